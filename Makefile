@@ -1,0 +1,28 @@
+# One-command set-up: `make demo` and `make test` create .venv and install everything on first use.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: demo test test-all bench clean
+
+$(STAMP): core/pyproject.toml requirements-dev.txt
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -r requirements-dev.txt -e ./core
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(PY) -m raybundle render cornell --time 30 --out out/cornell.exr --stats out/cornell.json
+
+test: $(STAMP)
+	$(PY) -m pytest -q tests
+
+test-all: $(STAMP)
+	$(PY) -m pytest -q -m "slow or not slow" tests
+
+bench: $(STAMP)
+	$(PY) -m raybundle bench --out out/bench
+
+clean:
+	rm -rf $(VENV) out .pytest_cache

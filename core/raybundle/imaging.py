@@ -1,0 +1,252 @@
+"""Camera images from a solver: the measurement M L_n averaged over iterations.
+
+The pixel value is the box-filtered (one pixel wide) radiance seen through the
+pixel.  It is split into three parts, each estimated where it is cheapest and
+sharpest:
+
+* **direct**: emission seen by the eye plus light reflected from the
+  first-shot lights, evaluated per pixel at the visible point with shadow
+  rays (:meth:`~raybundle.lights.DirectLighting.reflected_radiance`).  Every
+  *image pass* jitters the sub-pixel position anew, so edges antialias as the
+  average converges (as Cycles' box filter does);
+* **glossy indirect**: the glossy lobe applied per pixel to the current
+  iterate, ``E_i^n f_i(t_i^n, w_eye)``, averaged over iterations (this is what
+  makes the method view-dependent);
+* **diffuse indirect**: ``kd / pi * E_bar``, linear in the running average
+  ``E_bar`` of the incoming radiance, so it is resolved once from the final
+  average at ``resolve_samples`` stratified sub-pixel positions, with ``E_bar``
+  interpolated linearly over each smooth surface (Gouraud) or flat per patch.
+
+:class:`Renderer` drives solver iterations and image passes, reports progress,
+honours a stop flag, and returns a :class:`RenderResult`.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .sampling import stratified_2d
+
+
+@dataclass
+class GBuffer:
+    """Visible surface per pixel: triangle (-1 = nothing), point, normal, material,
+    direction to the eye ``w_eye``, barycentrics (N, 3)."""
+
+    triangle: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    material: np.ndarray
+    w_eye: np.ndarray
+    bary: np.ndarray
+
+    @property
+    def hit(self):
+        return self.triangle >= 0
+
+
+@dataclass
+class RenderSettings:
+    """Settings shared by the CLI, the add-on and the bench (plain values only).
+
+    ``bundle_resolution``: rays per side of each bundle grid (0 = about one
+    cell per patch, :func:`~raybundle.solvers.auto_bundle_resolution`); ``sequence``: the
+    random sequence name; ``light_samples``: shadow rays per light per pixel per
+    image pass; ``image_ray_share``: fraction of traced rays spent on image
+    passes (the rest on bundles); ``resolve_samples``: sub-pixel positions for
+    the diffuse indirect part; ``smooth``: interpolate patch values.
+    """
+
+    bundle_resolution: int = 0
+    sequence: str = "prng"
+    seed: int = 0
+    first_shot: str = "auto"
+    light_samples: int = 1
+    image_ray_share: float = 0.25
+    resolve_samples: int = 16
+    smooth: bool = True
+    threads: int | None = None
+
+
+@dataclass
+class RenderResult:
+    image: np.ndarray              # (H, W, 3) float32 linear radiance, row 0 at the top
+    stats: dict = field(default_factory=dict)
+    cancelled: bool = False
+
+
+class Renderer:
+    """Runs a solver and forms the image.  See the module docstring."""
+
+    def __init__(self, scene, camera, solver, direct, settings: RenderSettings):
+        if camera is None:
+            raise ValueError("the scene has no camera; give one (Camera.from_blender / Camera.look_at)")
+        self.scene, self.camera, self.solver, self.direct = scene, camera, solver, direct
+        self.tracer = solver.tracer
+        self.settings = settings
+        self.rng = np.random.default_rng([settings.seed, 1])
+        n = camera.width * camera.height
+        self.direct_sum = np.zeros((n, 3))
+        self.glossy_sum = np.zeros((n, 3))
+        self.passes = 0
+        self.glossy_iterations = 0
+        self.image_rays = 0
+        self.gbuffer = None
+        mats = scene.materials
+        self.glossy_material = mats.is_glossy
+        py, px = np.divmod(np.arange(n), camera.width)
+        self._pixel = np.stack([px, py], axis=1).astype(float)
+
+    # --------------------------------------------------------------- passes
+    def trace_gbuffer(self, jitter):
+        """Primary rays through pixel corners + ``jitter`` (N, 2) in [0,1)^2."""
+        cam = self.camera
+        pos = self._pixel + jitter
+        dirs = cam.ray_directions(pos[:, 0], pos[:, 1])
+        org = np.broadcast_to(cam.position, dirs.shape)
+        tri, t, u, v = self.tracer.first_hit(org, dirs)
+        self.image_rays += len(dirs)
+        hit = tri >= 0
+        safe = np.where(hit, tri, 0)
+        sc = self.scene
+        return GBuffer(tri, org + np.where(hit, t, 0.0)[:, None] * dirs, sc.triangle_normal[safe],
+                       sc.triangle_material[safe], -dirs, np.stack([1 - u - v, u, v], axis=1))
+
+    def image_pass(self):
+        """One jittered sample per pixel of the direct part; keeps the G-buffer for glossy."""
+        g = self.trace_gbuffer(self.rng.random((len(self._pixel), 2)))
+        self.gbuffer = g
+        h = np.nonzero(g.hit)[0]
+        cos_eye = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h])
+        contrib = self.scene.materials.emitted_radiance(g.material[h], cos_eye)
+        front = cos_eye > 0
+        hf = h[front]
+        if self.direct.n_lights and len(hf):
+            before = self.direct.rays
+            contrib[front] += self.direct.reflected_radiance(
+                g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], self.rng, self.settings.light_samples)
+            self.image_rays += self.direct.rays - before
+        self.direct_sum[h] += contrib
+        self.passes += 1
+        gl = h[front & self.glossy_material[g.material[h]]]
+        self._glossy_pixels = gl
+
+    def accumulate_glossy(self):
+        """Add this iterate's glossy lobe per pixel: E_i f_glossy(t_i, w_eye)."""
+        self.glossy_iterations += 1
+        gl = getattr(self, "_glossy_pixels", None)
+        if gl is None or len(gl) == 0:
+            return
+        g = self.gbuffer
+        patch = self.scene.triangle_patch[g.triangle[gl]]
+        f = self.scene.materials.brdf(g.material[gl], g.normal[gl], self.solver.receive_direction[patch],
+                                      g.w_eye[gl], diffuse=False)
+        self.glossy_sum[gl] += self.solver.incoming[patch] * f
+
+    # -------------------------------------------------------------- resolve
+    def vertex_values(self, patch_values):
+        """Patch values (P, C) -> per welded vertex (V, C): area-weighted mean of adjacent patches."""
+        sc = self.scene
+        ids = sc.smooth_vertex_ids
+        nv = int(ids.max()) + 1
+        w = np.repeat(sc.triangle_area, 3)
+        tri_val = patch_values[sc.triangle_patch]
+        out = np.stack([np.bincount(ids.ravel(), np.repeat(tri_val[:, k], 3) * w, minlength=nv)
+                        for k in range(patch_values.shape[1])], axis=1)
+        return out / np.bincount(ids.ravel(), w, minlength=nv)[:, None]
+
+    def diffuse_indirect(self):
+        """(N, 3) kd/pi * E_bar at the pixels, box-filtered with stratified sub-pixel samples."""
+        sc = self.scene
+        n = len(self._pixel)
+        out = np.zeros((n, 3))
+        e_bar = self.solver.mean_incoming
+        if not np.any(e_bar):
+            return out
+        vert = self.vertex_values(e_bar) if self.settings.smooth else None
+        kd = sc.materials.diffuse_reflectance
+        k = max(1, int(self.settings.resolve_samples))
+        rng = np.random.default_rng([self.settings.seed, 2])
+        offsets = stratified_2d(k, rng)
+        for j in range(k):
+            g = self.trace_gbuffer(np.broadcast_to(offsets[j], (n, 2)))
+            h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
+            tri = g.triangle[h]
+            if vert is not None:
+                e = np.einsum("nk,nkc->nc", g.bary[h], vert[sc.smooth_vertex_ids[tri]])
+            else:
+                e = e_bar[sc.triangle_patch[tri]]
+            out[h] += kd[g.material[h]] / np.pi * e
+        return out / k
+
+    def image(self, diffuse=None):
+        """The current estimate (H, W, 3) float32; ``diffuse`` = precomputed diffuse indirect."""
+        img = self.direct_sum / max(self.passes, 1)
+        if self.glossy_iterations:
+            img = img + self.glossy_sum / self.glossy_iterations
+        img = img + (self.diffuse_indirect() if diffuse is None else diffuse)
+        return img.reshape(self.camera.height, self.camera.width, 3).astype(np.float32)
+
+    # ------------------------------------------------------------------ run
+    def run(self, iterations=None, seconds=None, progress=None, stop=None):
+        """Iterate until ``iterations`` or ``seconds`` is reached or ``stop()`` is true.
+
+        ``progress(fraction, info)`` is called after every iteration; ``stop`` is
+        a callable or an object with ``is_set()`` (threading.Event), checked
+        between iterations.  KeyboardInterrupt ends the run like a stop; the
+        image so far is returned either way (``cancelled`` says which).
+        """
+        if iterations is None and seconds is None:
+            raise ValueError("give iterations or seconds")
+        should_stop = (stop.is_set if hasattr(stop, "is_set") else stop) or (lambda: False)
+        solver = self.solver
+        t0 = time.perf_counter()
+        cancelled = False
+        every = None
+        try:
+            self.image_pass()
+            while True:
+                elapsed = time.perf_counter() - t0
+                it = solver.stats.iterations
+                if iterations is not None and it >= iterations:
+                    break
+                if seconds is not None and elapsed >= seconds:
+                    break
+                if should_stop():
+                    cancelled = True
+                    break
+                solver.step()
+                if every is None:   # image passes every k iterations: a fixed share of rays
+                    share = min(max(self.settings.image_ray_share, 1e-3), 0.95)
+                    per_pass = self.image_rays / max(self.passes, 1)
+                    per_iter = solver.stats.rays / max(solver.stats.iterations, 1)
+                    every = max(1, int(round(per_pass * (1 - share) / (share * max(per_iter, 1)))))
+                if not solver.diffuse_only:
+                    self.accumulate_glossy()
+                if solver.stats.iterations % every == 0:
+                    self.image_pass()
+                if progress is not None:
+                    it = solver.stats.iterations
+                    frac = it / iterations if iterations else (time.perf_counter() - t0) / seconds
+                    progress(min(frac, 1.0), {"iterations": it, "seconds": time.perf_counter() - t0})
+        except KeyboardInterrupt:
+            cancelled = True
+        t_res = time.perf_counter()
+        img = self.image()
+        total = time.perf_counter() - t0
+        st = solver.stats
+        stats = {"scene": self.scene.name, "solver": solver.name, "iterations": st.iterations,
+                 "seconds": round(total, 4), "solver_seconds": round(st.seconds, 4),
+                 "resolve_seconds": round(time.perf_counter() - t_res, 4),
+                 "rays_traced": int(st.rays + self.image_rays), "bundle_rays": int(st.bundle_rays),
+                 "bundle_queries": int(st.rays), "image_rays": int(self.image_rays),
+                 "image_passes": self.passes, "patches": int(self.scene.n_patches),
+                 "triangles": int(len(self.scene.triangles)), "resolution": [self.camera.width, self.camera.height],
+                 "bundle_resolution": solver.bundle_resolution, "sequence": self.settings.sequence,
+                 "seed": self.settings.seed, "diffuse_only": bool(solver.diffuse_only),
+                 "first_shot_lights": self.direct.n_lights, "cancelled": cancelled}
+        if not np.isfinite(img).all():
+            raise FloatingPointError("the image has non-finite values; this is a bug, please report it")
+        return RenderResult(img, stats, cancelled)

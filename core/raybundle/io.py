@@ -1,0 +1,104 @@
+"""Image and file output: linear EXR (OpenEXR package), sRGB PNG previews, JSON.
+
+Every writer is atomic: it writes a temporary file beside the target and
+renames it over the target only when the write succeeded, so an interrupted
+render never leaves a truncated image behind.
+"""
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import struct
+import tempfile
+import zlib
+
+import numpy as np
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """Yield a temporary path in the target's folder; rename it to ``path`` on success."""
+    path = os.fspath(path)
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
+    suffix = os.path.splitext(path)[1]
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=suffix, dir=folder)
+    os.close(fd)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def write_exr(path, rgb, header=None):
+    """Write an (H, W, 3) linear radiance image [W m^-2 sr^-1] as a FLOAT RGB EXR.
+
+    Row 0 is the top of the image.  ``header`` adds string attributes.
+    Non-finite pixels raise ValueError (never write a silent NaN image).
+    """
+    import OpenEXR
+
+    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
+    if rgb.ndim != 3 or rgb.shape[2] != 3:
+        raise ValueError(f"expected an (H, W, 3) image, got {rgb.shape}")
+    if not np.isfinite(rgb).all():
+        raise ValueError(f"refusing to write {path}: the image has {int((~np.isfinite(rgb)).sum())} "
+                         "non-finite values")
+    hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for k, v in (header or {}).items():
+        hdr[k] = str(v)
+    with atomic_path(path) as tmp:
+        with OpenEXR.File(hdr, {"RGB": rgb}) as f:
+            f.write(tmp)
+
+
+def read_exr(path):
+    """Read an EXR's RGB (or RGBA) channels as (H, W, 3) float32, row 0 at the top."""
+    import OpenEXR
+
+    with OpenEXR.File(os.fspath(path)) as f:
+        ch = f.channels()
+        key = "RGB" if "RGB" in ch else "RGBA"
+        return np.array(ch[key].pixels[..., :3], dtype=np.float32)
+
+
+def read_exr_header(path):
+    import OpenEXR
+
+    with OpenEXR.File(os.fspath(path), header_only=True) as f:
+        return dict(f.header())
+
+
+def linear_to_srgb(x):
+    """sRGB transfer function (IEC 61966-2-1) of linear values clipped to [0, 1]."""
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def write_png(path, rgb, exposure=0.0):
+    """Write an (H, W, 3) linear image as an 8-bit sRGB PNG preview (clipped, no tone map)."""
+    img = np.asarray(rgb, float) * (2.0 ** exposure)
+    img = np.nan_to_num(img, nan=0.0, posinf=1.0, neginf=0.0)
+    data = np.round(linear_to_srgb(img) * 255).astype(np.uint8)
+    h, w, _ = data.shape
+    raw = b"".join(b"\x00" + data[y].tobytes() for y in range(h))
+
+    def chunk(tag, body):
+        return struct.pack(">I", len(body)) + tag + body + struct.pack(">I", zlib.crc32(tag + body))
+
+    png = (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0))
+           + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(b"IEND", b""))
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as f:
+            f.write(png)
+
+
+def write_json(path, obj):
+    with atomic_path(path) as tmp:
+        with open(tmp, "w") as f:
+            json.dump(obj, f, indent=2, sort_keys=True)
+            f.write("\n")

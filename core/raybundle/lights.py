@@ -1,0 +1,170 @@
+"""Small lights and their direct illumination: the generalized (incoming) first shot.
+
+Thesis 3.4: small and point lights are hard for bundles (a bundle hits a small
+light with probability ~ its solid angle / 4 pi, and never hits a point light).
+Their emission ``Le_s`` is therefore taken out of the iteration: the incoming
+radiance they create is computed first, by shadow rays, and the iteration then
+solves ``L~ = (Le_r + L1) + T L~`` with ``L1 = T Le_s`` as extra emission.
+
+* Per patch (used inside the iteration), for every light l the patch-average
+  irradiance ``E_{i,l}`` [W/m^2] and its mean travel direction ``w_{i,l}``, so the
+  first-shot radiance is ``L1_i(w) = sum_l E_{i,l} f_i(w_{i,l}, w)`` (incoming
+  first shot: only incoming values are stored, the BRDF is applied on the fly).
+* Per pixel (for the image), the reflected direct radiance at the visible point
+  is estimated with fresh shadow rays every image pass, so shadows and glossy
+  highlights are sharp (:meth:`DirectLighting.reflected_radiance`).
+
+Lights: every emitting material whose emission is constant and whose area is at
+most ``small_fraction`` of the scene's area is one area light (sampled uniformly
+by area, one-sided Lambertian emitter); every point light is one light with
+``E = I cos / r^2``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .sampling import stratified_2d, uniform_triangle
+
+
+@dataclass
+class AreaLight:
+    """Triangles of one emitting material: ``triangles`` (K,), area-CDF, area [m^2], radiance (3,)."""
+
+    material: int
+    triangles: np.ndarray
+    cdf: np.ndarray
+    area: float
+    radiance: np.ndarray
+
+
+class DirectLighting:
+    """First-shot lights of a scene and the direct-illumination estimators."""
+
+    def __init__(self, scene, tracer, first_shot="auto", small_fraction=0.1):
+        if first_shot not in ("auto", "none"):
+            raise ValueError("first_shot must be 'auto' or 'none'")
+        self.scene = scene
+        self.tracer = tracer
+        self.rays = 0  # shadow rays traced so far
+        mats = scene.materials
+        self.first_shot_material = np.zeros(len(mats), bool)
+        self.area_lights: list[AreaLight] = []
+        total = scene.triangle_area.sum()
+        if first_shot == "auto":
+            constant = ~np.any(mats.emission_albedo_complement > 0, axis=1) & np.any(mats.emission > 0, axis=1)
+            for m in np.nonzero(constant)[0]:
+                tri = np.nonzero(scene.triangle_material == m)[0]
+                area = scene.triangle_area[tri].sum()
+                if len(tri) and area <= small_fraction * total:
+                    self.first_shot_material[m] = True
+                    cdf = np.cumsum(scene.triangle_area[tri])
+                    self.area_lights.append(AreaLight(int(m), tri, cdf / cdf[-1], float(area),
+                                                      mats.emission[m].astype(float)))
+        pl = scene.point_lights
+        self.point_lights = [(pl.position[k], pl.intensity[k]) for k in range(len(pl))
+                             if np.any(pl.intensity[k] > 0)]
+
+    @property
+    def n_lights(self):
+        return len(self.area_lights) + len(self.point_lights)
+
+    def sample_area_light(self, light: AreaLight, u):
+        """Points (N, 3) and normals (N, 3) on ``light`` from (N, 3) uniforms; pdf = 1 / area."""
+        k = np.minimum(np.searchsorted(light.cdf, u[:, 0] * light.cdf[-1], side="right"), len(light.cdf) - 1)
+        tri = light.triangles[k]
+        b = uniform_triangle(u[:, 1], u[:, 2])
+        p = np.einsum("nk,nkj->nj", b, self.scene.triangle_corners[tri])
+        return p, self.scene.triangle_normal[tri]
+
+    def _light_samples(self, points, normals, light, u):
+        """One sample of every point's irradiance from one light.
+
+        Returns ``(E (N,3) [W/m^2], travel (N,3), cos_x (N,))`` where E already
+        includes visibility, so ``E f(travel, w_out)`` is the reflected radiance.
+        """
+        if isinstance(light, AreaLight):
+            y, ny = self.sample_area_light(light, u)
+        else:
+            y, ny = np.broadcast_to(light[0], points.shape), None
+        v = y - points
+        r2 = np.einsum("ij,ij->i", v, v)
+        r = np.sqrt(np.maximum(r2, 1e-300))
+        w = v / r[:, None]                      # from the point towards the light
+        cos_x = np.einsum("ij,ij->i", normals, w)
+        if ny is not None:
+            cos_l = -np.einsum("ij,ij->i", ny, w)
+            geom = np.where((cos_x > 0) & (cos_l > 0), cos_x * cos_l * light.area / np.maximum(r2, 1e-300), 0.0)
+            e = geom[:, None] * light.radiance
+        else:
+            geom = np.where(cos_x > 0, cos_x / np.maximum(r2, 1e-300), 0.0)
+            e = geom[:, None] * light[1]
+        live = geom > 0
+        if live.any():
+            eps = self.tracer.eps
+            org = points[live] + normals[live] * (4 * eps)
+            self.rays += int(live.sum())
+            blocked = self.tracer.occluded(org, w[live], np.maximum(r[live] - 8 * eps, 0.0))
+            idx = np.nonzero(live)[0][blocked]
+            e[idx] = 0.0
+        return e, -w, cos_x
+
+    def patch_first_shot(self, points_per_patch=8, samples_per_light=16, seed=0):
+        """Incoming first shot per patch: ``E (P, L, 3)`` [W/m^2] and travel dirs ``(P, L, 3)``.
+
+        ``E_{i,l}`` is the mean over ``points_per_patch`` stratified points on
+        patch i and ``samples_per_light`` light samples of the irradiance
+        ``Le cos_x cos_l A / r^2 V`` (area light) or ``I cos_x / r^2 V`` (point).
+        The direction is the irradiance-weighted mean travel direction.
+        """
+        sc = self.scene
+        rng = np.random.default_rng([seed, 7])
+        n_p, L = sc.n_patches, self.n_lights
+        E = np.zeros((n_p, L, 3))
+        D = np.zeros((n_p, L, 3))
+        if L == 0:
+            return E, D
+        # points on triangles: patch = triangle after subdivision; general: by triangle
+        tri = np.repeat(np.arange(len(sc.triangles)), points_per_patch)
+        st = np.concatenate([stratified_2d(points_per_patch, rng) for _ in range(len(sc.triangles))])
+        b = uniform_triangle(st[:, 0], st[:, 1])
+        pts = np.einsum("nk,nkj->nj", b, sc.triangle_corners[tri])
+        nrm = sc.triangle_normal[tri]
+        patch = sc.triangle_patch[tri]
+        w_area = sc.triangle_area[tri] / points_per_patch
+        lights = self.area_lights + self.point_lights
+        for li, light in enumerate(lights):
+            n_s = samples_per_light if isinstance(light, AreaLight) else 1
+            e_acc = np.zeros((len(pts), 3))
+            d_acc = np.zeros((len(pts), 3))
+            for s in range(n_s):
+                u = rng.random((len(pts), 3))
+                e, travel, _ = self._light_samples(pts, nrm, light, u)
+                e_acc += e
+                d_acc += e.sum(axis=1, keepdims=True) * travel
+            e_acc /= n_s
+            for k in range(3):
+                E[:, li, k] = np.bincount(patch, e_acc[:, k] * w_area, minlength=n_p)
+                D[:, li, k] = np.bincount(patch, d_acc[:, k] * w_area, minlength=n_p)
+        E /= sc.patch_area[:, None, None]
+        norm = np.linalg.norm(D, axis=2, keepdims=True)
+        D = np.where(norm > 0, D / np.maximum(norm, 1e-300), 0.0)
+        return E, D
+
+    def reflected_radiance(self, points, normals, mats, w_out, rng, samples_per_light=1):
+        """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
+
+        Unbiased estimate with ``samples_per_light`` shadow rays per light:
+        ``sum_l mean_s Le f(w_travel, w_out) cos_x cos_l A / r^2 V``.
+        """
+        out = np.zeros((len(points), 3))
+        for light in self.area_lights + self.point_lights:
+            n_s = samples_per_light if isinstance(light, AreaLight) else 1
+            for _ in range(n_s):
+                e, travel, _ = self._light_samples(points, normals, light, rng.random((len(points), 3)))
+                live = np.any(e > 0, axis=1)
+                if live.any():
+                    f = self.scene.materials.brdf(mats[live], normals[live], travel[live], w_out[live])
+                    out[live] += e[live] * f / n_s
+        return out

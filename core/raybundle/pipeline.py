@@ -1,0 +1,50 @@
+"""One call from a scene to an image: subdivide, build the tracer, first shot, solve, image.
+
+This is the entry point the CLI, the Blender add-on and the bench share.
+"""
+from __future__ import annotations
+
+import warnings
+
+from .imaging import Renderer, RenderSettings
+from .lights import DirectLighting
+from .sampling import make_sequence
+from .scene import subdivide
+from .solvers import SOLVERS, StochasticIterationSolver
+from .visibility import RayTracer
+
+#: default patch count for scenes rendered without an explicit one
+DEFAULT_PATCHES = 4000
+
+
+def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None):
+    """Subdivide ``scene`` into about ``patches`` patches (or edges <= ``max_edge`` m)."""
+    if max_edge is not None:
+        return subdivide(scene, max_edge=max_edge)
+    if patches:
+        return subdivide(scene, patches=patches)
+    return scene
+
+
+def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
+                  solver=StochasticIterationSolver.name):
+    """Tracer + first shot + solver + image accumulator for a prepared scene."""
+    settings = settings or RenderSettings()
+    if settings.sequence == "halton":
+        warnings.warn("the Halton sequence is not completely uniformly distributed: stochastic iteration "
+                      "driven by it converges to a wrong image (thesis 1.2); use 'prng' or 'pi-powers'",
+                      stacklevel=2)
+    tracer = RayTracer(scene, threads=settings.threads)
+    direct = DirectLighting(scene, tracer, first_shot=settings.first_shot)
+    sequence = make_sequence(settings.sequence, settings.seed)
+    solver_obj = SOLVERS[solver](scene, tracer, direct, sequence, bundle_resolution=settings.bundle_resolution)
+    return Renderer(scene, camera if camera is not None else scene.camera, solver_obj, direct, settings)
+
+
+def render(scene, settings=None, iterations=None, seconds=None, progress=None, stop=None, camera=None):
+    """Render a prepared scene; returns :class:`~raybundle.imaging.RenderResult`."""
+    renderer = make_renderer(scene, settings, camera)
+    try:
+        return renderer.run(iterations=iterations, seconds=seconds, progress=progress, stop=stop)
+    finally:
+        renderer.tracer.close()

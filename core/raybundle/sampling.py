@@ -1,0 +1,182 @@
+"""Random and quasi-random numbers that drive the iteration, and direction maps.
+
+Stochastic iteration multiplies each new random operator into a state built
+from all earlier ones, so the numbers consumed iteration after iteration must be
+*completely uniformly distributed* (thesis result 1.2; ``algorithms.md`` §1.2):
+
+* :class:`PRNGSequence` (NumPy PCG64): works; the default.
+* :class:`PiPowersSequence`, the fractional parts {pi^n}: works (the thesis'
+  recommendation).  In doubles {pi^n} is exactly 0 from n ~ 33 on, so it is
+  computed here in exact fixed-point integer arithmetic with enough bits.
+* :class:`HaltonSequence`: a low-discrepancy sequence whose consecutive points
+  are strongly correlated.  It is here so that the failure it causes (a
+  converged but *wrong* answer) can be shown; do not use it for rendering.
+
+All sequences share one interface: ``next(dim)`` returns the next point of the
+iteration as ``dim`` numbers in [0, 1).  Chosen by name via :data:`SEQUENCES`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+# ------------------------------------------------------------ direction maps
+def uniform_sphere(u1, u2):
+    """Map (u1, u2) in [0,1)^2 to a unit vector uniform on the sphere (pdf 1/(4 pi)).
+
+    z = 1 - 2 u1, phi = 2 pi u2.  Accepts scalars or arrays; returns (..., 3).
+    """
+    u1 = np.asarray(u1, float)
+    u2 = np.asarray(u2, float)
+    z = 1.0 - 2.0 * u1
+    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    phi = 2.0 * np.pi * u2
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
+
+
+def uniform_sphere_pdf():
+    """Solid-angle density of :func:`uniform_sphere`, 1/(4 pi) [1/sr]."""
+    return 1.0 / (4.0 * np.pi)
+
+
+def invert_uniform_sphere(d):
+    """Inverse of :func:`uniform_sphere`: unit vectors (..., 3) -> (u1, u2)."""
+    d = np.asarray(d, float)
+    u1 = (1.0 - d[..., 2]) / 2.0
+    u2 = (np.arctan2(d[..., 1], d[..., 0]) / (2 * np.pi)) % 1.0
+    return u1, u2
+
+
+def orthonormal_basis(d):
+    """Two unit vectors (u, v) with (u, v, d) a right-handed orthonormal frame."""
+    d = np.asarray(d, float)
+    a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(a, d)
+    u /= np.linalg.norm(u)
+    return u, np.cross(d, u)
+
+
+def uniform_triangle(u1, u2):
+    """Barycentric weights (..., 3) uniform over a triangle (square-root map)."""
+    s = np.sqrt(np.asarray(u1, float))
+    b0 = 1.0 - s
+    b1 = np.asarray(u2, float) * s
+    return np.stack([b0, b1, 1.0 - b0 - b1], axis=-1)
+
+
+def stratified_2d(n, rng):
+    """n jittered points in [0,1)^2 on a ceil(sqrt n)^2 grid, shuffled, (n, 2)."""
+    k = int(math.ceil(math.sqrt(n)))
+    cells = rng.permutation(k * k)[:n]
+    return (np.stack([cells % k, cells // k], axis=1) + rng.random((n, 2))) / k
+
+
+# ---------------------------------------------------------------- sequences
+class PRNGSequence:
+    """Pseudo-random numbers from NumPy's PCG64, seeded."""
+
+    name = "prng"
+
+    def __init__(self, seed=0):
+        self.rng = np.random.default_rng(seed)
+
+    def next(self, dim):
+        return self.rng.random(dim)
+
+
+class PiPowersSequence:
+    """The sequence u_n = frac(pi^n), n = start, start+1, ... consumed in order.
+
+    ``pi^n`` is kept as a fixed-point integer with ``B`` fraction bits,
+    ``X_n = floor(X_{n-1} * PI_B / 2^B)``; each step truncates by < 1 ulp and the
+    error grows by a factor pi per step, so ``B = n_max log2(pi) + 80`` bits give
+    frac(pi^n) to far better than double precision for every n <= n_max.  When
+    more numbers are asked for, the capacity doubles and the table is rebuilt
+    (cost O(n_max^2 log) bit operations; 20 000 numbers take about a second).
+    """
+
+    name = "pi-powers"
+
+    def __init__(self, start=1, capacity=4096):
+        if start < 1:
+            raise ValueError("start must be >= 1")
+        self.n = int(start)          # exponent of the next number
+        self._table_start = self.n
+        self._table = np.empty(0)
+        self._capacity = int(capacity)
+
+    def _build(self, n_first, count):
+        import mpmath
+
+        n_max = n_first + count
+        bits = int(n_max * math.log2(math.pi)) + 80
+        with mpmath.workprec(bits + 32):
+            pi_fixed = int(mpmath.floor(mpmath.ldexp(mpmath.pi, bits)))
+        one = 1 << bits
+        mask = one - 1
+        x = one  # pi^0
+        for _ in range(n_first):
+            x = (x * pi_fixed) >> bits
+        out = np.empty(count)
+        for k in range(count):
+            out[k] = (x & mask) / one      # frac(pi^(n_first + k)), exact to ~2^-80
+            x = (x * pi_fixed) >> bits
+        return out
+
+    def next(self, dim):
+        off = self.n - self._table_start
+        if off + dim > len(self._table):
+            count = max(self._capacity, 2 * len(self._table), dim)
+            self._table_start = self.n
+            self._table = self._build(self.n, count)
+            off = 0
+        self.n += dim
+        return self._table[off:off + dim].copy()
+
+
+_PRIMES = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37)
+
+
+def radical_inverse(base, index):
+    """Van der Corput radical inverse of a non-negative integer in ``base``."""
+    inv, f = 0.0, 1.0 / base
+    while index > 0:
+        index, digit = divmod(index, base)
+        inv += digit * f
+        f /= base
+    return inv
+
+
+class HaltonSequence:
+    """Halton points: iteration n gets point n, coordinate k in base prime_k.
+
+    Deliberately *not* completely uniformly distributed: consecutive points are
+    correlated, which makes stochastic iteration converge to a wrong value
+    (thesis 1.2).  Kept for demonstrating that failure; the solver warns.
+    """
+
+    name = "halton"
+
+    def __init__(self, start=1):
+        self.index = int(start)
+
+    def next(self, dim):
+        if dim > len(_PRIMES):
+            raise ValueError(f"Halton sequence supports at most {len(_PRIMES)} dimensions")
+        out = np.array([radical_inverse(_PRIMES[k], self.index) for k in range(dim)])
+        self.index += 1
+        return out
+
+
+SEQUENCES = {"prng": PRNGSequence, "pi-powers": PiPowersSequence, "halton": HaltonSequence}
+
+
+def make_sequence(name, seed=0):
+    """A sequence by name; ``seed`` seeds the PRNG and offsets the start of the others."""
+    if name not in SEQUENCES:
+        raise ValueError(f"unknown sequence {name!r}; choose one of {sorted(SEQUENCES)}")
+    if name == "prng":
+        return PRNGSequence(seed)
+    return SEQUENCES[name](start=1 + int(seed) * 1000)

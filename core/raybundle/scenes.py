@@ -1,0 +1,168 @@
+"""Built-in scenes: the measured Cornell box, its glossy variant, and analytic furnaces.
+
+* ``cornell``: the Cornell box geometry (Cornell data, mm, Y up) turned into
+  metres, Z up, by (x, y, z) -> (-x, z, y) / 1000, with the common RGB stand-ins
+  for the measured reflectances and the light lowered to y = 548.3 mm.
+* ``cornell-glossy``: the floor is Mix(Diffuse white, Glossy GGX white,
+  roughness 0.3, factor 0.5) and the tall block pure Glossy GGX (0.8, r 0.2).
+* ``furnace``: a closed room with a closed block inside (non-convex); every
+  surface emits Le and is Lambertian with albedo a, so L = Le / (1 - a) exactly.
+* ``furnace-glossy``: the same enclosure with GGX and mixed materials emitting
+  ``c (1 - a(w))`` (a(w) the directional albedo), so L = c exactly
+  (``algorithms.md`` §5).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .camera import Camera
+from .materials import MaterialTable
+from .scene import build_scene
+
+WHITE = (0.725, 0.71, 0.68)
+RED = (0.63, 0.065, 0.05)
+GREEN = (0.14, 0.45, 0.091)
+CORNELL_LIGHT = (18.387, 13.9873, 6.75357)
+
+# Cornell box quads in mm (Cornell data, Y up)
+_CORNELL_QUADS = {
+    "floor": ([552.8, 0, 0], [0, 0, 0], [0, 0, 559.2], [549.6, 0, 559.2]),
+    "ceiling": ([556.0, 548.8, 0], [556.0, 548.8, 559.2], [0, 548.8, 559.2], [0, 548.8, 0]),
+    "back": ([549.6, 0, 559.2], [0, 0, 559.2], [0, 548.8, 559.2], [556.0, 548.8, 559.2]),
+    "green": ([0, 0, 559.2], [0, 0, 0], [0, 548.8, 0], [0, 548.8, 559.2]),
+    "red": ([552.8, 0, 0], [549.6, 0, 559.2], [556.0, 548.8, 559.2], [556.0, 548.8, 0]),
+    "light": ([343.0, 548.3, 227.0], [343.0, 548.3, 332.0], [213.0, 548.3, 332.0], [213.0, 548.3, 227.0]),
+}
+_SHORT_TOP = [(130, 65), (82, 225), (240, 272), (290, 114)]
+_TALL_TOP = [(423, 247), (265, 296), (314, 456), (472, 406)]
+
+
+def _block_quads(top_xz, height):
+    quads = [[(x, height, z) for x, z in top_xz]]
+    for k in range(4):
+        (x0, z0), (x1, z1) = top_xz[k], top_xz[(k + 1) % 4]
+        quads.append([(x0, 0, z0), (x1, 0, z1), (x1, height, z1), (x0, height, z0)])
+    return [np.array(q, float) for q in quads]
+
+
+def _oriented(quad, towards=None, away=None):
+    """Order a planar quad so that its normal points towards/away from a point."""
+    q = np.asarray(quad, float)
+    n = np.cross(q[1] - q[0], q[2] - q[0])
+    c = q.mean(axis=0)
+    ref = (np.asarray(towards) - c) if towards is not None else (c - np.asarray(away))
+    return q if n @ ref > 0 else q[::-1]
+
+
+def _mesh(quads_with_material):
+    verts, tris, mats = [], [], []
+    for q, m in quads_with_material:
+        base = len(verts) * 4
+        verts.append(q)
+        tris += [[base, base + 1, base + 2], [base, base + 2, base + 3]]
+        mats += [m, m]
+    return np.concatenate(verts), np.array(tris), np.array(mats)
+
+
+def cornell_to_blender(p_mm):
+    """Cornell coordinates (mm, Y up) -> metres, Z up: (x, y, z) -> (-x, z, y) / 1000."""
+    p = np.asarray(p_mm, float)
+    return np.stack([-p[..., 0], p[..., 2], p[..., 1]], axis=-1) / 1000.0
+
+
+def cornell_camera(resolution=(256, 256)):
+    """The Cornell camera: at (278, 273, -800) mm looking +z, 35 mm lens, 25 mm sensor."""
+    pos = cornell_to_blender([278.0, 273.0, -800.0])
+    return Camera.look_at(pos, pos + np.array([0.0, 1.0, 0.0]), (0.0, 0.0, 1.0),
+                          lens=35.0, sensor_width=25.0, resolution=resolution)
+
+
+def cornell(glossy=False, resolution=(256, 256)):
+    specs = [dict(name="white", diffuse=WHITE), dict(name="red", diffuse=RED),
+             dict(name="green", diffuse=GREEN), dict(name="light", emission=CORNELL_LIGHT)]
+    if glossy:
+        specs += [dict(name="floor_mix", diffuse=(1, 1, 1), glossy=(1, 1, 1), roughness=0.3, glossy_weight=0.5),
+                  dict(name="tall_glossy", glossy=(0.8, 0.8, 0.8), roughness=0.2, glossy_weight=1.0)]
+    centre = np.array([278.0, 274.4, 279.6])
+    mat_of = {"floor": 4 if glossy else 0, "ceiling": 0, "back": 0, "green": 2, "red": 1, "light": 3}
+    quads = []
+    for name, q in _CORNELL_QUADS.items():
+        q = np.array(q, float)
+        quads.append((_oriented(q, away=q.mean(axis=0) + [0, 1, 0]) if name == "light"
+                       else _oriented(q, towards=centre), mat_of[name]))
+    for top, h, m in ((_SHORT_TOP, 165.0, 0), (_TALL_TOP, 330.0, 5 if glossy else 0)):
+        blk = _block_quads(top, h)
+        c = np.mean([b.mean(axis=0) for b in blk], axis=0) - [0, h / 2, 0]
+        quads += [(_oriented(b, away=c), m) for b in blk]
+    v, t, m = _mesh(quads)
+    return build_scene(cornell_to_blender(v), t, m, MaterialTable.from_list(specs),
+                       camera=cornell_camera(resolution), name="cornell-glossy" if glossy else "cornell")
+
+
+def _box_quads(lo, hi):
+    """The six faces of an axis-aligned box (unoriented)."""
+    x0, y0, z0 = lo
+    x1, y1, z1 = hi
+    return [np.array(q, float) for q in (
+        [(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0)],
+        [(x0, y0, z1), (x1, y0, z1), (x1, y1, z1), (x0, y1, z1)],
+        [(x0, y0, z0), (x1, y0, z0), (x1, y0, z1), (x0, y0, z1)],
+        [(x0, y1, z0), (x1, y1, z0), (x1, y1, z1), (x0, y1, z1)],
+        [(x0, y0, z0), (x0, y1, z0), (x0, y1, z1), (x0, y0, z1)],
+        [(x1, y0, z0), (x1, y1, z0), (x1, y1, z1), (x1, y0, z1)])]
+
+
+FURNACE_LE = np.array([0.5, 0.5, 0.5])
+FURNACE_ALBEDO = np.array([0.3, 0.5, 0.7])
+FURNACE_GLOSSY_C = np.array([1.0, 0.8, 0.6])
+
+
+def furnace(glossy=False, resolution=(128, 128)):
+    """Closed room (2 x 2 x 1.5 m) with a closed block inside; exact radiance known.
+
+    Diffuse: Le = 0.5, albedo (0.3, 0.5, 0.7) -> L = Le / (1 - a) = (0.714, 1, 1.667).
+    Glossy: walls Glossy GGX (0.9, roughness 0.5), block Mix(Diffuse 0.6,
+    Glossy 0.8 r 0.35, factor 0.5), all emitting c (1 - a(w)) -> L = c = (1, 0.8, 0.6).
+    """
+    lo, hi = np.array([0.0, 0.0, 0.0]), np.array([2.0, 2.0, 1.5])
+    blo, bhi = np.array([0.9, 1.0, 0.3]), np.array([1.5, 1.5, 0.9])
+    centre = (lo + hi) / 2
+    bc = (blo + bhi) / 2
+    if glossy:
+        specs = [dict(name="walls", glossy=(0.9, 0.9, 0.9), roughness=0.5, glossy_weight=1.0,
+                      emission_albedo_complement=FURNACE_GLOSSY_C),
+                 dict(name="block", diffuse=(0.6, 0.6, 0.6), glossy=(0.8, 0.8, 0.8), roughness=0.35,
+                      glossy_weight=0.5, emission_albedo_complement=FURNACE_GLOSSY_C)]
+        exact = FURNACE_GLOSSY_C
+    else:
+        specs = [dict(name="walls", diffuse=FURNACE_ALBEDO, emission=FURNACE_LE),
+                 dict(name="block", diffuse=FURNACE_ALBEDO, emission=FURNACE_LE)]
+        exact = FURNACE_LE / (1 - FURNACE_ALBEDO)
+    # the block floats: a patch partly hidden under a block resting on the floor
+    # would average its incoming radiance over a hidden part (an FE error)
+    quads = [(_oriented(q, towards=centre), 0) for q in _box_quads(lo, hi)]
+    quads += [(_oriented(q, away=bc), 1) for q in _box_quads(blo, bhi)]
+    v, t, m = _mesh(quads)
+    cam = Camera.look_at((0.25, 0.2, 1.2), (1.2, 1.25, 0.4), (0, 0, 1), lens=20.0, sensor_width=36.0,
+                         resolution=resolution)
+    return build_scene(v, t, m, MaterialTable.from_list(specs), camera=cam, analytic_radiance=exact,
+                       name="furnace-glossy" if glossy else "furnace")
+
+
+BUILTIN = {
+    "cornell": lambda: cornell(False),
+    "cornell-glossy": lambda: cornell(True),
+    "furnace": lambda: furnace(False),
+    "furnace-glossy": lambda: furnace(True),
+}
+
+
+def load_scene(name_or_path):
+    """A built-in scene by name, or a ``.npz`` scene file."""
+    if name_or_path in BUILTIN:
+        return BUILTIN[name_or_path]()
+    if str(name_or_path).endswith(".npz"):
+        from .scene import load_npz
+
+        return load_npz(name_or_path)
+    raise ValueError(f"unknown scene {name_or_path!r}: use one of {sorted(BUILTIN)} or a .npz file")

@@ -1,0 +1,92 @@
+import numpy as np
+import pytest
+
+from raybundle import scenes
+from raybundle.materials import MaterialTable
+from raybundle.scene import PointLights, SceneError, build_scene, load_npz, subdivide
+
+LIGHT = MaterialTable.from_list([dict(name="white", diffuse=(0.5, 0.5, 0.5)), dict(name="lamp", emission=(1, 1, 1))])
+QUAD_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+QUAD_T = np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def test_cornell_geometry_and_orientation():
+    sc = scenes.cornell()
+    assert sc.n_patches == 32          # (6 room quads + 2 blocks x 5 quads) x 2 triangles
+    lo, hi = sc.vertices.min(axis=0), sc.vertices.max(axis=0)
+    assert np.allclose(lo, [-0.556, 0, 0], atol=1e-9) and np.allclose(hi, [0, 0.5592, 0.5488], atol=1e-9)
+    light = sc.materials.names.index("light")
+    assert np.allclose(sc.triangle_normal[sc.triangle_material == light], [0, 0, -1])
+    red = sc.materials.names.index("red")
+    assert np.all(sc.patch_centroid[sc.patch_material == red][:, 0] < -0.5)   # red on the left (-x)
+    # walls face the interior
+    inside = np.array([-0.278, 0.28, 0.27])
+    walls = np.isin(sc.triangle_material, [1, 2])
+    to_in = inside - sc.triangle_corners[walls].mean(axis=1)
+    assert np.all(np.einsum("ij,ij->i", sc.triangle_normal[walls], to_in) > 0)
+
+
+def test_subdivide_preserves_area_and_hits_target():
+    sc = scenes.cornell()
+    for target in (500, 4000):
+        sub = subdivide(sc, patches=target)
+        assert abs(sub.triangle_area.sum() - sc.triangle_area.sum()) < 1e-9
+        assert 0.7 * target < sub.n_patches < 1.3 * target
+        assert np.allclose(sub.patch_normal[sub.triangle_patch], sc.triangle_normal[sub.triangle_source])
+    sub = subdivide(sc, max_edge=0.05)
+    e = np.linalg.norm(sub.triangle_corners - np.roll(sub.triangle_corners, 1, axis=1), axis=2)
+    assert e.max() <= 0.05 + 1e-9
+
+
+def test_npz_round_trip(tmp_path):
+    sc = subdivide(scenes.furnace(glossy=True), patches=300)
+    sc.point_lights = PointLights(np.array([[1.0, 1, 1]]), np.array([[2.0, 2, 2]]))
+    path = tmp_path / "s.npz"
+    sc.save_npz(path)
+    back = load_npz(path)
+    assert np.array_equal(back.triangles, sc.triangles) and np.allclose(back.vertices, sc.vertices)
+    assert np.array_equal(back.triangle_patch, sc.triangle_patch)
+    assert back.materials.names == sc.materials.names
+    assert np.allclose(back.materials.emission_albedo_complement, sc.materials.emission_albedo_complement)
+    assert np.allclose(back.camera.matrix_world, sc.camera.matrix_world) and back.camera.fx == sc.camera.fx
+    assert np.allclose(back.analytic_radiance, sc.analytic_radiance)
+    assert np.allclose(back.point_lights.intensity, 2.0)
+
+
+def test_nan_vertices_are_an_error():
+    v = QUAD_V.copy()
+    v[2, 1] = np.nan
+    with pytest.raises(SceneError, match="NaN or infinite"):
+        build_scene(v, QUAD_T, [1, 1], LIGHT)
+
+
+def test_zero_area_triangles_are_dropped_with_a_count():
+    t = np.vstack([QUAD_T, [[0, 1, 1]], [[0, 0, 0]]])
+    with pytest.warns(UserWarning, match="dropped 2 zero-area"):
+        sc = build_scene(QUAD_V, t, [1, 1, 0, 0], LIGHT)
+    assert sc.dropped_triangles == 2 and len(sc.triangles) == 2
+
+
+@pytest.mark.parametrize("kwargs,msg", [
+    (dict(triangles=np.zeros((0, 3), int), triangle_material=[]), "empty"),
+    (dict(triangle_material=[0, 0]), "no lights"),
+    (dict(triangle_material=[0, 5]), "material ids"),
+    (dict(triangles=np.array([[0, 1, 9], [0, 2, 3]])), "vertex indices"),
+])
+def test_bad_scenes_give_clear_errors(kwargs, msg):
+    args = dict(vertices=QUAD_V, triangles=QUAD_T, triangle_material=[1, 1], materials=LIGHT)
+    args.update(kwargs)
+    with pytest.raises(SceneError, match=msg):
+        build_scene(**args)
+
+
+def test_albedo_above_one_is_an_error():
+    bad = MaterialTable.from_list([dict(name="hot", diffuse=(1.1, 0.5, 0.5), emission=(1, 1, 1))])
+    with pytest.raises(SceneError, match="albedo > 1"):
+        build_scene(QUAD_V, QUAD_T, [0, 0], bad)
+
+
+def test_point_light_alone_is_a_light():
+    sc = build_scene(QUAD_V, QUAD_T, [0, 0], LIGHT,
+                     point_lights=PointLights(np.array([[0.5, 0.5, 1.0]]), np.array([[1.0, 1, 1]])))
+    assert sc.n_patches == 2
