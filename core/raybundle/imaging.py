@@ -157,12 +157,15 @@ class Renderer:
                         for k in range(patch_values.shape[1])], axis=1)
         return out / np.bincount(ids.ravel(), w, minlength=nv)[:, None]
 
-    def diffuse_indirect(self):
-        """(N, 3) kd/pi * E_bar at the pixels, box-filtered with stratified sub-pixel samples."""
+    def diffuse_indirect(self, e_bar=None):
+        """(N, 3) kd/pi * E_bar at the pixels, box-filtered with stratified sub-pixel samples.
+
+        ``e_bar`` (P, 3) defaults to the solver's running average of the incoming radiance.
+        """
         sc = self.scene
         n = len(self._pixel)
         out = np.zeros((n, 3))
-        e_bar = self.solver.mean_incoming
+        e_bar = self.solver.mean_incoming if e_bar is None else e_bar
         if not np.any(e_bar):
             return out
         vert = self.vertex_values(e_bar) if self.settings.smooth else None

@@ -103,54 +103,20 @@ class DirectLighting:
         live = geom > 0
         if live.any():
             eps = self.tracer.eps
-            org = points[live] + normals[live] * (4 * eps)
+            # shadow ray from just above the surface *to the light sample itself*
+            # (a ray shifted parallel would meet a grazing light plane early)
+            org = points[live] + normals[live] * eps
+            seg = y[live] - org
+            dist = np.linalg.norm(seg, axis=1)
             self.rays += int(live.sum())
-            blocked = self.tracer.occluded(org, w[live], np.maximum(r[live] - 8 * eps, 0.0))
+            blocked = self.tracer.occluded(org, seg / np.maximum(dist, 1e-300)[:, None],
+                                           np.maximum(dist - 2 * eps, 0.0))
             idx = np.nonzero(live)[0][blocked]
             e[idx] = 0.0
         return e, -w, cos_x
 
-    def patch_first_shot(self, points_per_patch=8, samples_per_light=16, seed=0):
-        """Incoming first shot per patch: ``E (P, L, 3)`` [W/m^2] and travel dirs ``(P, L, 3)``.
-
-        ``E_{i,l}`` is the mean over ``points_per_patch`` stratified points on
-        patch i and ``samples_per_light`` light samples of the irradiance
-        ``Le cos_x cos_l A / r^2 V`` (area light) or ``I cos_x / r^2 V`` (point).
-        The direction is the irradiance-weighted mean travel direction.
-        """
-        sc = self.scene
-        rng = np.random.default_rng([seed, 7])
-        n_p, L = sc.n_patches, self.n_lights
-        E = np.zeros((n_p, L, 3))
-        D = np.zeros((n_p, L, 3))
-        if L == 0:
-            return E, D
-        # points on triangles: patch = triangle after subdivision; general: by triangle
-        tri = np.repeat(np.arange(len(sc.triangles)), points_per_patch)
-        st = np.concatenate([stratified_2d(points_per_patch, rng) for _ in range(len(sc.triangles))])
-        b = uniform_triangle(st[:, 0], st[:, 1])
-        pts = np.einsum("nk,nkj->nj", b, sc.triangle_corners[tri])
-        nrm = sc.triangle_normal[tri]
-        patch = sc.triangle_patch[tri]
-        w_area = sc.triangle_area[tri] / points_per_patch
-        lights = self.area_lights + self.point_lights
-        for li, light in enumerate(lights):
-            n_s = samples_per_light if isinstance(light, AreaLight) else 1
-            e_acc = np.zeros((len(pts), 3))
-            d_acc = np.zeros((len(pts), 3))
-            for s in range(n_s):
-                u = rng.random((len(pts), 3))
-                e, travel, _ = self._light_samples(pts, nrm, light, u)
-                e_acc += e
-                d_acc += e.sum(axis=1, keepdims=True) * travel
-            e_acc /= n_s
-            for k in range(3):
-                E[:, li, k] = np.bincount(patch, e_acc[:, k] * w_area, minlength=n_p)
-                D[:, li, k] = np.bincount(patch, d_acc[:, k] * w_area, minlength=n_p)
-        E /= sc.patch_area[:, None, None]
-        norm = np.linalg.norm(D, axis=2, keepdims=True)
-        D = np.where(norm > 0, D / np.maximum(norm, 1e-300), 0.0)
-        return E, D
+    def light_list(self):
+        return self.area_lights + self.point_lights
 
     def reflected_radiance(self, points, normals, mats, w_out, rng, samples_per_light=1):
         """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
@@ -159,7 +125,7 @@ class DirectLighting:
         ``sum_l mean_s Le f(w_travel, w_out) cos_x cos_l A / r^2 V``.
         """
         out = np.zeros((len(points), 3))
-        for light in self.area_lights + self.point_lights:
+        for light in self.light_list():
             n_s = samples_per_light if isinstance(light, AreaLight) else 1
             for _ in range(n_s):
                 e, travel, _ = self._light_samples(points, normals, light, rng.random((len(points), 3)))
@@ -168,3 +134,76 @@ class DirectLighting:
                     f = self.scene.materials.brdf(mats[live], normals[live], travel[live], w_out[live])
                     out[live] += e[live] * f / n_s
         return out
+
+
+class PatchFirstShot:
+    """Incoming first shot per patch, refined progressively while the solver iterates.
+
+    For every patch i and light l it keeps running sums over uniformly random
+    points of the patch and light samples of the irradiance
+    ``Le cos_x cos_l A / r^2 V`` (area light) or ``I cos_x / r^2 V`` (point light)
+    and of the irradiance-weighted travel direction.  ``E`` (P, L, 3) [W/m^2] is
+    the patch-average irradiance, ``direction`` (P, L, 3) the mean travel direction.
+
+    A fixed first shot would freeze its Monte Carlo noise into the solution (a
+    bias that no number of iterations removes); refining it with a few shadow
+    rays per iteration (:meth:`refine`) keeps every quantity a running average
+    of unbiased samples.
+    """
+
+    def __init__(self, direct: DirectLighting, rng, initial_samples=16):
+        self.direct = direct
+        self.rng = rng
+        sc = direct.scene
+        self.scene = sc
+        self.lights = direct.light_list()
+        n_t, n_l = len(sc.triangles), len(self.lights)
+        self._e_sum = np.zeros((n_t, n_l, 3))
+        self._d_sum = np.zeros((n_t, n_l, 3))
+        self._count = np.zeros(n_t)
+        self._next = 0
+        self.E = np.zeros((sc.n_patches, n_l, 3))
+        self.direction = np.zeros((sc.n_patches, n_l, 3))
+        if n_l:
+            for _ in range(initial_samples):
+                self._add(np.arange(n_t))
+            self._update()
+
+    @property
+    def n_lights(self):
+        return len(self.lights)
+
+    def _add(self, tri):
+        sc = self.scene
+        u = self.rng.random((len(tri), 2))
+        b = uniform_triangle(u[:, 0], u[:, 1])
+        pts = np.einsum("nk,nkj->nj", b, sc.triangle_corners[tri])
+        nrm = sc.triangle_normal[tri]
+        for li, light in enumerate(self.lights):
+            e, travel, _ = self.direct._light_samples(pts, nrm, light, self.rng.random((len(tri), 3)))
+            self._e_sum[tri, li] += e
+            self._d_sum[tri, li] += e.sum(axis=1, keepdims=True) * travel
+        self._count[tri] += 1
+
+    def _update(self):
+        sc = self.scene
+        w = sc.triangle_area / np.maximum(self._count, 1)
+        n_p, n_l = self.E.shape[:2]
+        flat_e = (self._e_sum * w[:, None, None]).reshape(len(w), -1)
+        flat_d = (self._d_sum * w[:, None, None]).reshape(len(w), -1)
+        e = np.stack([np.bincount(sc.triangle_patch, flat_e[:, k], minlength=n_p) for k in range(flat_e.shape[1])], 1)
+        d = np.stack([np.bincount(sc.triangle_patch, flat_d[:, k], minlength=n_p) for k in range(flat_d.shape[1])], 1)
+        self.E = e.reshape(n_p, n_l, 3) / sc.patch_area[:, None, None]
+        d = d.reshape(n_p, n_l, 3)
+        norm = np.linalg.norm(d, axis=2, keepdims=True)
+        self.direction = np.where(norm > 0, d / np.maximum(norm, 1e-300), 0.0)
+
+    def refine(self, n_triangles):
+        """One more sample on the next ``n_triangles`` triangles (round robin)."""
+        if not self.lights or n_triangles <= 0:
+            return
+        n_t = len(self.scene.triangles)
+        tri = (self._next + np.arange(min(n_triangles, n_t))) % n_t
+        self._next = int((self._next + len(tri)) % n_t)
+        self._add(tri)
+        self._update()

@@ -37,7 +37,8 @@ def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
     tracer = RayTracer(scene, threads=settings.threads)
     direct = DirectLighting(scene, tracer, first_shot=settings.first_shot)
     sequence = make_sequence(settings.sequence, settings.seed)
-    solver_obj = SOLVERS[solver](scene, tracer, direct, sequence, bundle_resolution=settings.bundle_resolution)
+    solver_obj = SOLVERS[solver](scene, tracer, direct, sequence, bundle_resolution=settings.bundle_resolution,
+                                 seed=settings.seed)
     return Renderer(scene, camera if camera is not None else scene.camera, solver_obj, direct, settings)
 
 

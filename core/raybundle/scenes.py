@@ -121,18 +121,19 @@ def furnace(glossy=False, resolution=(128, 128)):
     """Closed room (2 x 2 x 1.5 m) with a closed block inside; exact radiance known.
 
     Diffuse: Le = 0.5, albedo (0.3, 0.5, 0.7) -> L = Le / (1 - a) = (0.714, 1, 1.667).
-    Glossy: walls Glossy GGX (0.9, roughness 0.5), block Mix(Diffuse 0.6,
-    Glossy 0.8 r 0.35, factor 0.5), all emitting c (1 - a(w)) -> L = c = (1, 0.8, 0.6).
+    Glossy: walls Glossy GGX (0.7, roughness 0.7), block Mix(Diffuse 0.7,
+    Glossy 0.7 r 0.5, factor 0.3), all emitting c (1 - a(w)) -> L = c = (1, 0.8, 0.6).
+    (Sharper or brighter lobes make the iterates heavy-tailed: see ``solvers``.)
     """
     lo, hi = np.array([0.0, 0.0, 0.0]), np.array([2.0, 2.0, 1.5])
     blo, bhi = np.array([0.9, 1.0, 0.3]), np.array([1.5, 1.5, 0.9])
     centre = (lo + hi) / 2
     bc = (blo + bhi) / 2
     if glossy:
-        specs = [dict(name="walls", glossy=(0.9, 0.9, 0.9), roughness=0.5, glossy_weight=1.0,
+        specs = [dict(name="walls", glossy=(0.7, 0.7, 0.7), roughness=0.7, glossy_weight=1.0,
                       emission_albedo_complement=FURNACE_GLOSSY_C),
-                 dict(name="block", diffuse=(0.6, 0.6, 0.6), glossy=(0.8, 0.8, 0.8), roughness=0.35,
-                      glossy_weight=0.5, emission_albedo_complement=FURNACE_GLOSSY_C)]
+                 dict(name="block", diffuse=(0.7, 0.7, 0.7), glossy=(0.7, 0.7, 0.7), roughness=0.5,
+                      glossy_weight=0.3, emission_albedo_complement=FURNACE_GLOSSY_C)]
         exact = FURNACE_GLOSSY_C
     else:
         specs = [dict(name="walls", diffuse=FURNACE_ALBEDO, emission=FURNACE_LE),

@@ -29,7 +29,9 @@ sent radiance needs no direction, and the image needs only the running
 average of E.
 
 Parameters: bundle resolution (rays per side of the grid), the random sequence
-(``prng`` or ``pi-powers``; ``halton`` converges to a wrong answer, thesis 1.2).
+that draws the directions (``prng`` or ``pi-powers``; ``halton`` converges to a
+wrong answer, thesis 1.2).  The grid's random offset and rotation come from a
+separate PRNG stream.
 Failure modes: glossy lobes with low roughness (fireflies, blocky reflections:
 radiance is constant per patch), albedo near 1 (slow convergence), patches
 much smaller than the bundle cell (they are missed in most iterations; raise
@@ -42,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .lights import PatchFirstShot
 from .sampling import uniform_sphere
 
 
@@ -58,7 +61,7 @@ class StochasticIterationSolver:
 
     name = "stochastic-iteration"
 
-    def __init__(self, scene, tracer, direct, sequence, bundle_resolution=0):
+    def __init__(self, scene, tracer, direct, sequence, bundle_resolution=0, seed=0):
         self.scene = scene
         self.tracer = tracer
         self.direct = direct
@@ -77,9 +80,10 @@ class StochasticIterationSolver:
         self.constant_emission = np.where(self.bundle_emitter[:, None], mats.emission[pm], 0.0)
         self.directional_emitter = np.nonzero(
             self.bundle_emitter & np.any(mats.emission_albedo_complement[pm] > 0, axis=1))[0]
-        # incoming first shot
-        self.first_shot_E, self.first_shot_dir = direct.patch_first_shot()
-        self.first_shot_diffuse = self.kd_over_pi * self.first_shot_E.sum(axis=1)   # (P, 3) radiance
+        # incoming first shot, refined by a few shadow rays every iteration
+        self.first_shot = PatchFirstShot(direct, np.random.default_rng([seed, 7]))
+        self.grid_rng = np.random.default_rng([seed, 3])   # bundle grid offset and rotation
+        self.first_shot_refine = max(64, len(scene.triangles) // 16) if direct.n_lights else 0
         n = scene.n_patches
         self.incoming = np.zeros((n, 3))
         self.receive_direction = np.zeros((n, 3))   # t_i of the current iterate
@@ -92,7 +96,8 @@ class StochasticIterationSolver:
         """Radiance S_j (P, 3) that each patch sends into ``send_dir`` (P, 3) [W m^-2 sr^-1]."""
         mats = self.scene.materials
         cos_out = np.einsum("ij,ij->i", self.normal, send_dir)
-        S = self.constant_emission + self.first_shot_diffuse + self.kd_over_pi * self.incoming
+        fs = self.first_shot
+        S = self.constant_emission + self.kd_over_pi * (self.incoming + fs.E.sum(axis=1))
         de = self.directional_emitter
         if len(de):
             S[de] += mats.emission_albedo_complement[self.patch_material[de]] * (
@@ -102,11 +107,11 @@ class StochasticIterationSolver:
             m, n, w = self.patch_material[g], self.normal[g], send_dir[g]
             if self.direction is not None:
                 S[g] += self.incoming[g] * mats.brdf(m, n, self.receive_direction[g], w, diffuse=False)
-            for li in range(self.first_shot_E.shape[1]):
-                e = self.first_shot_E[g, li]
+            for li in range(fs.n_lights):
+                e = fs.E[g, li]
                 live = np.any(e > 0, axis=1)
                 if live.any():
-                    S[g[live]] += e[live] * mats.brdf(m[live], n[live], self.first_shot_dir[g[live], li],
+                    S[g[live]] += e[live] * mats.brdf(m[live], n[live], fs.direction[g[live], li],
                                                       w[live], diffuse=False)
         S[cos_out <= 0] = 0.0
         return S
@@ -114,9 +119,12 @@ class StochasticIterationSolver:
     def step(self):
         """One iteration: draw d, trace a bundle, transfer, update the running average."""
         t0 = time.perf_counter()
-        u = self.sequence.next(5)
+        before = self.direct.rays
+        self.first_shot.refine(self.first_shot_refine)
+        u = self.sequence.next(2)
         d = uniform_sphere(u[0], u[1])
-        bundle = self.tracer.bundle(d, self.bundle_resolution, offset=(u[2], u[3]), rotation=u[4])
+        g = self.grid_rng.random(3)
+        bundle = self.tracer.bundle(d, self.bundle_resolution, offset=(g[0], g[1]), rotation=g[2])
         side = np.sign(self.normal @ d)
         S = self.sent_radiance(side[:, None] * d)
         w = bundle.cell_area * 2.0 * np.pi
@@ -129,19 +137,36 @@ class StochasticIterationSolver:
         st = self.stats
         st.iterations += 1
         self.mean_incoming += (E - self.mean_incoming) / st.iterations
-        st.rays += bundle.n_casts
+        st.rays += bundle.n_casts + self.direct.rays - before
         st.bundle_rays += bundle.n_rays
         st.seconds += time.perf_counter() - t0
         return bundle
 
     # ------------------------------------------------------------- estimates
+    def iterate_radiance(self, w_out):
+        """Radiance of the current iterate L_n,i(w_out) (P, 3) of every patch towards
+        ``w_out`` (P, 3), all lobes, first shot and emission included."""
+        mats = self.scene.materials
+        cos = np.einsum("ij,ij->i", self.normal, w_out)
+        L = mats.emitted_radiance(self.patch_material, cos)
+        fs = self.first_shot
+        L += self.kd_over_pi * (self.incoming + fs.E.sum(axis=1))
+        g = self.glossy_patches
+        if len(g) and self.direction is not None:
+            m, n, w = self.patch_material[g], self.normal[g], w_out[g]
+            L[g] += self.incoming[g] * mats.brdf(m, n, self.receive_direction[g], w, diffuse=False)
+            for li in range(fs.n_lights):
+                L[g] += fs.E[g, li] * mats.brdf(m, n, fs.direction[g, li], w, diffuse=False)
+        L[cos <= 0] = 0.0
+        return L
+
     def patch_radiance(self, w_out=None):
         """Running-average radiance of each patch (P, 3) towards its normal
         (or towards ``w_out`` (P, 3)), diffuse part only plus emission: the
         view-independent estimate written back as color attributes."""
         cos = np.ones(len(self.normal)) if w_out is None else np.einsum("ij,ij->i", self.normal, w_out)
         le = self.scene.materials.emitted_radiance(self.patch_material, cos)
-        return le + self.kd_over_pi * (self.mean_incoming + self.first_shot_E.sum(axis=1))
+        return le + self.kd_over_pi * (self.mean_incoming + self.first_shot.E.sum(axis=1))
 
 
 def auto_bundle_resolution(scene, lo=32, hi=512):

@@ -9,8 +9,8 @@ stands for the area delta^2 of the plane perpendicular to d, so summed over a
 bundle the weight of a pair estimates ``P(i, j, d) = A(i, j, d) cos_i`` without
 bias when the grid gets a random sub-cell offset (and rotation) every time.
 
-Hits closer than ``eps`` along a ray are one hit (``eps`` = 1e-6 of the scene
-radius): a ray through a shared edge or vertex is counted once, and walls
+Hits closer than ``eps`` along a ray are one hit (``eps`` = 1e-5 of the scene
+radius; Embree's hit distances carry errors of that order in single precision): a ray through a shared edge or vertex is counted once, and walls
 thinner than ``eps`` behave as one surface.
 
 ``embreex`` traces one ray after another in C and releases the GIL, so every
@@ -74,7 +74,7 @@ class RayTracer:
         self.triangle_patch = scene.triangle_patch
         self.triangle_normal = scene.triangle_normal
         self.center, self.radius = scene.bounding_sphere
-        self.eps = max(1e-6 * self.radius, 1e-9)
+        self.eps = max(1e-5 * self.radius, 1e-9)
         self._embree = rtcore_scene.EmbreeScene()
         TriangleMesh(self._embree, scene.vertices.astype(np.float32), scene.triangles.astype(np.int32))
         self._embree.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))  # commit now

@@ -1,0 +1,62 @@
+"""The command line end to end, in a subprocess: EXR, stats JSON, Ctrl-C, errors."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from raybundle.io import read_exr
+
+
+def run_cli(*args, **kw):
+    return subprocess.run([sys.executable, "-m", "raybundle", *args], capture_output=True, text=True,
+                          timeout=300, **kw)
+
+
+def test_render_furnace_writes_exr_png_and_stats(tmp_path):
+    out, stats = tmp_path / "f.exr", tmp_path / "f.json"
+    p = run_cli("render", "furnace", "--iterations", "300", "--patches", "200", "--resolution", "24", "24",
+                "--seed", "3", "--out", str(out), "--stats", str(stats))
+    assert p.returncode == 0, p.stderr
+    img = read_exr(out)
+    assert img.shape == (24, 24, 3) and np.isfinite(img).all()
+    assert (tmp_path / "f.png").exists()
+    s = json.loads(stats.read_text())
+    for key in ("iterations", "seconds", "rays_traced", "patches", "analytic_radiance", "pixel_relative_rmse"):
+        assert key in s
+    assert s["iterations"] == 300 and 150 < s["patches"] < 260
+    assert np.allclose(s["image_mean"], img.reshape(-1, 3).mean(axis=0), rtol=1e-5)
+    assert max(abs(e) for e in s["mean_relative_error"]) < 0.1
+    assert "error vs analytic" in p.stderr
+
+
+def test_ctrl_c_stops_and_still_writes_the_image(tmp_path):
+    out = tmp_path / "c.exr"
+    env = dict(os.environ, RAYBUNDLE_PROGRESS="1")
+    proc = subprocess.Popen([sys.executable, "-m", "raybundle", "render", "cornell", "--time", "120",
+                             "--patches", "300", "--resolution", "32", "32", "--out", str(out)],
+                            stderr=subprocess.PIPE, text=True, env=env)
+    # wait for the first progress line, then interrupt
+    buf = ""
+    t0 = time.time()
+    while "iterations" not in buf and time.time() - t0 < 120:
+        buf += proc.stderr.read(1)
+    proc.send_signal(signal.SIGINT)
+    rest = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 130, buf + rest
+    assert "stopped early" in rest
+    img = read_exr(out)
+    assert np.isfinite(img).all() and img.mean() > 0.01
+
+
+def test_bad_scene_names_and_files_give_errors(tmp_path):
+    p = run_cli("render", "no-such-scene", "--iterations", "1", "--out", str(tmp_path / "x.exr"))
+    assert p.returncode == 2 and "unknown scene" in p.stderr and "Traceback" not in p.stderr
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, something=np.zeros(3))
+    p = run_cli("render", str(bad), "--iterations", "1", "--out", str(tmp_path / "x.exr"))
+    assert p.returncode == 2 and "not a raybundle scene" in p.stderr
+    assert not (tmp_path / "x.exr").exists()
