@@ -52,9 +52,9 @@ def test_image_of_point_lit_plane_matches_closed_form():
     r = pipeline.make_renderer(sc, RenderSettings(resolve_samples=1))
     samples = []
     for _ in range(300):
-        before = r.direct_sum.copy()
+        before = r.pass_sum.copy()
         r.image_pass()
-        samples.append(r.direct_sum - before)
+        samples.append(r.pass_sum - before)
     samples = np.array(samples)
     img = samples.mean(axis=0)
     se = samples.std(axis=0, ddof=1) / np.sqrt(len(samples))

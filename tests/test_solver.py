@@ -30,7 +30,7 @@ def batch_means(renderer, batches, per_batch):
     r.image_pass()
     for b in range(batches + 1):
         acc = np.zeros(3)
-        snap = (r.direct_sum.copy(), r.passes, r.glossy_sum.copy(), r.glossy_iterations,
+        snap = (r.pass_sum.copy(), r.passes, r.glossy_sum.copy(), r.glossy_iterations,
                 s.mean_incoming * s.stats.iterations)
         for _ in range(per_batch):
             s.step()
@@ -41,7 +41,7 @@ def batch_means(renderer, batches, per_batch):
                 r.image_pass()
         if b == 0:
             continue      # burn-in: the start-up transient (bias O(1/m)) stays out
-        d_direct = (r.direct_sum - snap[0]) / max(r.passes - snap[1], 1)
+        d_direct = (r.pass_sum - snap[0]) / max(r.passes - snap[1], 1)
         d_glossy = (r.glossy_sum - snap[2]) / max(r.glossy_iterations - snap[3], 1)
         e_batch = (s.mean_incoming * s.stats.iterations - snap[4]) / per_batch
         img = d_direct + d_glossy + r.diffuse_indirect(e_batch)

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .materials import sample_ggx_reflection
 from .sampling import stratified_2d
 
 
@@ -56,7 +57,10 @@ class RenderSettings:
     random sequence name; ``light_samples``: shadow rays per light per pixel per
     image pass; ``image_ray_share``: fraction of traced rays spent on image
     passes (the rest on bundles); ``resolve_samples``: sub-pixel positions for
-    the diffuse indirect part; ``smooth``: interpolate patch values.
+    the diffuse indirect part; ``smooth``: interpolate patch values;
+    ``glossy_gather``: estimate the glossy lobe seen by the eye with one
+    importance-sampled eye ray per pixel and pass (see :meth:`Renderer.glossy_gather`)
+    instead of the per-iteration ``E f(t, w_eye)``.
     """
 
     bundle_resolution: int = 0
@@ -67,6 +71,7 @@ class RenderSettings:
     image_ray_share: float = 0.25
     resolve_samples: int = 16
     smooth: bool = True
+    glossy_gather: bool = True
     threads: int | None = None
 
 
@@ -88,7 +93,7 @@ class Renderer:
         self.settings = settings
         self.rng = np.random.default_rng([settings.seed, 1])
         n = camera.width * camera.height
-        self.direct_sum = np.zeros((n, 3))
+        self.pass_sum = np.zeros((n, 3))
         self.glossy_sum = np.zeros((n, 3))
         self.passes = 0
         self.glossy_iterations = 0
@@ -128,10 +133,46 @@ class Renderer:
             contrib[front] += self.direct.reflected_radiance(
                 g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], self.rng, self.settings.light_samples)
             self.image_rays += self.direct.rays - before
-        self.direct_sum[h] += contrib
-        self.passes += 1
         gl = h[front & self.glossy_material[g.material[h]]]
+        if self.settings.glossy_gather:
+            contrib[np.isin(h, gl)] += self.glossy_gather(g, gl)
+            gl = gl[:0]
+        self.pass_sum[h] += contrib
+        self.passes += 1
         self._glossy_pixels = gl
+
+    def glossy_gather(self, g, idx):
+        """Glossy lobe at pixels ``idx`` by one eye ray each (the remedy for sharp lobes).
+
+        Sample ``w_i`` from the GGX lobe around the mirror of the eye direction,
+        trace it to the surface it sees, and take that surface's outgoing
+        radiance from the solver (running-average diffuse part interpolated at the
+        hit, current iterate for its own glossy lobe, first shot).  Direct light of
+        the first-shot lights is left out: :meth:`DirectLighting.reflected_radiance`
+        counts it.  Returns (len(idx), 3).
+        """
+        out = np.zeros((len(idx), 3))
+        if len(idx) == 0:
+            return out
+        sc, mats, solver = self.scene, self.scene.materials, self.solver
+        m, n, wo = g.material[idx], g.normal[idx], g.w_eye[idx]
+        w_i, weight = sample_ggx_reflection(mats.alpha[m], n, wo, self.rng.random((len(idx), 2)))
+        live = np.nonzero(weight > 0)[0]
+        if len(live) == 0:
+            return out
+        tri, _, u, v = self.tracer.first_hit(g.point[idx[live]] + n[live] * self.tracer.eps, w_i[live])
+        self.image_rays += len(live)
+        hit = tri >= 0
+        live, tri, bary = live[hit], tri[hit], np.stack([1 - u - v, u, v], axis=1)[hit]
+        patch = sc.triangle_patch[tri]
+        e = solver.mean_incoming + solver.first_shot.E.sum(axis=1)
+        if self.settings.smooth:
+            e_hit = np.einsum("nk,nkc->nc", bary, self.vertex_values(e)[sc.smooth_vertex_ids[tri]])
+        else:
+            e_hit = e[patch]
+        L = solver.radiance(patch, -w_i[live], diffuse_incoming=e_hit, first_shot_emission=False)
+        out[live] = (mats.glossy_weight[m[live]] * weight[live])[:, None] * mats.glossy[m[live]] * L
+        return out
 
     def accumulate_glossy(self):
         """Add this iterate's glossy lobe per pixel: E_i f_glossy(t_i, w_eye)."""
@@ -186,20 +227,22 @@ class Renderer:
 
     def image(self, diffuse=None):
         """The current estimate (H, W, 3) float32; ``diffuse`` = precomputed diffuse indirect."""
-        img = self.direct_sum / max(self.passes, 1)
+        img = self.pass_sum / max(self.passes, 1)
         if self.glossy_iterations:
             img = img + self.glossy_sum / self.glossy_iterations
         img = img + (self.diffuse_indirect() if diffuse is None else diffuse)
         return img.reshape(self.camera.height, self.camera.width, 3).astype(np.float32)
 
     # ------------------------------------------------------------------ run
-    def run(self, iterations=None, seconds=None, progress=None, stop=None):
+    def run(self, iterations=None, seconds=None, progress=None, stop=None, snapshots=(), on_snapshot=None):
         """Iterate until ``iterations`` or ``seconds`` is reached or ``stop()`` is true.
 
         ``progress(fraction, info)`` is called after every iteration; ``stop`` is
         a callable or an object with ``is_set()`` (threading.Event), checked
         between iterations.  KeyboardInterrupt ends the run like a stop; the
         image so far is returned either way (``cancelled`` says which).
+        ``on_snapshot(seconds, iterations, image)`` is called when the run's clock
+        passes each of ``snapshots`` (seconds); the time it takes is not counted.
         """
         if iterations is None and seconds is None:
             raise ValueError("give iterations or seconds")
@@ -208,10 +251,16 @@ class Renderer:
         t0 = time.perf_counter()
         cancelled = False
         every = None
+        pending = sorted(snapshots)
         try:
             self.image_pass()
             while True:
                 elapsed = time.perf_counter() - t0
+                while pending and elapsed >= pending[0] and on_snapshot is not None:
+                    pending.pop(0)
+                    t_snap = time.perf_counter()
+                    on_snapshot(elapsed, solver.stats.iterations, self.image())
+                    t0 += time.perf_counter() - t_snap
                 it = solver.stats.iterations
                 if iterations is not None and it >= iterations:
                     break

@@ -163,40 +163,39 @@ class PatchFirstShot:
         self._count = np.zeros(n_t)
         self._next = 0
         self.E = np.zeros((sc.n_patches, n_l, 3))
+        self._d_patch = np.zeros((sc.n_patches, n_l, 3))
         self.direction = np.zeros((sc.n_patches, n_l, 3))
         if n_l:
             for _ in range(initial_samples):
                 self._add(np.arange(n_t))
-            self._update()
 
     @property
     def n_lights(self):
         return len(self.lights)
 
     def _add(self, tri):
+        """One new sample on each triangle in ``tri`` (distinct ids); updates E and direction."""
         sc = self.scene
         u = self.rng.random((len(tri), 2))
         b = uniform_triangle(u[:, 0], u[:, 1])
         pts = np.einsum("nk,nkj->nj", b, sc.triangle_corners[tri])
         nrm = sc.triangle_normal[tri]
+        old = self._e_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
+        old_d = self._d_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
         for li, light in enumerate(self.lights):
             e, travel, _ = self.direct._light_samples(pts, nrm, light, self.rng.random((len(tri), 3)))
             self._e_sum[tri, li] += e
             self._d_sum[tri, li] += e.sum(axis=1, keepdims=True) * travel
         self._count[tri] += 1
-
-    def _update(self):
-        sc = self.scene
-        w = sc.triangle_area / np.maximum(self._count, 1)
-        n_p, n_l = self.E.shape[:2]
-        flat_e = (self._e_sum * w[:, None, None]).reshape(len(w), -1)
-        flat_d = (self._d_sum * w[:, None, None]).reshape(len(w), -1)
-        e = np.stack([np.bincount(sc.triangle_patch, flat_e[:, k], minlength=n_p) for k in range(flat_e.shape[1])], 1)
-        d = np.stack([np.bincount(sc.triangle_patch, flat_d[:, k], minlength=n_p) for k in range(flat_d.shape[1])], 1)
-        self.E = e.reshape(n_p, n_l, 3) / sc.patch_area[:, None, None]
-        d = d.reshape(n_p, n_l, 3)
-        norm = np.linalg.norm(d, axis=2, keepdims=True)
-        self.direction = np.where(norm > 0, d / np.maximum(norm, 1e-300), 0.0)
+        # patch average = sum over its triangles of area * (triangle mean) / patch area
+        w = (sc.triangle_area[tri] / sc.patch_area[sc.triangle_patch[tri]])[:, None, None]
+        new = self._e_sum[tri] / self._count[tri][:, None, None]
+        new_d = self._d_sum[tri] / self._count[tri][:, None, None]
+        np.add.at(self.E, sc.triangle_patch[tri], w * (new - old))
+        np.add.at(self._d_patch, sc.triangle_patch[tri], w * (new_d - old_d))
+        p = np.unique(sc.triangle_patch[tri])
+        norm = np.linalg.norm(self._d_patch[p], axis=2, keepdims=True)
+        self.direction[p] = np.where(norm > 0, self._d_patch[p] / np.maximum(norm, 1e-300), 0.0)
 
     def refine(self, n_triangles):
         """One more sample on the next ``n_triangles`` triangles (round robin)."""
@@ -206,4 +205,3 @@ class PatchFirstShot:
         tri = (self._next + np.arange(min(n_triangles, n_t))) % n_t
         self._next = int((self._next + len(tri)) % n_t)
         self._add(tri)
-        self._update()

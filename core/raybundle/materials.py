@@ -252,6 +252,32 @@ def ggx_lobe(alpha, n, w_i, w_o, cos_i, cos_o):
     return d * g2 / (4.0 * cos_i * cos_o)
 
 
+def sample_ggx_reflection(alpha, normal, w_out, u):
+    """Importance-sample the GGX lobe seen from ``w_out``: half vectors h with
+    density D(h) (n.h), mirrored to the light-side direction ``w_i``.
+
+    Returns ``(w_i (N, 3), weight (N,))`` with ``weight = lobe * cos_i / pdf(w_i)
+    = G2 (h.w_out) / (cos_out cos_h)`` (0 where ``w_i`` is below the surface), so
+    ``E[weight * L(w_i)]`` is the lobe's reflected radiance (untinted).
+    """
+    from .sampling import frames_from_normals
+
+    t, b = frames_from_normals(normal)
+    tan2 = alpha * alpha * u[:, 0] / np.maximum(1.0 - u[:, 0], 1e-12)
+    cos_h = 1.0 / np.sqrt(1.0 + tan2)
+    sin_h = np.sqrt(np.maximum(0.0, 1.0 - cos_h * cos_h))
+    phi = 2 * np.pi * u[:, 1]
+    h = (sin_h * np.cos(phi))[:, None] * t + (sin_h * np.sin(phi))[:, None] * b + cos_h[:, None] * normal
+    h_o = np.einsum("ij,ij->i", h, w_out)
+    w_i = 2 * h_o[:, None] * h - w_out
+    cos_i = np.einsum("ij,ij->i", normal, w_i)
+    cos_o = np.einsum("ij,ij->i", normal, w_out)
+    ok = (cos_i > 0) & (h_o > 0) & (cos_o > 0)
+    g2 = 1.0 / (1.0 + smith_lambda(alpha, np.where(ok, cos_i, 1.0)) + smith_lambda(alpha, np.where(ok, cos_o, 1.0)))
+    weight = np.where(ok, g2 * h_o / (np.maximum(cos_o, 1e-12) * cos_h), 0.0)
+    return w_i, weight
+
+
 def ggx_albedo(alpha, cos_out, n_theta=1024, n_phi=256):
     """Directional albedo of the untinted GGX lobe, integral of lobe * cos_i dw_i.
 

@@ -58,6 +58,18 @@ def orthonormal_basis(d):
     return u, np.cross(d, u)
 
 
+def frames_from_normals(n):
+    """Tangents (N, 3) and bitangents (N, 3) completing unit normals (N, 3) to
+    right-handed orthonormal frames (branchless construction, Duff et al. 2017)."""
+    n = np.asarray(n, float)
+    sign = np.where(n[:, 2] >= 0, 1.0, -1.0)
+    a = -1.0 / (sign + n[:, 2])
+    b = n[:, 0] * n[:, 1] * a
+    t = np.stack([1 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], axis=1)
+    bt = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
+    return t, bt
+
+
 def uniform_triangle(u1, u2):
     """Barycentric weights (..., 3) uniform over a triangle (square-root map)."""
     s = np.sqrt(np.asarray(u1, float))

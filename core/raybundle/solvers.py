@@ -143,22 +143,40 @@ class StochasticIterationSolver:
         return bundle
 
     # ------------------------------------------------------------- estimates
+    def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True):
+        """Outgoing radiance (N, 3) of ``patch`` (N,) towards ``w_out`` (N, 3):
+
+        ``Le + kd/pi (E + E1) + E f_g(t, w_out) + sum_l E1_l f_g(w_l, w_out)``, with E
+        the current iterate (or ``diffuse_incoming`` (N, 3) for the diffuse lobe,
+        e.g. the running average interpolated at hit points) and E1 the first shot.
+        ``first_shot_emission=False`` leaves out the emission of first-shot lights
+        (for estimators that already count direct light).
+        """
+        mats = self.scene.materials
+        patch = np.asarray(patch)
+        pm = self.patch_material[patch]
+        n = self.normal[patch]
+        cos = np.einsum("ij,ij->i", n, w_out)
+        L = mats.emitted_radiance(pm, cos)
+        if not first_shot_emission:
+            L[self.direct.first_shot_material[pm]] = 0.0
+        fs = self.first_shot
+        e = self.incoming[patch] + fs.E[patch].sum(axis=1) if diffuse_incoming is None else diffuse_incoming
+        L += self.kd_over_pi[patch] * e
+        g = np.nonzero(mats.is_glossy[pm])[0]
+        if len(g):
+            m, ng, w, pg = pm[g], n[g], w_out[g], patch[g]
+            if self.direction is not None:
+                L[g] += self.incoming[pg] * mats.brdf(m, ng, self.receive_direction[pg], w, diffuse=False)
+            for li in range(fs.n_lights):
+                L[g] += fs.E[pg, li] * mats.brdf(m, ng, fs.direction[pg, li], w, diffuse=False)
+        L[cos <= 0] = 0.0
+        return L
+
     def iterate_radiance(self, w_out):
         """Radiance of the current iterate L_n,i(w_out) (P, 3) of every patch towards
         ``w_out`` (P, 3), all lobes, first shot and emission included."""
-        mats = self.scene.materials
-        cos = np.einsum("ij,ij->i", self.normal, w_out)
-        L = mats.emitted_radiance(self.patch_material, cos)
-        fs = self.first_shot
-        L += self.kd_over_pi * (self.incoming + fs.E.sum(axis=1))
-        g = self.glossy_patches
-        if len(g) and self.direction is not None:
-            m, n, w = self.patch_material[g], self.normal[g], w_out[g]
-            L[g] += self.incoming[g] * mats.brdf(m, n, self.receive_direction[g], w, diffuse=False)
-            for li in range(fs.n_lights):
-                L[g] += fs.E[g, li] * mats.brdf(m, n, fs.direction[g, li], w, diffuse=False)
-        L[cos <= 0] = 0.0
-        return L
+        return self.radiance(np.arange(len(self.normal)), w_out)
 
     def patch_radiance(self, w_out=None):
         """Running-average radiance of each patch (P, 3) towards its normal

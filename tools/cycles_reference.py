@@ -1,0 +1,182 @@
+"""Render a raybundle scene with Blender's Cycles (pip ``bpy``), for references and checks.
+
+Usage::
+
+    python tools/cycles_reference.py cornell --samples 1024 --out out/bench/cycles-cornell.exr
+
+Builds the scene in Blender with the node set-up that :mod:`raybundle.materials`
+models (Mix Shader(Diffuse BSDF, Glossy BSDF GGX) + one-sided Emission), the
+same camera, and renders with settings that match the raybundle estimator: box
+pixel filter one pixel wide, no clamping, no glossy filter, caustics on, many
+bounces, black world, no denoiser.  This script lives outside ``core/`` because
+the core library never imports ``bpy``.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+
+def _bpy():
+    import bpy
+
+    return bpy
+
+
+def reset():
+    bpy = _bpy()
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    return bpy.context.scene
+
+
+def make_material(name, diffuse, glossy, roughness, glossy_weight, emission):
+    """A node material: Add(Mix(Diffuse, Glossy GGX, fac), Emission * (1 - backfacing))."""
+    bpy = _bpy()
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    dif = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    dif.inputs["Color"].default_value = (*diffuse, 1.0)
+    dif.inputs["Roughness"].default_value = 0.0
+    glo = nt.nodes.new("ShaderNodeBsdfGlossy")
+    glo.distribution = "GGX"
+    glo.inputs["Color"].default_value = (*glossy, 1.0)
+    glo.inputs["Roughness"].default_value = float(roughness)
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    mix.inputs["Fac"].default_value = float(glossy_weight)
+    nt.links.new(dif.outputs[0], mix.inputs[1])
+    nt.links.new(glo.outputs[0], mix.inputs[2])
+    surface = mix.outputs[0]
+    if any(e > 0 for e in emission):
+        em = nt.nodes.new("ShaderNodeEmission")
+        em.inputs["Color"].default_value = (*emission, 1.0)
+        geo = nt.nodes.new("ShaderNodeNewGeometry")
+        inv = nt.nodes.new("ShaderNodeMath")
+        inv.operation = "SUBTRACT"
+        inv.inputs[0].default_value = 1.0
+        nt.links.new(geo.outputs["Backfacing"], inv.inputs[1])
+        nt.links.new(inv.outputs[0], em.inputs["Strength"])      # one-sided emitter
+        add = nt.nodes.new("ShaderNodeAddShader")
+        nt.links.new(surface, add.inputs[0])
+        nt.links.new(em.outputs[0], add.inputs[1])
+        surface = add.outputs[0]
+    nt.links.new(surface, out.inputs["Surface"])
+    return mat
+
+
+def add_scene_mesh(scene):
+    """The raybundle scene's triangles as one Blender mesh with a material slot per material."""
+    bpy = _bpy()
+    me = bpy.data.meshes.new("raybundle")
+    me.from_pydata(scene.vertices.tolist(), [], scene.triangles.tolist())
+    mt = scene.materials
+    for k, name in enumerate(mt.names):
+        me.materials.append(make_material(name, mt.diffuse[k], mt.glossy[k], mt.roughness[k],
+                                          mt.glossy_weight[k], mt.emission[k]))
+    me.polygons.foreach_set("material_index", scene.triangle_material.astype(np.int32))
+    me.update()
+    ob = bpy.data.objects.new("raybundle", me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def add_camera(camera):
+    """A Blender camera equal to a :class:`raybundle.camera.Camera` (horizontal sensor fit)."""
+    bpy = _bpy()
+    from mathutils import Matrix
+
+    cd = bpy.data.cameras.new("cam")
+    cd.sensor_fit = "HORIZONTAL"
+    cd.sensor_width = 36.0
+    cd.lens = camera.fx * 36.0 / camera.width
+    cd.shift_x = (camera.width / 2 - camera.cx) / camera.width
+    cd.shift_y = (camera.cy - camera.height / 2) / camera.width
+    ob = bpy.data.objects.new("cam", cd)
+    ob.matrix_world = Matrix(camera.matrix_world.tolist())
+    sc = bpy.context.scene
+    sc.collection.objects.link(ob)
+    sc.camera = ob
+    sc.render.resolution_x, sc.render.resolution_y = camera.width, camera.height
+    sc.render.resolution_percentage = 100
+    return ob
+
+
+def cycles_settings(samples, seed=0, world_strength=0.0):
+    bpy = _bpy()
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    c = sc.cycles
+    c.device = "CPU"
+    c.samples = int(samples)
+    c.use_adaptive_sampling = False
+    c.use_denoising = False
+    c.seed = int(seed)
+    c.pixel_filter_type = "BOX"
+    sc.render.filter_size = 1.0
+    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = 64
+    c.transparent_max_bounces = 8
+    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
+    c.blur_glossy = 0.0
+    c.caustics_reflective = True
+    c.use_light_tree = True
+    sc.view_settings.view_transform = "Standard"
+    sc.view_settings.look = "None"
+    sc.view_settings.exposure = 0.0
+    world = bpy.data.worlds.new("world")
+    world.use_nodes = True
+    bg = world.node_tree.nodes["Background"]
+    bg.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    bg.inputs["Strength"].default_value = float(world_strength)
+    sc.world = world
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    sc.render.image_settings.color_depth = "32"
+    sc.render.image_settings.exr_codec = "ZIP"
+
+
+def render_to(path):
+    """Render the current scene to ``path`` (EXR) and read it back as (H, W, 3) float32."""
+    bpy = _bpy()
+    from raybundle.io import read_exr
+
+    bpy.context.scene.render.filepath = os.path.abspath(path)
+    bpy.ops.render.render(write_still=True)
+    return read_exr(path)
+
+
+def render_scene(scene, samples, out, seed=0):
+    reset()
+    add_scene_mesh(scene)
+    add_camera(scene.camera)
+    cycles_settings(samples, seed)
+    tmp = out + ".tmp.exr"
+    img = render_to(tmp)
+    from raybundle.io import write_exr
+
+    write_exr(out, img, {"cycles_samples": samples})
+    os.unlink(tmp)
+    return img
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scene")
+    p.add_argument("--samples", type=int, default=1024)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True)
+    a = p.parse_args(argv)
+    from raybundle.scenes import load_scene
+
+    t = time.perf_counter()
+    render_scene(load_scene(a.scene), a.samples, a.out, a.seed)
+    print(f"Cycles: {a.scene} at {a.samples} samples/pixel in {time.perf_counter() - t:.1f} s -> {a.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
