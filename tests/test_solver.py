@@ -16,10 +16,11 @@ from raybundle import pipeline, scenes
 from raybundle.imaging import RenderSettings
 
 
-def furnace_renderer(glossy, sequence, patches=600, seed=0, res=(24, 24)):
+def furnace_renderer(glossy, sequence, patches=600, seed=0, res=(24, 24), glossy_gather=True):
     sc = scenes.furnace(glossy=glossy, resolution=res)
     sc = pipeline.prepare(sc, patches=patches)
-    return pipeline.make_renderer(sc, RenderSettings(sequence=sequence, seed=seed, resolve_samples=4))
+    return pipeline.make_renderer(sc, RenderSettings(sequence=sequence, seed=seed, resolve_samples=4,
+                                                     glossy_gather=glossy_gather))
 
 
 def batch_means(renderer, batches, per_batch):
@@ -67,6 +68,15 @@ def test_furnace_converges_to_analytic(glossy, sequence, batches, per_batch):
     patch, img = batch_means(r, batches, per_batch)
     assert_converged(patch, exact, max_se=0.02)
     assert_converged(img, exact, max_se=0.02)
+    r.tracer.close()
+
+
+def test_glossy_furnace_image_without_gather():
+    """The thesis' own eye estimator E_i f(t_i, w_eye) per iteration (glossy_gather off)."""
+    r = furnace_renderer(True, "prng", glossy_gather=False)
+    patch, img = batch_means(r, 12, 250)
+    assert r.glossy_iterations > 0 and not r.settings.glossy_gather
+    assert_converged(img, r.scene.analytic_radiance, max_se=0.03)
     r.tracer.close()
 
 

@@ -99,6 +99,7 @@ class Renderer:
         self.glossy_iterations = 0
         self.image_rays = 0
         self.gbuffer = None
+        self._glossy_pixels = np.zeros(0, np.int64)   # pixels for accumulate_glossy
         mats = scene.materials
         self.glossy_material = mats.is_glossy
         py, px = np.divmod(np.arange(n), camera.width)
@@ -120,7 +121,9 @@ class Renderer:
                        sc.triangle_material[safe], -dirs, np.stack([1 - u - v, u, v], axis=1))
 
     def image_pass(self):
-        """One jittered sample per pixel of the direct part; keeps the G-buffer for glossy."""
+        """One jittered sample per pixel of the per-pass part: emission seen, direct
+        light of the first-shot lights and (with ``glossy_gather``) the glossy lobe.
+        Keeps the G-buffer for :meth:`accumulate_glossy`."""
         g = self.trace_gbuffer(self.rng.random((len(self._pixel), 2)))
         self.gbuffer = g
         h = np.nonzero(g.hit)[0]
@@ -133,9 +136,10 @@ class Renderer:
             contrib[front] += self.direct.reflected_radiance(
                 g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], self.rng, self.settings.light_samples)
             self.image_rays += self.direct.rays - before
-        gl = h[front & self.glossy_material[g.material[h]]]
+        glossy = front & self.glossy_material[g.material[h]]
+        gl = h[glossy]
         if self.settings.glossy_gather:
-            contrib[np.isin(h, gl)] += self.glossy_gather(g, gl)
+            contrib[glossy] += self.glossy_gather(g, gl)
             gl = gl[:0]
         self.pass_sum[h] += contrib
         self.passes += 1
@@ -177,8 +181,8 @@ class Renderer:
     def accumulate_glossy(self):
         """Add this iterate's glossy lobe per pixel: E_i f_glossy(t_i, w_eye)."""
         self.glossy_iterations += 1
-        gl = getattr(self, "_glossy_pixels", None)
-        if gl is None or len(gl) == 0:
+        gl = self._glossy_pixels
+        if len(gl) == 0:
             return
         g = self.gbuffer
         patch = self.scene.triangle_patch[g.triangle[gl]]

@@ -1,0 +1,24 @@
+"""The core is a standalone, pip-installable package that never imports bpy."""
+import pathlib
+import re
+import subprocess
+import sys
+import zipfile
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+
+def test_core_never_imports_bpy():
+    offenders = [str(p) for p in (ROOT / "core").rglob("*.py")
+                 if re.search(r"^\s*(import bpy|from bpy)", p.read_text(), re.M)]
+    assert offenders == []
+
+
+def test_core_builds_a_wheel_named_raybundle(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(ROOT / "core")],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    (wheel,) = tmp_path.glob("raybundle-*.whl")
+    names = zipfile.ZipFile(wheel).namelist()
+    assert "raybundle/__init__.py" in names and "raybundle/solvers.py" in names
+    assert not any(n.startswith(("core/", "tests/")) for n in names)
