@@ -83,3 +83,21 @@ def test_toy_iteration_van_der_corput_is_wrong():
     # beyond Monte Carlo noise (algorithms.md 1.2: -0.0049 at 2e5 steps)
     err = toy_iteration(HaltonSequence(), 50_000) - 2.0
     assert err < -0.003
+
+
+def test_kronecker_generators_and_stratification(rng):
+    from raybundle.sampling import ShiftedKronecker, kronecker_alpha
+
+    assert np.isclose(kronecker_alpha(1)[0], (math.sqrt(5) - 1) / 2)
+    assert np.isclose(kronecker_alpha(2)[0], 1 / 1.324717957244746)      # plastic number
+    s = ShiftedKronecker(3, 2, rng)
+    pts = np.array([s.next() for _ in range(256)])                        # (pass, pixel, dim)
+    # each pixel's 256 passes cover a 16 x 16 grid of cells far more evenly than random points
+    for p in range(3):
+        cells = np.histogram2d(pts[:, p, 0], pts[:, p, 1], bins=16, range=[[0, 1], [0, 1]])[0]
+        assert cells.max() <= 3 and (cells == 0).sum() <= 60        # random: ~94 empty, max 4-6
+    # and each pass, over pixels, is uniform: the shift is uniform per pixel
+    many = ShiftedKronecker(20_000, 3, rng)
+    many.next()
+    u = many.next()
+    assert np.allclose(u.mean(axis=0), 0.5, atol=0.01)

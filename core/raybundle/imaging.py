@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .materials import sample_ggx_reflection
-from .sampling import stratified_2d
+from .sampling import ShiftedKronecker, stratified_2d
 
 
 @dataclass
@@ -92,6 +92,9 @@ class Renderer:
         self.tracer = solver.tracer
         self.settings = settings
         self.rng = np.random.default_rng([settings.seed, 1])
+        n_light = direct.samples_per_pass(settings.light_samples)
+        # per pass and pixel: jitter (2), glossy lobe (2), light samples (3 each)
+        self.pass_sampler = ShiftedKronecker(camera.width * camera.height, 4 + 3 * n_light, self.rng)
         n = camera.width * camera.height
         self.pass_sum = np.zeros((n, 3))
         self.glossy_sum = np.zeros((n, 3))
@@ -124,7 +127,8 @@ class Renderer:
         """One jittered sample per pixel of the per-pass part: emission seen, direct
         light of the first-shot lights and (with ``glossy_gather``) the glossy lobe.
         Keeps the G-buffer for :meth:`accumulate_glossy`."""
-        g = self.trace_gbuffer(self.rng.random((len(self._pixel), 2)))
+        u = self.pass_sampler.next()
+        g = self.trace_gbuffer(u[:, :2])
         self.gbuffer = g
         h = np.nonzero(g.hit)[0]
         cos_eye = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h])
@@ -134,18 +138,19 @@ class Renderer:
         if self.direct.n_lights and len(hf):
             before = self.direct.rays
             contrib[front] += self.direct.reflected_radiance(
-                g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], self.rng, self.settings.light_samples)
+                g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], u[hf, 4:].reshape(len(hf), -1, 3),
+                self.settings.light_samples)
             self.image_rays += self.direct.rays - before
         glossy = front & self.glossy_material[g.material[h]]
         gl = h[glossy]
         if self.settings.glossy_gather:
-            contrib[glossy] += self.glossy_gather(g, gl)
+            contrib[glossy] += self.glossy_gather(g, gl, u[gl, 2:4])
             gl = gl[:0]
         self.pass_sum[h] += contrib
         self.passes += 1
         self._glossy_pixels = gl
 
-    def glossy_gather(self, g, idx):
+    def glossy_gather(self, g, idx, u):
         """Glossy lobe at pixels ``idx`` by one eye ray each (the remedy for sharp lobes).
 
         Sample ``w_i`` from the GGX lobe around the mirror of the eye direction,
@@ -153,14 +158,14 @@ class Renderer:
         radiance from the solver (running-average diffuse part interpolated at the
         hit, current iterate for its own glossy lobe, first shot).  Direct light of
         the first-shot lights is left out: :meth:`DirectLighting.reflected_radiance`
-        counts it.  Returns (len(idx), 3).
+        counts it.  ``u`` (len(idx), 2): uniforms for the lobe.  Returns (len(idx), 3).
         """
         out = np.zeros((len(idx), 3))
         if len(idx) == 0:
             return out
         sc, mats, solver = self.scene, self.scene.materials, self.solver
         m, n, wo = g.material[idx], g.normal[idx], g.w_eye[idx]
-        w_i, weight = sample_ggx_reflection(mats.alpha[m], n, wo, self.rng.random((len(idx), 2)))
+        w_i, weight = sample_ggx_reflection(mats.alpha[m], n, wo, u)
         live = np.nonzero(weight > 0)[0]
         if len(live) == 0:
             return out

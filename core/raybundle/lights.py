@@ -118,17 +118,26 @@ class DirectLighting:
     def light_list(self):
         return self.area_lights + self.point_lights
 
-    def reflected_radiance(self, points, normals, mats, w_out, rng, samples_per_light=1):
+    def samples_per_pass(self, samples_per_light=1):
+        """How many light samples :meth:`reflected_radiance` draws per point."""
+        return samples_per_light * len(self.area_lights) + len(self.point_lights)
+
+    def reflected_radiance(self, points, normals, mats, w_out, u, samples_per_light=1):
         """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
 
-        Unbiased estimate with ``samples_per_light`` shadow rays per light:
-        ``sum_l mean_s Le f(w_travel, w_out) cos_x cos_l A / r^2 V``.
+        Unbiased estimate with ``samples_per_light`` shadow rays per area light
+        (one per point light): ``sum_l mean_s Le f(w_travel, w_out) cos_x cos_l A / r^2 V``.
+        ``u``: uniforms (N, K, 3) with K = :meth:`samples_per_pass`, or a Generator.
         """
         out = np.zeros((len(points), 3))
+        if isinstance(u, np.random.Generator):
+            u = u.random((len(points), self.samples_per_pass(samples_per_light), 3))
+        k = 0
         for light in self.light_list():
             n_s = samples_per_light if isinstance(light, AreaLight) else 1
             for _ in range(n_s):
-                e, travel, _ = self._light_samples(points, normals, light, rng.random((len(points), 3)))
+                e, travel, _ = self._light_samples(points, normals, light, u[:, k])
+                k += 1
                 live = np.any(e > 0, axis=1)
                 if live.any():
                     f = self.scene.materials.brdf(mats[live], normals[live], travel[live], w_out[live])

@@ -85,6 +85,38 @@ def stratified_2d(n, rng):
     return (np.stack([cells % k, cells // k], axis=1) + rng.random((n, 2))) / k
 
 
+def kronecker_alpha(dim):
+    """Generators of the R_d Kronecker sequence: alpha_j = phi_d^-j, j = 1..dim, where
+    phi_d is the positive root of x^(d+1) = x + 1 (Roberts' generalized golden ratio)."""
+    phi = 2.0
+    for _ in range(60):
+        phi = (1.0 + phi) ** (1.0 / (dim + 1))
+    return (1.0 / phi) ** np.arange(1, dim + 1) % 1.0
+
+
+class ShiftedKronecker:
+    """Per-pixel randomly shifted R_d sequences for the image passes.
+
+    Pass k of pixel p uses ``frac(shift_p + k alpha)``: every single pass is
+    uniformly distributed (so each pass is an unbiased sample of the pixel
+    integral) while successive passes fill [0,1)^d evenly, so pixel-filter
+    edges and penumbrae converge faster than with independent jitter.  (Image
+    passes are plain averages, not iterations: completely uniform distribution
+    is not needed here.)
+    """
+
+    def __init__(self, n, dim, rng):
+        self.shift = rng.random((n, dim))
+        self.alpha = kronecker_alpha(dim)
+        self.k = 0
+
+    def next(self):
+        """(n, dim) points of the next pass."""
+        u = (self.shift + self.k * self.alpha) % 1.0
+        self.k += 1
+        return u
+
+
 # ---------------------------------------------------------------- sequences
 class PRNGSequence:
     """Pseudo-random numbers from NumPy's PCG64, seeded."""
