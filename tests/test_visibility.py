@@ -112,3 +112,28 @@ def test_first_hit_and_occlusion_against_brute_force(rng):
     assert not tr.occluded(o[hit], d[hit], t[hit] * 0.99).any()
     assert tr.occluded(o[hit], d[hit], t[hit] * 1.01).all()
     tr.close()
+
+
+def shoelace(xz):
+    x, z = np.asarray(xz, float).T
+    return 0.5 * abs(np.dot(x, np.roll(z, 1)) - np.dot(z, np.roll(x, 1)))
+
+
+def test_open_fraction_excludes_area_buried_under_blocks_and_the_light():
+    """Cornell: the floor under both blocks and the ceiling above the light receive nothing."""
+    sc = subdivide(scenes.cornell(), patches=800)
+    tr = RayTracer(sc)
+    open_area = tr.open_fraction() * sc.triangle_area
+    names = sc.materials.names
+    floor = np.isclose(sc.triangle_corners[:, :, 2], 0).all(axis=1) & (sc.triangle_material == names.index("white"))
+    ceiling = np.isclose(sc.triangle_corners[:, :, 2], 0.5488).all(axis=1)
+    footprints = (shoelace(scenes._SHORT_TOP) + shoelace(scenes._TALL_TOP)) * 1e-6
+    light = 0.130 * 0.105
+    assert abs(open_area[floor].sum() - (sc.triangle_area[floor].sum() - footprints)) < 0.01 * footprints
+    # above the light (0.5 mm below the ceiling) the 60-degree test rays escape within
+    # 0.5 mm * tan(60) of its edge: a band of perimeter x 0.87 mm counts as open
+    band = 2 * (0.130 + 0.105) * 0.0005 * np.tan(np.pi / 3)
+    assert abs(open_area[ceiling].sum() - (sc.triangle_area[ceiling].sum() - light)) < band + 0.01 * light
+    walls = ~floor & ~ceiling
+    assert np.allclose(open_area[walls], sc.triangle_area[walls])
+    tr.close()

@@ -7,8 +7,10 @@ Prints and writes to ``--out`` (default ``out/bench``):
   queries per second on the same rays, and their ratio;
 * ``iterations.csv``: seconds per solver iteration for each built-in scene;
 * ``convergence.csv`` and ``convergence.png``: relative RMSE against a
-  reference over time (log-log).  Relative RMSE = sqrt(mean((x - ref)^2)) /
-  mean(ref) over all pixels and channels.  References: the analytic radiance
+  reference over time (log-log).  Relative RMSE = sqrt(mean(((x - ref) /
+  (ref + 0.01))^2)) over pixels and channels (:func:`relative_rmse`); the CSV
+  also has the normalized RMSE (RMSE / mean(ref)), which the edge pixels of a
+  visible light dominate.  References: the analytic radiance
   for the furnaces; for the Cornell boxes a long run of the same method
   (``reference-<scene>.exr``, reused when present), which measures noise, and,
   when ``cycles-<scene>.exr`` exists in the output folder (made by
@@ -34,7 +36,15 @@ from .visibility import RayTracer
 SNAPSHOTS = (0.5, 1, 2, 4, 8, 15)
 
 
-def relative_rmse(img, ref):
+def relative_rmse(img, ref, eps=0.01):
+    """Per-pixel relative RMSE, sqrt(mean(((img - ref) / (ref + eps))^2)) over pixels and
+    channels (the square root of relMSE; eps [W m^-2 sr^-1] keeps black pixels finite)."""
+    img, ref = np.asarray(img, float), np.asarray(ref, float)
+    return float(np.sqrt((((img - ref) / (ref + eps)) ** 2).mean()))
+
+
+def normalized_rmse(img, ref):
+    """sqrt(mean((img - ref)^2)) / mean(ref): dominated by the brightest pixels (visible lights)."""
     img, ref = np.asarray(img, float), np.asarray(ref, float)
     return float(np.sqrt(((img - ref) ** 2).mean()) / ref.mean())
 
@@ -99,7 +109,8 @@ def convergence(name, seconds, reference=None, seed=0, settings=None):
 
     def snap(t, it, img):
         rows.append({"scene": name, "seconds": round(t, 3), "iterations": it,
-                     **{f"rel_rmse_vs_{k}": relative_rmse(img, v) for k, v in refs.items()}})
+                     **{f"rel_rmse_vs_{k}": relative_rmse(img, v) for k, v in refs.items()},
+                     **{f"nrmse_vs_{k}": normalized_rmse(img, v) for k, v in refs.items()}})
 
     r = make_renderer(sc, settings or RenderSettings(seed=seed))
     res = r.run(seconds=seconds, snapshots=[t for t in SNAPSHOTS if t < seconds], on_snapshot=snap)

@@ -60,7 +60,8 @@ class RenderSettings:
     the diffuse indirect part; ``smooth``: interpolate patch values;
     ``glossy_gather``: estimate the glossy lobe seen by the eye with one
     importance-sampled eye ray per pixel and pass (see :meth:`Renderer.glossy_gather`)
-    instead of the per-iteration ``E f(t, w_eye)``.
+    instead of the per-iteration ``E f(t, w_eye)``; ``emission_edge_samples``:
+    extra primary rays per pass for pixels on the edge of a visible emitter.
     """
 
     bundle_resolution: int = 0
@@ -72,6 +73,7 @@ class RenderSettings:
     resolve_samples: int = 16
     smooth: bool = True
     glossy_gather: bool = True
+    emission_edge_samples: int = 32
     threads: int | None = None
 
 
@@ -103,6 +105,7 @@ class Renderer:
         self.image_rays = 0
         self.gbuffer = None
         self._glossy_pixels = np.zeros(0, np.int64)   # pixels for accumulate_glossy
+        self._emitter_hits = np.zeros(n, np.int64)       # passes whose sample saw an emitter
         mats = scene.materials
         self.glossy_material = mats.is_glossy
         py, px = np.divmod(np.arange(n), camera.width)
@@ -132,7 +135,10 @@ class Renderer:
         self.gbuffer = g
         h = np.nonzero(g.hit)[0]
         cos_eye = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h])
-        contrib = self.scene.materials.emitted_radiance(g.material[h], cos_eye)
+        emitted = np.zeros((len(self._pixel), 3))
+        emitted[h] = self.scene.materials.emitted_radiance(g.material[h], cos_eye)
+        self._emission_edge_samples(emitted)
+        contrib = np.zeros((len(h), 3))
         front = cos_eye > 0
         hf = h[front]
         if self.direct.n_lights and len(hf):
@@ -146,9 +152,37 @@ class Renderer:
         if self.settings.glossy_gather:
             contrib[glossy] += self.glossy_gather(g, gl, u[gl, 2:4])
             gl = gl[:0]
+        self.pass_sum += emitted
         self.pass_sum[h] += contrib
         self.passes += 1
         self._glossy_pixels = gl
+
+    def _emission_edge_samples(self, emitted):
+        """Supersample the emission seen in pixels on the edge of a visible emitter.
+
+        A pixel whose earlier passes saw an emitter in some samples and not in
+        others gets ``emission_edge_samples`` extra primary rays this pass, and its
+        emission estimate becomes the mean of all of them: still unbiased (the
+        choice depends only on earlier passes) and, at the edge of a bright light,
+        far less noisy than one sample per pass.  Updates ``emitted`` in place.
+        """
+        seen = np.any(emitted > 0, axis=1)
+        edge = np.nonzero((self._emitter_hits > 0) & (self._emitter_hits < self.passes))[0]
+        self._emitter_hits += seen
+        k = self.settings.emission_edge_samples
+        if len(edge) == 0 or k <= 0:
+            return
+        pix = np.repeat(edge, k)
+        d = self.camera.ray_directions(self._pixel[pix, 0] + self.rng.random(len(pix)),
+                                       self._pixel[pix, 1] + self.rng.random(len(pix)))
+        tri, _, _, _ = self.tracer.first_hit(np.broadcast_to(self.camera.position, d.shape), d)
+        self.image_rays += len(pix)
+        le = np.zeros((len(pix), 3))
+        hit = tri >= 0
+        sc = self.scene
+        le[hit] = sc.materials.emitted_radiance(sc.triangle_material[tri[hit]],
+                                                np.einsum("ij,ij->i", sc.triangle_normal[tri[hit]], -d[hit]))
+        emitted[edge] = (emitted[edge] + le.reshape(len(edge), k, 3).sum(axis=1)) / (k + 1)
 
     def glossy_gather(self, g, idx, u):
         """Glossy lobe at pixels ``idx`` by one eye ray each (the remedy for sharp lobes).

@@ -151,7 +151,8 @@ class PatchFirstShot:
     For every patch i and light l it keeps running sums over uniformly random
     points of the patch and light samples of the irradiance
     ``Le cos_x cos_l A / r^2 V`` (area light) or ``I cos_x / r^2 V`` (point light)
-    and of the irradiance-weighted travel direction.  ``E`` (P, L, 3) [W/m^2] is
+    and of the irradiance-weighted travel direction, divided by the patch's
+    receiving area (``receiving_area``; buried parts receive nothing).  ``E`` (P, L, 3) [W/m^2] is
     the patch-average irradiance, ``direction`` (P, L, 3) the mean travel direction.
 
     A fixed first shot would freeze its Monte Carlo noise into the solution (a
@@ -160,8 +161,10 @@ class PatchFirstShot:
     of unbiased samples.
     """
 
-    def __init__(self, direct: DirectLighting, rng, initial_samples=16):
+    def __init__(self, direct: DirectLighting, rng, initial_samples=16, receiving_area=None):
         self.direct = direct
+        # average over the area that can receive light (see RayTracer.open_fraction)
+        self.receiving_area = direct.scene.patch_area if receiving_area is None else receiving_area
         self.rng = rng
         sc = direct.scene
         self.scene = sc
@@ -197,7 +200,7 @@ class PatchFirstShot:
             self._d_sum[tri, li] += e.sum(axis=1, keepdims=True) * travel
         self._count[tri] += 1
         # patch average = sum over its triangles of area * (triangle mean) / patch area
-        w = (sc.triangle_area[tri] / sc.patch_area[sc.triangle_patch[tri]])[:, None, None]
+        w = (sc.triangle_area[tri] / self.receiving_area[sc.triangle_patch[tri]])[:, None, None]
         new = self._e_sum[tri] / self._count[tri][:, None, None]
         new_d = self._d_sum[tri] / self._count[tri][:, None, None]
         np.add.at(self.E, sc.triangle_patch[tri], w * (new - old))

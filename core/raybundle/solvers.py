@@ -71,7 +71,10 @@ class StochasticIterationSolver:
         pm = scene.patch_material
         self.patch_material = pm
         self.normal = scene.patch_normal
-        self.area = scene.patch_area
+        # receiving area: the patch area less what is buried inside solids
+        open_tri = tracer.open_fraction() * scene.triangle_area
+        self.open_area = np.bincount(scene.triangle_patch, open_tri, minlength=scene.n_patches)
+        self.area = self.open_area
         self.kd_over_pi = mats.diffuse_reflectance[pm] / np.pi          # (P, 3)
         self.glossy_patches = np.nonzero(mats.is_glossy[pm])[0]
         self.diffuse_only = len(self.glossy_patches) == 0
@@ -81,7 +84,7 @@ class StochasticIterationSolver:
         self.directional_emitter = np.nonzero(
             self.bundle_emitter & np.any(mats.emission_albedo_complement[pm] > 0, axis=1))[0]
         # incoming first shot, refined by a few shadow rays every iteration
-        self.first_shot = PatchFirstShot(direct, np.random.default_rng([seed, 7]))
+        self.first_shot = PatchFirstShot(direct, np.random.default_rng([seed, 7]), receiving_area=self.area)
         self.grid_rng = np.random.default_rng([seed, 3])   # bundle grid offset and rotation
         self.first_shot_refine = max(64, len(scene.triangles) // 16) if direct.n_lights else 0
         n = scene.n_patches
