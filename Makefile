@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-all bench clean
+.PHONY: demo test bench cycles-reference clean
 
 $(STAMP): core/pyproject.toml requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -18,11 +18,13 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q tests
 
-test-all: $(STAMP)
-	$(PY) -m pytest -q -m "slow or not slow" tests
-
 bench: $(STAMP)
 	$(PY) -m raybundle bench --out out/bench
+
+# Cycles references for the bench (about 5 minutes each on 2 cores)
+cycles-reference: $(STAMP)
+	$(PY) tools/cycles_reference.py cornell --samples 1024 --out out/bench/cycles-cornell.exr
+	$(PY) tools/cycles_reference.py cornell-glossy --samples 1024 --out out/bench/cycles-cornell-glossy.exr
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

@@ -12,7 +12,7 @@ QUAD_T = np.array([[0, 1, 2], [0, 2, 3]])
 
 def test_cornell_geometry_and_orientation():
     sc = scenes.cornell()
-    assert sc.n_patches == 32          # (6 room quads + 2 blocks x 5 quads) x 2 triangles
+    assert sc.n_patches == 42          # (9 room quads + 2 closed blocks x 6 quads) x 2 triangles
     lo, hi = sc.vertices.min(axis=0), sc.vertices.max(axis=0)
     assert np.allclose(lo, [-0.556, 0, 0], atol=1e-9) and np.allclose(hi, [0, 0.5592, 0.5488], atol=1e-9)
     light = sc.materials.names.index("light")

@@ -119,21 +119,43 @@ def shoelace(xz):
     return 0.5 * abs(np.dot(x, np.roll(z, 1)) - np.dot(z, np.roll(x, 1)))
 
 
-def test_open_fraction_excludes_area_buried_under_blocks_and_the_light():
-    """Cornell: the floor under both blocks and the ceiling above the light receive nothing."""
+def test_open_fraction_excludes_area_buried_under_solid_blocks():
+    """Cornell: the floor under both (closed) blocks receives nothing; everything else is open."""
     sc = subdivide(scenes.cornell(), patches=800)
     tr = RayTracer(sc)
     open_area = tr.open_fraction() * sc.triangle_area
     names = sc.materials.names
-    floor = np.isclose(sc.triangle_corners[:, :, 2], 0).all(axis=1) & (sc.triangle_material == names.index("white"))
-    ceiling = np.isclose(sc.triangle_corners[:, :, 2], 0.5488).all(axis=1)
+    floor = np.isclose(sc.triangle_corners[:, :, 2], 0).all(axis=1) & ~sc.triangle_solid \
+        & (sc.triangle_material == names.index("white"))
     footprints = (shoelace(scenes._SHORT_TOP) + shoelace(scenes._TALL_TOP)) * 1e-6
-    light = 0.130 * 0.105
     assert abs(open_area[floor].sum() - (sc.triangle_area[floor].sum() - footprints)) < 0.01 * footprints
-    # above the light (0.5 mm below the ceiling) the 60-degree test rays escape within
-    # 0.5 mm * tan(60) of its edge: a band of perimeter x 0.87 mm counts as open
-    band = 2 * (0.130 + 0.105) * 0.0005 * np.tan(np.pi / 3)
-    assert abs(open_area[ceiling].sum() - (sc.triangle_area[ceiling].sum() - light)) < band + 0.01 * light
-    walls = ~floor & ~ceiling
-    assert np.allclose(open_area[walls], sc.triangle_area[walls])
+    rest = ~floor & ~sc.triangle_solid
+    assert np.allclose(open_area[rest], sc.triangle_area[rest])
     tr.close()
+
+
+def test_one_sided_shelf_buries_nothing():
+    """A floor under a one-sided plane still receives light from the sides: nothing is buried."""
+    quads = [(_oriented(q, towards=[1, 1, 1]), 0) for q in _box_quads([0, 0, 0], [2, 2, 2])]
+    shelf = np.array([[0.2, 0.2, 0.08], [1.8, 0.2, 0.08], [1.8, 1.8, 0.08], [0.2, 1.8, 0.08]])
+    quads.append((_oriented(shelf, towards=[1, 1, 2]), 0))
+    v, t, m = _mesh(quads)
+    sc = subdivide(build_scene(v, t, m, MATS), patches=400)
+    shelf_tri = np.isclose(sc.triangle_corners[:, :, 2], 0.08).all(axis=1)
+    assert shelf_tri.any() and not sc.triangle_solid[shelf_tri].any()   # the room is closed, the shelf not
+    tr = RayTracer(sc)
+    assert np.all(tr.open_fraction() == 1.0)
+    tr.close()
+
+
+def test_closed_solid_detection():
+    from raybundle.scene import closed_solid_triangles
+
+    oriented = np.array([_oriented(q, away=[0.5, 0.5, 0.5]) for q in _box_quads([0, 0, 0], [1, 1, 1])])
+    vv = oriented.reshape(-1, 3)
+    tt = np.array([[4 * k, 4 * k + 1, 4 * k + 2] for k in range(6)] + [[4 * k, 4 * k + 2, 4 * k + 3] for k in range(6)])
+    assert closed_solid_triangles(vv, tt).all()
+    assert not closed_solid_triangles(vv, tt[:-1]).any()              # a hole opens the solid
+    flipped = tt.copy()
+    flipped[0] = flipped[0][::-1]
+    assert not closed_solid_triangles(vv, flipped).any()              # inconsistent orientation

@@ -231,11 +231,12 @@ class Renderer:
 
     # -------------------------------------------------------------- resolve
     def vertex_values(self, patch_values):
-        """Patch values (P, C) -> per welded vertex (V, C): area-weighted mean of adjacent patches."""
+        """Patch values (P, C) -> per welded vertex (V, C): mean of the adjacent patches
+        weighted by their receiving (not buried) area."""
         sc = self.scene
         ids = sc.smooth_vertex_ids
         nv = int(ids.max()) + 1
-        w = np.repeat(sc.triangle_area, 3)
+        w = np.repeat(self.solver.triangle_open_area, 3)
         tri_val = patch_values[sc.triangle_patch]
         out = np.stack([np.bincount(ids.ravel(), np.repeat(tri_val[:, k], 3) * w, minlength=nv)
                         for k in range(patch_values.shape[1])], axis=1)

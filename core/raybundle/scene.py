@@ -55,6 +55,8 @@ class PatchScene:
     analytic_radiance : (3,) float or None  the exact radiance everywhere, when known
     name : str
     dropped_triangles : int  zero-area triangles removed at validation
+    triangle_solid : (T,) bool  the triangle belongs to a closed, consistently
+        oriented mesh (a solid), see :func:`closed_solid_triangles`
     """
 
     vertices: np.ndarray
@@ -68,6 +70,11 @@ class PatchScene:
     analytic_radiance: np.ndarray | None = None
     name: str = ""
     dropped_triangles: int = 0
+    triangle_solid: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.triangle_solid is None:
+            self.triangle_solid = closed_solid_triangles(self.vertices, self.triangles)
 
     # ------------------------------------------------------------- geometry
     @cached_property
@@ -151,7 +158,7 @@ class PatchScene:
         d = {"format_version": np.array(NPZ_FORMAT_VERSION), "name": np.array(self.name),
              "vertices": self.vertices, "triangles": self.triangles,
              "triangle_material": self.triangle_material, "triangle_patch": self.triangle_patch,
-             "triangle_source": self.triangle_source,
+             "triangle_source": self.triangle_source, "triangle_solid": self.triangle_solid,
              "point_light_position": self.point_lights.position,
              "point_light_intensity": self.point_lights.intensity}
         d.update(self.materials.to_arrays())
@@ -187,13 +194,13 @@ def load_npz(path) -> PatchScene:
     return build_scene(d["vertices"], d["triangles"], d["triangle_material"],
                        MaterialTable.from_arrays(d), point_lights=lights,
                        camera=Camera.from_arrays(d), triangle_patch=d.get("triangle_patch"),
-                       triangle_source=d.get("triangle_source"),
+                       triangle_source=d.get("triangle_source"), triangle_solid=d.get("triangle_solid"),
                        analytic_radiance=d.get("analytic_radiance"), name=str(d.get("name", "")))
 
 
 def build_scene(vertices, triangles, triangle_material, materials, point_lights=None, camera=None,
                 triangle_patch=None, triangle_source=None, analytic_radiance=None, name="",
-                area_epsilon=1e-14) -> PatchScene:
+                area_epsilon=1e-14, triangle_solid=None) -> PatchScene:
     """Validate raw triangles and make a :class:`PatchScene`.
 
     Errors (:class:`SceneError`): non-finite vertices, bad indices, an empty
@@ -247,7 +254,8 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
         raise SceneError("the scene has no lights: no emitting material and no point light "
                          "(add an Emission shader or a light)")
     ar = None if analytic_radiance is None else np.asarray(analytic_radiance, float).reshape(3)
-    return PatchScene(v, t, m, patch, src, materials, lights, camera, ar, name, dropped)
+    solid = None if triangle_solid is None else np.asarray(triangle_solid, bool).reshape(-1)[keep]
+    return PatchScene(v, t, m, patch, src, materials, lights, camera, ar, name, dropped, solid)
 
 
 def subdivide(scene: PatchScene, max_edge=None, patches=None) -> PatchScene:
@@ -304,6 +312,49 @@ def subdivide(scene: PatchScene, max_edge=None, patches=None) -> PatchScene:
     q = np.round(v / max(r * 1e-7, 1e-12)).astype(np.int64)
     _, first, inv = np.unique(q, axis=0, return_index=True, return_inverse=True)
     v, t = v[first], inv.reshape(-1)[t]
+    solid = np.concatenate([np.repeat(scene.triangle_solid[np.nonzero(k_all == k)[0]], k * k)
+                            for k in np.unique(k_all)])
     return PatchScene(v, t, np.concatenate(mats), np.arange(len(t)), np.concatenate(srcs),
                       scene.materials, scene.point_lights, scene.camera, scene.analytic_radiance,
-                      scene.name, scene.dropped_triangles)
+                      scene.name, scene.dropped_triangles, solid)
+
+
+def closed_solid_triangles(vertices, triangles, tol=1e-7):
+    """(T,) bool: triangles of connected components that are closed and consistently
+    oriented (every directed edge u->v has exactly one twin v->u).  Such components
+    bound solids; what lies inside them can never receive light.  Vertices closer
+    than ``tol`` times the scene size are welded first.  After :func:`subdivide`
+    (T-junctions) use the flags computed before it.
+    """
+    t = np.asarray(triangles, np.int64)
+    if len(t) == 0:
+        return np.zeros(0, bool)
+    v = np.asarray(vertices, float)
+    scale = max(float(np.abs(v).max()), 1e-12) * tol
+    _, weld = np.unique(np.round(v / scale).astype(np.int64), axis=0, return_inverse=True)
+    t = weld.reshape(-1)[t]
+    nv = int(t.max()) + 1
+    a, b = t.ravel(), np.roll(t, -1, axis=1).ravel()        # directed edges a->b, 3 per triangle
+    key, rev = a * nv + b, b * nv + a
+    uniq, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    pos = np.clip(np.searchsorted(uniq, rev), 0, len(uniq) - 1)
+    twin = (uniq[pos] == rev)
+    ok_edge = (count[inv.reshape(-1)] == 1) & twin & (count[pos] == 1)
+    tri_ok = ok_edge.reshape(-1, 3).all(axis=1)
+    # connected components over shared (undirected) edges, by min-label propagation
+    und = np.minimum(a, b) * nv + np.maximum(a, b)
+    order = np.argsort(und, kind="stable")
+    same = und[order][1:] == und[order][:-1]
+    e1, e2 = order[:-1][same] // 3, order[1:][same] // 3
+    label = np.arange(len(t))
+    while True:
+        m = np.minimum(label[e1], label[e2])
+        new = label.copy()
+        np.minimum.at(new, e1, m)
+        np.minimum.at(new, e2, m)
+        new = new[new]
+        if np.array_equal(new, label):
+            break
+        label = new
+    bad = np.bincount(label, ~tri_ok, minlength=len(t)) > 0
+    return ~bad[label]

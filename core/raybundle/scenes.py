@@ -2,7 +2,9 @@
 
 * ``cornell``: the Cornell box geometry (Cornell data, mm, Y up) turned into
   metres, Z up, by (x, y, z) -> (-x, z, y) / 1000, with the common RGB stand-ins
-  for the measured reflectances and the light lowered to y = 548.3 mm.
+  for the measured reflectances and the light lowered to y = 548.3 mm.  The
+  blocks are closed (bottom faces added) and the ceiling has an opening above
+  the light; both change nothing visible and keep hidden area out of patches.
 * ``cornell-glossy``: the floor is Mix(Diffuse white, Glossy GGX white,
   roughness 0.3, factor 0.5) and the tall block pure Glossy GGX (0.8, r 0.2).
 * ``furnace``: a closed room with a closed block inside (non-convex); every
@@ -27,7 +29,12 @@ CORNELL_LIGHT = (18.387, 13.9873, 6.75357)
 # Cornell box quads in mm (Cornell data, Y up)
 _CORNELL_QUADS = {
     "floor": ([552.8, 0, 0], [0, 0, 0], [0, 0, 559.2], [549.6, 0, 559.2]),
-    "ceiling": ([556.0, 548.8, 0], [556.0, 548.8, 559.2], [0, 548.8, 559.2], [0, 548.8, 0]),
+    # the ceiling has an opening above the light (a recessed lamp): nothing lies
+    # hidden 0.5 mm above the light quad
+    "ceiling-front": ([556.0, 548.8, 0], [556.0, 548.8, 227.0], [0, 548.8, 227.0], [0, 548.8, 0]),
+    "ceiling-back": ([556.0, 548.8, 332.0], [556.0, 548.8, 559.2], [0, 548.8, 559.2], [0, 548.8, 332.0]),
+    "ceiling-left": ([556.0, 548.8, 227.0], [556.0, 548.8, 332.0], [343.0, 548.8, 332.0], [343.0, 548.8, 227.0]),
+    "ceiling-right": ([213.0, 548.8, 227.0], [213.0, 548.8, 332.0], [0, 548.8, 332.0], [0, 548.8, 227.0]),
     "back": ([549.6, 0, 559.2], [0, 0, 559.2], [0, 548.8, 559.2], [556.0, 548.8, 559.2]),
     "green": ([0, 0, 559.2], [0, 0, 0], [0, 548.8, 0], [0, 548.8, 559.2]),
     "red": ([552.8, 0, 0], [549.6, 0, 559.2], [556.0, 548.8, 559.2], [556.0, 548.8, 0]),
@@ -38,7 +45,8 @@ _TALL_TOP = [(423, 247), (265, 296), (314, 456), (472, 406)]
 
 
 def _block_quads(top_xz, height):
-    quads = [[(x, height, z) for x, z in top_xz]]
+    """Top, four sides and bottom: a closed solid standing on the floor."""
+    quads = [[(x, height, z) for x, z in top_xz], [(x, 0.0, z) for x, z in top_xz]]
     for k in range(4):
         (x0, z0), (x1, z1) = top_xz[k], top_xz[(k + 1) % 4]
         quads.append([(x0, 0, z0), (x1, 0, z1), (x1, height, z1), (x0, height, z0)])
@@ -84,12 +92,12 @@ def cornell(glossy=False, resolution=(256, 256)):
         specs += [dict(name="floor_mix", diffuse=(1, 1, 1), glossy=(1, 1, 1), roughness=0.3, glossy_weight=0.5),
                   dict(name="tall_glossy", glossy=(0.8, 0.8, 0.8), roughness=0.2, glossy_weight=1.0)]
     centre = np.array([278.0, 274.4, 279.6])
-    mat_of = {"floor": 4 if glossy else 0, "ceiling": 0, "back": 0, "green": 2, "red": 1, "light": 3}
+    mat_of = {"floor": 4 if glossy else 0, "back": 0, "green": 2, "red": 1, "light": 3}
     quads = []
     for name, q in _CORNELL_QUADS.items():
         q = np.array(q, float)
         quads.append((_oriented(q, away=q.mean(axis=0) + [0, 1, 0]) if name == "light"
-                       else _oriented(q, towards=centre), mat_of[name]))
+                       else _oriented(q, towards=centre), mat_of.get(name, 0)))
     for top, h, m in ((_SHORT_TOP, 165.0, 0), (_TALL_TOP, 330.0, 5 if glossy else 0)):
         blk = _block_quads(top, h)
         c = np.mean([b.mean(axis=0) for b in blk], axis=0) - [0, h / 2, 0]

@@ -72,8 +72,8 @@ class StochasticIterationSolver:
         self.patch_material = pm
         self.normal = scene.patch_normal
         # receiving area: the patch area less what is buried inside solids
-        open_tri = tracer.open_fraction() * scene.triangle_area
-        self.open_area = np.bincount(scene.triangle_patch, open_tri, minlength=scene.n_patches)
+        self.triangle_open_area = tracer.open_fraction() * scene.triangle_area
+        self.open_area = np.bincount(scene.triangle_patch, self.triangle_open_area, minlength=scene.n_patches)
         self.area = self.open_area
         self.kd_over_pi = mats.diffuse_reflectance[pm] / np.pi          # (P, 3)
         self.glossy_patches = np.nonzero(mats.is_glossy[pm])[0]

@@ -133,9 +133,10 @@ class RayTracer:
         """(T,) fraction of each triangle's area that is not buried inside a closed solid.
 
         A point is buried when rays from it along its normal and along three
-        directions tilted 60 degrees from it all meet a *back* face first (a box
-        standing on a floor buries the floor under it; a light just below a
-        ceiling buries the ceiling above it).  Such area never receives light, so
+        directions tilted 60 degrees from it all meet the inside of a closed solid
+        first (a back face of a :attr:`~raybundle.scene.PatchScene.triangle_solid`
+        triangle: a box standing on a floor buries the floor under it; a
+        one-sided shelf buries nothing).  Such area never receives light, so
         patch averages must not be divided by it (an FE error otherwise: the
         visible rest of the patch comes out too dark).  Estimated from
         ``points_per_triangle`` stratified points; triangles found partly buried
@@ -170,7 +171,9 @@ class RayTracer:
             if len(live) == 0:
                 break
             hit, _, _, _ = self.first_hit(pts[live] + n[live] * self.eps, d[live])
-            back = (hit >= 0) & (np.einsum("ij,ij->i", sc.triangle_normal[np.maximum(hit, 0)], d[live]) > 0)
+            safe = np.maximum(hit, 0)
+            back = ((hit >= 0) & sc.triangle_solid[safe]
+                    & (np.einsum("ij,ij->i", sc.triangle_normal[safe], d[live]) > 0))
             buried[live[~back]] = False
         return 1.0 - buried.reshape(-1, k).mean(axis=1)
 
