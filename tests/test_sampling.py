@@ -101,3 +101,13 @@ def test_kronecker_generators_and_stratification(rng):
     many.next()
     u = many.next()
     assert np.allclose(u.mean(axis=0), 0.5, atol=0.01)
+
+
+def test_pi_powers_refuse_runs_they_cannot_afford():
+    from raybundle.sampling import make_sequence
+
+    seq = PiPowersSequence(start=PiPowersSequence.MAX_N - 3)
+    with pytest.raises(ValueError, match="use the 'prng'"):
+        seq.next(8)
+    with pytest.raises(ValueError, match="seed"):
+        make_sequence("pi-powers", seed=5000)

@@ -90,3 +90,16 @@ def test_point_light_alone_is_a_light():
     sc = build_scene(QUAD_V, QUAD_T, [0, 0], LIGHT,
                      point_lights=PointLights(np.array([[0.5, 0.5, 1.0]]), np.array([[1.0, 1, 1]])))
     assert sc.n_patches == 2
+
+
+def test_patches_must_be_planar_and_of_one_material():
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1]], float)
+    two = MaterialTable.from_list([dict(name="a", diffuse=(0.5,) * 3, emission=(1,) * 3), dict(name="b", diffuse=(0.2,) * 3)])
+    with pytest.raises(SceneError, match="mixes materials"):
+        build_scene(v, QUAD_T, [0, 1], two, triangle_patch=[0, 0])
+    with pytest.raises(SceneError, match="face different ways"):
+        build_scene(v, [[0, 1, 2], [0, 4, 1]], [0, 0], two, triangle_patch=[0, 0])
+    with pytest.raises(SceneError, match="entries for 2 triangles"):
+        build_scene(v, QUAD_T, [0, 0], two, triangle_patch=[0, 0, 1])
+    with pytest.raises(SceneError, match="point lights"):
+        build_scene(v, QUAD_T, [0, 0], two, point_lights=PointLights(np.zeros((2, 3)), np.ones((1, 3))))

@@ -133,3 +133,22 @@ def test_diffuse_only_scene_takes_the_view_independent_path():
     assert r.solver.diffuse_only and len(r.solver.glossy_patches) == 0
     g = furnace_renderer(True, "prng", patches=200)
     assert not g.solver.diffuse_only
+
+
+@pytest.mark.parametrize("kwargs,msg", [
+    (dict(light_samples=0), "light_samples"), (dict(bundle_resolution=-1), "bundle_resolution"),
+    (dict(image_ray_share=1.0), "image_ray_share"), (dict(first_shot="all"), "first_shot"),
+])
+def test_bad_settings_are_rejected_before_work(kwargs, msg):
+    sc = pipeline.prepare(scenes.cornell(resolution=(8, 8)), patches=100)
+    with pytest.raises(ValueError, match=msg):
+        pipeline.make_renderer(sc, RenderSettings(**kwargs))
+
+
+def test_bad_run_limits_are_rejected():
+    r = furnace_renderer(False, "prng", patches=100, res=(8, 8))
+    with pytest.raises(ValueError, match="seconds"):
+        r.run(seconds=float("nan"))
+    with pytest.raises(ValueError, match="iterations or seconds"):
+        r.run()
+    r.tracer.close()

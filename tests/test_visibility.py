@@ -159,3 +159,19 @@ def test_closed_solid_detection():
     flipped = tt.copy()
     flipped[0] = flipped[0][::-1]
     assert not closed_solid_triangles(vv, flipped).any()              # inconsistent orientation
+
+
+def test_scene_far_from_origin_keeps_precision(rng):
+    """Embree is single precision: a room 10 km from the origin must give the same pairs."""
+    near = box_in_box()
+    far = build_scene(near.vertices + 1e4, near.triangles, near.triangle_material, MATS)
+    a, b = RayTracer(near), RayTracer(far)
+    for _ in range(3):
+        u = rng.random(5)
+        d = uniform_sphere(u[0], u[1])
+        fa = a.bundle(d, 32, (u[2], u[3]), u[4])
+        fb = b.bundle(d, 32, (u[2], u[3]), u[4])
+        assert pair_counts(fa) == pair_counts(fb)
+        assert fa.n_casts == fb.n_casts
+    a.close()
+    b.close()

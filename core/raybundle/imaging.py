@@ -77,6 +77,20 @@ class RenderSettings:
     threads: int | None = None
 
 
+    def validate(self):
+        """Raise ValueError on settings that cannot work (before any work is done)."""
+        if not 0 <= int(self.bundle_resolution) <= 4096:
+            raise ValueError("bundle_resolution must lie in [0, 4096] (0 = automatic)")
+        if int(self.light_samples) < 1:
+            raise ValueError("light_samples must be at least 1 (small lights are lit only by the first shot)")
+        if int(self.resolve_samples) < 1 or int(self.emission_edge_samples) < 0:
+            raise ValueError("resolve_samples must be >= 1 and emission_edge_samples >= 0")
+        if not 0.0 < float(self.image_ray_share) < 1.0:
+            raise ValueError("image_ray_share must lie strictly between 0 and 1")
+        if self.first_shot not in ("auto", "none"):
+            raise ValueError("first_shot must be 'auto' or 'none'")
+
+
 @dataclass
 class RenderResult:
     image: np.ndarray              # (H, W, 3) float32 linear radiance, row 0 at the top
@@ -90,13 +104,18 @@ class Renderer:
     def __init__(self, scene, camera, solver, direct, settings: RenderSettings):
         if camera is None:
             raise ValueError("the scene has no camera; give one (Camera.from_blender / Camera.look_at)")
+        settings.validate()
         self.scene, self.camera, self.solver, self.direct = scene, camera, solver, direct
         self.tracer = solver.tracer
         self.settings = settings
         self.rng = np.random.default_rng([settings.seed, 1])
-        n_light = direct.samples_per_pass(settings.light_samples)
-        # per pass and pixel: jitter (2), glossy lobe (2), light samples (3 each)
-        self.pass_sampler = ShiftedKronecker(camera.width * camera.height, 4 + 3 * n_light, self.rng)
+        self._resolve_rng = np.random.default_rng([settings.seed, 2])
+        self.n_light_samples = direct.samples_per_pass(settings.light_samples)
+        # per pass and pixel: jitter (2), glossy lobe (2), the first light samples (3 each);
+        # further light samples (many lights) come from the PRNG, keeping memory bounded
+        self.kronecker_light_samples = min(self.n_light_samples, 4)
+        self.pass_sampler = ShiftedKronecker(camera.width * camera.height, 4 + 3 * self.kronecker_light_samples,
+                                             self.rng)
         n = camera.width * camera.height
         self.pass_sum = np.zeros((n, 3))
         self.glossy_sum = np.zeros((n, 3))
@@ -144,7 +163,7 @@ class Renderer:
         if self.direct.n_lights and len(hf):
             before = self.direct.rays
             contrib[front] += self.direct.reflected_radiance(
-                g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], u[hf, 4:].reshape(len(hf), -1, 3),
+                g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], self._light_uniforms(u[hf, 4:]),
                 self.settings.light_samples)
             self.image_rays += self.direct.rays - before
         glossy = front & self.glossy_material[g.material[h]]
@@ -156,6 +175,12 @@ class Renderer:
         self.pass_sum[h] += contrib
         self.passes += 1
         self._glossy_pixels = gl
+
+    def _light_uniforms(self, kron):
+        """(N, K, 3) light-sample uniforms: Kronecker for the first ones, PRNG for the rest."""
+        u = kron.reshape(len(kron), -1, 3)
+        extra = self.n_light_samples - u.shape[1]
+        return np.concatenate([u, self.rng.random((len(kron), extra, 3))], axis=1) if extra > 0 else u
 
     def _emission_edge_samples(self, emitted):
         """Supersample the emission seen in pixels on the edge of a visible emitter.
@@ -256,8 +281,7 @@ class Renderer:
         vert = self.vertex_values(e_bar) if self.settings.smooth else None
         kd = sc.materials.diffuse_reflectance
         k = max(1, int(self.settings.resolve_samples))
-        rng = np.random.default_rng([self.settings.seed, 2])
-        offsets = stratified_2d(k, rng)
+        offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve
         for j in range(k):
             g = self.trace_gbuffer(np.broadcast_to(offsets[j], (n, 2)))
             h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
@@ -290,6 +314,10 @@ class Renderer:
         """
         if iterations is None and seconds is None:
             raise ValueError("give iterations or seconds")
+        if seconds is not None and not (np.isfinite(seconds) and seconds >= 0):
+            raise ValueError("seconds must be a finite, non-negative number")
+        if iterations is not None and int(iterations) < 0:
+            raise ValueError("iterations must be non-negative")
         should_stop = (stop.is_set if hasattr(stop, "is_set") else stop) or (lambda: False)
         solver = self.solver
         t0 = time.perf_counter()
@@ -315,7 +343,7 @@ class Renderer:
                     break
                 solver.step()
                 if every is None:   # image passes every k iterations: a fixed share of rays
-                    share = min(max(self.settings.image_ray_share, 1e-3), 0.95)
+                    share = self.settings.image_ray_share
                     per_pass = self.image_rays / max(self.passes, 1)
                     per_iter = solver.stats.rays / max(solver.stats.iterations, 1)
                     every = max(1, int(round(per_pass * (1 - share) / (share * max(per_iter, 1)))))

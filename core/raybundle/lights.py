@@ -157,8 +157,11 @@ class PatchFirstShot:
 
     A fixed first shot would freeze its Monte Carlo noise into the solution (a
     bias that no number of iterations removes); refining it with a few shadow
-    rays per iteration (:meth:`refine`) keeps every quantity a running average
-    of unbiased samples.
+    rays per iteration (:meth:`refine`) keeps E a running average of unbiased
+    samples.  For glossy patches the reflected first shot uses one mean
+    direction per light, ``E f(w_mean, w)``: an approximation (exact for point
+    lights, close for lights small as seen from the patch), used only inside
+    the iteration; the image's direct light is per pixel and exact.
     """
 
     def __init__(self, direct: DirectLighting, rng, initial_samples=16, receiving_area=None):

@@ -30,6 +30,7 @@ def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
                   solver=StochasticIterationSolver.name):
     """Tracer + first shot + solver + image accumulator for a prepared scene."""
     settings = settings or RenderSettings()
+    settings.validate()
     if settings.sequence == "halton":
         warnings.warn("the Halton sequence is not completely uniformly distributed: stochastic iteration "
                       "driven by it converges to a wrong image (thesis 1.2); use 'prng' or 'pi-powers'",

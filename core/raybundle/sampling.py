@@ -137,11 +137,14 @@ class PiPowersSequence:
     ``X_n = floor(X_{n-1} * PI_B / 2^B)``; each step truncates by < 1 ulp and the
     relative error grows by about 2^-B per step, so ``B = n_max log2(pi) + 80``
     bits give frac(pi^n) to far better than double precision for every
-    n <= n_max.  When more numbers are asked for, a table twice as long is
-    built from the current n on (the start is reached by binary powering).
+    n <= n_max.  Tables of ``capacity`` numbers are built as needed (the start
+    is reached by binary powering).  The cost per number grows like n (about
+    1.65 n bits per multiplication), so this sequence is for studies of up to
+    ``MAX_N`` numbers; beyond that it raises ValueError (use ``prng``).
     """
 
     name = "pi-powers"
+    MAX_N = 100_000
 
     def __init__(self, start=1, capacity=4096):
         if start < 1:
@@ -177,7 +180,10 @@ class PiPowersSequence:
     def next(self, dim):
         off = self.n - self._table_start
         if off + dim > len(self._table):
-            count = max(self._capacity, 2 * len(self._table), dim)
+            if self.n + dim > self.MAX_N:
+                raise ValueError(f"the pi-powers sequence is limited to n <= {self.MAX_N} (each number costs "
+                                 "~1.65 n bits of arithmetic); use the 'prng' sequence for long runs")
+            count = max(self._capacity, dim)
             self._table_start = self.n
             self._table = self._build(self.n, count)
             off = 0
@@ -223,9 +229,12 @@ SEQUENCES = {"prng": PRNGSequence, "pi-powers": PiPowersSequence, "halton": Halt
 
 
 def make_sequence(name, seed=0):
-    """A sequence by name; ``seed`` seeds the PRNG and offsets the start of the others."""
+    """A sequence by name; ``seed`` seeds the PRNG and offsets the start of the others
+    (by 64 numbers per seed value, at most 1000)."""
     if name not in SEQUENCES:
         raise ValueError(f"unknown sequence {name!r}; choose one of {sorted(SEQUENCES)}")
     if name == "prng":
         return PRNGSequence(seed)
-    return SEQUENCES[name](start=1 + int(seed) * 1000)
+    if not 0 <= int(seed) <= 1000:
+        raise ValueError(f"seed must lie in [0, 1000] for the {name} sequence")
+    return SEQUENCES[name](start=1 + int(seed) * 64)

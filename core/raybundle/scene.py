@@ -183,7 +183,9 @@ def load_npz(path) -> PatchScene:
             d = {k: z[k] for k in z.files}
     except (OSError, ValueError) as e:
         raise SceneError(f"cannot read scene file {path}: {e}") from e
-    missing = [k for k in ("vertices", "triangles", "triangle_material", "material_names") if k not in d]
+    missing = [k for k in ("vertices", "triangles", "triangle_material", "material_names", "material_diffuse",
+                           "material_glossy", "material_roughness", "material_glossy_weight", "material_emission")
+               if k not in d]
     if missing:
         raise SceneError(f"{path}: not a raybundle scene (missing arrays {missing})")
     version = int(d.get("format_version", NPZ_FORMAT_VERSION))
@@ -231,6 +233,9 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
         raise SceneError(str(e)) from e
     src = np.arange(len(t)) if triangle_source is None else np.asarray(triangle_source).reshape(-1).astype(np.int64)
     patch = None if triangle_patch is None else np.asarray(triangle_patch).reshape(-1).astype(np.int64)
+    for label, arr in (("triangle_source", src), ("triangle_patch", patch), ("triangle_solid", triangle_solid)):
+        if arr is not None and len(np.asarray(arr).reshape(-1)) != len(t):
+            raise SceneError(f"{label} has {len(np.asarray(arr).reshape(-1))} entries for {len(t)} triangles")
 
     c = v[t]
     area = 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
@@ -245,7 +250,11 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
         patch = np.arange(len(t))
     else:
         patch = np.unique(patch[keep], return_inverse=True)[1].reshape(-1)  # renumber densely
+        _check_patches(v, t, m, patch)
     lights = point_lights if point_lights is not None else PointLights()
+    lights = PointLights(np.asarray(lights.position, float), np.asarray(lights.intensity, float))
+    if lights.position.ndim != 2 or lights.position.shape[1:] != (3,) or lights.intensity.shape != lights.position.shape:
+        raise SceneError("point lights need positions (L, 3) and intensities (L, 3) of the same length")
     if not np.isfinite(lights.position).all() or not np.isfinite(lights.intensity).all() \
             or (lights.intensity < 0).any():
         raise SceneError("point lights need finite positions and non-negative finite intensities")
@@ -256,6 +265,20 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
     ar = None if analytic_radiance is None else np.asarray(analytic_radiance, float).reshape(3)
     solid = None if triangle_solid is None else np.asarray(triangle_solid, bool).reshape(-1)[keep]
     return PatchScene(v, t, m, patch, src, materials, lights, camera, ar, name, dropped, solid)
+
+
+def _check_patches(v, t, m, patch):
+    """A patch must be planar, face one way and have one material (one variable per patch)."""
+    n_p = int(patch.max()) + 1
+    first = np.full(n_p, -1)
+    first[patch[::-1]] = np.arange(len(patch))[::-1]
+    if np.any(m != m[first[patch]]):
+        raise SceneError("a patch mixes materials: give each patch triangles of one material")
+    c = v[t]
+    n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    if np.any(np.einsum("ij,ij->i", n, n[first[patch]]) < 0.999):
+        raise SceneError("a patch mixes triangles that face different ways: patches must be planar")
 
 
 def subdivide(scene: PatchScene, max_edge=None, patches=None) -> PatchScene:

@@ -19,6 +19,7 @@ query is split into one chunk per core and run on a thread pool.
 from __future__ import annotations
 
 import os
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
@@ -26,7 +27,7 @@ import numpy as np
 
 from .sampling import orthonormal_basis
 
-_MAX_LAYERS = 100000
+_MAX_LAYERS = 10000
 
 
 @dataclass
@@ -76,8 +77,12 @@ class RayTracer:
         self.center, self.radius = scene.bounding_sphere
         self.eps = max(1e-5 * self.radius, 1e-9)
         self._embree = rtcore_scene.EmbreeScene()
-        TriangleMesh(self._embree, scene.vertices.astype(np.float32), scene.triangles.astype(np.int32))
+        # Embree works in single precision: build it around the scene's centre so that
+        # scenes far from the world origin keep their precision (queries are shifted too)
+        TriangleMesh(self._embree, (scene.vertices - self.center).astype(np.float32),
+                     scene.triangles.astype(np.int32))
         self._embree.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))  # commit now
+        self.layer_limit_hits = 0   # bundles cut off at _MAX_LAYERS (degenerate geometry)
         self.threads = max(1, int(threads or os.cpu_count() or 1))
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
 
@@ -95,7 +100,7 @@ class RayTracer:
 
     # -------------------------------------------------------------- queries
     def _run(self, origins, directions, **kw):
-        return self._embree.run(np.ascontiguousarray(origins, np.float32),
+        return self._embree.run(np.ascontiguousarray(origins - self.center, np.float32),
                                 np.ascontiguousarray(directions, np.float32), **kw)
 
     def first_hit(self, origins, directions):
@@ -214,7 +219,7 @@ class RayTracer:
         eps = self.eps
 
         def work(a, b):
-            orig = origins[a:b]
+            orig = origins[a:b] - self.center
             n = len(orig)
             ray = np.arange(n)
             start = np.zeros(n)
@@ -238,6 +243,9 @@ class RayTracer:
                 rays.append(ray[pair] + a)
                 last[ray] = prim
                 start[ray] = start[ray] + tfar + eps
+            else:
+                self.layer_limit_hits += 1
+                warnings.warn(f"a bundle ray met more than {_MAX_LAYERS} surfaces; it was cut off", stacklevel=3)
             cat = (lambda xs: np.concatenate(xs) if xs else np.zeros(0, np.int64))
             return cat(ups), cat(downs), cat(rays), casts
 
