@@ -108,9 +108,13 @@ def convergence(name, seconds, reference=None, seed=0, settings=None):
     rows = []
 
     def snap(t, it, img):
-        rows.append({"scene": name, "seconds": round(t, 3), "iterations": it,
-                     **{f"rel_rmse_vs_{k}": relative_rmse(img, v) for k, v in refs.items()},
-                     **{f"nrmse_vs_{k}": normalized_rmse(img, v) for k, v in refs.items()}})
+        row = {"scene": name, "seconds": round(t, 3), "iterations": it,
+               **{f"rel_rmse_vs_{k}": relative_rmse(img, v) for k, v in refs.items()},
+               **{f"nrmse_vs_{k}": normalized_rmse(img, v) for k, v in refs.items()}}
+        if sc.analytic_radiance is not None:      # error of the image mean (the furnace target)
+            row["mean_error_vs_analytic"] = float(np.abs(img.reshape(-1, 3).mean(axis=0)
+                                                         / sc.analytic_radiance - 1).max())
+        rows.append(row)
 
     r = make_renderer(sc, settings or RenderSettings(seed=seed))
     res = r.run(seconds=seconds, snapshots=[t for t in SNAPSHOTS if t < seconds], on_snapshot=snap)
@@ -200,6 +204,8 @@ def run_bench(args):
         write_exr(os.path.join(out, f"{name}.exr"), res.image)
         summary[name] = r[-1]
         errs = ", ".join(f"{k[len('rel_rmse_vs_'):]} {v:.4f}" for k, v in r[-1].items() if k.startswith("rel_rmse"))
+        if "mean_error_vs_analytic" in r[-1]:
+            errs += f"; image mean off by {r[-1]['mean_error_vs_analytic']:.4f}"
         print(f"{name}: {r[-1]['iterations']} iterations in {r[-1]['seconds']:.1f} s; relative RMSE: {errs}",
               flush=True)
     write_csv(os.path.join(out, "convergence.csv"), rows)

@@ -216,33 +216,32 @@ class RayTracer:
         """
         d = np.asarray(direction, float)
         d32 = d.astype(np.float32)[None, :]
-        eps = self.eps
+        eps32 = np.float32(self.eps)
 
         def work(a, b):
-            orig = origins[a:b] - self.center
-            n = len(orig)
-            ray = np.arange(n)
-            start = np.zeros(n)
-            last = np.full(n, -1, np.int64)
+            # active rays are kept compact: origin (float32, scene-centred), start
+            # offset along d, ray index, and the last surface hit
+            o32 = (origins[a:b] - self.center).astype(np.float32)
+            ray = np.arange(len(o32))
+            start = np.zeros(len(o32), np.float32)
+            last = np.full(len(o32), -1, np.int64)
             ups, downs, rays = [], [], []
             casts = 0
             for _ in range(_MAX_LAYERS):
                 if ray.size == 0:
                     break
                 casts += ray.size
-                o = orig[ray] + start[ray, None] * d
-                r = self._embree.run(o.astype(np.float32), d32, output=1)
+                r = self._embree.run(o32 + start[:, None] * d32, d32, output=1)
                 prim = r["primID"].astype(np.int64)
                 hit = prim >= 0
-                ray, prim, tfar = ray[hit], prim[hit], r["tfar"][hit].astype(float)
-                prev = last[ray]
+                o32, ray, prim, prev = o32[hit], ray[hit], prim[hit], last[hit]
+                start = start[hit] + r["tfar"][hit] + eps32
                 new = prev != prim          # a re-hit of the same triangle is no new surface
                 pair = new & (prev >= 0)
                 ups.append(prev[pair])
                 downs.append(prim[pair])
                 rays.append(ray[pair] + a)
-                last[ray] = prim
-                start[ray] = start[ray] + tfar + eps
+                last = prim
             else:
                 self.layer_limit_hits += 1
                 warnings.warn(f"a bundle ray met more than {_MAX_LAYERS} surfaces; it was cut off", stacklevel=3)
