@@ -20,7 +20,6 @@ Prints and writes to ``--out`` (default ``out/bench``):
 from __future__ import annotations
 
 import csv
-import json
 import os
 import time
 

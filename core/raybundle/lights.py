@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import stratified_2d, uniform_triangle
+from .sampling import uniform_triangle
 
 
 @dataclass
