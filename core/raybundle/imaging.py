@@ -60,7 +60,8 @@ class RenderSettings:
     the diffuse indirect part; ``smooth``: interpolate patch values;
     ``glossy_gather``: estimate the glossy lobe seen by the eye with one
     importance-sampled eye ray per pixel and pass (see :meth:`Renderer.glossy_gather`)
-    instead of the per-iteration ``E f(t, w_eye)``; ``emission_edge_samples``:
+    instead of the per-iteration ``E f(t, w_eye)``, following up to
+    ``glossy_gather_depth`` glossy bounces; ``emission_edge_samples``:
     extra primary rays per pass for pixels on the edge of a visible emitter.
     """
 
@@ -73,6 +74,7 @@ class RenderSettings:
     resolve_samples: int = 16
     smooth: bool = True
     glossy_gather: bool = True
+    glossy_gather_depth: int = 3
     emission_edge_samples: int = 32
     threads: int | None = None
 
@@ -210,36 +212,59 @@ class Renderer:
         emitted[edge] = (emitted[edge] + le.reshape(len(edge), k, 3).sum(axis=1)) / (k + 1)
 
     def glossy_gather(self, g, idx, u):
-        """Glossy lobe at pixels ``idx`` by one eye ray each (the remedy for sharp lobes).
+        """Glossy lobe at pixels ``idx`` by one eye path each (the remedy for sharp lobes).
 
         Sample ``w_i`` from the GGX lobe around the mirror of the eye direction,
         trace it to the surface it sees, and take that surface's outgoing
-        radiance from the solver (running-average diffuse part interpolated at the
-        hit, current iterate for its own glossy lobe, first shot).  Direct light of
-        the first-shot lights is left out: :meth:`DirectLighting.reflected_radiance`
-        counts it.  ``u`` (len(idx), 2): uniforms for the lobe.  Returns (len(idx), 3).
+        radiance from the solver: running-average diffuse part interpolated at
+        the hit, first shot, and, for its own glossy lobe, either the current
+        iterate ``E f(t, w)`` or, while fewer than ``glossy_gather_depth`` glossy
+        bounces were traced, one more lobe-sampled ray (the per-iteration term is
+        what makes glossy-to-glossy paths spiky).  Direct light of the first-shot
+        lights is left out of what the rays see: :meth:`DirectLighting.reflected_radiance`
+        and the first shot count it.  ``u`` (len(idx), 2): uniforms for the first
+        lobe sample.  Returns (len(idx), 3).
         """
         out = np.zeros((len(idx), 3))
-        if len(idx) == 0:
-            return out
         sc, mats, solver = self.scene, self.scene.materials, self.solver
-        m, n, wo = g.material[idx], g.normal[idx], g.w_eye[idx]
-        w_i, weight = sample_ggx_reflection(mats.alpha[m], n, wo, u)
-        live = np.nonzero(weight > 0)[0]
-        if len(live) == 0:
-            return out
-        tri, _, u, v = self.tracer.first_hit(g.point[idx[live]] + n[live] * self.tracer.eps, w_i[live])
-        self.image_rays += len(live)
-        hit = tri >= 0
-        live, tri, bary = live[hit], tri[hit], np.stack([1 - u - v, u, v], axis=1)[hit]
-        patch = sc.triangle_patch[tri]
         e = solver.mean_incoming + solver.first_shot.E.sum(axis=1)
-        if self.settings.smooth:
-            e_hit = np.einsum("nk,nkc->nc", bary, self.vertex_values(e)[sc.smooth_vertex_ids[tri]])
-        else:
-            e_hit = e[patch]
-        L = solver.radiance(patch, -w_i[live], diffuse_incoming=e_hit, first_shot_emission=False)
-        out[live] = (mats.glossy_weight[m[live]] * weight[live])[:, None] * mats.glossy[m[live]] * L
+        vert = self.vertex_values(e) if self.settings.smooth and len(idx) else None
+        pix = np.arange(len(idx))                     # which output row each path belongs to
+        m, n, wo, pts = g.material[idx], g.normal[idx], g.w_eye[idx], g.point[idx]
+        throughput = np.ones((len(idx), 3))
+        depth = max(1, int(self.settings.glossy_gather_depth))
+        for bounce in range(depth):
+            if len(pix) == 0:
+                break
+            uu = u if bounce == 0 else self.rng.random((len(pix), 2))
+            w_i, weight = sample_ggx_reflection(mats.alpha[m], n, wo, uu)
+            throughput = throughput * (mats.glossy_weight[m] * weight)[:, None] * mats.glossy[m]
+            live = np.nonzero(weight > 0)[0]
+            tri, t, bu, bv = self.tracer.first_hit(pts[live] + n[live] * self.tracer.eps, w_i[live])
+            self.image_rays += len(live)
+            hit = tri >= 0
+            live, tri, t = live[hit], tri[hit], t[hit]
+            bary = np.stack([1 - bu - bv, bu, bv], axis=1)[hit]
+            patch = sc.triangle_patch[tri]
+            e_hit = (np.einsum("nk,nkc->nc", bary, vert[sc.smooth_vertex_ids[tri]]) if vert is not None
+                     else e[patch])
+            hit_m = sc.triangle_material[tri]
+            hit_n = sc.triangle_normal[tri]
+            w_back = -w_i[live]
+            go_on = (mats.is_glossy[hit_m] & (np.einsum("ij,ij->i", hit_n, w_back) > 0)
+                     if bounce + 1 < depth else np.zeros(len(live), bool))
+            L = solver.radiance(patch, w_back, diffuse_incoming=e_hit, first_shot_emission=False,
+                                glossy_iterate=False)
+            stop = ~go_on
+            if stop.any():   # paths that end here use the iterate for the hit's own glossy lobe
+                s_idx = np.nonzero(stop)[0]
+                L[s_idx] = solver.radiance(patch[s_idx], w_back[s_idx], diffuse_incoming=e_hit[s_idx],
+                                           first_shot_emission=False)
+            np.add.at(out, pix[live], throughput[live] * L)
+            pts = pts[live] + t[:, None] * w_i[live]
+            keep = np.nonzero(go_on)[0]
+            pix, m, n, wo = pix[live][keep], hit_m[keep], hit_n[keep], w_back[keep]
+            pts, throughput = pts[keep], throughput[live][keep]
         return out
 
     def accumulate_glossy(self):

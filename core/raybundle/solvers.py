@@ -146,14 +146,15 @@ class StochasticIterationSolver:
         return bundle
 
     # ------------------------------------------------------------- estimates
-    def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True):
+    def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True, glossy_iterate=True):
         """Outgoing radiance (N, 3) of ``patch`` (N,) towards ``w_out`` (N, 3):
 
         ``Le + kd/pi (E + E1) + E f_g(t, w_out) + sum_l E1_l f_g(w_l, w_out)``, with E
         the current iterate (or ``diffuse_incoming`` (N, 3) for the diffuse lobe,
         e.g. the running average interpolated at hit points) and E1 the first shot.
         ``first_shot_emission=False`` leaves out the emission of first-shot lights
-        (for estimators that already count direct light).
+        (for estimators that already count direct light); ``glossy_iterate=False``
+        leaves out ``E f_g(t, w_out)`` (for estimators that trace that lobe further).
         """
         mats = self.scene.materials
         patch = np.asarray(patch)
@@ -169,7 +170,7 @@ class StochasticIterationSolver:
         g = np.nonzero(mats.is_glossy[pm])[0]
         if len(g):
             m, ng, w, pg = pm[g], n[g], w_out[g], patch[g]
-            if self.direction is not None:
+            if self.direction is not None and glossy_iterate:
                 L[g] += self.incoming[pg] * mats.brdf(m, ng, self.receive_direction[pg], w, diffuse=False)
             for li in range(fs.n_lights):
                 L[g] += fs.E[pg, li] * mats.brdf(m, ng, fs.direction[pg, li], w, diffuse=False)
