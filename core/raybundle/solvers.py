@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .lights import PatchFirstShot
-from .sampling import uniform_sphere
+from .sampling import uniform_sphere, uniform_sphere_pdf
 
 
 @dataclass
@@ -130,7 +130,8 @@ class StochasticIterationSolver:
         bundle = self.tracer.bundle(d, self.bundle_resolution, offset=(g[0], g[1]), rotation=g[2])
         side = np.sign(self.normal @ d)
         S = self.sent_radiance(side[:, None] * d)
-        w = bundle.cell_area * 2.0 * np.pi
+        # t_i is uniform on the receiver's hemisphere: pdf = 2 / (4 pi) = 1 / (2 pi)
+        w = bundle.cell_area / (2.0 * uniform_sphere_pdf())
         n = self.scene.n_patches
         E = np.stack([np.bincount(bundle.receiver, S[bundle.sender, k], minlength=n) for k in range(3)], axis=1)
         E *= w / self.area[:, None]

@@ -82,7 +82,6 @@ class RayTracer:
         TriangleMesh(self._embree, (scene.vertices - self.center).astype(np.float32),
                      scene.triangles.astype(np.int32))
         self._embree.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))  # commit now
-        self.layer_limit_hits = 0   # bundles cut off at _MAX_LAYERS (degenerate geometry)
         self.threads = max(1, int(threads or os.cpu_count() or 1))
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
 
@@ -243,7 +242,6 @@ class RayTracer:
                 rays.append(ray[pair] + a)
                 last = prim
             else:
-                self.layer_limit_hits += 1
                 warnings.warn(f"a bundle ray met more than {_MAX_LAYERS} surfaces; it was cut off", stacklevel=3)
             cat = (lambda xs: np.concatenate(xs) if xs else np.zeros(0, np.int64))
             return cat(ups), cat(downs), cat(rays), casts
