@@ -89,6 +89,9 @@ def test_exr_round_trip_header_and_atomicity(tmp_path):
         write_exr(p, bad)
     assert np.array_equal(read_exr(p), img)           # the old file is intact
     assert sorted(os.listdir(tmp_path)) == ["a.exr"]  # no temporary left behind
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (p.stat().st_mode & 0o777) == 0o666 & ~umask   # not mkstemp's private 0600
 
 
 def test_png_preview_is_srgb(tmp_path):
