@@ -133,10 +133,11 @@ class Renderer:
         self._pixel = np.stack([px, py], axis=1).astype(float)
 
     # --------------------------------------------------------------- passes
-    def trace_gbuffer(self, jitter):
-        """Primary rays through pixel corners + ``jitter`` (N, 2) in [0,1)^2."""
+    def trace_gbuffer(self, jitter, pixels=None):
+        """Primary rays through pixel corners + ``jitter`` (N, 2) in [0,1)^2, for all
+        pixels or for the pixel indices ``pixels`` (N,)."""
         cam = self.camera
-        pos = self._pixel + jitter
+        pos = (self._pixel if pixels is None else self._pixel[pixels]) + jitter
         dirs = cam.ray_directions(pos[:, 0], pos[:, 1])
         org = np.broadcast_to(cam.position, dirs.shape)
         tri, t, u, v = self.tracer.first_hit(org, dirs)
@@ -146,6 +147,18 @@ class Renderer:
         sc = self.scene
         return GBuffer(tri, org + np.where(hit, t, 0.0)[:, None] * dirs, sc.triangle_normal[safe],
                        sc.triangle_material[safe], -dirs, np.stack([1 - u - v, u, v], axis=1))
+
+    def seen_emission(self, g, idx):
+        """Emitted radiance (len(idx), 3) towards the eye at G-buffer entries ``idx``."""
+        cos_eye = np.einsum("ij,ij->i", g.normal[idx], g.w_eye[idx])
+        return self.scene.materials.emitted_radiance(g.material[idx], cos_eye)
+
+    def surface_values(self, patch_values, vert, tri, bary):
+        """Patch values (P, C) at hit points: interpolated from welded-vertex values
+        ``vert`` (V, C) with barycentrics (N, 3), or flat per patch when ``vert`` is None."""
+        if vert is None:
+            return patch_values[self.scene.triangle_patch[tri]]
+        return np.einsum("nk,nkc->nc", bary, vert[self.scene.smooth_vertex_ids[tri]])
 
     def image_pass(self):
         """One jittered sample per pixel of the per-pass part: emission seen, direct
@@ -157,7 +170,7 @@ class Renderer:
         h = np.nonzero(g.hit)[0]
         cos_eye = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h])
         emitted = np.zeros((len(self._pixel), 3))
-        emitted[h] = self.scene.materials.emitted_radiance(g.material[h], cos_eye)
+        emitted[h] = self.seen_emission(g, h)
         self._emission_edge_samples(emitted)
         contrib = np.zeros((len(h), 3))
         front = cos_eye > 0
@@ -200,15 +213,10 @@ class Renderer:
         if len(edge) == 0 or k <= 0:
             return
         pix = np.repeat(edge, k)
-        d = self.camera.ray_directions(self._pixel[pix, 0] + self.rng.random(len(pix)),
-                                       self._pixel[pix, 1] + self.rng.random(len(pix)))
-        tri, _, _, _ = self.tracer.first_hit(np.broadcast_to(self.camera.position, d.shape), d)
-        self.image_rays += len(pix)
+        g = self.trace_gbuffer(self.rng.random((len(pix), 2)), pixels=pix)
         le = np.zeros((len(pix), 3))
-        hit = tri >= 0
-        sc = self.scene
-        le[hit] = sc.materials.emitted_radiance(sc.triangle_material[tri[hit]],
-                                                np.einsum("ij,ij->i", sc.triangle_normal[tri[hit]], -d[hit]))
+        hit = np.nonzero(g.hit)[0]
+        le[hit] = self.seen_emission(g, hit)
         emitted[edge] = (emitted[edge] + le.reshape(len(edge), k, 3).sum(axis=1)) / (k + 1)
 
     def glossy_gather(self, g, idx, u):
@@ -246,8 +254,7 @@ class Renderer:
             live, tri, t = live[hit], tri[hit], t[hit]
             bary = np.stack([1 - bu - bv, bu, bv], axis=1)[hit]
             patch = sc.triangle_patch[tri]
-            e_hit = (np.einsum("nk,nkc->nc", bary, vert[sc.smooth_vertex_ids[tri]]) if vert is not None
-                     else e[patch])
+            e_hit = self.surface_values(e, vert, tri, bary)
             hit_m = sc.triangle_material[tri]
             hit_n = sc.triangle_normal[tri]
             w_back = -w_i[live]
@@ -310,11 +317,7 @@ class Renderer:
         for j in range(k):
             g = self.trace_gbuffer(np.broadcast_to(offsets[j], (n, 2)))
             h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
-            tri = g.triangle[h]
-            if vert is not None:
-                e = np.einsum("nk,nkc->nc", g.bary[h], vert[sc.smooth_vertex_ids[tri]])
-            else:
-                e = e_bar[sc.triangle_patch[tri]]
+            e = self.surface_values(e_bar, vert, g.triangle[h], g.bary[h])
             out[h] += kd[g.material[h]] / np.pi * e
         return out / k
 

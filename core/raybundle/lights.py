@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import uniform_triangle
+from .sampling import points_on_triangles
 
 
 @dataclass
@@ -74,8 +74,7 @@ class DirectLighting:
         """Points (N, 3) and normals (N, 3) on ``light`` from (N, 3) uniforms; pdf = 1 / area."""
         k = np.minimum(np.searchsorted(light.cdf, u[:, 0] * light.cdf[-1], side="right"), len(light.cdf) - 1)
         tri = light.triangles[k]
-        b = uniform_triangle(u[:, 1], u[:, 2])
-        p = np.einsum("nk,nkj->nj", b, self.scene.triangle_corners[tri])
+        p = points_on_triangles(self.scene.triangle_corners[tri], u[:, 1], u[:, 2])
         return p, self.scene.triangle_normal[tri]
 
     def _light_samples(self, points, normals, light, u):
@@ -192,8 +191,7 @@ class PatchFirstShot:
         """One new sample on each triangle in ``tri`` (distinct ids); updates E and direction."""
         sc = self.scene
         u = self.rng.random((len(tri), 2))
-        b = uniform_triangle(u[:, 0], u[:, 1])
-        pts = np.einsum("nk,nkj->nj", b, sc.triangle_corners[tri])
+        pts = points_on_triangles(sc.triangle_corners[tri], u[:, 0], u[:, 1])
         nrm = sc.triangle_normal[tri]
         old = self._e_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
         old_d = self._d_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]

@@ -193,10 +193,9 @@ class MaterialTable:
         """One-sided emitted radiance Le(w_out) [W m^-2 sr^-1], RGB; 0 behind the surface."""
         mat = np.asarray(mat)
         cos_out = np.asarray(cos_out, float)
-        le = self.emission[mat].copy()
-        c = self.emission_albedo_complement[mat]
-        if np.any(c > 0):
-            le += c * (1.0 - self.albedo(mat, cos_out))
+        le = self.emission[mat]           # fancy indexing: already a copy
+        if np.any(self.emission_albedo_complement > 0):
+            le += self.emission_albedo_complement[mat] * (1.0 - self.albedo(mat, cos_out))
         le[cos_out <= 0] = 0.0
         return le
 

@@ -78,6 +78,11 @@ def uniform_triangle(u1, u2):
     return np.stack([b0, b1, 1.0 - b0 - b1], axis=-1)
 
 
+def points_on_triangles(corners, u1, u2):
+    """Uniform points (N, 3) on triangles with corners (N, 3, 3), from uniforms u1, u2 (N,)."""
+    return np.einsum("nk,nkj->nj", uniform_triangle(u1, u2), corners)
+
+
 def stratified_2d(n, rng):
     """n jittered points in [0,1)^2 on a ceil(sqrt n)^2 grid, shuffled, (n, 2)."""
     k = int(math.ceil(math.sqrt(n)))

@@ -76,18 +76,15 @@ class StochasticIterationSolver:
         self.open_area = np.bincount(scene.triangle_patch, self.triangle_open_area, minlength=scene.n_patches)
         self.area = self.open_area
         self.kd_over_pi = mats.diffuse_reflectance[pm] / np.pi          # (P, 3)
-        self.glossy_patches = np.nonzero(mats.is_glossy[pm])[0]
+        self.glossy_mask = mats.is_glossy[pm]
+        self.glossy_patches = np.nonzero(self.glossy_mask)[0]
         self.diffuse_only = len(self.glossy_patches) == 0
-        # emission carried by the bundles: everything but the first-shot lights
-        self.bundle_emitter = mats.is_emitter[pm] & ~direct.first_shot_material[pm]
-        self.constant_emission = np.where(self.bundle_emitter[:, None], mats.emission[pm], 0.0)
-        self.directional_emitter = np.nonzero(
-            self.bundle_emitter & np.any(mats.emission_albedo_complement[pm] > 0, axis=1))[0]
         # incoming first shot, refined by a few shadow rays every iteration
         self.first_shot = PatchFirstShot(direct, np.random.default_rng([seed, 7]), receiving_area=self.area)
         self.grid_rng = np.random.default_rng([seed, 3])   # bundle grid offset and rotation
         self.first_shot_refine = max(64, len(scene.triangles) // 16) if direct.n_lights else 0
         n = scene.n_patches
+        self._all_patches = np.arange(n)
         self.incoming = np.zeros((n, 3))
         self.receive_direction = np.zeros((n, 3))   # t_i of the current iterate
         self.mean_incoming = np.zeros((n, 3))
@@ -96,28 +93,10 @@ class StochasticIterationSolver:
 
     # ------------------------------------------------------------------ step
     def sent_radiance(self, send_dir):
-        """Radiance S_j (P, 3) that each patch sends into ``send_dir`` (P, 3) [W m^-2 sr^-1]."""
-        mats = self.scene.materials
-        cos_out = np.einsum("ij,ij->i", self.normal, send_dir)
-        fs = self.first_shot
-        S = self.constant_emission + self.kd_over_pi * (self.incoming + fs.E.sum(axis=1))
-        de = self.directional_emitter
-        if len(de):
-            S[de] += mats.emission_albedo_complement[self.patch_material[de]] * (
-                1.0 - mats.albedo(self.patch_material[de], cos_out[de]))
-        g = self.glossy_patches
-        if len(g):
-            m, n, w = self.patch_material[g], self.normal[g], send_dir[g]
-            if self.direction is not None:
-                S[g] += self.incoming[g] * mats.brdf(m, n, self.receive_direction[g], w, diffuse=False)
-            for li in range(fs.n_lights):
-                e = fs.E[g, li]
-                live = np.any(e > 0, axis=1)
-                if live.any():
-                    S[g[live]] += e[live] * mats.brdf(m[live], n[live], fs.direction[g[live], li],
-                                                      w[live], diffuse=False)
-        S[cos_out <= 0] = 0.0
-        return S
+        """Radiance S_j (P, 3) that each patch sends into ``send_dir`` (P, 3) [W m^-2 sr^-1]:
+        the current iterate without the emission of first-shot lights (their light
+        enters the iteration as the first shot)."""
+        return self.radiance(self._all_patches, send_dir, first_shot_emission=False)
 
     def step(self):
         """One iteration: draw d, trace a bundle, transfer, update the running average."""
@@ -158,17 +137,19 @@ class StochasticIterationSolver:
         leaves out ``E f_g(t, w_out)`` (for estimators that trace that lobe further).
         """
         mats = self.scene.materials
-        patch = np.asarray(patch)
-        pm = self.patch_material[patch]
-        n = self.normal[patch]
+        # the whole-scene call (every iteration) uses views, not fancy-indexed copies
+        sel = slice(None) if patch is self._all_patches else np.asarray(patch)
+        patch = self._all_patches[sel]
+        pm = self.patch_material[sel]
+        n = self.normal[sel]
         cos = np.einsum("ij,ij->i", n, w_out)
         L = mats.emitted_radiance(pm, cos)
         if not first_shot_emission:
             L[self.direct.first_shot_material[pm]] = 0.0
         fs = self.first_shot
-        e = self.incoming[patch] + fs.E[patch].sum(axis=1) if diffuse_incoming is None else diffuse_incoming
-        L += self.kd_over_pi[patch] * e
-        g = np.nonzero(mats.is_glossy[pm])[0]
+        e = self.incoming[sel] + fs.E[sel].sum(axis=1) if diffuse_incoming is None else diffuse_incoming
+        L += self.kd_over_pi[sel] * e
+        g = np.nonzero(self.glossy_mask[sel])[0]
         if len(g):
             m, ng, w, pg = pm[g], n[g], w_out[g], patch[g]
             if self.direction is not None and glossy_iterate:
@@ -181,7 +162,7 @@ class StochasticIterationSolver:
     def iterate_radiance(self, w_out):
         """Radiance of the current iterate L_n,i(w_out) (P, 3) of every patch towards
         ``w_out`` (P, 3), all lobes, first shot and emission included."""
-        return self.radiance(np.arange(len(self.normal)), w_out)
+        return self.radiance(self._all_patches, w_out)
 
     def patch_radiance(self, w_out=None):
         """Running-average radiance of each patch (P, 3) towards its normal

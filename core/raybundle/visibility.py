@@ -157,12 +157,12 @@ class RayTracer:
         return np.maximum(frac, 0.5 / k)
 
     def _open_fraction(self, triangles, k, rng):
-        from .sampling import frames_from_normals, stratified_2d, uniform_triangle
+        from .sampling import frames_from_normals, points_on_triangles, stratified_2d
 
         sc = self.scene
         tri = np.repeat(triangles, k)
         st = np.concatenate([stratified_2d(k, rng) for _ in range(len(triangles))])
-        pts = np.einsum("nk,nkj->nj", uniform_triangle(st[:, 0], st[:, 1]), sc.triangle_corners[tri])
+        pts = points_on_triangles(sc.triangle_corners[tri], st[:, 0], st[:, 1])
         n = sc.triangle_normal[tri]
         t, b = frames_from_normals(n)
         buried = np.ones(len(tri), bool)
