@@ -52,6 +52,14 @@ def test_pi_powers_match_arbitrary_precision():
     assert 0.3 < got.mean() < 0.7 and got.min() >= 0 and got.max() < 1
 
 
+def test_pi_fixed_point_matches_arbitrary_precision():
+    from raybundle.sampling import pi_fixed_point
+
+    for bits in (53, 1000, 20000):
+        with mpmath.workprec(bits + 64):
+            assert pi_fixed_point(bits) == int(mpmath.floor(mpmath.ldexp(mpmath.pi, bits))), bits
+
+
 def test_halton_radical_inverse():
     assert [radical_inverse(2, i) for i in range(1, 5)] == [0.5, 0.25, 0.75, 0.125]
     assert radical_inverse(3, 5) == pytest.approx(2 / 3 + 1 / 9)   # 5 = 12 in base 3 -> 0.21

@@ -7,7 +7,7 @@ from raybundle.materials import MaterialTable
 from raybundle.sampling import uniform_sphere
 from raybundle.scene import build_scene, subdivide
 from raybundle.scenes import _box_quads, _mesh, _oriented
-from raybundle.visibility import RayTracer, brute_force_bundle, brute_force_hits
+from raybundle.visibility import ENVIRONMENT, RayTracer, brute_force_bundle, brute_force_hits, bundle_from_hits
 
 MATS = MaterialTable.from_list([dict(name="w", diffuse=(0.5, 0.5, 0.5), emission=(1, 1, 1))])
 
@@ -29,8 +29,21 @@ def pair_counts(bundle):
     return {tuple(k): round(x / bundle.cell_area) for k, x in zip(keys, w)}
 
 
+def two_sided_in_world(sc, flip=()):
+    """``sc`` with Blender's semantics: two-sided triangles under a grey world, the
+    triangles ``flip`` turned around (a .blend with flipped normals).  Faces lying
+    on other faces (block bottoms on the floor) are left out: which of two
+    coincident sides a ray meets is arbitrary."""
+    t = sc.triangles.copy()
+    t[list(flip)] = t[list(flip)][:, ::-1]
+    keep = ~(sc.triangle_solid & np.isclose(sc.triangle_corners[:, :, 2], 0).all(axis=1))
+    return build_scene(sc.vertices, t[keep], sc.triangle_material[keep], sc.materials, camera=sc.camera,
+                       two_sided=True, environment=(0.2, 0.2, 0.2))
+
+
 SCENES = {
     "cornell": lambda: scenes.cornell(),                        # open, non-convex, blocks on the floor
+    "cornell-two-sided-world": lambda: two_sided_in_world(scenes.cornell(), flip=range(0, 40, 3)),
     "cornell-sub": lambda: subdivide(scenes.cornell(), patches=300),   # shared edges, T-junctions
     "box-in-box": lambda: box_in_box(),                         # closed, non-convex
     "thin-wall": lambda: box_in_box(thickness=1e-3),            # walls 1 mm apart
@@ -45,12 +58,39 @@ def test_bundle_equals_brute_force(name, rng):
         u = rng.random(5)
         d = uniform_sphere(u[0], u[1])
         origins, delta = tr.bundle_origins(d, 24, (u[2], u[3]), u[4])
-        up, down, _, _ = tr.all_hit_pairs(origins, d)
-        fast = tr._bundle_from_pairs(d, delta, up, down, len(origins), 0)
+        world = bool(np.any(sc.environment > 0))
+        up, down, _, _, *ends = tr.all_hit_pairs(origins, d, ends=world)
+        fast = bundle_from_hits(sc, d, delta, up, down, len(origins), 0, *ends)
         slow = brute_force_bundle(sc, origins, d, delta, tr.eps)
         assert pair_counts(fast) == pair_counts(slow)
         assert len(fast.receiver) > 0
+        assert np.any(fast.sender == ENVIRONMENT) == world
     tr.close()
+
+
+def test_two_sided_sides_meet_by_ray_direction():
+    """A two-sided quad between two parallel one-sided quads facing it: rays along
+    +z link the lower quad's front to the middle's back side, the middle's front to
+    the upper quad; flipping the middle quad's winding changes nothing."""
+    v = np.array([[0, 0, z] for z in (0, 1, 2) for _ in range(4)], float)
+    v[:, :2] = np.tile([[0, 0], [1, 0], [1, 1], [0, 1]], (3, 1))
+    for flip in (False, True):
+        mid = [[4, 5, 6], [4, 6, 7]] if not flip else [[4, 6, 5], [4, 7, 6]]
+        t = np.array([[0, 1, 2], [0, 2, 3]] + mid + [[8, 10, 9], [8, 11, 10]])
+        sc = build_scene(v, t, [0] * 6, MATS, two_sided=[False, False, True, True, False, False])
+        assert sc.n_sides == sc.n_patches + 2
+        tr = RayTracer(sc)
+        b = tr.bundle([0, 0, 1], 16)
+        tr.close()
+        mid_up = set(sc.side_facing(np.array([2, 3]), [0, 0, 1]).tolist())
+        mid_down = set(sc.side_facing(np.array([2, 3]), [0, 0, -1]).tolist())
+        assert (mid_up == {2, 3}) == (not flip) and (mid_down == {2, 3}) == flip
+        group = {0: "lower", 1: "lower", 4: "upper", 5: "upper"}
+        group.update({k: "middle, upper side" for k in mid_up})
+        group.update({k: "middle, lower side" for k in mid_down})
+        linked = {(group[a], group[b]) for a, b in zip(b.sender.tolist(), b.receiver.tolist())}
+        assert linked == {("lower", "middle, lower side"), ("middle, lower side", "lower"),
+                          ("middle, upper side", "upper"), ("upper", "middle, upper side")}
 
 
 def test_rays_through_shared_edges_and_vertices_hit_once():

@@ -33,10 +33,12 @@ from .sampling import ShiftedKronecker, stratified_2d
 
 @dataclass
 class GBuffer:
-    """Visible surface per pixel: triangle (-1 = nothing), point, normal, material,
-    direction to the eye ``w_eye``, barycentrics (N, 3)."""
+    """Visible surface per pixel: triangle (-1 = nothing), the triangle side seen
+    ``tside`` (:meth:`~raybundle.scene.PatchScene.seen_tside`), point, that side's
+    normal, material, direction to the eye ``w_eye``, barycentrics (N, 3)."""
 
     triangle: np.ndarray
+    tside: np.ndarray
     point: np.ndarray
     normal: np.ndarray
     material: np.ndarray
@@ -143,22 +145,30 @@ class Renderer:
         tri, t, u, v = self.tracer.first_hit(org, dirs)
         self.image_rays += len(dirs)
         hit = tri >= 0
-        safe = np.where(hit, tri, 0)
         sc = self.scene
-        return GBuffer(tri, org + np.where(hit, t, 0.0)[:, None] * dirs, sc.triangle_normal[safe],
-                       sc.triangle_material[safe], -dirs, np.stack([1 - u - v, u, v], axis=1))
+        ts = sc.seen_tside(np.where(hit, tri, 0), dirs)
+        return GBuffer(tri, ts, org + np.where(hit, t, 0.0)[:, None] * dirs, sc.tside_normal[ts],
+                       sc.triangle_material[sc.tside_triangle[ts]], -dirs, np.stack([1 - u - v, u, v], axis=1))
 
-    def seen_emission(self, g, idx):
-        """Emitted radiance (len(idx), 3) towards the eye at G-buffer entries ``idx``."""
-        cos_eye = np.einsum("ij,ij->i", g.normal[idx], g.w_eye[idx])
-        return self.scene.materials.emitted_radiance(g.material[idx], cos_eye)
+    def seen_radiance(self, g):
+        """Radiance (N, 3) that reaches the eye directly: emission of the surfaces
+        seen, the world's radiance where nothing is hit; and (N,) bool, the
+        pixels whose sample saw an emitting surface."""
+        out = np.broadcast_to(self.scene.environment, (len(g.triangle), 3)).copy()
+        h = np.nonzero(g.hit)[0]
+        cos_eye = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h])
+        out[h] = self.scene.materials.emitted_radiance(g.material[h], cos_eye)
+        emitter = np.zeros(len(out), bool)
+        emitter[h] = np.any(out[h] > 0, axis=1)
+        return out, emitter
 
-    def surface_values(self, patch_values, vert, tri, bary):
-        """Patch values (P, C) at hit points: interpolated from welded-vertex values
-        ``vert`` (V, C) with barycentrics (N, 3), or flat per patch when ``vert`` is None."""
+    def surface_values(self, side_values, vert, tside, bary):
+        """Side values (S, C) at hit points on triangle sides ``tside`` (N,):
+        interpolated from welded-vertex values ``vert`` (V, C) with barycentrics
+        (N, 3), or flat per side when ``vert`` is None."""
         if vert is None:
-            return patch_values[self.scene.triangle_patch[tri]]
-        return np.einsum("nk,nkc->nc", bary, vert[self.scene.smooth_vertex_ids[tri]])
+            return side_values[self.scene.tside_side[tside]]
+        return np.einsum("nk,nkc->nc", bary, vert[self.scene.smooth_vertex_ids[tside]])
 
     def image_pass(self):
         """One jittered sample per pixel of the per-pass part: emission seen, direct
@@ -169,9 +179,8 @@ class Renderer:
         self.gbuffer = g
         h = np.nonzero(g.hit)[0]
         cos_eye = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h])
-        emitted = np.zeros((len(self._pixel), 3))
-        emitted[h] = self.seen_emission(g, h)
-        self._emission_edge_samples(emitted)
+        emitted, seen = self.seen_radiance(g)
+        self._emission_edge_samples(emitted, seen)
         contrib = np.zeros((len(h), 3))
         front = cos_eye > 0
         hf = h[front]
@@ -197,16 +206,16 @@ class Renderer:
         extra = self.n_light_samples - u.shape[1]
         return np.concatenate([u, self.rng.random((len(kron), extra, 3))], axis=1) if extra > 0 else u
 
-    def _emission_edge_samples(self, emitted):
+    def _emission_edge_samples(self, emitted, seen):
         """Supersample the emission seen in pixels on the edge of a visible emitter.
 
         A pixel whose earlier passes saw an emitter in some samples and not in
         others gets ``emission_edge_samples`` extra primary rays this pass, and its
         emission estimate becomes the mean of all of them: still unbiased (the
         choice depends only on earlier passes) and, at the edge of a bright light,
-        far less noisy than one sample per pass.  Updates ``emitted`` in place.
+        far less noisy than one sample per pass.  Updates ``emitted`` in place;
+        ``seen`` (N,) bool: this pass's sample saw an emitter.
         """
-        seen = np.any(emitted > 0, axis=1)
         edge = np.nonzero((self._emitter_hits > 0) & (self._emitter_hits < self.passes))[0]
         self._emitter_hits += seen
         k = self.settings.emission_edge_samples
@@ -214,9 +223,7 @@ class Renderer:
             return
         pix = np.repeat(edge, k)
         g = self.trace_gbuffer(self.rng.random((len(pix), 2)), pixels=pix)
-        le = np.zeros((len(pix), 3))
-        hit = np.nonzero(g.hit)[0]
-        le[hit] = self.seen_emission(g, hit)
+        le, _ = self.seen_radiance(g)
         emitted[edge] = (emitted[edge] + le.reshape(len(edge), k, 3).sum(axis=1)) / (k + 1)
 
     def glossy_gather(self, g, idx, u):
@@ -251,12 +258,16 @@ class Renderer:
             tri, t, bu, bv = self.tracer.first_hit(pts[live] + n[live] * self.tracer.eps, w_i[live])
             self.image_rays += len(live)
             hit = tri >= 0
+            if np.any(sc.environment > 0):      # paths that leave the scene see the world
+                gone = live[~hit]
+                np.add.at(out, pix[gone], throughput[gone] * sc.environment)
             live, tri, t = live[hit], tri[hit], t[hit]
             bary = np.stack([1 - bu - bv, bu, bv], axis=1)[hit]
-            patch = sc.triangle_patch[tri]
-            e_hit = self.surface_values(e, vert, tri, bary)
+            ts = sc.seen_tside(tri, w_i[live])
+            patch = sc.tside_side[ts]
+            e_hit = self.surface_values(e, vert, ts, bary)
             hit_m = sc.triangle_material[tri]
-            hit_n = sc.triangle_normal[tri]
+            hit_n = sc.tside_normal[ts]
             w_back = -w_i[live]
             go_on = (mats.is_glossy[hit_m] & (np.einsum("ij,ij->i", hit_n, w_back) > 0)
                      if bounce + 1 < depth else np.zeros(len(live), bool))
@@ -281,28 +292,29 @@ class Renderer:
         if len(gl) == 0:
             return
         g = self.gbuffer
-        patch = self.scene.triangle_patch[g.triangle[gl]]
+        patch = self.scene.tside_side[g.tside[gl]]
         f = self.scene.materials.brdf(g.material[gl], g.normal[gl], self.solver.receive_direction[patch],
                                       g.w_eye[gl], diffuse=False)
         self.glossy_sum[gl] += self.solver.incoming[patch] * f
 
     # -------------------------------------------------------------- resolve
-    def vertex_values(self, patch_values):
-        """Patch values (P, C) -> per welded vertex (V, C): mean of the adjacent patches
+    def vertex_values(self, side_values):
+        """Side values (S, C) -> per welded vertex (V, C): mean of the adjacent sides
         weighted by their receiving (not buried) area."""
         sc = self.scene
         ids = sc.smooth_vertex_ids
         nv = int(ids.max()) + 1
-        w = np.repeat(self.solver.triangle_open_area, 3)
-        tri_val = patch_values[sc.triangle_patch]
+        w = np.repeat(self.solver.tside_open_area, 3)
+        tri_val = side_values[sc.tside_side]
         out = np.stack([np.bincount(ids.ravel(), np.repeat(tri_val[:, k], 3) * w, minlength=nv)
-                        for k in range(patch_values.shape[1])], axis=1)
+                        for k in range(side_values.shape[1])], axis=1)
         return out / np.bincount(ids.ravel(), w, minlength=nv)[:, None]
 
-    def diffuse_indirect(self, e_bar=None):
-        """(N, 3) kd/pi * E_bar at the pixels, box-filtered with stratified sub-pixel samples.
+    def diffuse_indirect(self, e_bar=None, samples=None):
+        """(N, 3) kd/pi * E_bar at the pixels, box-filtered with ``samples`` (default
+        ``resolve_samples``) stratified sub-pixel samples.
 
-        ``e_bar`` (P, 3) defaults to the solver's running average of the incoming radiance.
+        ``e_bar`` (S, 3) defaults to the solver's running average of the incoming radiance.
         """
         sc = self.scene
         n = len(self._pixel)
@@ -312,21 +324,24 @@ class Renderer:
             return out
         vert = self.vertex_values(e_bar) if self.settings.smooth else None
         kd = sc.materials.diffuse_reflectance
-        k = max(1, int(self.settings.resolve_samples))
+        k = max(1, int(samples or self.settings.resolve_samples))
         offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve
         for j in range(k):
             g = self.trace_gbuffer(np.broadcast_to(offsets[j], (n, 2)))
             h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
-            e = self.surface_values(e_bar, vert, g.triangle[h], g.bary[h])
+            e = self.surface_values(e_bar, vert, g.tside[h], g.bary[h])
             out[h] += kd[g.material[h]] / np.pi * e
         return out / k
 
-    def image(self, diffuse=None):
-        """The current estimate (H, W, 3) float32; ``diffuse`` = precomputed diffuse indirect."""
+    def image(self, diffuse=None, preview=False):
+        """The current estimate (H, W, 3) float32; ``diffuse`` = precomputed diffuse
+        indirect; ``preview``: resolve it with one sub-pixel sample (fast, aliased)."""
         img = self.pass_sum / max(self.passes, 1)
         if self.glossy_iterations:
             img = img + self.glossy_sum / self.glossy_iterations
-        img = img + (self.diffuse_indirect() if diffuse is None else diffuse)
+        if diffuse is None:
+            diffuse = self.diffuse_indirect(samples=1 if preview else None)
+        img = img + diffuse
         return img.reshape(self.camera.height, self.camera.width, 3).astype(np.float32)
 
     # ------------------------------------------------------------------ run

@@ -14,10 +14,17 @@ solves ``L~ = (Le_r + L1) + T L~`` with ``L1 = T Le_s`` as extra emission.
   is estimated with fresh shadow rays every image pass, so shadows and glossy
   highlights are sharp (:meth:`DirectLighting.reflected_radiance`).
 
-Lights: every emitting material whose emission is constant and whose area is at
-most ``small_fraction`` of the scene's area is one area light (sampled uniformly
-by area, one-sided Lambertian emitter); every point light is one light with
-``E = I cos / r^2``.
+Lights (each an object with ``sample(points, u)``, see :class:`MeshLight`):
+
+* every emitting material whose emission is constant and whose area is at
+  most ``small_fraction`` of the scene's area: a :class:`MeshLight`, sampled
+  uniformly by area, a Lambertian emitter on its front (and, for two-sided
+  triangles, on its back too);
+* point and spot lights (:class:`PointLight`): ``E = I s(w) cos / r^2`` with
+  Cycles' spot attenuation s, and a disc of the light's radius for soft shadows;
+* Blender area lights (:class:`ShapeLight`): one-sided rectangles and ellipses
+  that are not geometry;
+* suns (:class:`SunLight`): ``E = E_sun cos`` from a cone of the sun's angle.
 """
 from __future__ import annotations
 
@@ -25,18 +32,116 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import points_on_triangles
+from .sampling import frames_from_normals, orthonormal_basis, points_on_triangles
 
 
 @dataclass
-class AreaLight:
-    """Triangles of one emitting material: ``triangles`` (K,), area-CDF, area [m^2], radiance (3,)."""
+class MeshLight:
+    """Triangles of one emitting material: ``triangles`` (K,), area-CDF, area [m^2],
+    radiance (3,), ``two_sided`` (K,) bool (the triangle emits from its back too)."""
 
     material: int
     triangles: np.ndarray
     cdf: np.ndarray
     area: float
     radiance: np.ndarray
+    two_sided: np.ndarray
+    scene: object = None
+
+    def sample(self, points, u):
+        """One sample of the light for each point (N, 3) from uniforms ``u`` (N, 3).
+
+        Returns ``(y (N, 3), e (N, 3))``: the sampled point on the light and the
+        unshadowed irradiance it gives on a plane facing it, divided by nothing
+        else: the caller multiplies by ``cos_x`` (w = direction to y) and tests
+        visibility.  Here ``e = Le cos_l A / r^2`` (pdf 1/A)."""
+        sc = self.scene
+        k = np.minimum(np.searchsorted(self.cdf, u[:, 0] * self.cdf[-1], side="right"), len(self.cdf) - 1)
+        tri = self.triangles[k]
+        y = points_on_triangles(sc.triangle_corners[tri], u[:, 1], u[:, 2])
+        v = y - points
+        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+        cos_l = -np.einsum("ij,ij->i", sc.triangle_normal[tri], v) / np.sqrt(r2)
+        cos_l = np.where(self.two_sided[k], np.abs(cos_l), np.maximum(cos_l, 0.0))
+        return y, (cos_l * self.area / r2)[:, None] * self.radiance
+
+
+@dataclass
+class PointLight:
+    """A point or spot light (``PointLights`` row ``k``); see :meth:`MeshLight.sample`.
+
+    ``e = I s(travel) / r^2`` with ``s`` Cycles' spot attenuation.  A light with
+    a radius is sampled on the disc of that radius facing the point (soft
+    shadows; exact far from the light, where a sphere looks like that disc)."""
+
+    position: np.ndarray
+    intensity: np.ndarray
+    lights: object
+    k: int
+
+    def sample(self, points, u):
+        to_light = self.position - points
+        dist = np.maximum(np.linalg.norm(to_light, axis=1), 1e-300)
+        travel = -to_light / dist[:, None]
+        y = np.broadcast_to(self.position, points.shape)
+        radius = float(self.lights.radius[self.k])
+        if radius > 0:
+            a, b = frames_from_normals(travel)
+            r = radius * np.sqrt(u[:, 0])
+            phi = 2 * np.pi * u[:, 1]
+            y = y + (r * np.cos(phi))[:, None] * a + (r * np.sin(phi))[:, None] * b
+        v = y - points
+        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+        s = self.lights.spot_factor(self.k, travel)
+        return y, (s / r2)[:, None] * self.intensity
+
+
+@dataclass
+class ShapeLight:
+    """A Blender area light (``AreaLights`` row): a one-sided Lambertian rectangle
+    or ellipse that is not geometry.  ``e = Le cos_l A / r^2`` (pdf 1/A)."""
+
+    center: np.ndarray
+    axis_u: np.ndarray
+    axis_v: np.ndarray
+    normal: np.ndarray
+    ellipse: bool
+    area: float
+    radiance: np.ndarray
+
+    def sample(self, points, u):
+        if self.ellipse:
+            r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
+            a, b = r * np.cos(phi), r * np.sin(phi)
+        else:
+            a, b = 2 * u[:, 0] - 1, 2 * u[:, 1] - 1
+        y = self.center + a[:, None] * self.axis_u + b[:, None] * self.axis_v
+        v = y - points
+        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+        cos_l = np.maximum(-(v @ self.normal) / np.sqrt(r2), 0.0)
+        return y, (cos_l * self.area / r2)[:, None] * self.radiance
+
+
+@dataclass
+class SunLight:
+    """A distant light: travel directions uniform in the cone of half-angle
+    ``angle / 2`` around ``direction``; ``e = irradiance`` (no fall-off).  The
+    sample point lies ``far`` [m] away towards the sun (beyond the scene)."""
+
+    direction: np.ndarray
+    irradiance: np.ndarray
+    angle: float
+    far: float
+
+    def sample(self, points, u):
+        cos_max = np.cos(0.5 * self.angle)
+        cos_t = 1.0 - u[:, 0] * (1.0 - cos_max)
+        sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t * cos_t))
+        a, b = orthonormal_basis(self.direction)
+        phi = 2 * np.pi * u[:, 1]
+        travel = (cos_t[:, None] * self.direction + (sin_t * np.cos(phi))[:, None] * a
+                  + (sin_t * np.sin(phi))[:, None] * b)
+        return points - self.far * travel, np.broadcast_to(self.irradiance, points.shape).copy()
 
 
 class DirectLighting:
@@ -48,9 +153,11 @@ class DirectLighting:
         self.scene = scene
         self.tracer = tracer
         self.rays = 0  # shadow rays traced so far
+        # area_lights: sampled ``samples_per_light`` times per point (mesh and shape lights);
+        # point_lights: one sample per point (point, spot and sun lights)
         mats = scene.materials
         self.first_shot_material = np.zeros(len(mats), bool)
-        self.area_lights: list[AreaLight] = []
+        self.area_lights: list[MeshLight] = []
         total = scene.triangle_area.sum()
         if first_shot == "auto":
             constant = ~np.any(mats.emission_albedo_complement > 0, axis=1) & np.any(mats.emission > 0, axis=1)
@@ -60,22 +167,24 @@ class DirectLighting:
                 if len(tri) and area <= small_fraction * total:
                     self.first_shot_material[m] = True
                     cdf = np.cumsum(scene.triangle_area[tri])
-                    self.area_lights.append(AreaLight(int(m), tri, cdf / cdf[-1], float(area),
-                                                      mats.emission[m].astype(float)))
+                    self.area_lights.append(MeshLight(int(m), tri, cdf / cdf[-1], float(area),
+                                                      mats.emission[m].astype(float),
+                                                      scene.triangle_two_sided[tri], scene))
         pl = scene.point_lights
-        self.point_lights = [(pl.position[k], pl.intensity[k]) for k in range(len(pl))
+        self.point_lights = [PointLight(pl.position[k], pl.intensity[k], pl, k) for k in range(len(pl))
                              if np.any(pl.intensity[k] > 0)]
+        al = scene.area_lights
+        self.area_lights += [ShapeLight(al.center[k], al.axis_u[k], al.axis_v[k], al.normal[k], bool(al.shape[k] == 1),
+                                        float(al.area[k]), al.radiance[k]) for k in range(len(al))
+                             if np.any(al.radiance[k] > 0)]
+        sl = scene.sun_lights
+        far = 4.0 * tracer.radius + 1.0
+        self.point_lights += [SunLight(sl.direction[k], sl.irradiance[k], float(sl.angle[k]), far)
+                              for k in range(len(sl)) if np.any(sl.irradiance[k] > 0)]
 
     @property
     def n_lights(self):
         return len(self.area_lights) + len(self.point_lights)
-
-    def sample_area_light(self, light: AreaLight, u):
-        """Points (N, 3) and normals (N, 3) on ``light`` from (N, 3) uniforms; pdf = 1 / area."""
-        k = np.minimum(np.searchsorted(light.cdf, u[:, 0] * light.cdf[-1], side="right"), len(light.cdf) - 1)
-        tri = light.triangles[k]
-        p = points_on_triangles(self.scene.triangle_corners[tri], u[:, 1], u[:, 2])
-        return p, self.scene.triangle_normal[tri]
 
     def _light_samples(self, points, normals, light, u):
         """One sample of every point's irradiance from one light.
@@ -83,23 +192,13 @@ class DirectLighting:
         Returns ``(E (N,3) [W/m^2], travel (N,3), cos_x (N,))`` where E already
         includes visibility, so ``E f(travel, w_out)`` is the reflected radiance.
         """
-        if isinstance(light, AreaLight):
-            y, ny = self.sample_area_light(light, u)
-        else:
-            y, ny = np.broadcast_to(light[0], points.shape), None
+        y, e = light.sample(points, u)
         v = y - points
-        r2 = np.einsum("ij,ij->i", v, v)
-        r = np.sqrt(np.maximum(r2, 1e-300))
+        r = np.sqrt(np.maximum(np.einsum("ij,ij->i", v, v), 1e-300))
         w = v / r[:, None]                      # from the point towards the light
         cos_x = np.einsum("ij,ij->i", normals, w)
-        if ny is not None:
-            cos_l = -np.einsum("ij,ij->i", ny, w)
-            geom = np.where((cos_x > 0) & (cos_l > 0), cos_x * cos_l * light.area / np.maximum(r2, 1e-300), 0.0)
-            e = geom[:, None] * light.radiance
-        else:
-            geom = np.where(cos_x > 0, cos_x / np.maximum(r2, 1e-300), 0.0)
-            e = geom[:, None] * light[1]
-        live = geom > 0
+        e *= np.maximum(cos_x, 0.0)[:, None]
+        live = np.any(e > 0, axis=1)
         if live.any():
             eps = self.tracer.eps
             # shadow ray from just above the surface *to the light sample itself*
@@ -125,7 +224,7 @@ class DirectLighting:
         """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
 
         Unbiased estimate with ``samples_per_light`` shadow rays per area light
-        (one per point light): ``sum_l mean_s Le f(w_travel, w_out) cos_x cos_l A / r^2 V``.
+        (one per point light or sun): ``sum_l mean_s e_l cos_x f(w_travel, w_out) V``.
         ``u``: uniforms (N, K, 3) with K = :meth:`samples_per_pass`, or a Generator.
         """
         out = np.zeros((len(points), 3))
@@ -133,7 +232,7 @@ class DirectLighting:
             u = u.random((len(points), self.samples_per_pass(samples_per_light), 3))
         k = 0
         for light in self.light_list():
-            n_s = samples_per_light if isinstance(light, AreaLight) else 1
+            n_s = samples_per_light if isinstance(light, (MeshLight, ShapeLight)) else 1
             for _ in range(n_s):
                 e, travel, _ = self._light_samples(points, normals, light, u[:, k])
                 k += 1
@@ -147,12 +246,13 @@ class DirectLighting:
 class PatchFirstShot:
     """Incoming first shot per patch, refined progressively while the solver iterates.
 
-    For every patch i and light l it keeps running sums over uniformly random
-    points of the patch and light samples of the irradiance
-    ``Le cos_x cos_l A / r^2 V`` (area light) or ``I cos_x / r^2 V`` (point light)
-    and of the irradiance-weighted travel direction, divided by the patch's
-    receiving area (``receiving_area``; buried parts receive nothing).  ``E`` (P, L, 3) [W/m^2] is
-    the patch-average irradiance, ``direction`` (P, L, 3) the mean travel direction.
+    For every side i (:mod:`raybundle.scene`) and light l it keeps running sums
+    over uniformly random points of the side and light samples of the
+    irradiance ``e cos_x V`` (:meth:`DirectLighting._light_samples`) and of the
+    irradiance-weighted travel direction, divided by the side's receiving area
+    (``receiving_area`` (S,); buried parts receive nothing).  ``E`` (S, L, 3)
+    [W/m^2] is the side-average irradiance, ``direction`` (S, L, 3) the mean
+    travel direction.  Samples are kept per triangle side (tside).
 
     A fixed first shot would freeze its Monte Carlo noise into the solution (a
     bias that no number of iterations removes); refining it with a few shadow
@@ -166,19 +266,19 @@ class PatchFirstShot:
     def __init__(self, direct: DirectLighting, rng, initial_samples=16, receiving_area=None):
         self.direct = direct
         # average over the area that can receive light (see RayTracer.open_fraction)
-        self.receiving_area = direct.scene.patch_area if receiving_area is None else receiving_area
-        self.rng = rng
         sc = direct.scene
+        self.receiving_area = sc.patch_area[sc.side_patch] if receiving_area is None else receiving_area
+        self.rng = rng
         self.scene = sc
         self.lights = direct.light_list()
-        n_t, n_l = len(sc.triangles), len(self.lights)
+        n_t, n_l = len(sc.tside_triangle), len(self.lights)
         self._e_sum = np.zeros((n_t, n_l, 3))
         self._d_sum = np.zeros((n_t, n_l, 3))
         self._count = np.zeros(n_t)
         self._next = 0
-        self.E = np.zeros((sc.n_patches, n_l, 3))
-        self._d_patch = np.zeros((sc.n_patches, n_l, 3))
-        self.direction = np.zeros((sc.n_patches, n_l, 3))
+        self.E = np.zeros((sc.n_sides, n_l, 3))
+        self._d_patch = np.zeros((sc.n_sides, n_l, 3))
+        self.direction = np.zeros((sc.n_sides, n_l, 3))
         if n_l:
             for _ in range(initial_samples):
                 self._add(np.arange(n_t))
@@ -188,11 +288,11 @@ class PatchFirstShot:
         return len(self.lights)
 
     def _add(self, tri):
-        """One new sample on each triangle in ``tri`` (distinct ids); updates E and direction."""
+        """One new sample on each tside in ``tri`` (distinct ids); updates E and direction."""
         sc = self.scene
         u = self.rng.random((len(tri), 2))
-        pts = points_on_triangles(sc.triangle_corners[tri], u[:, 0], u[:, 1])
-        nrm = sc.triangle_normal[tri]
+        pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[tri]], u[:, 0], u[:, 1])
+        nrm = sc.tside_normal[tri]
         old = self._e_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
         old_d = self._d_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
         for li, light in enumerate(self.lights):
@@ -200,21 +300,22 @@ class PatchFirstShot:
             self._e_sum[tri, li] += e
             self._d_sum[tri, li] += e.sum(axis=1, keepdims=True) * travel
         self._count[tri] += 1
-        # patch average = sum over its triangles of area * (triangle mean) / patch area
-        w = (sc.triangle_area[tri] / self.receiving_area[sc.triangle_patch[tri]])[:, None, None]
+        # side average = sum over its tsides of area * (tside mean) / side area
+        side = sc.tside_side[tri]
+        w = (sc.triangle_area[sc.tside_triangle[tri]] / self.receiving_area[side])[:, None, None]
         new = self._e_sum[tri] / self._count[tri][:, None, None]
         new_d = self._d_sum[tri] / self._count[tri][:, None, None]
-        np.add.at(self.E, sc.triangle_patch[tri], w * (new - old))
-        np.add.at(self._d_patch, sc.triangle_patch[tri], w * (new_d - old_d))
-        p = np.unique(sc.triangle_patch[tri])
+        np.add.at(self.E, side, w * (new - old))
+        np.add.at(self._d_patch, side, w * (new_d - old_d))
+        p = np.unique(side)
         norm = np.linalg.norm(self._d_patch[p], axis=2, keepdims=True)
         self.direction[p] = np.where(norm > 0, self._d_patch[p] / np.maximum(norm, 1e-300), 0.0)
 
     def refine(self, n_triangles):
-        """One more sample on the next ``n_triangles`` triangles (round robin)."""
+        """One more sample on the next ``n_triangles`` tsides (round robin)."""
         if not self.lights or n_triangles <= 0:
             return
-        n_t = len(self.scene.triangles)
+        n_t = len(self.scene.tside_triangle)
         tri = (self._next + np.arange(min(n_triangles, n_t))) % n_t
         self._next = int((self._next + len(tri)) % n_t)
         self._add(tri)

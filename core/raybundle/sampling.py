@@ -135,6 +135,31 @@ class PRNGSequence:
         return self.rng.random(dim)
 
 
+_PI_CACHE = [0, 0]     # [bits, floor(pi 2^bits)] of the most precise pi computed so far
+
+
+def pi_fixed_point(bits):
+    """floor(pi * 2^bits) as an integer, by Machin's formula
+    pi = 16 atan(1/5) - 4 atan(1/239) in integer arithmetic with 64 guard bits
+    (exact except when pi 2^bits lies within 2^-40 of an integer; cached)."""
+    if _PI_CACHE[0] < bits:
+        work = bits + 64
+        one = 1 << work
+
+        def atan_inv(x):               # atan(1/x) * 2^work, alternating Taylor series
+            total = term = one // x
+            x2, k, sign = x * x, 1, -1
+            while term:
+                term //= x2
+                k += 2
+                total += sign * (term // k)
+                sign = -sign
+            return total
+
+        _PI_CACHE[:] = [work, 16 * atan_inv(5) - 4 * atan_inv(239)]
+    return _PI_CACHE[1] >> (_PI_CACHE[0] - bits)
+
+
 class PiPowersSequence:
     """The sequence u_n = frac(pi^n), n = start, start+1, ... consumed in order.
 
@@ -160,12 +185,9 @@ class PiPowersSequence:
         self._capacity = int(capacity)
 
     def _build(self, n_first, count):
-        import mpmath
-
         n_max = n_first + count
         bits = int(n_max * math.log2(math.pi)) + 80
-        with mpmath.workprec(bits + 32):
-            pi_fixed = int(mpmath.floor(mpmath.ldexp(mpmath.pi, bits)))
+        pi_fixed = pi_fixed_point(bits)
         one = 1 << bits
         mask = one - 1
         x, base, e = one, pi_fixed, n_first          # x = pi^n_first by binary powering

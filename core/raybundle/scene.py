@@ -1,10 +1,21 @@
 """Patch scenes: triangles grouped into patches (the finite elements), materials,
 point lights and a camera; validation, subdivision and the ``.npz`` exchange format.
 
-A *patch* is the unit that carries one incoming-radiance variable (RGB) in the
-solver.  After :func:`subdivide` every triangle is its own patch.  Patches are
-one-sided: the front is where the triangle's normal
+A *patch* is the unit of the finite-element solution.  After :func:`subdivide`
+every triangle is its own patch.  The front of a triangle is where its normal
 ``n = normalize((v1 - v0) x (v2 - v0))`` points.
+
+Sides.  A triangle is *one-sided* (the back is a black absorber that emits
+nothing: the core's built-in scenes, and ``.npz`` files that do not say
+otherwise) or *two-sided* (Blender's semantics, the add-on's export: both sides
+shade with the same material and an emitter glows on both sides).  Each side of
+a patch that can be lit is a *side* with its own incoming-radiance variable:
+side ``p`` is the front of patch ``p``, side ``n_patches + k`` the back of the
+k-th two-sided patch.  The side a ray meets is chosen by the ray's direction
+against the face normal (:meth:`PatchScene.side_facing`).  Per-triangle sides
+(*tsides*, numbered the same way over triangles) carry what is per triangle:
+open area, first-shot samples, interpolation.  A side that no light reaches
+costs memory and nothing else.
 """
 from __future__ import annotations
 
@@ -17,25 +28,153 @@ import numpy as np
 from .camera import Camera
 from .materials import MaterialTable
 
-NPZ_FORMAT_VERSION = 1
+NPZ_FORMAT_VERSION = 2
 
 
 class SceneError(ValueError):
     """A scene that cannot be rendered; the message says why and what to do."""
 
 
+def _rows(a, n, width, default=0.0, what="lights"):
+    """``a`` as an (n, width) (or (n,) when width is 0) float array, or ``default`` filled."""
+    shape = (n, width) if width else (n,)
+    if a is None:
+        return np.full(shape, default, float)
+    try:
+        return np.asarray(a, float).reshape(shape)
+    except ValueError:
+        raise SceneError(f"{what}: an array of shape {np.shape(a)} where {shape} is needed "
+                         "(one row per light)") from None
+
+
 @dataclass
 class PointLights:
-    """Point lights: ``position`` (L, 3) [m], ``intensity`` (L, 3) [W/sr] per channel.
+    """Point and spot lights.
 
-    Blender's point light of power P [W] has I = P / (4 pi) W/sr (``blender.md`` §4.4).
+    ``position`` (L, 3) [m], ``intensity`` (L, 3) [W/sr] per channel;
+    ``spot_direction`` (L, 3) the unit axis the light travels along (zeros: a
+    point light, the same in every direction); ``spot_cos_half_angle`` (L,)
+    cos(spot_size / 2); ``spot_blend`` (L,) Blender's blend in [0, 1];
+    ``radius`` (L,) Blender's ``shadow_soft_size`` [m] (soft shadows; 0 = ideal point).
+
+    Blender's point or spot light of power P [W] has I = P / (4 pi) W/sr; the
+    cone does not renormalise it (``blender.md`` §4.4).  A spot's intensity
+    towards ``w`` is ``I * smoothstep((w.axis - cos_half) / ((1 - cos_half) * blend))``,
+    Cycles' spot attenuation (``smoothstep(x) = 3x^2 - 2x^3`` on [0, 1]).
     """
 
-    position: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    intensity: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    position: np.ndarray = None
+    intensity: np.ndarray = None
+    spot_direction: np.ndarray = None
+    spot_cos_half_angle: np.ndarray = None
+    spot_blend: np.ndarray = None
+    radius: np.ndarray = None
+
+    def __post_init__(self):
+        self.position = _rows(np.zeros((0, 3)) if self.position is None else self.position, -1, 3, what="point lights")
+        n = len(self.position)
+        self.intensity = _rows(self.intensity, n, 3, what="point lights")
+        self.spot_direction = _rows(self.spot_direction, n, 3, what="point lights")
+        self.spot_cos_half_angle = _rows(self.spot_cos_half_angle, n, 0, -1.0, what="point lights")
+        self.spot_blend = _rows(self.spot_blend, n, 0, what="point lights")
+        self.radius = _rows(self.radius, n, 0, what="point lights")
 
     def __len__(self):
         return len(self.position)
+
+    def spot_factor(self, k, travel):
+        """(N,) Cycles' spot attenuation of light ``k`` for light travelling along ``travel`` (N, 3)."""
+        axis = self.spot_direction[k]
+        if not np.any(axis):
+            return np.ones(len(travel))
+        c = self.spot_cos_half_angle[k]
+        x = travel @ axis - c
+        width = (1.0 - c) * self.spot_blend[k]
+        if width <= 0:
+            return (x > 0).astype(float)
+        t = np.clip(x / width, 0.0, 1.0)
+        return t * t * (3.0 - 2.0 * t)
+
+    def to_arrays(self, prefix="point_light_"):
+        return {prefix + k: getattr(self, k) for k in
+                ("position", "intensity", "spot_direction", "spot_cos_half_angle", "spot_blend", "radius")}
+
+    @classmethod
+    def from_arrays(cls, d, prefix="point_light_"):
+        return cls(**{k: d.get(prefix + k) for k in
+                      ("position", "intensity", "spot_direction", "spot_cos_half_angle", "spot_blend", "radius")})
+
+
+@dataclass
+class SunLights:
+    """Distant lights: ``direction`` (L, 3) unit travel direction of the light,
+    ``irradiance`` (L, 3) [W/m^2] on a plane facing the light (Blender's sun
+    strength times color), ``angle`` (L,) angular diameter [rad] (soft shadows)."""
+
+    direction: np.ndarray = None
+    irradiance: np.ndarray = None
+    angle: np.ndarray = None
+
+    def __post_init__(self):
+        self.direction = _rows(np.zeros((0, 3)) if self.direction is None else self.direction, -1, 3, what="sun lights")
+        n = len(self.direction)
+        self.irradiance = _rows(self.irradiance, n, 3, what="sun lights")
+        self.angle = _rows(self.angle, n, 0, what="sun lights")
+
+    def __len__(self):
+        return len(self.direction)
+
+    def to_arrays(self, prefix="sun_light_"):
+        return {prefix + k: getattr(self, k) for k in ("direction", "irradiance", "angle")}
+
+    @classmethod
+    def from_arrays(cls, d, prefix="sun_light_"):
+        return cls(**{k: d.get(prefix + k) for k in ("direction", "irradiance", "angle")})
+
+
+@dataclass
+class AreaLights:
+    """Blender area lights: flat one-sided Lambertian emitters that are not geometry
+    (they never occlude and the camera does not see them).
+
+    ``center`` (L, 3) [m]; ``axis_u``, ``axis_v`` (L, 3) half-extent vectors along
+    the light's local X and Y [m]; ``normal`` (L, 3) the emitting direction
+    (Blender: local -Z); ``shape`` (L,) 0 = rectangle, 1 = ellipse;
+    ``radiance`` (L, 3) [W m^-2 sr^-1].  Blender's area light of power P has
+    L = P / (pi A) with A = 4 |u| |v| (rectangle) or pi |u| |v| (ellipse).
+    """
+
+    center: np.ndarray = None
+    axis_u: np.ndarray = None
+    axis_v: np.ndarray = None
+    normal: np.ndarray = None
+    shape: np.ndarray = None
+    radiance: np.ndarray = None
+
+    def __post_init__(self):
+        self.center = _rows(np.zeros((0, 3)) if self.center is None else self.center, -1, 3, what="area lights")
+        n = len(self.center)
+        self.axis_u = _rows(self.axis_u, n, 3, what="area lights")
+        self.axis_v = _rows(self.axis_v, n, 3, what="area lights")
+        self.normal = _rows(self.normal, n, 3, what="area lights")
+        self.shape = _rows(self.shape, n, 0, what="area lights").astype(np.int64)
+        self.radiance = _rows(self.radiance, n, 3, what="area lights")
+
+    def __len__(self):
+        return len(self.center)
+
+    @property
+    def area(self):
+        """(L,) [m^2]."""
+        uv = np.linalg.norm(self.axis_u, axis=1) * np.linalg.norm(self.axis_v, axis=1)
+        return np.where(self.shape == 1, np.pi * uv, 4.0 * uv)
+
+    def to_arrays(self, prefix="area_light_"):
+        return {prefix + k: getattr(self, k) for k in ("center", "axis_u", "axis_v", "normal", "shape", "radiance")}
+
+    @classmethod
+    def from_arrays(cls, d, prefix="area_light_"):
+        return cls(**{k: d.get(prefix + k) for k in ("center", "axis_u", "axis_v", "normal", "shape", "radiance")})
 
 
 @dataclass
@@ -56,7 +195,13 @@ class PatchScene:
     name : str
     dropped_triangles : int  zero-area triangles removed at validation
     triangle_solid : (T,) bool  the triangle belongs to a closed, consistently
-        oriented mesh (a solid), see :func:`closed_solid_triangles`
+        oriented one-sided mesh (a solid: its inside is behind the black backs),
+        see :func:`closed_solid_triangles`.  Two-sided meshes are never solids
+        (a closed two-sided mesh may be a room seen from inside).
+    triangle_two_sided : (T,) bool  both sides shade and emit (module docstring)
+    sun_lights, area_lights : SunLights, AreaLights
+    environment : (3,) float  constant radiance of the world around the scene
+        [W m^-2 sr^-1] (Blender's world color times strength)
     """
 
     vertices: np.ndarray
@@ -71,10 +216,17 @@ class PatchScene:
     name: str = ""
     dropped_triangles: int = 0
     triangle_solid: np.ndarray | None = None
+    triangle_two_sided: np.ndarray | None = None
+    sun_lights: SunLights = field(default_factory=SunLights)
+    area_lights: AreaLights = field(default_factory=AreaLights)
+    environment: np.ndarray | None = None
 
     def __post_init__(self):
+        if self.triangle_two_sided is None:
+            self.triangle_two_sided = np.zeros(len(self.triangles), bool)
         if self.triangle_solid is None:
-            self.triangle_solid = closed_solid_triangles(self.vertices, self.triangles)
+            self.triangle_solid = closed_solid_triangles(self.vertices, self.triangles) & ~self.triangle_two_sided
+        self.environment = np.zeros(3) if self.environment is None else np.asarray(self.environment, float)
 
     # ------------------------------------------------------------- geometry
     @cached_property
@@ -137,13 +289,95 @@ class PatchScene:
 
     @cached_property
     def smooth_vertex_ids(self):
-        """(T, 3) int: corners welded by position *and* normal, for interpolating
-        patch values across a smooth surface without bleeding over creases."""
+        """(TS, 3) int: tside corners welded by position *and* side normal, for
+        interpolating side values across a smooth surface without bleeding over
+        creases or from one side of a surface to the other."""
         _, r = self.bounding_sphere
-        q = np.round(self.triangle_corners.reshape(-1, 3) / max(r * 1e-6, 1e-12)).astype(np.int64)
-        nq = np.repeat(np.round(self.triangle_normal * 1e3).astype(np.int64), 3, axis=0)
+        corners = self.triangle_corners[self.tside_triangle]
+        q = np.round(corners.reshape(-1, 3) / max(r * 1e-6, 1e-12)).astype(np.int64)
+        nq = np.repeat(np.round(self.tside_normal * 1e3).astype(np.int64), 3, axis=0)
         _, ids = np.unique(np.concatenate([q, nq], axis=1), axis=0, return_inverse=True)
         return ids.reshape(-1, 3)
+
+    # ---------------------------------------------------------------- sides
+    @cached_property
+    def patch_two_sided(self):
+        """(P,) bool: the patch's triangles are two-sided."""
+        return np.bincount(self.triangle_patch, self.triangle_two_sided, minlength=self.n_patches) > 0
+
+    @cached_property
+    def patch_back_side(self):
+        """(P,) int: the side id of each patch's back, -1 for one-sided patches."""
+        two = self.patch_two_sided
+        back = np.full(self.n_patches, -1, np.int64)
+        back[two] = self.n_patches + np.arange(int(two.sum()))
+        return back
+
+    @property
+    def n_sides(self):
+        return self.n_patches + int(self.patch_two_sided.sum())
+
+    @cached_property
+    def side_patch(self):
+        """(S,) int: the patch each side belongs to."""
+        return np.concatenate([np.arange(self.n_patches), np.nonzero(self.patch_two_sided)[0]])
+
+    @cached_property
+    def side_normal(self):
+        """(S, 3) float: unit normal of each side (the patch normal, negated for backs)."""
+        sign = np.where(np.arange(self.n_sides) < self.n_patches, 1.0, -1.0)
+        return self.patch_normal[self.side_patch] * sign[:, None]
+
+    @cached_property
+    def side_material(self):
+        return self.patch_material[self.side_patch]
+
+    @cached_property
+    def triangle_back_tside(self):
+        """(T,) int: the tside id of each triangle's back, -1 for one-sided triangles."""
+        two = self.triangle_two_sided
+        back = np.full(len(self.triangles), -1, np.int64)
+        back[two] = len(self.triangles) + np.arange(int(two.sum()))
+        return back
+
+    @cached_property
+    def tside_triangle(self):
+        """(TS,) int: the triangle of each triangle side (tside)."""
+        return np.concatenate([np.arange(len(self.triangles)), np.nonzero(self.triangle_two_sided)[0]])
+
+    @cached_property
+    def tside_normal(self):
+        """(TS, 3) float: unit normal of each tside."""
+        sign = np.where(np.arange(len(self.tside_triangle)) < len(self.triangles), 1.0, -1.0)
+        return self.triangle_normal[self.tside_triangle] * sign[:, None]
+
+    @cached_property
+    def tside_side(self):
+        """(TS,) int: the (patch) side each tside belongs to."""
+        t = self.tside_triangle
+        p = self.triangle_patch[t]
+        return np.where(np.arange(len(t)) < len(self.triangles), p, self.patch_back_side[p])
+
+    def tside_facing(self, triangle, direction):
+        """(N,) tside ids of ``triangle`` (N,) whose normal has a positive dot product
+        with ``direction`` ((3,) or (N, 3)); -1 where that is the black back of a
+        one-sided triangle or the direction lies in the triangle's plane."""
+        n = self.triangle_normal[triangle]
+        nd = n @ direction if np.ndim(direction) == 1 else np.einsum("ij,ij->i", n, direction)
+        ts = np.where(nd > 0, triangle, self.triangle_back_tside[triangle])
+        return np.where(nd != 0, ts, -1)
+
+    def side_facing(self, triangle, direction):
+        """(N,) side ids of ``triangle`` facing ``direction`` (see :meth:`tside_facing`), -1 for none."""
+        ts = self.tside_facing(triangle, direction)
+        return np.where(ts >= 0, self.tside_side[np.maximum(ts, 0)], -1)
+
+    def seen_tside(self, triangle, ray_direction):
+        """(N,) the tside a ray travelling along ``ray_direction`` meets on ``triangle``.
+        The back of a one-sided triangle maps to its front (whose normal then faces
+        away from the ray: it reflects and emits nothing towards it)."""
+        ts = self.tside_facing(triangle, -np.asarray(ray_direction, float))
+        return np.where(ts >= 0, ts, triangle)
 
     @property
     def is_diffuse_only(self):
@@ -159,8 +393,10 @@ class PatchScene:
              "vertices": self.vertices, "triangles": self.triangles,
              "triangle_material": self.triangle_material, "triangle_patch": self.triangle_patch,
              "triangle_source": self.triangle_source, "triangle_solid": self.triangle_solid,
-             "point_light_position": self.point_lights.position,
-             "point_light_intensity": self.point_lights.intensity}
+             "triangle_two_sided": self.triangle_two_sided, "environment": self.environment}
+        d.update(self.point_lights.to_arrays())
+        d.update(self.sun_lights.to_arrays())
+        d.update(self.area_lights.to_arrays())
         d.update(self.materials.to_arrays())
         if self.camera is not None:
             d.update(self.camera.to_arrays())
@@ -176,7 +412,9 @@ def load_npz(path) -> PatchScene:
 
     Required arrays: ``vertices`` (V,3), ``triangles`` (T,3), ``triangle_material`` (T,)
     and the ``material_*`` table; ``triangle_patch``, ``triangle_source``,
-    ``point_light_*``, ``camera_*`` and ``analytic_radiance`` are optional.
+    ``triangle_two_sided`` (T,) bool (absent: one-sided, as files of format 1),
+    ``point_light_*``, ``sun_light_*``, ``area_light_*``, ``environment`` (3,),
+    ``camera_*`` and ``analytic_radiance`` are optional.
     """
     try:
         with np.load(path, allow_pickle=False) as z:
@@ -191,25 +429,29 @@ def load_npz(path) -> PatchScene:
     version = int(d.get("format_version", NPZ_FORMAT_VERSION))
     if version > NPZ_FORMAT_VERSION:
         raise SceneError(f"{path}: format version {version} is newer than this raybundle supports")
-    lights = PointLights(np.asarray(d.get("point_light_position", np.zeros((0, 3))), float).reshape(-1, 3),
-                         np.asarray(d.get("point_light_intensity", np.zeros((0, 3))), float).reshape(-1, 3))
+    lights = (PointLights.from_arrays(d), SunLights.from_arrays(d), AreaLights.from_arrays(d))
     return build_scene(d["vertices"], d["triangles"], d["triangle_material"],
-                       MaterialTable.from_arrays(d), point_lights=lights,
+                       MaterialTable.from_arrays(d), point_lights=lights[0], sun_lights=lights[1],
+                       area_lights=lights[2], environment=d.get("environment"),
                        camera=Camera.from_arrays(d), triangle_patch=d.get("triangle_patch"),
                        triangle_source=d.get("triangle_source"), triangle_solid=d.get("triangle_solid"),
+                       two_sided=d.get("triangle_two_sided", False),
                        analytic_radiance=d.get("analytic_radiance"), name=str(d.get("name", "")))
 
 
 def build_scene(vertices, triangles, triangle_material, materials, point_lights=None, camera=None,
                 triangle_patch=None, triangle_source=None, analytic_radiance=None, name="",
-                area_epsilon=1e-14, triangle_solid=None) -> PatchScene:
+                area_epsilon=1e-14, triangle_solid=None, two_sided=False,
+                sun_lights=None, area_lights=None, environment=None) -> PatchScene:
     """Validate raw triangles and make a :class:`PatchScene`.
 
+    ``two_sided``: bool or (T,) bool, Blender's semantics when true (module
+    docstring); the default, one-sided, is the core's own convention.
     Errors (:class:`SceneError`): non-finite vertices, bad indices, an empty
-    scene, no emitter and no point light, invalid materials (albedo > 1, NaN...).
-    Zero-area triangles (area <= ``area_epsilon`` m^2) are dropped and counted in
-    ``dropped_triangles`` (a warning is issued).  Without ``triangle_patch`` each
-    triangle is its own patch.
+    scene, no light at all (no emitter, light or environment), invalid
+    materials (albedo > 1, NaN...) or lights.  Zero-area triangles (area <=
+    ``area_epsilon`` m^2) are dropped and counted in ``dropped_triangles`` (a
+    warning is issued).  Without ``triangle_patch`` each triangle is its own patch.
     """
     v = np.asarray(vertices, float).reshape(-1, 3)
     t = np.asarray(triangles).reshape(-1, 3).astype(np.int64)
@@ -233,7 +475,10 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
         raise SceneError(str(e)) from e
     src = np.arange(len(t)) if triangle_source is None else np.asarray(triangle_source).reshape(-1).astype(np.int64)
     patch = None if triangle_patch is None else np.asarray(triangle_patch).reshape(-1).astype(np.int64)
-    for label, arr in (("triangle_source", src), ("triangle_patch", patch), ("triangle_solid", triangle_solid)):
+    two = np.broadcast_to(np.asarray(two_sided, bool), (len(t),)) if np.ndim(two_sided) == 0 \
+        else np.asarray(two_sided, bool).reshape(-1)
+    for label, arr in (("triangle_source", src), ("triangle_patch", patch), ("triangle_solid", triangle_solid),
+                       ("two_sided", two)):
         if arr is not None and len(np.asarray(arr).reshape(-1)) != len(t):
             raise SceneError(f"{label} has {len(np.asarray(arr).reshape(-1))} entries for {len(t)} triangles")
 
@@ -245,35 +490,61 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
         warnings.warn(f"dropped {dropped} zero-area triangles", stacklevel=2)
     if not keep.any():
         raise SceneError("the scene is empty: every triangle has zero area")
-    t, m, src = t[keep], m[keep], src[keep]
+    t, m, src, two = t[keep], m[keep], src[keep], np.array(two[keep])
     if patch is None:
         patch = np.arange(len(t))
     else:
         patch = np.unique(patch[keep], return_inverse=True)[1].reshape(-1)  # renumber densely
-        _check_patches(v, t, m, patch)
-    lights = point_lights if point_lights is not None else PointLights()
-    lights = PointLights(np.asarray(lights.position, float), np.asarray(lights.intensity, float))
-    if lights.position.ndim != 2 or lights.position.shape[1:] != (3,) or lights.intensity.shape != lights.position.shape:
-        raise SceneError("point lights need positions (L, 3) and intensities (L, 3) of the same length")
-    if not np.isfinite(lights.position).all() or not np.isfinite(lights.intensity).all() \
-            or (lights.intensity < 0).any():
-        raise SceneError("point lights need finite positions and non-negative finite intensities")
+        _check_patches(v, t, m, patch, two)
+    point_lights = PointLights() if point_lights is None else PointLights(**vars(point_lights))
+    sun_lights = SunLights() if sun_lights is None else SunLights(**vars(sun_lights))
+    area_lights = AreaLights() if area_lights is None else AreaLights(**vars(area_lights))
+    _check_lights(point_lights, sun_lights, area_lights)
+    env = np.zeros(3) if environment is None else np.broadcast_to(np.asarray(environment, float), (3,)).copy()
+    if not np.isfinite(env).all() or (env < 0).any():
+        raise SceneError(f"the environment (world) radiance must be finite and non-negative, got {env.tolist()}")
     has_emitter = materials.is_emitter[np.unique(m)].any()
-    if not has_emitter and not (lights.intensity > 0).any():
-        raise SceneError("the scene has no lights: no emitting material and no point light "
-                         "(add an Emission shader or a light)")
+    has_light = any((np.asarray(x) > 0).any() for x in (point_lights.intensity, sun_lights.irradiance,
+                                                       area_lights.radiance, env))
+    if not has_emitter and not has_light:
+        raise SceneError("the scene has no lights: no emitting material, no light and a black world "
+                         "(add an Emission shader, a light or a world color)")
     ar = None if analytic_radiance is None else np.asarray(analytic_radiance, float).reshape(3)
-    solid = None if triangle_solid is None else np.asarray(triangle_solid, bool).reshape(-1)[keep]
-    return PatchScene(v, t, m, patch, src, materials, lights, camera, ar, name, dropped, solid)
+    solid = None if triangle_solid is None else np.asarray(triangle_solid, bool).reshape(-1)[keep] & ~two
+    return PatchScene(v, t, m, patch, src, materials, point_lights, camera, ar, name, dropped, solid,
+                      two, sun_lights, area_lights, env)
 
 
-def _check_patches(v, t, m, patch):
-    """A patch must be planar, face one way and have one material (one variable per patch)."""
+def _check_lights(point, sun, area):
+    """Lights must be finite, non-negative, and have usable directions and sizes."""
+    for label, group in (("point/spot", point), ("sun", sun), ("area", area)):
+        for k, a in vars(group).items():
+            a = np.asarray(a, float)
+            if not np.isfinite(a).all():
+                raise SceneError(f"{label} light {k} has non-finite values")
+    if (point.intensity < 0).any() or (point.radius < 0).any() or (sun.irradiance < 0).any() \
+            or (sun.angle < 0).any() or (area.radiance < 0).any():
+        raise SceneError("light intensities, irradiances, radiances and sizes must be non-negative")
+    for label, dirs, live in (("sun", sun.direction, np.ones(len(sun), bool)),
+                              ("area light", area.normal, np.ones(len(area), bool)),
+                              ("spot", point.spot_direction, np.any(point.spot_direction != 0, axis=1))):
+        norm = np.linalg.norm(dirs, axis=1)
+        if np.any(live & (np.abs(norm - 1) > 1e-3)):
+            raise SceneError(f"{label} directions must be unit vectors")
+    if len(area) and np.any(area.area <= 0):
+        raise SceneError("an area light has zero size")
+
+
+def _check_patches(v, t, m, patch, two_sided):
+    """A patch must be planar, face one way, have one material and one sidedness
+    (one variable per side)."""
     n_p = int(patch.max()) + 1
     first = np.full(n_p, -1)
     first[patch[::-1]] = np.arange(len(patch))[::-1]
     if np.any(m != m[first[patch]]):
         raise SceneError("a patch mixes materials: give each patch triangles of one material")
+    if np.any(two_sided != two_sided[first[patch]]):
+        raise SceneError("a patch mixes one-sided and two-sided triangles")
     c = v[t]
     n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
     n /= np.linalg.norm(n, axis=1, keepdims=True)
@@ -335,11 +606,12 @@ def subdivide(scene: PatchScene, max_edge=None, patches=None) -> PatchScene:
     q = np.round(v / max(r * 1e-7, 1e-12)).astype(np.int64)
     _, first, inv = np.unique(q, axis=0, return_index=True, return_inverse=True)
     v, t = v[first], inv.reshape(-1)[t]
-    solid = np.concatenate([np.repeat(scene.triangle_solid[np.nonzero(k_all == k)[0]], k * k)
-                            for k in np.unique(k_all)])
+    per_tri = [np.concatenate([np.repeat(a[np.nonzero(k_all == k)[0]], k * k) for k in np.unique(k_all)])
+               for a in (scene.triangle_solid, scene.triangle_two_sided)]
     return PatchScene(v, t, np.concatenate(mats), np.arange(len(t)), np.concatenate(srcs),
                       scene.materials, scene.point_lights, scene.camera, scene.analytic_radiance,
-                      scene.name, scene.dropped_triangles, solid)
+                      scene.name, scene.dropped_triangles, *per_tri, scene.sun_lights, scene.area_lights,
+                      scene.environment)
 
 
 def closed_solid_triangles(vertices, triangles, tol=1e-7):

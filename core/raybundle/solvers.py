@@ -7,7 +7,8 @@ drive any of them by name (:data:`SOLVERS`): ``step()`` performs one iteration,
 
 Stochastic iteration with ray bundles (thesis 3.3, bidirectional form)
 --------------------------------------------------------------------
-One RGB variable per patch, the *incoming* radiance ``E_i`` (an irradiance:
+One RGB variable per patch side (:mod:`raybundle.scene`: one per one-sided
+patch, two per two-sided patch), the *incoming* radiance ``E_i`` (an irradiance:
 the cosine-weighted integral of the incoming radiance estimated from one
 direction, [W/m^2]).  Iteration n draws a direction d uniformly on the sphere,
 finds with one bundle (:mod:`raybundle.visibility`) every pair of mutually
@@ -16,7 +17,9 @@ visible patches along +-d, and transfers::
     S_j   = Le_r,j(s_j) + L1_j(s_j) + E_j^{n-1} f_j(t_j^{n-1}, s_j)     (radiance sent)
     E_i^n = (2 pi / A_i) sum_j S_j P(i, j, d)                             [W/m^2]
 
-where ``s_j = sign(n_j.d) d`` is the direction patch j sends into,
+where ``i`` and ``j`` are sides (normal ``n`` of the side), the environment
+(world) radiance is one more sender ``j`` for the first and last hits of
+each bundle line, ``s_j = sign(n_j.d) d`` is the direction side j sends into,
 ``t_i = -sign(n_i.d) d`` the travel direction patch i receives from (uniform
 on i's hemisphere, hence the 2 pi = 1/pdf), ``P(i,j,d) = A(i,j,d) cos_i`` the
 projected area of the rays linking them and ``L1`` the incoming first shot of
@@ -68,13 +71,13 @@ class StochasticIterationSolver:
         self.sequence = sequence
         self.bundle_resolution = int(bundle_resolution) or auto_bundle_resolution(scene)
         mats = scene.materials
-        pm = scene.patch_material
+        # the unknowns are patch sides: normals, materials and areas are per side
+        pm = scene.side_material
         self.patch_material = pm
-        self.normal = scene.patch_normal
-        # receiving area: the patch area less what is buried inside solids
-        self.triangle_open_area = tracer.open_fraction() * scene.triangle_area
-        self.open_area = np.bincount(scene.triangle_patch, self.triangle_open_area, minlength=scene.n_patches)
-        self.area = self.open_area
+        self.normal = scene.side_normal
+        # receiving area: the side's area less what is buried inside solids
+        self.tside_open_area = tracer.open_fraction() * scene.triangle_area[scene.tside_triangle]
+        self.area = np.bincount(scene.tside_side, self.tside_open_area, minlength=scene.n_sides)
         self.kd_over_pi = mats.diffuse_reflectance[pm] / np.pi          # (P, 3)
         self.glossy_mask = mats.is_glossy[pm]
         self.glossy_patches = np.nonzero(self.glossy_mask)[0]
@@ -82,8 +85,9 @@ class StochasticIterationSolver:
         # incoming first shot, refined by a few shadow rays every iteration
         self.first_shot = PatchFirstShot(direct, np.random.default_rng([seed, 7]), receiving_area=self.area)
         self.grid_rng = np.random.default_rng([seed, 3])   # bundle grid offset and rotation
-        self.first_shot_refine = max(64, len(scene.triangles) // 16) if direct.n_lights else 0
-        n = scene.n_patches
+        self.first_shot_refine = max(64, len(scene.tside_triangle) // 16) if direct.n_lights else 0
+        self.environment = np.asarray(scene.environment, float)
+        n = scene.n_sides
         self._all_patches = np.arange(n)
         self.incoming = np.zeros((n, 3))
         self.receive_direction = np.zeros((n, 3))   # t_i of the current iterate
@@ -108,10 +112,11 @@ class StochasticIterationSolver:
         g = self.grid_rng.random(3)
         bundle = self.tracer.bundle(d, self.bundle_resolution, offset=(g[0], g[1]), rotation=g[2])
         side = np.sign(self.normal @ d)
-        S = self.sent_radiance(side[:, None] * d)
+        # the last row is the world's radiance: sender ENVIRONMENT (-1) indexes it
+        S = np.vstack([self.sent_radiance(side[:, None] * d), self.environment])
         # t_i is uniform on the receiver's hemisphere: pdf = 2 / (4 pi) = 1 / (2 pi)
         w = bundle.cell_area / (2.0 * uniform_sphere_pdf())
-        n = self.scene.n_patches
+        n = len(self.area)
         E = np.stack([np.bincount(bundle.receiver, S[bundle.sender, k], minlength=n) for k in range(3)], axis=1)
         E *= w / self.area[:, None]
         self.incoming = E
@@ -127,7 +132,7 @@ class StochasticIterationSolver:
 
     # ------------------------------------------------------------- estimates
     def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True, glossy_iterate=True):
-        """Outgoing radiance (N, 3) of ``patch`` (N,) towards ``w_out`` (N, 3):
+        """Outgoing radiance (N, 3) of the sides ``patch`` (N,) towards ``w_out`` (N, 3):
 
         ``Le + kd/pi (E + E1) + E f_g(t, w_out) + sum_l E1_l f_g(w_l, w_out)``, with E
         the current iterate (or ``diffuse_incoming`` (N, 3) for the diffuse lobe,
@@ -165,8 +170,8 @@ class StochasticIterationSolver:
         return self.radiance(self._all_patches, w_out)
 
     def patch_radiance(self, w_out=None):
-        """Running-average radiance of each patch (P, 3) towards its normal
-        (or towards ``w_out`` (P, 3)), diffuse part only plus emission: the
+        """Running-average radiance of each side (S, 3) towards its normal
+        (or towards ``w_out`` (S, 3)), diffuse part only plus emission: the
         view-independent estimate written back as color attributes."""
         cos = np.ones(len(self.normal)) if w_out is None else np.einsum("ij,ij->i", self.normal, w_out)
         le = self.scene.materials.emitted_radiance(self.patch_material, cos)

@@ -3,8 +3,12 @@
 A *bundle* (thesis 3.1) is a grid of parallel rays with direction d covering
 the scene's bounding sphere.  Along each ray every surface hit is found (Embree
 first hits, re-shot just past each hit), and each pair of *consecutive* hits
-that face each other exchanges light in both directions: the upstream patch j
-sends along +d to the downstream patch i, and i sends along -d to j.  Each ray
+exchanges light in both directions between the sides that face each other
+(:meth:`~raybundle.scene.PatchScene.side_facing`; the black back of a one-sided
+triangle takes no part): the upstream side j sends along +d to the downstream
+side i, and i sends along -d to j.  With an environment (world) radiance the
+first hit of each ray also receives from the world along +d and the last hit
+along -d (sender :data:`ENVIRONMENT`).  Each ray
 stands for the area delta^2 of the plane perpendicular to d, so summed over a
 bundle the weight of a pair estimates ``P(i, j, d) = A(i, j, d) cos_i`` without
 bias when the grid gets a random sub-cell offset (and rotation) every time.
@@ -28,6 +32,8 @@ import numpy as np
 from .sampling import orthonormal_basis
 
 _MAX_LAYERS = 10000
+#: sender id of light that comes from the environment (world) in a :class:`Bundle`
+ENVIRONMENT = -1
 
 
 @dataclass
@@ -38,7 +44,8 @@ class Bundle:
     ----------
     direction : (3,) float  the bundle direction d (unit)
     cell_area : float  delta^2 [m^2], the cross-section each ray stands for
-    receiver, sender : (K,) int  patch ids; light goes from sender to receiver
+    receiver, sender : (K,) int  side ids; light goes from sender to receiver
+        (sender :data:`ENVIRONMENT` = the world)
     travel_sign : (K,) int8  +1 when the light travels along +d, -1 along -d
     n_rays : int  rays in the grid (inside the bounding disc)
     n_casts : int  Embree first-hit queries used (all layers)
@@ -72,8 +79,6 @@ class RayTracer:
         from embreex.mesh_construction import TriangleMesh
 
         self.scene = scene
-        self.triangle_patch = scene.triangle_patch
-        self.triangle_normal = scene.triangle_normal
         self.center, self.radius = scene.bounding_sphere
         self.eps = max(1e-5 * self.radius, 1e-9)
         self._embree = rtcore_scene.EmbreeScene()
@@ -134,21 +139,24 @@ class RayTracer:
         return np.concatenate(self._map_chunks(work, len(origins))) != -1
 
     def open_fraction(self, points_per_triangle=32, refine_points=512, seed=0):
-        """(T,) fraction of each triangle's area that is not buried inside a closed solid.
+        """(TS,) fraction of each triangle side's area that is not buried inside a closed solid.
 
-        A point is buried when rays from it along its normal and along three
-        directions tilted 60 degrees from it all meet the inside of a closed solid
-        first (a back face of a :attr:`~raybundle.scene.PatchScene.triangle_solid`
-        triangle: a box standing on a floor buries the floor under it; a
-        one-sided shelf buries nothing).  Such area never receives light, so
-        patch averages must not be divided by it (an FE error otherwise: the
-        visible rest of the patch comes out too dark).  Estimated from
-        ``points_per_triangle`` stratified points; triangles found partly buried
-        get ``refine_points`` more (the receiving area divides E, so its error
-        matters); the result is floored at half a sample.
+        A point is buried when rays from it along its side's normal and along
+        three directions tilted 60 degrees from it all meet the inside of a
+        closed solid first (a back face of a :attr:`~raybundle.scene.PatchScene.triangle_solid`
+        triangle: a box standing on a floor buries
+        the floor under it; a one-sided shelf buries nothing).  Such area never
+        receives light, so side averages must not be divided by it (an FE error
+        otherwise: the visible rest of the patch comes out too dark).  Estimated
+        from ``points_per_triangle`` stratified points; triangle sides found
+        partly buried get ``refine_points`` more (the receiving area divides E,
+        so its error matters); the result is floored at half a sample.  A scene
+        without solids needs no rays: everything is open.
         """
         rng = np.random.default_rng([seed, 11])
-        n_t = len(self.scene.triangles)
+        n_t = len(self.scene.tside_triangle)
+        if not self.scene.triangle_solid.any():
+            return np.ones(n_t)
         frac = self._open_fraction(np.arange(n_t), points_per_triangle, rng)
         part = np.nonzero((frac > 0) & (frac < 1))[0]
         if len(part) and refine_points:
@@ -156,18 +164,18 @@ class RayTracer:
         k = np.where(np.isin(np.arange(n_t), part), refine_points, points_per_triangle)
         return np.maximum(frac, 0.5 / k)
 
-    def _open_fraction(self, triangles, k, rng):
+    def _open_fraction(self, tsides, k, rng):
         from .sampling import frames_from_normals, points_on_triangles, stratified_2d
 
         sc = self.scene
-        tri = np.repeat(triangles, k)
-        st = np.concatenate([stratified_2d(k, rng) for _ in range(len(triangles))])
-        pts = points_on_triangles(sc.triangle_corners[tri], st[:, 0], st[:, 1])
-        n = sc.triangle_normal[tri]
+        ts = np.repeat(tsides, k)
+        st = np.concatenate([stratified_2d(k, rng) for _ in range(len(tsides))])
+        pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[ts]], st[:, 0], st[:, 1])
+        n = sc.tside_normal[ts]
         t, b = frames_from_normals(n)
-        buried = np.ones(len(tri), bool)
+        buried = np.ones(len(ts), bool)
         s60, c60 = np.sin(np.pi / 3), np.cos(np.pi / 3)
-        phi0 = rng.random(len(tri)) * 2 * np.pi
+        phi0 = rng.random(len(ts)) * 2 * np.pi
         dirs = [n] + [c60 * n + s60 * (np.cos(phi0 + a)[:, None] * t + np.sin(phi0 + a)[:, None] * b)
                       for a in (0, 2 * np.pi / 3, 4 * np.pi / 3)]
         for d in dirs:
@@ -207,11 +215,13 @@ class RayTracer:
         o = self.center + x[:, None] * u + y[:, None] * v - 1.01 * r * d
         return o, delta
 
-    def all_hit_pairs(self, origins, direction):
+    def all_hit_pairs(self, origins, direction, ends=False):
         """Consecutive hits along parallel rays: ``(upstream_tri, downstream_tri, ray, n_casts)``.
 
         Every hit along every ray is found by re-shooting ``eps`` past the previous
         hit; consecutive hits form one pair.  Triangle ids are Embree prim ids.
+        With ``ends`` also returns the first and the last triangle hit by each ray
+        that hits anything (the surfaces that see the world along -d and +d).
         """
         d = np.asarray(direction, float)
         d32 = d.astype(np.float32)[None, :]
@@ -224,15 +234,19 @@ class RayTracer:
             ray = np.arange(len(o32))
             start = np.zeros(len(o32), np.float32)
             last = np.full(len(o32), -1, np.int64)
-            ups, downs, rays = [], [], []
+            ups, downs, rays, firsts, lasts = [], [], [], [], []
             casts = 0
-            for _ in range(_MAX_LAYERS):
+            for layer in range(_MAX_LAYERS):
                 if ray.size == 0:
                     break
                 casts += ray.size
                 r = self._embree.run(o32 + start[:, None] * d32, d32, output=1)
                 prim = r["primID"].astype(np.int64)
                 hit = prim >= 0
+                if ends:
+                    if layer == 0:
+                        firsts.append(prim[hit])
+                    lasts.append(last[~hit & (last >= 0)])
                 o32, ray, prim, prev = o32[hit], ray[hit], prim[hit], last[hit]
                 start = start[hit] + r["tfar"][hit] + eps32
                 new = prev != prim          # a re-hit of the same triangle is no new surface
@@ -244,29 +258,45 @@ class RayTracer:
             else:
                 warnings.warn(f"a bundle ray met more than {_MAX_LAYERS} surfaces; it was cut off", stacklevel=3)
             cat = (lambda xs: np.concatenate(xs) if xs else np.zeros(0, np.int64))
-            return cat(ups), cat(downs), cat(rays), casts
+            return cat(ups), cat(downs), cat(rays), casts, cat(firsts), cat(lasts)
 
         parts = self._map_chunks(work, len(origins), min_chunk=1024)
-        return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
-                np.concatenate([p[2] for p in parts]), sum(p[3] for p in parts))
+        out = (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
+               np.concatenate([p[2] for p in parts]), sum(p[3] for p in parts))
+        if ends:
+            out += (np.concatenate([p[4] for p in parts]), np.concatenate([p[5] for p in parts]))
+        return out
 
     def bundle(self, direction, resolution, offset=(0.5, 0.5), rotation=0.0) -> Bundle:
         """Global visibility in one direction: all light-carrying segments (see module doc)."""
         d = np.asarray(direction, float)
         d = d / np.linalg.norm(d)
         origins, delta = self.bundle_origins(d, resolution, offset, rotation)
-        up, down, _, casts = self.all_hit_pairs(origins, d)
-        return self._bundle_from_pairs(d, delta, up, down, len(origins), casts)
+        world = bool(np.any(self.scene.environment > 0))
+        up, down, _, casts, *ends = self.all_hit_pairs(origins, d, ends=world)
+        return bundle_from_hits(self.scene, d, delta, up, down, len(origins), casts, *ends)
 
-    def _bundle_from_pairs(self, d, delta, up, down, n_rays, casts):
-        nd = self.triangle_normal @ d
-        facing = (nd[up] > 0) & (nd[down] < 0)
-        up, down = self.triangle_patch[up[facing]], self.triangle_patch[down[facing]]
-        k = len(up)
-        return Bundle(d, delta * delta,
-                      receiver=np.concatenate([down, up]), sender=np.concatenate([up, down]),
-                      travel_sign=np.concatenate([np.ones(k, np.int8), -np.ones(k, np.int8)]),
-                      n_rays=n_rays, n_casts=casts)
+
+def bundle_from_hits(scene, d, delta, up, down, n_rays, casts, first=None, last=None):
+    """The :class:`Bundle` of consecutive hit pairs ``up`` -> ``down`` (triangle ids)
+    along ``d``: the side of ``up`` facing +d and the side of ``down`` facing -d
+    exchange light both ways; with ``first``/``last`` (the first and last triangle
+    of each ray) the world sends to their sides facing -d and +d."""
+    s_up, s_down = scene.side_facing(up, d), scene.side_facing(down, -d)
+    ok = (s_up >= 0) & (s_down >= 0)
+    s_up, s_down = s_up[ok], s_down[ok]
+    k = len(s_up)
+    receiver, sender = [s_down, s_up], [s_up, s_down]
+    sign = [np.ones(k, np.int8), -np.ones(k, np.int8)]
+    if first is not None:
+        for tris, s in ((first, 1), (last, -1)):
+            side = scene.side_facing(tris, -s * d)
+            side = side[side >= 0]
+            receiver.append(side)
+            sender.append(np.full(len(side), ENVIRONMENT))
+            sign.append(np.full(len(side), s, np.int8))
+    return Bundle(d, delta * delta, receiver=np.concatenate(receiver), sender=np.concatenate(sender),
+                  travel_sign=np.concatenate(sign), n_rays=n_rays, n_casts=casts)
 
 
 # ------------------------------------------------------------ brute force twin
@@ -308,15 +338,14 @@ def brute_force_hits(corners, origins, direction, eps):
 def brute_force_bundle(scene, origins, direction, delta, eps):
     """The :class:`Bundle` of the same rays computed with :func:`brute_force_hits`."""
     d = np.asarray(direction, float)
-    up, down = [], []
+    up, down, first, last = [], [], [], []
     for seq in brute_force_hits(scene.triangle_corners, origins, d, eps):
         for (_, a), (_, b) in zip(seq[:-1], seq[1:]):
             up.append(a)
             down.append(b)
-    nd = scene.triangle_normal @ d
-    up, down = np.array(up, np.int64), np.array(down, np.int64)
-    facing = (nd[up] > 0) & (nd[down] < 0) if len(up) else np.zeros(0, bool)
-    pu, pd = scene.triangle_patch[up[facing]], scene.triangle_patch[down[facing]]
-    k = len(pu)
-    return Bundle(d, delta * delta, np.concatenate([pd, pu]), np.concatenate([pu, pd]),
-                  np.concatenate([np.ones(k, np.int8), -np.ones(k, np.int8)]), len(origins), 0)
+        if seq:
+            first.append(seq[0][1])
+            last.append(seq[-1][1])
+    ends = [np.array(first, np.int64), np.array(last, np.int64)] if np.any(scene.environment > 0) else []
+    return bundle_from_hits(scene, d, delta, np.array(up, np.int64), np.array(down, np.int64),
+                            len(origins), 0, *ends)
