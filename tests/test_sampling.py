@@ -119,3 +119,33 @@ def test_pi_powers_refuse_runs_they_cannot_afford():
         seq.next(8)
     with pytest.raises(ValueError, match="seed"):
         make_sequence("pi-powers", seed=5000)
+
+
+def test_spherical_triangle_sampling_is_uniform_in_solid_angle(rng):
+    """Arvo's sampler: every direction meets the triangle, the solid angle equals the
+    closed form, and the mean of a smooth function of the direction equals its mean
+    under area sampling weighted by the solid-angle Jacobian cos_l / r^2."""
+    from raybundle.sampling import sample_spherical_triangle, triangle_solid_angle, points_on_triangles
+
+    tri = np.array([[0.3, -0.2, 1.0], [-0.5, 0.1, 0.4], [0.2, 0.6, 0.2]])     # seen from the origin
+    n = 200_000
+    corners = np.broadcast_to(tri, (n, 3, 3))
+    d, omega = sample_spherical_triangle(corners[:, 0], corners[:, 1], corners[:, 2], rng.random(n), rng.random(n))
+    assert np.allclose(omega, triangle_solid_angle(tri[0], tri[1], tri[2]))
+    # each direction hits the triangle's plane inside the triangle (barycentrics >= 0)
+    nrm = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    t = (tri[0] @ nrm) / (d @ nrm)
+    p = t[:, None] * d
+    m = np.stack([tri[1] - tri[0], tri[2] - tri[0], nrm], axis=1)     # columns
+    bary = np.linalg.solve(m, (p - tri[0]).T).T
+    assert np.all(bary[:, :2] > -1e-9) and np.all(bary[:, 0] + bary[:, 1] < 1 + 1e-9)
+    f = lambda x: (x[:, 2] ** 2 + 0.5 * x[:, 0]) ** 2     # smooth test function of the direction
+    fs = f(d)
+    u = rng.random((n, 2))
+    y = points_on_triangles(corners, u[:, 0], u[:, 1])
+    r = np.linalg.norm(y, axis=1)
+    jac = np.abs(y @ nrm) / np.linalg.norm(nrm) / r ** 3      # cos_l / r^2: dw = jac dA
+    area = 0.5 * np.linalg.norm(nrm)
+    g = f(y / r[:, None]) * jac * area                       # estimates the integral of f over the solid angle
+    se = np.hypot(fs.std() * omega[0], g.std()) / np.sqrt(n)
+    assert abs(fs.mean() * omega[0] - g.mean()) < 4.5 * se, (fs.mean() * omega[0], g.mean(), se)

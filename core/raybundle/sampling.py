@@ -83,6 +83,45 @@ def points_on_triangles(corners, u1, u2):
     return np.einsum("nk,nkj->nj", uniform_triangle(u1, u2), corners)
 
 
+def triangle_solid_angle(a, b, c):
+    """Solid angle [sr] (N,) of triangles seen from the origin, corners ``a, b, c``
+    (N, 3) relative to the viewpoint (Van Oosterom & Strackee 1983):
+    ``tan(O/2) = |a.(b x c)| / (|a||b||c| + (a.b)|c| + (a.c)|b| + (b.c)|a|)``."""
+    la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
+    num = np.abs(np.einsum("...i,...i->...", a, np.cross(b, c)))
+    den = (la * lb * lc + np.einsum("...i,...i->...", a, b) * lc + np.einsum("...i,...i->...", a, c) * lb
+           + np.einsum("...i,...i->...", b, c) * la)
+    return 2.0 * np.arctan2(num, den)
+
+
+def sample_spherical_triangle(a, b, c, u1, u2):
+    """Directions (N, 3) uniform in solid angle over triangles with corners ``a, b, c``
+    (N, 3) relative to the viewpoint (Arvo, "Stratified sampling of spherical
+    triangles", SIGGRAPH 1995); pdf = 1 / :func:`triangle_solid_angle`.  Returns
+    ``(directions, solid_angle)``."""
+    A, B, C = (x / np.linalg.norm(x, axis=1, keepdims=True) for x in (a, b, c))
+
+    def unit(x):
+        return x / np.maximum(np.linalg.norm(x, axis=1, keepdims=True), 1e-300)
+
+    def corner_angle(p, q, r):          # angle at p between the great arcs p-q and p-r
+        return np.arccos(np.clip(np.einsum("ij,ij->i", unit(np.cross(p, q)), unit(np.cross(p, r))), -1, 1))
+
+    alpha, beta, gamma = corner_angle(A, B, C), corner_angle(B, C, A), corner_angle(C, A, B)
+    area = np.maximum(alpha + beta + gamma - np.pi, 0.0)
+    a_hat = u1 * area
+    s, t = np.sin(a_hat - alpha), np.cos(a_hat - alpha)
+    uu = t - np.cos(alpha)
+    vv = s + np.sin(alpha) * np.einsum("ij,ij->i", A, B)
+    den = (vv * s + uu * t) * np.sin(alpha)
+    q = np.clip(((vv * t - uu * s) * np.cos(alpha) - vv) / np.where(den != 0, den, 1e-300), -1.0, 1.0)
+    c_hat = q[:, None] * A + np.sqrt(1 - q * q)[:, None] * unit(C - np.einsum("ij,ij->i", C, A)[:, None] * A)
+    z = 1.0 - u2 * (1.0 - np.einsum("ij,ij->i", c_hat, B))
+    d = z[:, None] * B + np.sqrt(np.maximum(0.0, 1 - z * z))[:, None] * unit(
+        c_hat - np.einsum("ij,ij->i", c_hat, B)[:, None] * B)
+    return d, area
+
+
 def stratified_2d(n, rng):
     """n jittered points in [0,1)^2 on a ceil(sqrt n)^2 grid, shuffled, (n, 2)."""
     k = int(math.ceil(math.sqrt(n)))
