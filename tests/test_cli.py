@@ -60,3 +60,16 @@ def test_bad_scene_names_and_files_give_errors(tmp_path):
     p = run_cli("render", str(bad), "--iterations", "1", "--out", str(tmp_path / "x.exr"))
     assert p.returncode == 2 and "not a raybundle scene" in p.stderr
     assert not (tmp_path / "x.exr").exists()
+
+
+import pytest  # noqa: E402
+
+
+@pytest.mark.parametrize("args", [["--iterations", "-3"], ["--resolution", "0", "10"], ["--time", "nan"],
+                                  ["--time", "-1"], ["--patches", "many"], ["--threads", "0"],
+                                  ["--bundle-resolution", "99999"], ["--sequence", "sobol"], ["--bogus"]])
+def test_bad_arguments_get_one_line_and_exit_2(tmp_path, args):
+    p = run_cli("render", "cornell", *args, "--out", str(tmp_path / "x.exr"))
+    assert p.returncode == 2, p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and "error" in p.stderr and "Traceback" not in p.stderr
+    assert not (tmp_path / "x.exr").exists()

@@ -99,27 +99,55 @@ def cmd_render(args):
     return 130 if stop.is_set() else 0
 
 
+def _number(kind, low, high=None, what="a number"):
+    """An argparse type: ``kind`` (int or float) in [low, high], else a one-line error."""
+    def parse(text):
+        try:
+            x = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {what}") from None
+        if not (np.isfinite(x) and x >= low and (high is None or x <= high)):
+            raise argparse.ArgumentTypeError(f"{text} is not {what}")
+        return x
+    return parse
+
+
+POSITIVE_INT = _number(int, 1, what="a positive integer")
+COUNT = _number(int, 0, what="a non-negative integer")
+SECONDS = _number(float, 0.0, what="a non-negative number of seconds")
+
+
+class OneLineErrors(argparse.ArgumentParser):
+    """argparse that reports a bad argument in one line (no usage dump), exit status 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def build_parser():
-    p = argparse.ArgumentParser(prog="raybundle", description="Global illumination with ray bundles.")
+    p = OneLineErrors(prog="raybundle", description="Global illumination with ray bundles.")
     p.add_argument("--version", action="version", version=f"raybundle {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a built-in scene or a .npz scene to EXR")
     r.add_argument("scene", help="cornell, cornell-glossy, furnace, furnace-glossy or FILE.npz")
     g = r.add_mutually_exclusive_group()
-    g.add_argument("--time", type=float, help="seconds to iterate (default 30)")
-    g.add_argument("--iterations", type=int, help="number of iterations (reproducible with --seed)")
-    r.add_argument("--seed", type=int, default=0)
-    r.add_argument("--patches", type=int, default=4000, help="target patch count (default 4000)")
-    r.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"))
+    g.add_argument("--time", type=SECONDS, help="seconds to iterate (default 30)")
+    g.add_argument("--iterations", type=COUNT, help="number of iterations (reproducible with --seed)")
+    r.add_argument("--seed", type=COUNT, default=0)
+    r.add_argument("--patches", type=COUNT, default=4000, help="target patch count (default 4000; 0 = one "
+                   "patch per input triangle)")
+    r.add_argument("--resolution", type=_number(int, 1, 65536, "a resolution in [1, 65536]"), nargs=2,
+                   metavar=("W", "H"))
     r.add_argument("--sequence", default="prng", choices=["prng", "pi-powers", "halton"])
-    r.add_argument("--bundle-resolution", type=int, default=0, help="rays per bundle side (0 = auto)")
-    r.add_argument("--threads", type=int, default=None)
+    r.add_argument("--bundle-resolution", type=_number(int, 0, 4096, "an integer in [0, 4096]"), default=0,
+                   help="rays per bundle side (0 = auto)")
+    r.add_argument("--threads", type=POSITIVE_INT, default=None)
     r.add_argument("--out", default="out/render.exr")
     r.add_argument("--stats", help="write statistics as JSON")
     b = sub.add_parser("bench", help="speed and accuracy benchmark (writes CSV and PNG charts)")
     b.add_argument("--out", default="out/bench")
-    b.add_argument("--seconds", type=float, default=30.0, help="time budget of each timed run")
-    b.add_argument("--reference-seconds", type=float, default=600.0, help="time of each reference run")
+    b.add_argument("--seconds", type=SECONDS, default=30.0, help="time budget of each timed run")
+    b.add_argument("--reference-seconds", type=SECONDS, default=600.0, help="time of each reference run")
     return p
 
 
