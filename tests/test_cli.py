@@ -7,6 +7,7 @@ import sys
 import time
 
 import numpy as np
+import pytest
 
 from raybundle.io import read_exr
 
@@ -61,8 +62,6 @@ def test_bad_scene_names_and_files_give_errors(tmp_path):
     assert p.returncode == 2 and "not a raybundle scene" in p.stderr
     assert not (tmp_path / "x.exr").exists()
 
-
-import pytest  # noqa: E402
 
 
 @pytest.mark.parametrize("args", [["--iterations", "-3"], ["--resolution", "0", "10"], ["--time", "nan"],
