@@ -67,9 +67,12 @@ def test_cornell_mean_radiance_matches_cycles(tmp_path):
     assert np.all(np.abs(m_o / m_c - 1) < 0.02), (m_o, m_c)
 
 
-@pytest.mark.parametrize("fit,res,shift", [("AUTO", (320, 200), (0.1, -0.05)), ("AUTO", (200, 320), (0.0, 0.2)),
-                                           ("VERTICAL", (300, 240), (-0.1, 0.0))])
-def test_camera_from_blender_matches_bpy_projection(fit, res, shift):
+@pytest.mark.parametrize("fit,res,shift,ortho", [("AUTO", (320, 200), (0.1, -0.05), None),
+                                                 ("AUTO", (200, 320), (0.0, 0.2), None),
+                                                 ("VERTICAL", (300, 240), (-0.1, 0.0), None),
+                                                 ("AUTO", (320, 200), (0.1, 0.05), 2.5),
+                                                 ("VERTICAL", (200, 320), (0.0, -0.1), 4.0)])
+def test_camera_from_blender_matches_bpy_projection(fit, res, shift, ortho):
     """Project points with our Camera.from_blender and with bpy's world_to_camera_view."""
     from bpy_extras.object_utils import world_to_camera_view
     from mathutils import Euler, Vector
@@ -80,6 +83,8 @@ def test_camera_from_blender_matches_bpy_projection(fit, res, shift):
     cd = bpy.data.cameras.new("cam")
     cd.lens, cd.sensor_width, cd.sensor_height, cd.sensor_fit = 42.0, 36.0, 24.0, fit
     cd.shift_x, cd.shift_y = shift
+    if ortho:
+        cd.type, cd.ortho_scale = "ORTHO", ortho
     ob = bpy.data.objects.new("cam", cd)
     ob.location = (1.0, -2.0, 0.5)
     ob.rotation_euler = Euler((1.2, 0.1, 0.3))
@@ -89,11 +94,13 @@ def test_camera_from_blender_matches_bpy_projection(fit, res, shift):
     sc.render.resolution_x, sc.render.resolution_y = res
     bpy.context.view_layer.update()
     cam = Camera.from_blender(cd.lens, cd.sensor_width, cd.sensor_height, cd.sensor_fit, cd.shift_x, cd.shift_y,
-                              res, np.array(ob.matrix_world))
+                              res, np.array(ob.matrix_world), ortho_scale=ortho, clip_start=0.1)
     rng = np.random.default_rng(4)
     for _ in range(20):
         px, py = rng.random() * res[0], rng.random() * res[1]
-        d = cam.ray_directions(np.array([px]), np.array([py]))[0]
-        p = cam.position + 3.0 * d
+        o, d = cam.rays(np.array([px]), np.array([py]))
+        view_axis = -np.array(ob.matrix_world)[:3, 2]
+        assert abs((o[0] - cam.position) @ view_axis - 0.1) < 1e-9      # rays start on the clip-start plane
+        p = o[0] + 3.0 * d[0]
         ndc = world_to_camera_view(sc, ob, Vector(p.tolist()))
         assert abs(ndc.x * res[0] - px) < 1e-3 and abs((1 - ndc.y) * res[1] - py) < 1e-3

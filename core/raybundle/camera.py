@@ -1,8 +1,10 @@
-"""Pinhole camera with Blender's conventions.
+"""Pinhole (perspective) and orthographic cameras with Blender's conventions.
 
 The camera looks down its local -Z axis with +Y up (Blender).  Intrinsics are
 kept in pixels with the origin at the top-left corner of the image and +v
-pointing down; pixel centres lie at (i + 0.5, j + 0.5).
+pointing down; pixel centres lie at (i + 0.5, j + 0.5).  Rays start at the
+clip-start plane (``clip_start`` metres in front of the camera, as Blender
+clips); the clip end is not modelled (everything beyond it is rendered).
 """
 from __future__ import annotations
 
@@ -18,9 +20,11 @@ class Camera:
     Attributes
     ----------
     width, height : int  resolution in pixels
-    fx, fy : float  focal lengths [pixels]
+    fx, fy : float  focal lengths [pixels] (orthographic: pixels per metre)
     cx, cy : float  principal point [pixels], origin top-left
     matrix_world : (4, 4) float  camera-to-world transform (Blender ``matrix_world``)
+    orthographic : bool
+    clip_start : float  [m] distance of the near clipping plane along the view axis
     """
 
     width: int
@@ -30,14 +34,18 @@ class Camera:
     cx: float
     cy: float
     matrix_world: np.ndarray
+    orthographic: bool = False
+    clip_start: float = 0.0
 
     @classmethod
     def from_blender(cls, lens, sensor_width, sensor_height, sensor_fit, shift_x, shift_y,
-                     resolution, matrix_world, pixel_aspect=(1.0, 1.0)):
+                     resolution, matrix_world, pixel_aspect=(1.0, 1.0), ortho_scale=None, clip_start=0.0):
         """Intrinsics from Blender camera data (``lens``/``sensor_*`` in mm).
 
         Follows Blender's sensor-fit rule: AUTO fits the sensor width to the
-        larger image side; HORIZONTAL/VERTICAL fit width/height.
+        larger image side; HORIZONTAL/VERTICAL fit width/height.  With
+        ``ortho_scale`` [m] the camera is orthographic: the fitted side spans
+        ``ortho_scale`` metres (``lens``/``sensor`` are then unused).
         """
         w, h = int(resolution[0]), int(resolution[1])
         ax, ay = pixel_aspect
@@ -49,9 +57,9 @@ class Camera:
             sensor = sensor_width if fit == "HORIZONTAL" else sensor_height
         par = ay / ax
         view = w if fit == "HORIZONTAL" else par * h
-        fx = lens / sensor * view
+        fx = view / ortho_scale if ortho_scale else lens / sensor * view
         return cls(w, h, fx, fx / par, w / 2 - shift_x * view, h / 2 + shift_y * view / par,
-                   np.asarray(matrix_world, float))
+                   np.asarray(matrix_world, float), bool(ortho_scale), float(clip_start))
 
     @classmethod
     def look_at(cls, position, target, up, lens, sensor_width, resolution, sensor_fit="AUTO"):
@@ -74,23 +82,41 @@ class Camera:
         """The same view at another resolution (intrinsics scale with it)."""
         sx, sy = width / self.width, height / self.height
         return Camera(int(width), int(height), self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy,
-                      self.matrix_world)
+                      self.matrix_world, self.orthographic, self.clip_start)
 
     def ray_directions(self, px, py):
         """Unit world directions through image points (px, py) in pixels, (N, 3)."""
+        return self.rays(px, py)[1]
+
+    def rays(self, px, py):
+        """Primary rays through image points (px, py) [pixels]: ``(origins (N, 3),
+        unit directions (N, 3))``, origins on the clip-start plane."""
         x = (np.asarray(px, float) - self.cx) / self.fx
         y = -(np.asarray(py, float) - self.cy) / self.fy
+        rot, pos = self.matrix_world[:3, :3], self.matrix_world[:3, 3]
+        scale = np.linalg.norm(rot, axis=0)          # object scale does not change the view
+        rot = rot / scale
+        if self.orthographic:
+            local = np.stack([x, y, np.full_like(x, -self.clip_start)], axis=-1)
+            org = pos + local @ rot.T
+            return org, np.broadcast_to(-rot[:, 2], org.shape)
         local = np.stack([x, y, -np.ones_like(x)], axis=-1)
-        d = local @ self.matrix_world[:3, :3].T
-        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+        d = local @ rot.T
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        # the clip-start plane is clip_start along the view axis: clip_start / cos from the eye
+        t = self.clip_start / np.sqrt(1.0 + x * x + y * y)
+        return pos + t[..., None] * d, d
 
     def to_arrays(self, prefix="camera_"):
         return {prefix + "intrinsics": np.array([self.width, self.height, self.fx, self.fy, self.cx, self.cy]),
-                prefix + "matrix_world": self.matrix_world}
+                prefix + "matrix_world": self.matrix_world,
+                prefix + "projection": np.array([float(self.orthographic), self.clip_start])}
 
     @classmethod
     def from_arrays(cls, d, prefix="camera_"):
         if prefix + "intrinsics" not in d:
             return None
         w, h, fx, fy, cx, cy = np.asarray(d[prefix + "intrinsics"], float)
-        return cls(int(w), int(h), fx, fy, cx, cy, np.asarray(d[prefix + "matrix_world"], float))
+        ortho, clip = np.asarray(d.get(prefix + "projection", (0.0, 0.0)), float)
+        return cls(int(w), int(h), fx, fy, cx, cy, np.asarray(d[prefix + "matrix_world"], float),
+                   bool(ortho), float(clip))

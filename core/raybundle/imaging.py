@@ -140,8 +140,7 @@ class Renderer:
         pixels or for the pixel indices ``pixels`` (N,)."""
         cam = self.camera
         pos = (self._pixel if pixels is None else self._pixel[pixels]) + jitter
-        dirs = cam.ray_directions(pos[:, 0], pos[:, 1])
-        org = np.broadcast_to(cam.position, dirs.shape)
+        org, dirs = cam.rays(pos[:, 0], pos[:, 1])
         tri, t, u, v = self.tracer.first_hit(org, dirs)
         self.image_rays += len(dirs)
         hit = tri >= 0

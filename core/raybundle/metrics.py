@@ -53,8 +53,8 @@ def light_source_mask(scene, camera=None, samples=4, seed=0, radius=2, tracer=No
         seen = np.zeros(len(px), bool)
         for _ in range(samples):
             j = rng.random((len(px), 2))
-            d = cam.ray_directions(px + j[:, 0], py + j[:, 1])
-            tri, _, _, _ = tracer.first_hit(np.broadcast_to(cam.position, d.shape), d)
+            org, d = cam.rays(px + j[:, 0], py + j[:, 1])
+            tri, _, _, _ = tracer.first_hit(org, d)
             hit = tri >= 0
             ts = scene.seen_tside(np.where(hit, tri, 0), d)
             facing = np.einsum("ij,ij->i", scene.tside_normal[ts], d) < 0
