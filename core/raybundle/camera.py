@@ -104,7 +104,7 @@ class Camera:
         d = local @ rot.T
         d /= np.linalg.norm(d, axis=-1, keepdims=True)
         # the clip-start plane is clip_start along the view axis: clip_start / cos from the eye
-        t = self.clip_start / np.sqrt(1.0 + x * x + y * y)
+        t = self.clip_start * np.sqrt(1.0 + x * x + y * y)
         return pos + t[..., None] * d, d
 
     def to_arrays(self, prefix="camera_"):
