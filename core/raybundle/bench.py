@@ -7,10 +7,9 @@ Prints and writes to ``--out`` (default ``out/bench``):
   queries per second on the same rays, and their ratio;
 * ``iterations.csv``: seconds per solver iteration for each built-in scene;
 * ``convergence.csv`` and ``convergence.png``: relative RMSE against a
-  reference over time (log-log).  Relative RMSE = sqrt(mean(((x - ref) /
-  (ref + 0.01))^2)) over pixels and channels (:func:`relative_rmse`); the CSV
-  also has the normalized RMSE (RMSE / mean(ref)), which the edge pixels of a
-  visible light dominate.  References: the analytic radiance
+  reference over time (log-log), the project's one image error
+  (:func:`raybundle.metrics.image_error`: RMSE / mean(reference) over pixels at
+  least 2 px from a directly seen light source).  References: the analytic radiance
   for the furnaces; for the Cornell boxes a long run of the same method
   (``reference-<scene>.exr``, reused when present), which measures noise, and,
   when ``cycles-<scene>.exr`` exists in the output folder (made by
@@ -30,22 +29,10 @@ from .io import read_exr, write_exr, write_json
 from .pipeline import make_renderer, prepare
 from .sampling import uniform_sphere
 from .scenes import load_scene
-from .visibility import RayTracer
+from .metrics import image_error, light_source_mask
+from .visibility import RayTracer, bundle_from_hits
 
 SNAPSHOTS = (0.5, 1, 2, 4, 8, 15)
-
-
-def relative_rmse(img, ref, eps=0.01):
-    """Per-pixel relative RMSE, sqrt(mean(((img - ref) / (ref + eps))^2)) over pixels and
-    channels (the square root of relMSE; eps [W m^-2 sr^-1] keeps black pixels finite)."""
-    img, ref = np.asarray(img, float), np.asarray(ref, float)
-    return float(np.sqrt((((img - ref) / (ref + eps)) ** 2).mean()))
-
-
-def normalized_rmse(img, ref):
-    """sqrt(mean((img - ref)^2)) / mean(ref): dominated by the brightest pixels (visible lights)."""
-    img, ref = np.asarray(img, float), np.asarray(ref, float)
-    return float(np.sqrt(((img - ref) ** 2).mean()) / ref.mean())
 
 
 def bench_visibility(scene_name="cornell", patches=4000, resolution=128, bundles=40, rounds=7, seed=0):
@@ -68,7 +55,7 @@ def bench_visibility(scene_name="cornell", patches=4000, resolution=128, bundles
         casts = 0
         for d, (o, delta) in zip(dirs, grids):
             up, down, _, c = tr.all_hit_pairs(o, d)
-            tr._bundle_from_pairs(d, delta, up, down, len(o), c)
+            bundle_from_hits(sc, d, delta, up, down, len(o), c)
             casts += c
         b_qps.append(casts / (time.perf_counter() - t))
         reps = max(1, int(round(casts / lines)))     # as many raw queries as the bundles made
@@ -111,11 +98,11 @@ def convergence(name, seconds, reference=None, seed=0, settings=None):
     if sc.analytic_radiance is not None:
         refs["analytic"] = np.broadcast_to(sc.analytic_radiance, (sc.camera.height, sc.camera.width, 3))
     rows = []
+    mask = light_source_mask(sc)
 
     def snap(t, it, img):
         row = {"scene": name, "seconds": round(t, 3), "iterations": it,
-               **{f"rel_rmse_vs_{k}": relative_rmse(img, v) for k, v in refs.items()},
-               **{f"nrmse_vs_{k}": normalized_rmse(img, v) for k, v in refs.items()}}
+               **{f"rel_rmse_vs_{k}": image_error(img, v, exclude=mask)["error"] for k, v in refs.items()}}
         if sc.analytic_radiance is not None:      # error of the image mean (the furnace target)
             row["mean_error_vs_analytic"] = float(np.abs(img.reshape(-1, 3).mean(axis=0)
                                                          / sc.analytic_radiance - 1).max())
