@@ -48,10 +48,13 @@ class MeshLight:
     two_sided: np.ndarray
     scene: object = None
 
-    #: lights with at most this many triangles pick a triangle by its solid angle
-    #: (else by area); below ``MIN_SOLID_ANGLE`` [sr] a triangle is sampled by area
-    MAX_SOLID_ANGLE_SELECT = 32
-    MIN_SOLID_ANGLE = 1e-3
+    #: triangles that may look larger than this [sr] are sampled by solid angle, others by area
+    MIN_SOLID_ANGLE = 0.1
+
+    def __post_init__(self):
+        c = self.scene.triangle_corners[self.triangles]
+        self._centroid = c.mean(axis=1)
+        self._radius = np.linalg.norm(c - self._centroid[:, None], axis=2).max(axis=1)
 
     def sample(self, points, u):
         """One sample of the light for each point (N, 3) from uniforms ``u`` (N, 3).
@@ -60,56 +63,46 @@ class MeshLight:
         unshadowed irradiance estimate on a plane facing it: the caller
         multiplies by ``cos_x`` (w = direction to y) and tests visibility.
 
-        A triangle k is picked with probability p_k proportional to its solid
-        angle O_k seen from the point (by area for lights of many triangles),
-        then a direction uniform in its solid angle (Arvo's spherical triangle
-        sampling): ``e = Le O_k / p_k`` [W/m^2 per unit cos].  A triangle that
-        looks tiny is sampled by area instead: ``e = Le cos_l A_k / (r^2 p_k)``.
-        Both are unbiased; solid-angle sampling keeps the estimate bounded next
-        to the light (a lamp 0.5 mm under a ceiling), where sampling by area
-        has a heavy tail.  Emits from the back only where ``two_sided``."""
-        from .sampling import sample_spherical_triangle, triangle_solid_angle
+        A triangle k is picked with probability p_k = A_k / A.  If it looks
+        small from the point (its solid angle is surely below :attr:`MIN_SOLID_ANGLE`:
+        ``A_k < MIN_SOLID_ANGLE d^2`` with d the distance to its bounding sphere) a point
+        uniform on it gives ``e = Le cos_l A_k / (r^2 p_k)``; if it looks large, a
+        direction uniform in its solid angle (Arvo's spherical triangle
+        sampling) gives ``e = Le O_k / p_k``.  Both are unbiased; the second keeps
+        the estimate bounded next to the light (a lamp 0.5 mm under a ceiling),
+        where sampling by area has a heavy tail.  Emits from the back only where
+        ``two_sided``."""
+        from .sampling import sample_spherical_triangle
 
         sc = self.scene
-        corners = sc.triangle_corners[self.triangles]          # (K, 3, 3)
         n_k = len(self.triangles)
-        tri_area = sc.triangle_area[self.triangles]
-        if n_k <= self.MAX_SOLID_ANGLE_SELECT:
-            rel = corners[None] - points[:, None, None, :]      # (N, K, 3, 3)
-            omega = triangle_solid_angle(rel[:, :, 0], rel[:, :, 1], rel[:, :, 2])
-            total = omega.sum(axis=1)
-            far = total <= 0                                   # on the light's plane: pick by area
-            prob = np.where(far[:, None], tri_area / tri_area.sum(), omega / np.where(far, 1.0, total)[:, None])
-            cdf = np.cumsum(prob, axis=1)
-            k = np.minimum((cdf < (u[:, 0] * cdf[:, -1])[:, None]).sum(axis=1), n_k - 1)
-            p_k = prob[np.arange(len(k)), k]
-            om = omega[np.arange(len(k)), k]
-        else:
-            k = np.minimum(np.searchsorted(self.cdf, u[:, 0] * self.cdf[-1], side="right"), n_k - 1)
-            p_k = tri_area[k] / tri_area.sum()
-            c = corners[k] - points[:, None, :]
-            om = triangle_solid_angle(c[:, 0], c[:, 1], c[:, 2])
-        c = corners[k]
-        by_angle = om > self.MIN_SOLID_ANGLE
-        y = points_on_triangles(c, u[:, 1], u[:, 2])            # by area
-        e_angle = np.zeros(len(k))
-        normal = sc.triangle_normal[self.triangles[k]]
+        k = np.minimum(np.searchsorted(self.cdf, u[:, 0] * self.cdf[-1], side="right"), n_k - 1)
+        tri = self.triangles[k]
+        p_k = sc.triangle_area[tri] / self.area
+        c = sc.triangle_corners[tri]
+        y = points_on_triangles(c, u[:, 1], u[:, 2])
+        normal = sc.triangle_normal[tri]
         v = y - points
         r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
         cos_l = -np.einsum("ij,ij->i", normal, v) / np.sqrt(r2)
-        e_area = cos_l * tri_area[k] / r2
-        if by_angle.any():
-            i = np.nonzero(by_angle)[0]
-            rel = c[i] - points[i, None, :]
-            d, om_i = sample_spherical_triangle(rel[:, 0], rel[:, 1], rel[:, 2], u[i, 1], u[i, 2])
-            nd = np.einsum("ij,ij->i", normal[i], d)
-            t = np.einsum("ij,ij->i", normal[i], rel[:, 0]) / np.where(nd != 0, nd, 1e-300)
-            y[i] = points[i] + t[:, None] * d
-            cos_l[i] = -nd
-            e_angle[i] = om_i
-        cos_ok = np.where(self.two_sided[k], cos_l != 0, cos_l > 0)
-        e = np.where(by_angle, e_angle, np.abs(e_area)) * cos_ok / np.maximum(p_k, 1e-300)
-        return y, e[:, None] * self.radiance
+        e = cos_l * sc.triangle_area[tri] / r2
+        gap = np.maximum(np.linalg.norm(self._centroid[k] - points, axis=1) - self._radius[k], 0.0)
+        near = np.nonzero(sc.triangle_area[tri] >= self.MIN_SOLID_ANGLE * gap * gap)[0]
+        if len(near):
+            rel = c[near] - points[near, None, :]
+            d, omega = sample_spherical_triangle(rel[:, 0], rel[:, 1], rel[:, 2], u[near, 1], u[near, 2])
+            nd = np.einsum("ij,ij->i", normal[near], d)
+            t = np.einsum("ij,ij->i", normal[near], rel[:, 0]) / np.where(nd != 0, nd, 1e-300)
+            y[near] = points[near] + t[:, None] * d
+            cos_l[near] = -nd
+            e[near] = omega
+        lit = np.where(self.two_sided[k], cos_l != 0, cos_l > 0)
+        return y, (np.abs(e) * lit / p_k)[:, None] * self.radiance
+
+    def in_front(self, origin, normal):
+        """(N,) bool: some point of the light lies in front of the planes (origin, normal) (N, 3)."""
+        c = self.scene.triangle_corners[self.triangles].reshape(-1, 3)
+        return _box_in_front(c.min(axis=0), c.max(axis=0), origin, normal)
 
 
 @dataclass
@@ -141,6 +134,10 @@ class PointLight:
         s = self.lights.spot_factor(self.k, travel)
         return y, (s / r2)[:, None] * self.intensity
 
+    def in_front(self, origin, normal):
+        r = float(self.lights.radius[self.k])
+        return np.einsum("ij,ij->i", self.position - origin, normal) > -r
+
 
 @dataclass
 class ShapeLight:
@@ -167,6 +164,10 @@ class ShapeLight:
         cos_l = np.maximum(-(v @ self.normal) / np.sqrt(r2), 0.0)
         return y, (cos_l * self.area / r2)[:, None] * self.radiance
 
+    def in_front(self, origin, normal):
+        corners = [self.center + a * self.axis_u + b * self.axis_v for a in (-1, 1) for b in (-1, 1)]
+        return np.any([np.einsum("ij,ij->i", c - origin, normal) > 0 for c in corners], axis=0)
+
 
 @dataclass
 class SunLight:
@@ -188,6 +189,15 @@ class SunLight:
         travel = (cos_t[:, None] * self.direction + (sin_t * np.cos(phi))[:, None] * a
                   + (sin_t * np.sin(phi))[:, None] * b)
         return points - self.far * travel, np.broadcast_to(self.irradiance, points.shape).copy()
+
+    def in_front(self, origin, normal):
+        return -(normal @ self.direction) > -np.sin(0.5 * self.angle)
+
+
+def _box_in_front(lo, hi, origin, normal):
+    """(N,) bool: a corner of the box [lo, hi] lies in front of the planes (origin, normal)."""
+    corner = np.where(normal > 0, hi, lo)            # the corner furthest along each normal
+    return np.einsum("ij,ij->i", corner - origin, normal) > 0
 
 
 class DirectLighting:
@@ -325,9 +335,12 @@ class PatchFirstShot:
         self.E = np.zeros((sc.n_sides, n_l, 3))
         self._d_patch = np.zeros((sc.n_sides, n_l, 3))
         self.direction = np.zeros((sc.n_sides, n_l, 3))
-        if n_l:
-            for _ in range(initial_samples):
-                self._add(np.arange(n_t))
+        # tsides that no light is in front of receive nothing: they cost no samples
+        origin = sc.triangle_corners[sc.tside_triangle, 0]
+        self.receiving_tsides = np.nonzero(np.any([light.in_front(origin, sc.tside_normal) for light in self.lights],
+                                            axis=0))[0] if n_l else np.zeros(0, np.int64)
+        for _ in range(initial_samples if len(self.receiving_tsides) else 0):
+            self._add(self.receiving_tsides)
 
     @property
     def n_lights(self):
@@ -358,10 +371,10 @@ class PatchFirstShot:
         self.direction[p] = np.where(norm > 0, self._d_patch[p] / np.maximum(norm, 1e-300), 0.0)
 
     def refine(self, n_triangles):
-        """One more sample on the next ``n_triangles`` tsides (round robin)."""
-        if not self.lights or n_triangles <= 0:
+        """One more sample on the next ``n_triangles`` receiving tsides (round robin)."""
+        n_t = len(self.receiving_tsides)
+        if n_t == 0 or n_triangles <= 0:
             return
-        n_t = len(self.scene.tside_triangle)
-        tri = (self._next + np.arange(min(n_triangles, n_t))) % n_t
-        self._next = int((self._next + len(tri)) % n_t)
-        self._add(tri)
+        k = (self._next + np.arange(min(n_triangles, n_t))) % n_t
+        self._next = int((self._next + len(k)) % n_t)
+        self._add(self.receiving_tsides[k])

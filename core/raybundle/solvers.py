@@ -85,7 +85,7 @@ class StochasticIterationSolver:
         # incoming first shot, refined by a few shadow rays every iteration
         self.first_shot = PatchFirstShot(direct, np.random.default_rng([seed, 7]), receiving_area=self.area)
         self.grid_rng = np.random.default_rng([seed, 3])   # bundle grid offset and rotation
-        self.first_shot_refine = max(64, len(scene.tside_triangle) // 16) if direct.n_lights else 0
+        self.first_shot_refine = max(64, len(self.first_shot.receiving_tsides) // 16) if direct.n_lights else 0
         self.environment = np.asarray(scene.environment, float)
         n = scene.n_sides
         self._all_patches = np.arange(n)
@@ -117,7 +117,8 @@ class StochasticIterationSolver:
         # t_i is uniform on the receiver's hemisphere: pdf = 2 / (4 pi) = 1 / (2 pi)
         w = bundle.cell_area / (2.0 * uniform_sphere_pdf())
         n = len(self.area)
-        E = np.stack([np.bincount(bundle.receiver, S[bundle.sender, k], minlength=n) for k in range(3)], axis=1)
+        E = np.stack([np.bincount(bundle.receiver, S[bundle.sender, k], minlength=n) for k in range(3)],
+                     axis=1).astype(float)       # an empty bundle gives integer zeros
         E *= w / self.area[:, None]
         self.incoming = E
         self.receive_direction = -side[:, None] * d
