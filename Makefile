@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench cycles-reference clean
+.PHONY: demo test bench extension cycles-reference clean
 
 $(STAMP): core/pyproject.toml requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -21,10 +21,16 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m raybundle bench --out out/bench
 
+# The installable Blender extension: dist/raybundle-<version>-<platform>.zip for every platform in
+# blender_manifest.toml, built without a Blender binary (Blender's blender_ext.py from the bpy module).
+# Wheel downloads are cached in wheels/, so later builds are offline.
+extension: $(STAMP)
+	$(PY) tools/build_extension.py --out dist
+
 # Cycles references for the bench (about 5 minutes each on 2 cores)
 cycles-reference: $(STAMP)
 	$(PY) tools/cycles_reference.py cornell --samples 1024 --out out/bench/cycles-cornell.exr
 	$(PY) tools/cycles_reference.py cornell-glossy --samples 1024 --out out/bench/cycles-cornell-glossy.exr
 
 clean:
-	rm -rf $(VENV) out .pytest_cache
+	rm -rf $(VENV) out .pytest_cache dist build

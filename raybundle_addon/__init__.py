@@ -1,6 +1,22 @@
-"""RayBundle GI, the Blender extension (thin glue over the ``raybundle`` library).
+"""RayBundle GI, the Blender extension: thin glue over the ``raybundle`` library.
 
-Scene export, the render engine, the bake operator and the panel come with the
-add-on issue; the core library in ``core/`` already reads the ``.npz`` scenes
-the exporter will write.
+Modules: :mod:`.props` (``scene.raybundle`` settings), :mod:`.export` and
+:mod:`.shaders` (evaluated depsgraph -> the core's arrays), :mod:`.engine` (the
+``RAYBUNDLE`` render engine), :mod:`.ui` (panels); ``python -m raybundle_addon``
+renders a ``.blend`` headless (:mod:`.__main__`).
 """
+from __future__ import annotations
+
+from . import engine, props, ui
+
+_modules = (props, engine, ui)
+
+
+def register():
+    for m in _modules:
+        m.register()
+
+
+def unregister():
+    for m in reversed(_modules):
+        m.unregister()

@@ -1,0 +1,134 @@
+"""Headless rendering with the ``bpy`` module::
+
+    python -m raybundle_addon SCENE.blend --out out.exr [--time S] [--iterations N] [--seed K]
+                              [--patches N] [--resolution-percentage P] [--save-npz scene.npz]
+
+Registers the add-on in the ``bpy`` module, opens the file, renders its scene
+with the ``RAYBUNDLE`` engine through ``bpy.ops.render.render`` (the same code
+path as ``blender -b SCENE.blend -E RAYBUNDLE -o //out -f 1``, with Blender's
+render-time depsgraph: render modifier levels, render visibility) and writes
+the linear radiance as a 32-bit float EXR (plus an sRGB PNG preview beside it).
+Options not given come from the file's ``scene.raybundle`` settings.
+``--save-npz`` also writes the exported scene in the core's ``.npz`` format
+(``python -m raybundle render scene.npz`` renders it without Blender).
+
+A progress bar goes to stderr; Ctrl-C stops after the current iteration and
+still writes the image so far (exit status 130).  Bad arguments and scenes that
+cannot be rendered give a one-line error and exit status 2.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import time
+
+
+def build_parser():
+    from raybundle.cli import COUNT, SECONDS, OneLineErrors, _number
+
+    p = OneLineErrors(prog="python -m raybundle_addon",
+                      description="Render a .blend with the Ray Bundle GI engine (bpy module, no Blender UI).")
+    p.add_argument("blend", help="the .blend file")
+    p.add_argument("--out", required=True, help="output EXR (linear radiance, 32-bit float)")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--time", type=SECONDS, help="seconds to iterate (default: the file's time limit)")
+    g.add_argument("--iterations", type=_number(int, 1, what="a positive integer"),
+                   help="number of iterations (reproducible with --seed)")
+    p.add_argument("--seed", type=COUNT, help="random seed (default: the file's)")
+    p.add_argument("--patches", type=COUNT, help="target patch count (default: the file's)")
+    p.add_argument("--resolution-percentage", type=_number(int, 1, 1000, "an integer in [1, 1000]"),
+                   help="override the file's resolution percentage")
+    p.add_argument("--scene", help="scene name (default: the file's active scene)")
+    p.add_argument("--save-npz", metavar="NPZ", help="also write the exported scene as .npz")
+    return p
+
+
+def _fail(message, status=2):
+    print(f"raybundle_addon: error: {message}", file=sys.stderr)
+    return status
+
+
+def main(argv=None):
+    args = build_parser().parse_args(argv)
+    if not os.path.isfile(args.blend):
+        return _fail(f"{args.blend}: no such file")
+    if not args.blend.endswith(".blend"):
+        return _fail(f"{args.blend}: not a .blend file")
+    if not args.out.lower().endswith(".exr"):
+        return _fail(f"--out {args.out}: the output must be an .exr file")
+
+    import bpy
+
+    from raybundle.cli import ProgressBar
+    from raybundle.io import write_exr, write_png
+
+    from . import engine, register
+
+    if not hasattr(bpy.types.Scene, "raybundle"):
+        register()
+    try:
+        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
+    except RuntimeError as e:
+        return _fail(f"cannot open {args.blend}: {str(e).strip().splitlines()[-1]}")
+    scene = bpy.data.scenes.get(args.scene) if args.scene else bpy.context.scene
+    if scene is None:
+        return _fail(f"--scene {args.scene!r}: the file has scenes {[s.name for s in bpy.data.scenes]}")
+    if bpy.context.window is not None and bpy.context.window.scene != scene:
+        bpy.context.window.scene = scene
+    rb = scene.raybundle
+    if args.time is not None:
+        rb.time_limit, rb.iterations = args.time, 0
+    if args.iterations is not None:
+        rb.iterations = args.iterations
+    if args.seed is not None:
+        rb.seed = args.seed
+    if args.patches is not None:
+        rb.patches = args.patches
+    if args.resolution_percentage is not None:
+        scene.render.resolution_percentage = args.resolution_percentage
+    scene.render.engine = "RAYBUNDLE"
+
+    bar = ProgressBar()
+    state = {"job": None, "outcome_image": None}
+
+    def observe(job, event):
+        state["job"] = job
+        if event == "export" and args.save_npz:
+            job.export.scene.save_npz(args.save_npz)
+        if event == "image" and job.renderer is not None:
+            bar(job.fraction, {"iterations": job.renderer.solver.stats.iterations,
+                               "seconds": time.perf_counter() - job.t_start})
+
+    old = signal.signal(signal.SIGINT, lambda *_: engine.cancel_all())
+    engine.observers.append(observe)
+    try:
+        bpy.ops.render.render(write_still=False, scene=scene.name)
+    except RuntimeError as e:                   # the engine's ERROR report
+        bar.close()
+        msg = str(e).strip().splitlines()[-1].removeprefix("Error: ").removeprefix("Ray Bundle GI: ")
+        return _fail(msg)
+    finally:
+        engine.observers.remove(observe)
+        signal.signal(signal.SIGINT, old)
+    bar.close()
+    job = state["job"]
+    if job is None or job.last_image is None:
+        return _fail("the render produced no image", 1)
+    from .props import LAST_RUN
+
+    stats = LAST_RUN.get(scene.name, {}).get("stats", {})
+    header = {"raybundle_" + k: v for k, v in stats.items() if isinstance(v, (int, float, str))}
+    write_exr(args.out, job.last_image, header)
+    write_png(os.path.splitext(args.out)[0] + ".png", job.last_image)
+    for w in LAST_RUN.get(scene.name, {}).get("warnings", []):
+        print(f"warning: {w}", file=sys.stderr)
+    cancelled = job.stop.is_set()
+    print(f"{'stopped early' if cancelled else 'done'}: {stats.get('iterations', 0)} iterations in "
+          f"{stats.get('seconds', 0):.1f} s, {stats.get('patches', 0)} patches, "
+          f"{stats.get('rays_traced', 0) / 1e6:.1f} M rays -> {args.out}", file=sys.stderr)
+    return 130 if cancelled else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,293 @@
+"""The ``RAYBUNDLE`` render engine ("Ray Bundle GI") and the progressive render job behind it.
+
+:class:`RenderJob` is independent of :class:`bpy.types.RenderEngine`: it exports
+the evaluated depsgraph (:mod:`.export`), subdivides it into patches, runs the
+core's stochastic iteration and hands images to a ``display`` callback — a
+quick preview as soon as the first image pass is done (direct light only), then
+every few hundred milliseconds (at most ~1/5 of the time goes to previews), and
+the fully resolved image at the end.  It stops at the time limit, the iteration
+count, or when its ``stop`` event is set; the engine sets that event when
+Blender's ``test_break()`` says so (Esc), tests and the command line set it
+directly.  The image so far is kept either way.
+
+The engine pushes images with ``RenderPass.rect.foreach_set`` (rows bottom-up,
+RGBA float32, alpha 1) into one result per view layer; the pixels are linear
+radiance [W m^-2 sr^-1], so a 32-bit OpenEXR save holds the core's numbers.
+Resolution percentage and the render border (cropped or not) are honoured; each
+view layer is rendered in turn (each for the whole time limit).  Errors
+(:class:`raybundle.scene.SceneError`, ValueError) become one-line ``ERROR``
+reports; export warnings become ``WARNING`` reports.
+"""
+from __future__ import annotations
+
+import threading
+import time
+import traceback
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from .export import export_scene
+from .props import LAST_RUN
+
+#: callables ``fn(job, event)`` told about every job: events "export" (after export),
+#: "image" (after each displayed image) and "done".  The command line uses it for its
+#: progress bar and Ctrl-C; tests use it to time the first image and to cancel.
+observers: list = []
+#: jobs running now (``cancel_all`` sets their stop flags)
+active_jobs: set = set()
+
+
+def cancel_all():
+    """Ask every running job to stop after its current iteration (keeps the image so far)."""
+    for job in list(active_jobs):
+        job.stop.set()
+
+
+@dataclass
+class JobSettings:
+    """Plain copy of ``scene.raybundle`` (see :mod:`.props`)."""
+
+    time_limit: float = 30.0
+    iterations: int = 0
+    seed: int = 0
+    patches: int = 4000
+    bundle_resolution: int = 0
+    first_shot: bool = True
+    method: str = "stochastic-iteration"
+
+    @classmethod
+    def from_scene(cls, scene):
+        rb = getattr(scene, "raybundle", None)
+        if rb is None:
+            return cls()
+        return cls(float(rb.time_limit), int(rb.iterations), int(rb.seed), int(rb.patches),
+                   int(rb.bundle_resolution), bool(rb.first_shot), str(rb.method))
+
+    def validate(self):
+        if self.iterations < 0 or self.time_limit < 0 or not np.isfinite(self.time_limit):
+            raise ValueError("the time limit and the iteration count must be non-negative")
+        if self.iterations == 0 and self.time_limit == 0:
+            raise ValueError("set a time limit (seconds) or an iteration count: both are 0")
+
+
+@dataclass
+class RenderOutcome:
+    image: np.ndarray            # (H, W, 3) float32 linear radiance, row 0 at the top
+    stats: dict
+    warnings: list
+    cancelled: bool
+    export: object = None        # the ExportResult
+    timings: dict = field(default_factory=dict)
+
+
+class RenderJob:
+    """One progressive render of an evaluated depsgraph (see the module docstring).
+
+    Callbacks (all optional): ``display(image (H, W, 3) f32 top-down, final)``,
+    ``progress(fraction)``, ``stats(text)``; ``user_break()`` is polled between
+    iterations and sets ``stop`` when true.
+    """
+
+    def __init__(self, depsgraph, settings=None, stop=None, display=None, progress=None, stats=None,
+                 user_break=None, camera_object=None, preview_interval=0.3):
+        self.depsgraph = depsgraph
+        self.settings = settings or JobSettings.from_scene(depsgraph.scene)
+        self.stop = stop if stop is not None else threading.Event()
+        self.display, self.progress, self.stats_cb = display, progress, stats
+        self.user_break = user_break
+        self.camera_object = camera_object
+        self.preview_interval = float(preview_interval)
+        self.t_start = None
+        self.first_image_seconds = None
+        self.images = 0
+        self.export = None
+        self.last_image = None
+        self.renderer = None
+        self._interval = self.preview_interval
+        self._last_push = 0.0
+        self._last_stats = 0.0
+        self.fraction = 0.0
+
+    # ---------------------------------------------------------------- events
+    def _notify(self, event):
+        for fn in list(observers):
+            fn(self, event)
+
+    def _show(self, image, final=False):
+        self.last_image = image
+        if self.display is not None:
+            self.display(image, final)
+        self.images += 1
+        if self.first_image_seconds is None:
+            self.first_image_seconds = time.perf_counter() - self.t_start
+        self._notify("image")
+
+    def _poll(self):
+        """Between iterations: Esc, previews.  Returns True to stop."""
+        if self.user_break is not None and self.user_break():
+            self.stop.set()
+        if self.stop.is_set():
+            return True
+        now = time.perf_counter()
+        if self.images == 0 or now - self._last_push >= self._interval:
+            img = self.renderer.image(preview=True)
+            self._show(img)
+            done = time.perf_counter()
+            self._interval = max(self.preview_interval, 4.0 * (done - now))   # previews <= ~20% of the time
+            self._last_push = done
+        return self.stop.is_set()
+
+    def _on_progress(self, fraction, info):
+        self.fraction = fraction
+        if self.progress is not None:
+            self.progress(fraction)
+        now = time.perf_counter()
+        if self.stats_cb is not None and now - self._last_stats > 0.2:
+            self._last_stats = now
+            st = self.renderer.solver.stats
+            rays = (st.rays + self.renderer.image_rays) / 1e6
+            self.stats_cb(f"Ray Bundle GI | Iteration {info['iterations']} | {rays:.1f} M rays | "
+                          f"{info['seconds']:.1f} s")
+
+    # ------------------------------------------------------------------ run
+    def run(self):
+        """Export, prepare and iterate; returns :class:`RenderOutcome`.  Raises
+        SceneError/ValueError for scenes and settings that cannot be rendered."""
+        from raybundle import pipeline
+        from raybundle.imaging import RenderSettings
+        from raybundle.solvers import SOLVERS
+
+        self.t_start = time.perf_counter()
+        s = self.settings
+        s.validate()
+        if s.method not in SOLVERS:
+            raise ValueError(f"unknown method {s.method!r}: the core has {sorted(SOLVERS)}")
+        active_jobs.add(self)
+        try:
+            if self.stats_cb is not None:
+                self.stats_cb("Ray Bundle GI | Exporting the scene")
+            self.export = export_scene(self.depsgraph, camera_object=self.camera_object)
+            t_export = time.perf_counter() - self.t_start
+            self._notify("export")
+            if self.stats_cb is not None:
+                self.stats_cb(f"Ray Bundle GI | Preparing {self.export.counts['triangles']} triangles")
+            scene = pipeline.prepare(self.export.scene, patches=s.patches)
+            settings = RenderSettings(seed=s.seed, bundle_resolution=s.bundle_resolution,
+                                      first_shot="auto" if s.first_shot else "none")
+            self.renderer = pipeline.make_renderer(scene, settings, solver=s.method)
+            t_prepared = time.perf_counter() - self.t_start
+            try:
+                result = self.renderer.run(iterations=s.iterations or None,
+                                           seconds=None if s.iterations else s.time_limit,
+                                           progress=self._on_progress, stop=self._poll)
+            finally:
+                self.renderer.tracer.close()
+            self._show(result.image, final=True)
+        finally:
+            active_jobs.discard(self)
+        stats = dict(result.stats)
+        stats.update(export_seconds=round(t_export, 4), prepare_seconds=round(t_prepared - t_export, 4),
+                     first_image_seconds=round(self.first_image_seconds, 4),
+                     total_seconds=round(time.perf_counter() - self.t_start, 4),
+                     warnings=len(self.export.warnings))
+        outcome = RenderOutcome(result.image, stats, list(self.export.warnings), result.cancelled, self.export)
+        self._notify("done")
+        return outcome
+
+
+def _record(scene_name, outcome=None, error=None):
+    if outcome is not None:
+        st = outcome.stats
+        LAST_RUN[scene_name] = {
+            "status": ("stopped early" if outcome.cancelled else "done") +
+                      (f", {len(outcome.warnings)} warnings" if outcome.warnings else ""),
+            "iterations": st["iterations"], "seconds": st["seconds"], "mrays": st["rays_traced"] / 1e6,
+            "patches": st["patches"], "triangles": st["triangles"],
+            "first_image_seconds": st["first_image_seconds"], "n_warnings": len(outcome.warnings),
+            "warnings": list(outcome.warnings), "stats": st}
+    else:
+        LAST_RUN[scene_name] = {"status": f"error: {error}", "warnings": []}
+
+
+def render_with_engine(engine, depsgraph):
+    """The body of ``RAYBUNDLE.render``: a :class:`RenderJob` whose images go to the
+    engine's render result.  Never raises: errors become reports."""
+    from raybundle.scene import SceneError
+
+    scene = depsgraph.scene
+    layer = depsgraph.view_layer.name
+    width, height = engine.resolution_x, engine.resolution_y
+    state = {"result": None}
+
+    def display(image, final):
+        res = state["result"]
+        if res is None:
+            res = state["result"] = engine.begin_result(0, 0, width, height, layer=layer)
+            if res is None:
+                raise RuntimeError("Blender gave no render result to write into")
+        h, w = image.shape[:2]
+        rgba = np.ones((h, w, 4), np.float32)
+        rgba[..., :3] = image[::-1]                        # RenderPass rows are bottom-up
+        rect = res.layers[0].passes["Combined"].rect
+        if len(rect) != h * w:
+            raise RuntimeError(f"the render result has {len(rect)} pixels, the image {w} x {h}: "
+                               "an unsupported render border or resolution setting")
+        rect.foreach_set(rgba.ravel())
+        engine.update_result(res)
+
+    job = RenderJob(depsgraph, display=display, progress=engine.update_progress,
+                    stats=lambda text: engine.update_stats("", text), user_break=engine.test_break,
+                    camera_object=engine.camera_override)
+    try:
+        outcome = job.run()
+        for w in outcome.warnings[:8]:
+            engine.report({"WARNING"}, f"Ray Bundle GI: {w}")
+        if len(outcome.warnings) > 8:
+            engine.report({"WARNING"}, f"Ray Bundle GI: {len(outcome.warnings) - 8} more warnings "
+                                       "(see the panel / the console)")
+            for w in outcome.warnings[8:]:
+                print(f"Ray Bundle GI: warning: {w}")
+        _record(scene.name, outcome)
+        st = outcome.stats
+        engine.update_stats("", f"Ray Bundle GI | {'Stopped' if outcome.cancelled else 'Done'} | "
+                                f"{st['iterations']} iterations | {st['rays_traced'] / 1e6:.1f} M rays | "
+                                f"{st['seconds']:.1f} s")
+    except (SceneError, ValueError) as e:
+        _record(scene.name, error=str(e))
+        engine.report({"ERROR"}, f"Ray Bundle GI: {e}")
+    except Exception as e:   # a bug: keep Blender alive, say what happened, keep the trace in the console
+        traceback.print_exc()
+        _record(scene.name, error=f"{type(e).__name__}: {e}")
+        engine.report({"ERROR"}, f"Ray Bundle GI: internal error ({type(e).__name__}: {e}); please report it")
+    finally:
+        if state["result"] is not None:
+            engine.end_result(state["result"])
+
+
+class RAYBUNDLE_RenderEngine(bpy.types.RenderEngine):
+    bl_idname = "RAYBUNDLE"
+    bl_label = "Ray Bundle GI"
+    bl_use_preview = False
+    bl_use_shading_nodes_custom = False     # Blender's own shader nodes (the Cycles ones)
+    bl_use_eevee_viewport = True            # material preview / viewport shading through EEVEE
+
+    def __init__(self, *args, **kwargs):    # Blender 4.4+/5.x: pass the arguments on (blender.md §2)
+        super().__init__(*args, **kwargs)
+
+    def render(self, depsgraph):
+        render_with_engine(self, depsgraph)
+
+
+classes = (RAYBUNDLE_RenderEngine,)
+
+
+def register():
+    for c in classes:
+        bpy.utils.register_class(c)
+
+
+def unregister():
+    for c in reversed(classes):
+        bpy.utils.unregister_class(c)

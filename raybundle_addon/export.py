@@ -1,0 +1,397 @@
+"""Evaluated depsgraph -> a :class:`raybundle.scene.PatchScene` (arrays only; no rendering).
+
+Geometry
+    Every mesh-like object instance of ``depsgraph.object_instances`` (objects,
+    collection instances, geometry-node instances, particles) with its modifiers
+    applied, in world space (``DepsgraphObjectInstance.matrix_world``, copied at
+    once: the iterator reuses its items).  Faces are the mesh's loop triangles,
+    read with ``foreach_get`` (``attributes["position"]``, ``.corner_vert``,
+    ``loop_triangle_polygons``, the ``material_index`` attribute); a mesh shared by
+    many instances is read once.  Surfaces are **two-sided**, as in Blender: both
+    sides shade with the same material and emitters glow on both sides, so normal
+    directions do not matter.  Objects invisible to every ray type are skipped;
+    other per-ray-type visibility settings are not modelled (warned).
+
+Materials
+    :mod:`.shaders` (node trees -> Lambert + GGX / Principled parameters).
+
+Lights (Blender's units, as Cycles converts them; ``blender.md`` §4.4)
+    Every light's color is ``color x 2**exposure`` (x ``temperature_color`` when
+    ``use_temperature`` is on), times:
+
+    ============  =====================================================================
+    point, spot   intensity ``I = P / (4 pi)`` [W/sr]; the spot cone (``spot_size``,
+                  ``spot_blend``) masks it and does **not** renormalise it
+    sun           irradiance ``E = strength`` [W/m^2] on a plane facing the sun
+    area          radiance ``L = P / (pi A)`` [W m^-2 sr^-1], one-sided (local -Z),
+                  ``A`` the world-space area: ``size x size_y`` (square, rectangle)
+                  or ``pi/4 size x size_y`` (disk, ellipse), object scale included
+    ============  =====================================================================
+
+    With ``normalize`` off (Cycles' "unnormalized" lights) the area factor is
+    dropped: area ``L = P / pi``, point/spot ``I = P r^2 / 4`` for radius r > 0, sun
+    ``E = strength x pi tan^2(angle / 2)`` for angle > 0.
+
+World
+    The Background node's color x strength as a constant environment radiance; a
+    textured world uses its mean color (warned); no world is black.
+
+Camera
+    Lens, sensor size and fit, shift, pixel aspect, clip start, resolution x
+    percentage, render border; perspective and orthographic (panoramic: an error).
+"""
+from __future__ import annotations
+
+import math
+import time
+import warnings as _warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .shaders import MaterialConverter, world_radiance
+
+#: object types that become triangles (through their evaluated mesh)
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES_LEGACY"}
+
+
+@dataclass
+class ObjectInfo:
+    """One exported object instance; its triangles are
+    ``first_triangle .. first_triangle + n_triangles`` of the export arrays."""
+
+    name: str                 # the (instanced) object's name
+    original: str             # the original object's name (for write-back)
+    mesh: str                 # the evaluated mesh's name
+    is_instance: bool
+    instancer: str | None
+    first_triangle: int
+    n_triangles: int
+    n_polygons: int
+    n_loops: int
+    matrix_world: np.ndarray  # (4, 4)
+
+
+@dataclass
+class ExportResult:
+    """What :func:`export_scene` returns.
+
+    ``scene`` is the validated, two-sided :class:`~raybundle.scene.PatchScene`
+    (not yet subdivided); ``scene.triangle_source`` indexes the export arrays
+    ``triangle_object`` (T,) int32 (into ``objects``), ``triangle_polygon`` (T,)
+    int32 and ``triangle_loops`` (T, 3) int32 (the object's evaluated mesh
+    polygon and corners); ``warnings`` are one-line messages for the user;
+    ``border`` is the render border ``(x0, y0, w, h)`` in pixels from the
+    bottom-left (None = the full frame).
+    """
+
+    scene: object
+    warnings: list
+    objects: list
+    triangle_object: np.ndarray
+    triangle_polygon: np.ndarray
+    triangle_loops: np.ndarray
+    material_names: list
+    resolution: tuple
+    border: tuple | None = None
+    seconds: float = 0.0
+    counts: dict = field(default_factory=dict)
+
+
+class _Warnings(list):
+    def __call__(self, message):
+        if message not in self:
+            self.append(message)
+
+
+# ------------------------------------------------------------------ geometry
+def _mesh_arrays(me):
+    """Local arrays of an evaluated mesh: positions (V, 3) f32, triangle corners
+    (T, 3) i32 (vertex ids), loops (T, 3) i32, triangle -> polygon (T,) i32,
+    polygon material index (P,) i32."""
+    nv = len(me.vertices)
+    pos = np.empty(nv * 3, np.float32)
+    pa = me.attributes.get("position")
+    if pa is not None:
+        pa.data.foreach_get("vector", pos)
+    else:
+        me.vertices.foreach_get("co", pos)
+    nt = len(me.loop_triangles)
+    loops = np.empty(nt * 3, np.int32)
+    me.loop_triangles.foreach_get("loops", loops)
+    cv_attr = me.attributes.get(".corner_vert")
+    if cv_attr is not None:
+        cv = np.empty(len(me.loops), np.int32)
+        cv_attr.data.foreach_get("value", cv)
+        tri = cv[loops]
+    else:
+        tri = np.empty(nt * 3, np.int32)
+        me.loop_triangles.foreach_get("vertices", tri)
+    tp = np.empty(nt, np.int32)
+    me.loop_triangle_polygons.foreach_get("value", tp)
+    mi_attr = me.attributes.get("material_index")
+    if mi_attr is not None and mi_attr.domain == "FACE" and mi_attr.data_type == "INT":
+        mi = np.empty(len(me.polygons), np.int32)
+        mi_attr.data.foreach_get("value", mi)
+    else:
+        mi = np.zeros(len(me.polygons), np.int32)
+    return pos.reshape(-1, 3), tri.reshape(-1, 3), loops.reshape(-1, 3), tp, mi
+
+
+def _ray_visible(ob, warn):
+    """False for objects no ray can see; warns about partial visibility."""
+    flags = [getattr(ob, k, True) for k in ("visible_camera", "visible_diffuse", "visible_glossy",
+                                             "visible_shadow", "visible_transmission")]
+    if not any(flags):
+        return False
+    if not all(flags):
+        warn(f"object {ob.name!r}: per-ray-type visibility is not supported; rendered as fully visible")
+    if getattr(ob, "is_holdout", False) or getattr(ob, "is_shadow_catcher", False):
+        warn(f"object {ob.name!r}: holdout / shadow catcher is not supported; rendered as a normal object")
+    return True
+
+
+# -------------------------------------------------------------------- lights
+def light_color(ld):
+    """(3,) color x 2**exposure (x temperature color when enabled) of a bpy Light."""
+    c = np.array(ld.color[:3], float) * 2.0 ** float(getattr(ld, "exposure", 0.0))
+    if getattr(ld, "use_temperature", False) and hasattr(ld, "temperature_color"):
+        c = c * np.array(ld.temperature_color[:3], float)
+    return c
+
+
+def convert_light(ld, M, warn):
+    """(kind, dict) for a bpy Light ``ld`` with world matrix ``M`` (4, 4):
+    kind "point" (position, intensity, spot_*, radius), "sun" (direction,
+    irradiance, angle) or "area" (center, axis_u, axis_v, normal, shape, radiance).
+    Formulas: module docstring."""
+    color = light_color(ld)
+    power = float(ld.energy)
+    normalize = bool(getattr(ld, "normalize", True))
+    pos = M[:3, 3].copy()
+    z = M[:3, 2]
+    zn = np.linalg.norm(z)
+    down = -z / zn if zn > 0 else np.array([0.0, 0.0, -1.0])
+    if power < 0:
+        warn(f"light {ld.name!r} has negative power: ignored")
+        return None
+    if ld.type in ("POINT", "SPOT"):
+        r = float(ld.shadow_soft_size)
+        intensity = color * power / (4 * math.pi)
+        if not normalize and r > 0:
+            intensity = intensity * math.pi * r * r
+        d = dict(position=pos, intensity=intensity, radius=r, spot_direction=np.zeros(3),
+                 spot_cos_half_angle=-1.0, spot_blend=0.0)
+        if getattr(ld, "use_soft_falloff", False) and r > 0:
+            warn(f"light {ld.name!r}: soft falloff is not modelled (a sphere light is used)")
+        if ld.type == "SPOT":
+            d.update(spot_direction=down, spot_cos_half_angle=math.cos(float(ld.spot_size) / 2),
+                     spot_blend=float(ld.spot_blend))
+            sx, sy = np.linalg.norm(M[:3, 0]), np.linalg.norm(M[:3, 1])
+            if abs(sx - sy) > 1e-6 * max(sx, sy):
+                warn(f"spot light {ld.name!r}: a non-uniformly scaled (elliptic) cone is treated as round")
+        return "point", d
+    if ld.type == "SUN":
+        angle = float(ld.angle)
+        irradiance = color * power
+        if not normalize and angle > 0:
+            irradiance = irradiance * math.pi * math.tan(angle / 2) ** 2
+        return "sun", dict(direction=down, irradiance=irradiance, angle=angle)
+    if ld.type == "AREA":
+        sx = float(ld.size)
+        sy = float(ld.size_y) if ld.shape in ("RECTANGLE", "ELLIPSE") else sx
+        u, v = M[:3, 0] * sx / 2, M[:3, 1] * sy / 2
+        ellipse = ld.shape in ("DISK", "ELLIPSE")
+        area = (math.pi if ellipse else 4.0) * np.linalg.norm(u) * np.linalg.norm(v)
+        if area <= 0:
+            warn(f"area light {ld.name!r} has zero size: ignored")
+            return None
+        radiance = color * power / (math.pi * (area if normalize else 1.0))
+        if float(getattr(ld, "spread", math.pi)) < math.pi - 1e-6:
+            warn(f"area light {ld.name!r}: spread is not modelled (a Lambertian emitter is used)")
+        return "area", dict(center=pos, axis_u=u, axis_v=v, normal=down, shape=int(ellipse), radiance=radiance)
+    warn(f"light {ld.name!r} of type {ld.type} is not supported: ignored")
+    return None
+
+
+# -------------------------------------------------------------------- camera
+def render_size(render):
+    """(W, H) pixels after the resolution percentage."""
+    s = render.resolution_percentage / 100.0
+    return max(1, int(render.resolution_x * s)), max(1, int(render.resolution_y * s))
+
+
+def border_rect(render, size):
+    """The render border as (x0, y0, w, h) pixels from the bottom-left, None for the full frame
+    (Blender truncates ``border * size``)."""
+    w, h = size
+    if not render.use_border:
+        return None
+    x0, x1 = int(render.border_min_x * w), int(render.border_max_x * w)
+    y0, y1 = int(render.border_min_y * h), int(render.border_max_y * h)
+    if (x0, y0, x1, y1) == (0, 0, w, h):
+        return None
+    if x1 <= x0 or y1 <= y0:
+        from raybundle.scene import SceneError
+
+        raise SceneError("the render border is empty: widen it or turn it off")
+    return x0, y0, x1 - x0, y1 - y0
+
+
+def export_camera(cam_ob, render, size=None, border=None, warn=print):
+    """A :class:`raybundle.camera.Camera` for camera object ``cam_ob`` (evaluated) and
+    the render settings; ``border`` (x0, y0, w, h) crops it to the border's pixels."""
+    from raybundle.camera import Camera
+    from raybundle.scene import SceneError
+
+    if cam_ob is None:
+        raise SceneError("the scene has no camera: add one and make it the active camera")
+    cd = cam_ob.data
+    if cam_ob.type != "CAMERA":
+        raise SceneError(f"the active camera {cam_ob.name!r} is not a camera object")
+    if cd.type == "PANO":
+        raise SceneError(f"camera {cam_ob.name!r} is panoramic: only perspective and orthographic cameras "
+                         "are supported")
+    w, h = size or render_size(render)
+    M = np.array(cam_ob.matrix_world, float)
+    cam = Camera.from_blender(cd.lens, cd.sensor_width, cd.sensor_height, cd.sensor_fit, cd.shift_x, cd.shift_y,
+                              (w, h), M, pixel_aspect=(render.pixel_aspect_x, render.pixel_aspect_y),
+                              ortho_scale=cd.ortho_scale if cd.type == "ORTHO" else None,
+                              clip_start=cd.clip_start)
+    if getattr(cd.dof, "use_dof", False):
+        warn(f"camera {cam_ob.name!r}: depth of field is not supported (a pinhole is used)")
+    if border is not None:
+        x0, y0, bw, bh = border
+        cam = Camera(bw, bh, cam.fx, cam.fy, cam.cx - x0, cam.cy - (h - (y0 + bh)), cam.matrix_world,
+                     cam.orthographic, cam.clip_start)
+    return cam
+
+
+# -------------------------------------------------------------------- export
+def export_scene(depsgraph, camera_object=None, use_border=True, name=None):
+    """Export the evaluated ``depsgraph`` (its scene and view layer) for rendering.
+
+    ``camera_object`` overrides the scene camera (e.g. ``RenderEngine.camera_override``).
+    Raises :class:`raybundle.scene.SceneError` (a ValueError) with a one-line reason
+    when there is nothing to render: no mesh, no light, no camera.
+    Returns :class:`ExportResult`.
+    """
+    from raybundle.materials import MaterialTable
+    from raybundle.scene import AreaLights, PointLights, SceneError, SunLights, build_scene
+
+    t0 = time.perf_counter()
+    warn = _Warnings()
+    scene = depsgraph.scene
+    viewport = depsgraph.mode == "VIEWPORT"
+    converter = MaterialConverter(warn)
+    mat_index, mat_specs = {}, []
+
+    def material_id(mat):
+        key = None if mat is None else mat.name_full
+        if key not in mat_index:
+            mat_index[key] = len(mat_specs)
+            mat_specs.append(converter.convert(mat))
+        return mat_index[key]
+
+    cache = {}
+    verts, tris, tmats, tobj, tpoly, tloops = [], [], [], [], [], []
+    objects = []
+    lights = {"point": [], "sun": [], "area": []}
+    n_vert = n_tri = 0
+    for inst in depsgraph.object_instances:
+        ob = inst.object
+        kind = ob.type
+        if kind != "LIGHT" and kind not in GEOMETRY_TYPES:
+            continue
+        M = np.array(inst.matrix_world, float)            # copy now: the iterator reuses items
+        if viewport and ob.original.hide_render:
+            continue
+        if kind == "LIGHT":
+            if not (getattr(ob, "visible_diffuse", True) or getattr(ob, "visible_glossy", True)):
+                continue
+            got = convert_light(ob.data, M, warn)
+            if got is not None:
+                lights[got[0]].append(got[1])
+            continue
+        if not inst.show_self or not _ray_visible(ob, warn):
+            continue
+        me, temp = (ob.data, False) if kind == "MESH" else (None, True)
+        if temp:
+            try:
+                me = ob.to_mesh()
+            except RuntimeError:
+                me = None
+            if me is None:
+                continue
+        try:
+            key = me.as_pointer()
+            arrays = cache.get(key) if not temp else None
+            if arrays is None:
+                arrays = _mesh_arrays(me)
+                if not temp:
+                    cache[key] = arrays
+            pos, tri, loops, tp, mi = arrays
+            slots = [s.material for s in ob.material_slots] if len(ob.material_slots) else list(me.materials)
+            info = ObjectInfo(ob.name, ob.original.name, me.name, bool(inst.is_instance),
+                              inst.parent.name if inst.is_instance and inst.parent else None,
+                              n_tri, len(tri), len(me.polygons), len(me.loops), M)
+        finally:
+            if temp:
+                ob.to_mesh_clear()
+        if len(tri) == 0:
+            continue
+        ids = np.array([material_id(m) for m in slots] or [material_id(None)], np.int64)
+        tmats.append(ids[np.clip(mi[tp], 0, len(ids) - 1)])
+        verts.append(pos @ M[:3, :3].T.astype(np.float64) + M[:3, 3])
+        tris.append(tri.astype(np.int64) + n_vert)
+        tobj.append(np.full(len(tri), len(objects), np.int32))
+        tpoly.append(tp)
+        tloops.append(loops)
+        objects.append(info)
+        n_vert += len(pos)
+        n_tri += len(tri)
+
+    if n_tri == 0:
+        raise SceneError("nothing to render: the scene has no visible mesh objects")
+    render = scene.render
+    size = render_size(render)
+    border = border_rect(render, size) if use_border else None
+    cam_ob = camera_object if camera_object is not None else scene.camera
+    if cam_ob is not None:
+        cam_ob = cam_ob.evaluated_get(depsgraph)
+    camera = export_camera(cam_ob, render, size, border, warn)
+    environment = world_radiance(scene.world, warn)
+    if render.use_motion_blur:
+        warn("motion blur is not supported: the scene is rendered at the current frame")
+    if render.film_transparent:
+        warn("transparent film is not supported: the background is the world's color, alpha is 1")
+
+    v = np.concatenate(verts)
+    t = np.concatenate(tris)
+    m = np.concatenate(tmats)
+    mats = MaterialTable.from_list(mat_specs)
+
+    def group(cls, rows):
+        if not rows:
+            return cls()
+        return cls(**{k: np.array([r[k] for r in rows]) for k in rows[0]})
+
+    with _warnings.catch_warnings(record=True) as caught:
+        _warnings.simplefilter("always")
+        sc = build_scene(v, t, m, mats, point_lights=group(PointLights, lights["point"]),
+                         sun_lights=group(SunLights, lights["sun"]), area_lights=group(AreaLights, lights["area"]),
+                         environment=environment, camera=camera, two_sided=True,
+                         triangle_solid=np.zeros(len(t), bool),    # two-sided surfaces are never solids
+                         name=name or scene.name)
+    for w in caught:
+        warn(str(w.message))
+    far = float(np.sqrt(((v - camera.position) ** 2).sum(axis=1).max()))
+    if cam_ob is not None and far > cam_ob.data.clip_end:
+        warn(f"camera {cam_ob.name!r}: geometry beyond the clip end ({cam_ob.data.clip_end:g} m) is rendered "
+             "(clip end is not modelled)")
+    counts = {"objects": len(objects), "triangles": int(len(sc.triangles)), "vertices": int(len(v)),
+              "materials": len(mats), "point_lights": len(lights["point"]), "sun_lights": len(lights["sun"]),
+              "area_lights": len(lights["area"])}
+    return ExportResult(sc, list(warn), objects, np.concatenate(tobj), np.concatenate(tpoly),
+                        np.concatenate(tloops), list(mats.names), size, border,
+                        time.perf_counter() - t0, counts)

@@ -1,0 +1,386 @@
+"""Blender shader node trees -> the core's material parameters (no rendering here).
+
+The core's material (:class:`raybundle.materials.MaterialTable`) is one
+Lambert + GGX mix with emission, optionally with the Principled BSDF's layered
+model.  A material's node tree is read from its Cycles output node:
+
+* **Diffuse BSDF**: diffuse color (Oren-Nayar roughness is ignored, warned).
+* **Glossy / Anisotropic BSDF**: a GGX lobe with tint and roughness (anisotropy
+  ignored, warned; Beckmann and Ashikhmin-Shirley are approximated by GGX, warned;
+  Multiscatter GGX maps to the core's energy compensation where it has it).
+* **Mix Shader** and **Add Shader** of these: flattened into one Lambert + GGX mix.
+  With ``D`` the summed diffuse albedo and ``G`` the summed glossy tint (each
+  closure weighted by its mix factors), the core's weight is
+  ``g = max(G) / (max(G) + max(D))`` and ``kd = D / (1 - g)``, ``ks = G / g``,
+  so ``(1 - g) kd = D`` and ``g ks = G`` exactly; glossy roughness is the
+  tint-weighted mean of the lobes' roughness.  A sum above 1 (an Add Shader of
+  two reflective closures) creates energy: it is clipped, with a warning.
+* **Emission**: radiance = Color x Strength [W m^-2 sr^-1], from both sides.
+* **Principled BSDF**: :func:`principled_to_material` (the one place that maps it).
+* A color input driven by an **Image Texture** uses the image's mean color
+  (linear), with a warning; an **RGB** / **Value** node gives its value; any
+  other link uses the socket's own value, with a warning.
+* Anything else (Glass, Translucent, Transparent, Subsurface, groups...) makes the
+  whole material fall back to its viewport color (``Material.diffuse_color``) as a
+  Diffuse BSDF, with one warning naming the material.  A material without nodes
+  is its viewport color (as Cycles does).  No material at all: grey 0.8.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+#: the diffuse color of faces without a material (Blender's default surface)
+DEFAULT_GREY = 0.8
+
+
+def _core_supports(fieldname):
+    from raybundle.materials import MaterialTable
+
+    return fieldname in getattr(MaterialTable, "__dataclass_fields__", {})
+
+
+def srgb_to_linear(c):
+    c = np.asarray(c, float)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+class Unsupported(Exception):
+    """A node the core cannot model; the material falls back to its viewport color."""
+
+
+@dataclass
+class _Closure:
+    """A weighted sum of closures, as Mix/Add shaders build it."""
+
+    diffuse: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    glossy: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    rough_sum: float = 0.0          # sum of lum(glossy_k) * roughness_k
+    glossy_lum: float = 0.0
+    multi_ggx: list = field(default_factory=list)     # per glossy lobe: uses Multiscatter GGX
+    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    principled: list = field(default_factory=list)    # [(weight, spec dict, simple spec dict)]
+
+
+def _lum(c):
+    return float(np.dot(np.asarray(c, float)[:3], (0.2126, 0.7152, 0.0722)))
+
+
+class MaterialConverter:
+    """Converts Blender materials to :meth:`MaterialTable.from_list` specs.
+
+    ``warn(message)`` collects warnings; each material is converted once (cache).
+    """
+
+    def __init__(self, warn):
+        self.warn = warn
+        self._cache = {}
+        self._image_means = {}
+
+    # ------------------------------------------------------------ materials
+    def convert(self, mat):
+        """The spec dict of ``mat`` (a bpy Material or None)."""
+        key = None if mat is None else mat.name_full
+        if key not in self._cache:
+            self._cache[key] = self._convert(mat)
+        return self._cache[key]
+
+    def _convert(self, mat):
+        if mat is None:
+            return dict(name="(no material)", diffuse=(DEFAULT_GREY,) * 3)
+        name = mat.name_full
+        nt = mat.node_tree
+        if nt is None:
+            return self._viewport(mat)
+        out = nt.get_output_node("CYCLES") or nt.get_output_node("ALL")
+        if out is None or not out.inputs["Surface"].is_linked:
+            self.warn(f"material {name!r} has no surface shader connected to its output: rendered black")
+            return dict(name=name)
+        notes = []
+        try:
+            acc = _Closure()
+            self._closure(out.inputs["Surface"], 1.0, acc, notes, 0)
+        except Unsupported as e:
+            self.warn(f"material {name!r}: {e}; using its viewport color")
+            return self._viewport(mat)
+        for n in dict.fromkeys(notes):        # once each, in order
+            self.warn(f"material {name!r}: {n}")
+        return self._flatten(name, acc)
+
+    def _viewport(self, mat):
+        return self._clip(dict(name=mat.name_full, diffuse=tuple(mat.diffuse_color[:3])), mat.name_full)
+
+    # ------------------------------------------------------------- closures
+    def _closure(self, socket, weight, acc, notes, depth):
+        """Add what shader ``socket`` (an input) delivers, times ``weight``, into ``acc``."""
+        if depth > 64:
+            raise Unsupported("the shader graph is too deep (a cycle?)")
+        if not socket.is_linked or weight == 0.0:
+            return
+        link = socket.links[0]
+        if getattr(link, "is_muted", False) or not getattr(link, "is_valid", True):
+            return
+        node = _follow_reroutes(link.from_node)
+        if node is None or getattr(node, "mute", False):
+            return
+        t = node.type
+        if t == "BSDF_DIFFUSE":
+            acc.diffuse += weight * self.color(node.inputs["Color"], notes)
+            if "Roughness" in node.inputs and self.value(node.inputs["Roughness"], notes) > 0:
+                notes.append("Diffuse BSDF roughness (Oren-Nayar) is ignored (Lambert)")
+            self._normal_note(node, notes)
+        elif t in ("BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
+            color = weight * self.color(node.inputs["Color"], notes)
+            r = float(np.clip(self.value(node.inputs["Roughness"], notes), 0.0, 1.0))
+            acc.glossy += color
+            acc.rough_sum += _lum(color) * r
+            acc.glossy_lum += _lum(color)
+            dist = getattr(node, "distribution", "GGX")
+            acc.multi_ggx.append(dist == "MULTI_GGX")
+            if dist not in ("GGX", "MULTI_GGX"):
+                notes.append(f"Glossy BSDF distribution {dist} is approximated by GGX")
+            if "Anisotropy" in node.inputs and abs(self.value(node.inputs["Anisotropy"], notes)) > 1e-6:
+                notes.append("anisotropy is ignored (isotropic GGX)")
+            self._normal_note(node, notes)
+        elif t == "EMISSION":
+            acc.emission += weight * self.color(node.inputs["Color"], notes) * max(
+                self.value(node.inputs["Strength"], notes), 0.0)
+        elif t == "MIX_SHADER":
+            fac = float(np.clip(self.value(node.inputs[0], notes), 0.0, 1.0))
+            self._closure(node.inputs[1], weight * (1.0 - fac), acc, notes, depth + 1)
+            self._closure(node.inputs[2], weight * fac, acc, notes, depth + 1)
+        elif t == "ADD_SHADER":
+            self._closure(node.inputs[0], weight, acc, notes, depth + 1)
+            self._closure(node.inputs[1], weight, acc, notes, depth + 1)
+        elif t == "BSDF_PRINCIPLED":
+            inputs = {s.name: (self.color(s, notes) if s.type == "RGBA" else self.value(s, notes))
+                      for s in node.inputs if s.type in ("RGBA", "VALUE")}
+            spec = principled_to_material(inputs, getattr(node, "distribution", "MULTI_GGX"),
+                                          notes.append)
+            simple = principled_to_material(inputs, getattr(node, "distribution", "MULTI_GGX"),
+                                            lambda m: None, layered=False)
+            acc.principled.append((weight, spec, simple))
+            self._normal_note(node, notes)
+        else:
+            label = node.bl_label if hasattr(node, "bl_label") else t
+            raise Unsupported(f"the {label} node ({node.name!r}) is not supported")
+
+    def _normal_note(self, node, notes):
+        sock = node.inputs.get("Normal")
+        if sock is not None and sock.is_linked:
+            notes.append("normal / bump maps are ignored")
+
+    # --------------------------------------------------------------- inputs
+    def color(self, sock, notes):
+        """(3,) linear RGB of a color (or float) input socket."""
+        if sock.type == "VALUE":
+            return np.full(3, self.value(sock, notes))
+        if sock.is_linked:
+            node = _follow_reroutes(sock.links[0].from_node)
+            if node is not None and node.type == "RGB":
+                return np.array(node.outputs[0].default_value[:3], float)
+            if node is not None and node.type in ("TEX_IMAGE", "TEX_ENVIRONMENT"):
+                mean = self.image_mean(node.image)
+                if mean is not None:
+                    notes.append(f"image texture {node.image.name!r} on {sock.name!r} is replaced by its mean color "
+                                 f"{tuple(np.round(mean, 3))} (textures come with baking)")
+                    return mean
+                notes.append(f"image texture on {sock.name!r} has no image data: using the socket's value")
+            elif node is not None:
+                notes.append(f"{sock.name!r} is driven by a {node.bl_label} node: using the socket's own value")
+        return np.array(sock.default_value[:3], float)
+
+    def value(self, sock, notes):
+        if sock.type == "RGBA":
+            return float(_lum(self.color(sock, notes)))
+        if sock.is_linked:
+            node = _follow_reroutes(sock.links[0].from_node)
+            if node is not None and node.type == "VALUE":
+                return float(node.outputs[0].default_value)
+            if node is not None:
+                notes.append(f"{sock.name!r} is driven by a {node.bl_label} node: using the socket's own value")
+        return float(sock.default_value)
+
+    def image_mean(self, image):
+        """(3,) mean linear color of ``image``, or None without pixel data."""
+        if image is None:
+            return None
+        key = image.name_full
+        if key not in self._image_means:
+            self._image_means[key] = _image_mean(image)
+        return self._image_means[key]
+
+    # -------------------------------------------------------------- flatten
+    def _flatten(self, name, acc):
+        emission = np.maximum(acc.emission, 0.0)
+        plain = not (np.any(acc.diffuse) or np.any(acc.glossy))
+        if len(acc.principled) == 1 and plain and abs(acc.principled[0][0] - 1.0) < 1e-9:
+            spec = dict(acc.principled[0][1], name=name)
+            spec["emission"] = tuple(np.asarray(spec.get("emission", (0, 0, 0)), float) + emission)
+            return self._clip(spec, name)
+        if acc.principled:
+            if len(acc.principled) > 1 or not plain or abs(acc.principled[0][0] - 1.0) > 1e-9:
+                self.warn(f"material {name!r}: a Principled BSDF mixed with other shaders is approximated "
+                          "by a plain Lambert + GGX mix (no Fresnel layer)")
+            for w, spec, simple in acc.principled:
+                d = np.asarray(simple["diffuse"], float) * (1 - simple["glossy_weight"])
+                gl = np.asarray(simple["glossy"], float) * simple["glossy_weight"]
+                acc.diffuse += w * d
+                acc.glossy += w * gl
+                acc.rough_sum += _lum(w * gl) * simple["roughness"]
+                acc.glossy_lum += _lum(w * gl)
+                acc.multi_ggx.append(False)
+                emission = emission + w * np.asarray(spec.get("emission", (0, 0, 0)), float)
+        d, gsum = np.maximum(acc.diffuse, 0.0), np.maximum(acc.glossy, 0.0)
+        md, mg = float(d.max()), float(gsum.max())
+        rough = acc.rough_sum / acc.glossy_lum if acc.glossy_lum > 0 else 0.5
+        spec = dict(name=name, emission=tuple(emission), roughness=float(np.clip(rough, 0.0, 1.0)))
+        if mg <= 0:
+            spec.update(diffuse=tuple(d), glossy_weight=0.0)
+        elif md <= 0:
+            spec.update(glossy=tuple(gsum), glossy_weight=1.0)
+        else:
+            g = mg / (mg + md)
+            spec.update(diffuse=tuple(d / (1 - g)), glossy=tuple(gsum / g), glossy_weight=g)
+        if mg > 0 and all(acc.multi_ggx) and _core_supports("multiscatter"):
+            spec["multiscatter"] = 1
+        elif mg > 0 and any(acc.multi_ggx) and not all(acc.multi_ggx) and _core_supports("multiscatter"):
+            self.warn(f"material {name!r}: GGX and Multiscatter GGX lobes are mixed; using single-scatter GGX")
+        elif mg > 0 and any(acc.multi_ggx):
+            self.warn(f"material {name!r}: Multiscatter GGX is approximated by GGX")
+        return self._clip(spec, name)
+
+    def _clip(self, spec, name):
+        """Colors above 1 create energy (the core rejects them): clip, with a warning."""
+        for k in ("diffuse", "glossy", "specular_tint"):
+            if k in spec:
+                c = np.asarray(spec[k], float)
+                if np.any(c > 1.0 + 1e-6):
+                    self.warn(f"material {name!r}: {k} color {tuple(np.round(c, 3))} has albedo > 1, clipped to 1 "
+                              "(it would create energy)")
+                spec[k] = tuple(np.clip(c, 0.0, 1.0))
+        return spec
+
+
+def principled_to_material(inputs, distribution="MULTI_GGX", warn=print, layered=True):
+    """The core material spec of a Principled BSDF, from its input values.
+
+    ``inputs``: socket name -> value (colors (3,) linear, floats), as on the node
+    in Blender 4.x/5.x (``Base Color``, ``Metallic``, ``Roughness``, ``IOR``,
+    ``Specular IOR Level``, ``Specular Tint``, ``Emission Color``,
+    ``Emission Strength``, ``Coat Weight``...).  ``warn`` gets one message per
+    ignored feature.
+
+    With ``layered`` and a core that has the Principled model
+    (:func:`raybundle.materials.principled_material`: Fresnel-weighted dielectric
+    GGX layer over Lambert, F82 conductor, multiscatter), that model is used.
+    Otherwise the plain Lambert + GGX mix: diffuse = base color, glossy weight
+    ``g = metallic + (1 - metallic) F0`` with ``F0 = ((ior-1)/(ior+1))^2 * 2 *
+    specular_level``, glossy tint ``(metallic * base + (1 - metallic) F0 tint) / g``.
+    """
+    get = inputs.get
+    base = np.clip(np.asarray(get("Base Color", (0.8, 0.8, 0.8)), float)[:3], 0.0, None)
+    metallic = float(np.clip(get("Metallic", 0.0), 0.0, 1.0))
+    roughness = float(np.clip(get("Roughness", 0.5), 0.0, 1.0))
+    ior = float(get("IOR", 1.5))
+    level = float(get("Specular IOR Level", 0.5))
+    tint = np.asarray(get("Specular Tint", (1.0, 1.0, 1.0)), float)[:3]
+    emission = np.asarray(get("Emission Color", (0.0, 0.0, 0.0)), float)[:3] * max(
+        float(get("Emission Strength", 0.0)), 0.0)
+    for key, label in (("Coat Weight", "coat"), ("Sheen Weight", "sheen"),
+                       ("Transmission Weight", "transmission"), ("Subsurface Weight", "subsurface"),
+                       ("Anisotropic", "anisotropy"), ("Thin Film Thickness", "thin film"),
+                       ("Diffuse Roughness", "diffuse roughness")):
+        if float(get(key, 0.0)) > 1e-6:
+            warn(f"Principled BSDF {label} is ignored")
+    if float(get("Alpha", 1.0)) < 1.0 - 1e-6:
+        warn("Principled BSDF alpha (transparency) is ignored: the surface is opaque")
+    if layered:
+        try:
+            from raybundle.materials import principled_material
+        except ImportError:
+            principled_material = None
+        if principled_material is not None:
+            return principled_material(base, metallic=metallic, roughness=roughness, ior=ior,
+                                       specular_ior_level=level, emission=emission, specular_tint=tint,
+                                       distribution=distribution)
+    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * max(level, 0.0)
+    f0 = float(np.clip(f0, 0.0, 1.0))
+    g = metallic + (1.0 - metallic) * f0
+    gl = metallic * np.clip(base, 0, 1) + (1.0 - metallic) * f0 * np.clip(tint, 0, 1)
+    return dict(diffuse=tuple(base), glossy=tuple(gl / g) if g > 0 else (0.0, 0.0, 0.0),
+                glossy_weight=g, roughness=roughness, emission=tuple(emission))
+
+
+# ------------------------------------------------------------------- helpers
+def _follow_reroutes(node):
+    for _ in range(256):
+        if node is None or node.type != "REROUTE":
+            return node
+        sock = node.inputs[0]
+        if not sock.is_linked:
+            return None
+        node = sock.links[0].from_node
+    return None
+
+
+def _image_mean(image):
+    """Mean linear RGB of an image's pixels (None without data).  Byte images in an
+    sRGB color space hold encoded values in ``Image.pixels``: they are decoded first."""
+    try:
+        w, h = image.size
+        ch = image.channels
+        if w * h == 0 or not image.has_data and (image.packed_file is None and not image.filepath):
+            return None
+        px = np.empty(w * h * ch, np.float32)
+        image.pixels.foreach_get(px)
+    except (RuntimeError, ValueError, AttributeError):
+        return None
+    if px.size == 0:
+        return None
+    px = px.reshape(-1, ch)
+    rgb = px[:, :3] if ch >= 3 else np.repeat(px[:, :1], 3, axis=1)
+    if not image.is_float and image.colorspace_settings.name in ("sRGB",):
+        rgb = srgb_to_linear(rgb)
+    return np.asarray(rgb, float).mean(axis=0)
+
+
+def world_radiance(world, warn):
+    """(3,) constant environment radiance [W m^-2 sr^-1] of a World: Background
+    color x strength; no world = black; a textured world = its mean color (warned)."""
+    if world is None:
+        return np.zeros(3)
+    nt = world.node_tree
+    if nt is None:
+        return np.array(world.color[:3], float)
+    out = nt.get_output_node("CYCLES") or nt.get_output_node("ALL")
+    if out is None or not out.inputs["Surface"].is_linked:
+        return np.zeros(3)
+    node = _follow_reroutes(out.inputs["Surface"].links[0].from_node)
+    conv = MaterialConverter(warn)
+    notes = []
+    if node is None:
+        return np.zeros(3)
+    if node.type != "BACKGROUND":
+        warn(f"world {world.name!r}: a {node.bl_label} node feeds the output; using the world's viewport color")
+        return np.array(world.color[:3], float)
+    color_sock = node.inputs["Color"]
+    strength = max(conv.value(node.inputs["Strength"], notes), 0.0)
+    color = np.array(color_sock.default_value[:3], float)
+    if color_sock.is_linked:
+        src = _follow_reroutes(color_sock.links[0].from_node)
+        mean = conv.image_mean(src.image) if src is not None and src.type in ("TEX_ENVIRONMENT", "TEX_IMAGE") \
+            else None
+        if mean is not None:
+            notes.append(f"the environment texture is replaced by its mean color {tuple(np.round(mean, 3))} "
+                         "(a constant environment)")
+            color = mean
+        elif src is not None and src.type == "RGB":
+            color = np.array(src.outputs[0].default_value[:3], float)
+        elif src is not None:
+            notes.append(f"the {src.bl_label} node on the background color is not supported; "
+                         "using the socket's own color")
+    for n in dict.fromkeys(notes):
+        warn(f"world {world.name!r}: {n}")
+    return color * strength

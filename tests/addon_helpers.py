@@ -1,0 +1,214 @@
+"""Shared set-up of the add-on tests (real ``bpy`` 5.0.1, no mocks).
+
+Importing this module points ``BLENDER_USER_RESOURCES`` at a temporary folder
+(before ``bpy`` is imported, so nothing touches the user's Blender config),
+imports ``bpy``, and puts the repository and ``demo_scenes/`` on ``sys.path``.
+"""
+from __future__ import annotations
+
+import os
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if "bpy" not in sys.modules:
+    os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="rb-blender-user-")
+for p in (ROOT, os.path.join(ROOT, "demo_scenes")):
+    if p not in sys.path:
+        sys.path.insert(0, p)
+
+import bpy  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+
+def ensure_registered():
+    import raybundle_addon
+
+    if not hasattr(bpy.types.Scene, "raybundle"):
+        raybundle_addon.register()
+    return raybundle_addon
+
+
+@pytest.fixture(scope="module")
+def addon():
+    """The add-on registered from source for the module (unregistered afterwards)."""
+    mod = ensure_registered()
+    yield mod
+    if hasattr(bpy.types.Scene, "raybundle"):
+        mod.unregister()
+
+
+@pytest.fixture
+def fresh(addon):
+    """An empty scene (factory settings, no world, no objects); returns bpy.context.scene."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    return bpy.context.scene
+
+
+# ------------------------------------------------------------------ building
+def node_material(name, kind="diffuse", color=(0.8, 0.8, 0.8), strength=1.0, roughness=0.5):
+    """A material with one shader node ``kind`` (diffuse, glossy, emission) to the output."""
+    mat = bpy.data.materials.new(name)
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    node = nt.nodes.new({"diffuse": "ShaderNodeBsdfDiffuse", "glossy": "ShaderNodeBsdfGlossy",
+                         "emission": "ShaderNodeEmission", "principled": "ShaderNodeBsdfPrincipled",
+                         "translucent": "ShaderNodeBsdfTranslucent"}[kind])
+    if kind == "principled":
+        node.inputs["Base Color"].default_value = (*color, 1.0)
+        node.inputs["Roughness"].default_value = roughness
+    else:
+        node.inputs["Color"].default_value = (*color, 1.0)
+    if kind == "emission":
+        node.inputs["Strength"].default_value = strength
+    if kind == "glossy":
+        node.distribution = "GGX"
+        node.inputs["Roughness"].default_value = roughness
+    if kind == "diffuse":
+        node.inputs["Roughness"].default_value = 0.0
+    nt.links.new(node.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def add_object(name, verts, faces, materials=(), location=(0, 0, 0)):
+    me = bpy.data.meshes.new(name)
+    me.from_pydata([tuple(map(float, v)) for v in verts], [], [tuple(f) for f in faces])
+    for m in materials:
+        me.materials.append(m)
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    ob.location = location
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def add_light(kind, location=(0, 0, 0), rotation=(0, 0, 0), **props):
+    ld = bpy.data.lights.new(kind.lower(), kind)
+    for k, v in props.items():
+        setattr(ld, k, v)
+    ob = bpy.data.objects.new(kind.lower(), ld)
+    ob.location, ob.rotation_euler = location, rotation
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def add_camera(location, rotation=(0, 0, 0), resolution=(32, 32), lens=50.0, ortho_scale=None):
+    cd = bpy.data.cameras.new("cam")
+    cd.lens = lens
+    if ortho_scale:
+        cd.type, cd.ortho_scale = "ORTHO", ortho_scale
+    ob = bpy.data.objects.new("cam", cd)
+    ob.location, ob.rotation_euler = location, rotation
+    sc = bpy.context.scene
+    sc.collection.objects.link(ob)
+    sc.camera = ob
+    sc.render.resolution_x, sc.render.resolution_y = resolution
+    sc.render.resolution_percentage = 100
+    return ob
+
+
+def set_world(color, strength):
+    w = bpy.data.worlds.new("world")
+    if w.node_tree is None:
+        w.use_nodes = True
+    bg = w.node_tree.nodes["Background"]
+    bg.inputs["Color"].default_value = (*color, 1.0)
+    bg.inputs["Strength"].default_value = strength
+    bpy.context.scene.world = w
+    return w
+
+
+def box(lo, hi):
+    """Vertices and quads of an axis-aligned box."""
+    x0, y0, z0 = lo
+    x1, y1, z1 = hi
+    v = [(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0), (x0, y0, z1), (x1, y0, z1), (x1, y1, z1),
+         (x0, y1, z1)]
+    return v, [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]
+
+
+# ----------------------------------------------------------------- rendering
+def render_raybundle(path, time_limit=None, iterations=None, seed=0, patches=None):
+    """Render the current scene with RAYBUNDLE to a 32-bit EXR via write_still; returns (H, W, 3)."""
+    from raybundle.io import read_exr
+
+    sc = bpy.context.scene
+    sc.render.engine = "RAYBUNDLE"
+    rb = sc.raybundle
+    rb.seed = seed
+    if iterations:
+        rb.iterations = iterations
+    else:
+        rb.iterations, rb.time_limit = 0, time_limit or 5.0
+    if patches is not None:
+        rb.patches = patches
+    _exr_output(path)
+    bpy.ops.render.render(write_still=True)
+    return read_exr(path)
+
+
+def render_cycles(path, samples=64, seed=0):
+    """Render the current scene with Cycles (CPU, no denoising/clamping, box filter 1 px,
+    no glossy filter, Standard view) to an EXR; returns (H, W, 3)."""
+    from raybundle.io import read_exr
+
+    sc = bpy.context.scene
+    sc.render.engine = "CYCLES"
+    c = sc.cycles
+    c.device = "CPU"
+    c.samples = int(samples)
+    c.use_adaptive_sampling = False
+    c.use_denoising = False
+    c.seed = int(seed)
+    c.pixel_filter_type = "BOX"
+    sc.render.filter_size = 1.0
+    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = 64
+    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
+    c.blur_glossy = 0.0
+    c.caustics_reflective = True
+    sc.view_settings.view_transform = "Standard"
+    sc.view_settings.look = "None"
+    _exr_output(path)
+    bpy.ops.render.render(write_still=True)
+    return read_exr(path)
+
+
+def _exr_output(path):
+    sc = bpy.context.scene
+    sc.render.image_settings.file_format = "OPEN_EXR"
+    sc.render.image_settings.color_depth = "32"
+    sc.render.filepath = str(path)
+
+
+def object_id_image(export, camera=None):
+    """(H, W) int: the exported object seen through each pixel centre (-1 = nothing),
+    traced with the core's tracer on the exported (unsubdivided) scene."""
+    from raybundle.visibility import RayTracer
+
+    sc = export.scene
+    cam = camera or sc.camera
+    py, px = np.divmod(np.arange(cam.width * cam.height), cam.width)
+    org, d = cam.rays(px + 0.5, py + 0.5)
+    tr = RayTracer(sc)
+    try:
+        tri = tr.first_hit(org, d)[0]
+    finally:
+        tr.close()
+    src = sc.triangle_source[np.maximum(tri, 0)]
+    obj = np.where(tri >= 0, export.triangle_object[src], -1)
+    return obj.reshape(cam.height, cam.width)
+
+
+def erode(mask, r=1):
+    """Pixels of ``mask`` whose (2r+1)^2 neighbourhood lies inside it (drop edge pixels)."""
+    out = mask.copy()
+    h, w = mask.shape
+    p = np.pad(mask, r, constant_values=False)
+    for dy in range(-r, r + 1):
+        for dx in range(-r, r + 1):
+            out &= p[r + dy:r + dy + h, r + dx:r + dx + w]
+    return out

@@ -1,0 +1,92 @@
+"""The headless command line ``python -m raybundle_addon SCENE.blend --out out.exr``
+(subprocesses with the real ``bpy`` module; the .blend is built in the test session)."""
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from addon_helpers import ROOT, addon, bpy  # noqa: F401
+
+from raybundle.io import read_exr, read_exr_header
+
+
+@pytest.fixture(scope="module")
+def cornell_blend(tmp_path_factory, addon):  # noqa: F811
+    import make_demo_scenes as mds
+
+    path = tmp_path_factory.mktemp("blend") / "cornell_box.blend"
+    mds.reset()
+    mds.build_cornell(resolution=(48, 48))
+    bpy.context.scene.raybundle.time_limit = 60.0
+    mds.save(str(path))
+    return str(path)
+
+
+def cli(*args, env=None, **kw):
+    e = dict(os.environ, BLENDER_USER_RESOURCES=os.environ.get("BLENDER_USER_RESOURCES", ""), **(env or {}))
+    return subprocess.run([sys.executable, "-m", "raybundle_addon", *map(str, args)], cwd=ROOT, env=e,
+                          capture_output=True, text=True, timeout=120, **kw)
+
+
+def test_cli_renders_an_exr_and_saves_the_scene(cornell_blend, tmp_path):
+    out, npz = tmp_path / "out.exr", tmp_path / "scene.npz"
+    r = cli(cornell_blend, "--out", out, "--iterations", 30, "--seed", 3, "--patches", 800, "--save-npz", npz)
+    assert r.returncode == 0, r.stderr[-2000:]
+    img = read_exr(out)
+    assert img.shape == (48, 48, 3) and np.isfinite(img).all() and img.mean() > 0.05
+    assert (tmp_path / "out.png").exists()
+    assert read_exr_header(out)["raybundle_iterations"] == "30"
+    assert "done: 30 iterations" in r.stderr and "Traceback" not in r.stderr
+    from raybundle.scene import load_npz
+
+    sc = load_npz(npz)                            # the core CLI's exchange format, two-sided
+    assert sc.triangle_two_sided.all() and len(sc.triangles) == 2 * (6 + 5 + 5)
+
+
+@pytest.mark.parametrize("args,message", [
+    (["--iterations", "-3"], "--iterations"),
+    (["--time", "abc"], "--time"),
+    (["--seed", "1.5"], "--seed"),
+    (["--resolution-percentage", "0"], "--resolution-percentage"),
+    (["--out", "x.png"], "must be an .exr"),
+    (["--bogus"], "unrecognized"),
+])
+def test_cli_bad_arguments_exit_2_with_one_line(cornell_blend, tmp_path, args, message):
+    a = ["--out", str(tmp_path / "o.exr")] + args if "--out" not in args else args
+    r = cli(cornell_blend, *a)
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    err = r.stderr.strip()
+    assert message in err and "Traceback" not in err and len(err.splitlines()) == 1, err
+
+
+def test_cli_missing_file_and_unrenderable_scene(tmp_path, addon):  # noqa: F811
+    r = cli(tmp_path / "nope.blend", "--out", tmp_path / "o.exr")
+    assert r.returncode == 2 and "no such file" in r.stderr and "Traceback" not in r.stderr
+    bpy.ops.wm.read_factory_settings(use_empty=True)                  # a camera and nothing else
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    bpy.context.scene.collection.objects.link(cam)
+    bpy.context.scene.camera = cam
+    empty = tmp_path / "empty.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(empty))
+    r = cli(empty, "--out", tmp_path / "o.exr", "--iterations", 5)
+    assert r.returncode == 2 and "no visible mesh" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not (tmp_path / "o.exr").exists()
+
+
+def test_cli_ctrl_c_keeps_the_partial_image(cornell_blend, tmp_path):
+    out = tmp_path / "partial.exr"
+    p = subprocess.Popen([sys.executable, "-m", "raybundle_addon", cornell_blend, "--out", str(out), "--time", "60"],
+                         cwd=ROOT, env=dict(os.environ, RAYBUNDLE_PROGRESS="1"), stderr=subprocess.PIPE, text=True)
+    t0 = time.perf_counter()
+    buf = ""
+    while "iterations" not in buf and time.perf_counter() - t0 < 60:      # wait for the progress bar
+        buf += p.stderr.read(1)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 130, err[-2000:]
+    assert time.perf_counter() - t0 < 40 and "stopped early" in err and "Traceback" not in err
+    img = read_exr(out)
+    assert img.shape == (48, 48, 3) and np.isfinite(img).all() and img.mean() > 0.05

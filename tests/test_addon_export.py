@@ -1,0 +1,390 @@
+"""Export of Blender scenes to the core's arrays (real ``bpy``, evaluated depsgraphs).
+
+Everything here is exact (no rendering): triangle counts, areas, materials,
+light units (blender.md §4.4), world, camera, warnings.
+"""
+import math
+import time
+
+import numpy as np
+import pytest
+from addon_helpers import (add_camera, add_light, add_object, addon, box, bpy, fresh,  # noqa: F401
+                           node_material, set_world)
+
+from raybundle.scene import SceneError
+
+
+def export(**kw):
+    from raybundle_addon.export import export_scene
+
+    return export_scene(bpy.context.evaluated_depsgraph_get(), **kw)
+
+
+def quad(size=1.0):
+    s = size / 2
+    return [(-s, -s, 0), (s, -s, 0), (s, s, 0), (-s, s, 0)], [(0, 1, 2, 3)]
+
+
+def minimal(fresh, world=True):
+    """A camera and a dim world so that scenes with only a mesh are valid."""
+    add_camera((0, 0, 10))
+    if world:
+        set_world((1, 1, 1), 0.1)
+
+
+def object_area(ex, name):
+    sc = ex.scene
+    k = [o.name for o in ex.objects].index(name)
+    return sc.triangle_area[ex.triangle_object[sc.triangle_source] == k].sum()
+
+
+def test_modifiers_are_applied(fresh):
+    minimal(fresh)
+    v, f = quad(2.0)
+    plane = add_object("plane", v, f)
+    arr = plane.modifiers.new("array", "ARRAY")
+    arr.count = 3
+    arr.relative_offset_displace = (1.0, 0.0, 0.0)
+    cv, cf = box((-1, -1, -1), (1, 1, 1))
+    cube = add_object("cube", cv, cf, location=(0, 10, 0))
+    sub = cube.modifiers.new("subsurf", "SUBSURF")
+    sub.levels = sub.render_levels = 1
+    ex = export()
+    sc = ex.scene
+    assert ex.counts["triangles"] == 3 * 2 + 6 * 4 * 2                 # array x3 of a quad, cube subdivided once
+    assert object_area(ex, "plane") == pytest.approx(12.0)
+    xs = sc.vertices[sc.triangles[ex.triangle_object[sc.triangle_source] == 0]].reshape(-1, 3)[:, 0]
+    assert xs.min() == pytest.approx(-1) and xs.max() == pytest.approx(5)
+    assert object_area(ex, "cube") < 24.0                                # Catmull-Clark shrinks the cube
+    assert np.all(sc.triangle_two_sided)
+
+
+def test_collection_instances_ngon_and_missing_material(fresh):
+    minimal(fresh)
+    col = bpy.data.collections.new("parts")                  # not linked to the scene: only instanced
+    me = bpy.data.meshes.new("tile")
+    v, f = quad(1.0)
+    me.from_pydata(v, [], f)
+    col.objects.link(bpy.data.objects.new("tile", me))
+    for k, scale in enumerate((1.0, 2.0)):
+        e = bpy.data.objects.new(f"inst{k}", None)
+        e.instance_type, e.instance_collection = "COLLECTION", col
+        e.location, e.scale = (5.0 * k, 0, 0), (scale,) * 3
+        bpy.context.scene.collection.objects.link(e)
+    r = 1.0                                                  # a regular pentagon: one ngon, three triangles
+    pent = [(r * math.cos(2 * math.pi * k / 5), r * math.sin(2 * math.pi * k / 5), 3.0) for k in range(5)]
+    add_object("pentagon", pent, [tuple(range(5))])
+    ex = export()
+    sc = ex.scene
+    inst = [o for o in ex.objects if o.is_instance]
+    assert sorted(o.instancer for o in inst) == ["inst0", "inst1"] and all(o.name == "tile" for o in inst)
+    areas = sorted(sc.triangle_area[ex.triangle_object[sc.triangle_source] == k].sum()
+                   for k, o in enumerate(ex.objects) if o.is_instance)
+    assert areas == pytest.approx([1.0, 4.0])
+    assert len(sc.triangles) == 2 + 2 + 3
+    assert object_area(ex, "pentagon") == pytest.approx(2.5 * r * r * math.sin(math.radians(72)))
+    assert ex.material_names == ["(no material)"]
+    assert np.allclose(sc.materials.diffuse[0], 0.8) and sc.materials.glossy_weight[0] == 0
+
+
+def test_flipped_normals_export_the_same_two_sided_surfaces(fresh):
+    minimal(fresh)
+    v, f = box((0, 0, 0), (1, 2, 3))
+    add_object("a", v, f, [node_material("m")])
+    add_object("b", v, [tuple(reversed(q)) for q in f], [node_material("m2")], location=(5, 0, 0))
+    ex = export()
+    sc = ex.scene
+    a, b = (ex.triangle_object[sc.triangle_source] == k for k in (0, 1))
+    assert a.sum() == b.sum() == 12
+    assert sc.triangle_area[a].sum() == pytest.approx(sc.triangle_area[b].sum()) == pytest.approx(22.0)
+    assert np.allclose(sc.triangle_normal[a].sum(0), 0) and np.all(sc.triangle_two_sided)
+    assert np.allclose(np.sort(sc.triangle_normal[a] @ [1, 2, 3]), np.sort(-sc.triangle_normal[b] @ [1, 2, 3]))
+
+
+def test_material_slots_and_hidden_objects(fresh):
+    minimal(fresh)
+    v, f = box((0, 0, 0), (1, 1, 1))
+    ob = add_object("two_mats", v, f, [node_material("red", color=(0.7, 0.1, 0.1)),
+                                       node_material("blue", color=(0.1, 0.1, 0.7))])
+    ob.data.polygons.foreach_set("material_index", np.array([0, 1, 1, 0, 0, 0], np.int32))
+    ob.data.update()
+    hidden = add_object("hidden", v, f, location=(3, 0, 0))
+    hidden.hide_render = True
+    ghost = add_object("ghost", v, f, location=(6, 0, 0))
+    for k in ("visible_camera", "visible_diffuse", "visible_glossy", "visible_shadow", "visible_transmission"):
+        setattr(ghost, k, False)
+    ex = export()
+    assert [o.name for o in ex.objects] == ["two_mats"]
+    names = np.array(ex.material_names)[ex.scene.triangle_material]
+    assert sorted(names.tolist()) == ["blue"] * 4 + ["red"] * 8
+
+
+@pytest.fixture
+def light_scene(fresh):
+    add_camera((0, 0, 10))
+    v, f = quad(4.0)
+    add_object("floor", v, f, [node_material("white")])
+    return fresh
+
+
+def test_light_units(light_scene):
+    """Blender's power units (blender.md §4.4) to the core's, exactly."""
+    P = 100.0
+    add_light("POINT", (1, 2, 3), energy=P, color=(1.0, 0.5, 0.25), shadow_soft_size=0.0)
+    add_light("SPOT", (0, 0, 2), (math.radians(30), 0, 0), energy=P, spot_size=math.radians(60), spot_blend=0.2,
+              exposure=1.0)
+    add_light("SUN", rotation=(math.radians(30), 0, 0), energy=3.0, angle=math.radians(1))
+    rect = add_light("AREA", (0, 0, 2), energy=P, shape="RECTANGLE", size=0.5, size_y=0.2)
+    rect.scale = (2.0, 2.0, 1.0)
+    add_light("AREA", (1, 0, 2), energy=P, shape="DISK", size=0.4)
+    ex = export()
+    sc = ex.scene
+    pl, sun, area = sc.point_lights, sc.sun_lights, sc.area_lights
+    assert len(pl) == 2 and len(sun) == 1 and len(area) == 2
+    I = P / (4 * math.pi)
+    k_point = int(np.argmax(pl.spot_cos_half_angle < -0.5))
+    k_spot = 1 - k_point
+    assert np.allclose(pl.position[k_point], (1, 2, 3))
+    assert np.allclose(pl.intensity[k_point], I * np.array([1.0, 0.5, 0.25]))
+    assert np.allclose(pl.intensity[k_spot], 2 * I)                            # exposure 1: x2, cone not renormalised
+    assert pl.spot_cos_half_angle[k_spot] == pytest.approx(math.cos(math.radians(30)))
+    assert pl.spot_blend[k_spot] == pytest.approx(0.2)
+    assert np.allclose(pl.spot_direction[k_spot], (0, math.sin(math.radians(30)), -math.cos(math.radians(30))))
+    assert np.allclose(sun.irradiance[0], 3.0) and sun.angle[0] == pytest.approx(math.radians(1))
+    assert np.allclose(sun.direction[0], (0, math.sin(math.radians(30)), -math.cos(math.radians(30))))
+    k_rect = int(np.argmin(area.shape))
+    assert area.area[k_rect] == pytest.approx(1.0 * 0.4)                        # scale 2 on both axes
+    assert np.allclose(area.radiance[k_rect], P / (math.pi * 0.4))
+    assert np.allclose(area.normal[k_rect], (0, 0, -1))
+    assert area.area[1 - k_rect] == pytest.approx(math.pi * 0.2 ** 2)
+    assert np.allclose(area.radiance[1 - k_rect], P / (math.pi * math.pi * 0.04))
+
+
+def test_light_temperature_and_unnormalized(light_scene):
+    pt = add_light("POINT", (0, 0, 2), energy=10.0, shadow_soft_size=0.5)
+    pt.data.normalize = False
+    ar = add_light("AREA", (0, 0, 2), energy=10.0, size=0.5)
+    ar.data.normalize = False
+    tl = add_light("POINT", (0, 0, 3), energy=10.0, shadow_soft_size=0.0)
+    tl.data.use_temperature = True
+    tl.data.temperature = 3000.0
+    ex = export()
+    pl, area = ex.scene.point_lights, ex.scene.area_lights
+    by_z = {round(float(z), 3): k for k, z in enumerate(pl.position[:, 2])}
+    assert np.allclose(pl.intensity[by_z[2.0]], 10.0 / (4 * math.pi) * math.pi * 0.25)   # Cycles: invarea = 1
+    assert np.allclose(area.radiance[0], 10.0 / math.pi)
+    warm = pl.intensity[by_z[3.0]] / (10.0 / (4 * math.pi))
+    assert np.allclose(warm, np.array(tl.data.temperature_color[:3]))
+    assert warm[0] > warm[2]                                                # 3000 K is reddish
+
+
+def shader_tree(mat):
+    nt = mat.node_tree
+    nt.nodes.clear()
+    return nt, nt.nodes.new("ShaderNodeOutputMaterial")
+
+
+def new_mat(name):
+    m = bpy.data.materials.new(name)
+    if m.node_tree is None:
+        m.use_nodes = True
+    return m
+
+
+def test_node_trees_flatten_to_lambert_ggx(fresh):
+    from raybundle.materials import MaterialTable
+
+    minimal(fresh)
+    mix = new_mat("mix")
+    nt, out = shader_tree(mix)
+    d, g, m = (nt.nodes.new(t) for t in ("ShaderNodeBsdfDiffuse", "ShaderNodeBsdfGlossy", "ShaderNodeMixShader"))
+    d.inputs["Color"].default_value = (0.8, 0.6, 0.4, 1)
+    g.inputs["Color"].default_value = (1, 1, 1, 1)
+    g.inputs["Roughness"].default_value = 0.3
+    g.distribution = "GGX"
+    m.inputs["Fac"].default_value = 0.25
+    nt.links.new(d.outputs[0], m.inputs[1])
+    nt.links.new(g.outputs[0], m.inputs[2])
+    nt.links.new(m.outputs[0], out.inputs["Surface"])
+    glow = new_mat("glow")
+    nt, out = shader_tree(glow)
+    e, d2, add = (nt.nodes.new(t) for t in ("ShaderNodeEmission", "ShaderNodeBsdfDiffuse", "ShaderNodeAddShader"))
+    e.inputs["Color"].default_value = (1.0, 0.5, 0.25, 1)
+    e.inputs["Strength"].default_value = 4.0
+    d2.inputs["Color"].default_value = (0.5, 0.5, 0.5, 1)
+    nt.links.new(e.outputs[0], add.inputs[0])
+    nt.links.new(d2.outputs[0], add.inputs[1])
+    nt.links.new(add.outputs[0], out.inputs["Surface"])
+    hot = node_material("hot", color=(1.5, 0.5, 0.5))                       # albedo > 1
+    glass = new_mat("glass")
+    glass.diffuse_color = (0.2, 0.4, 0.6, 1)
+    nt, out = shader_tree(glass)
+    nt.links.new(nt.nodes.new("ShaderNodeBsdfTranslucent").outputs[0], out.inputs["Surface"])
+    for k, mat in enumerate((mix, glow, hot, glass)):
+        v, f = quad()
+        add_object(f"o{k}", v, f, [mat], location=(2 * k, 0, 0))
+    ex = export()
+    mt = ex.scene.materials
+    i = {n: k for k, n in enumerate(mt.names)}
+    # the Mix's BRDF is (1 - fac) diffuse + fac glossy, whatever the split into kd, ks, g
+    k = i["mix"]
+    assert np.allclose(mt.diffuse_reflectance[k], 0.75 * np.array([0.8, 0.6, 0.4]))
+    assert np.allclose(mt.glossy_weight[k] * mt.glossy[k], 0.25)
+    assert mt.roughness[k] == pytest.approx(0.3)
+    assert np.allclose(mt.emission[i["glow"]], [4.0, 2.0, 1.0]) and np.allclose(mt.diffuse[i["glow"]], 0.5)
+    assert np.allclose(mt.diffuse[i["hot"]], [1.0, 0.5, 0.5])
+    assert np.allclose(mt.diffuse[i["glass"]], [0.2, 0.4, 0.6]) and mt.glossy_weight[i["glass"]] == 0
+    w = " | ".join(ex.warnings)
+    assert "'hot'" in w and "albedo > 1" in w
+    assert sum("'glass'" in x for x in ex.warnings) == 1 and "Translucent" in w and "viewport color" in w
+    mt.validate()
+    assert isinstance(mt, MaterialTable)
+
+
+def test_principled_image_texture_and_world(fresh):
+    add_camera((0, 0, 10))
+    p = node_material("plastic", "principled", color=(0.5, 0.2, 0.1), roughness=0.4)
+    bsdf = p.node_tree.nodes["Principled BSDF"]
+    bsdf.inputs["Emission Color"].default_value = (1, 1, 1, 1)
+    bsdf.inputs["Emission Strength"].default_value = 0.5
+    bsdf.inputs["Coat Weight"].default_value = 0.3
+    tex = node_material("textured")
+    img = bpy.data.images.new("checker", 4, 4, float_buffer=True)
+    px = np.zeros((16, 4), np.float32)
+    px[:, 3] = 1
+    px[::2, :3] = (0.2, 0.4, 0.6)
+    px[1::2, :3] = (0.6, 0.4, 0.2)
+    img.pixels.foreach_set(px.ravel())
+    tn = tex.node_tree.nodes.new("ShaderNodeTexImage")
+    tn.image = img
+    tex.node_tree.links.new(tn.outputs["Color"], tex.node_tree.nodes["Diffuse BSDF"].inputs["Color"])
+    for k, mat in enumerate((p, tex)):
+        v, f = quad()
+        add_object(f"o{k}", v, f, [mat], location=(2 * k, 0, 0))
+    w = set_world((0.5, 0.25, 1.0), 2.0)
+    ex = export()
+    mt = ex.scene.materials
+    i = {n: k for k, n in enumerate(mt.names)}
+    assert np.allclose(mt.emission[i["plastic"]], 0.5)
+    assert np.allclose(mt.diffuse[i["plastic"]], (0.5, 0.2, 0.1)) and mt.roughness[i["plastic"]] == pytest.approx(0.4)
+    assert mt.is_glossy[i["plastic"]]                                         # the specular layer
+    assert np.allclose(mt.diffuse[i["textured"]], 0.4)                        # the image's mean color
+    assert any("coat is ignored" in x for x in ex.warnings)
+    assert any("'checker'" in x and "mean color" in x for x in ex.warnings)
+    assert np.allclose(ex.scene.environment, (1.0, 0.5, 2.0))
+    bpy.context.scene.world = None
+    assert np.allclose(export().scene.environment, 0)                  # no world: black
+    w.node_tree.nodes.new("ShaderNodeTexEnvironment").image = img
+    env = w.node_tree.nodes["Environment Texture"]
+    w.node_tree.links.new(env.outputs["Color"], w.node_tree.nodes["Background"].inputs["Color"])
+    bpy.context.scene.world = w
+    ex = export()
+    assert np.allclose(ex.scene.environment, 0.4 * 2.0)
+    assert any("environment texture" in x for x in ex.warnings)
+
+
+def test_camera_resolution_border_and_ortho(fresh):
+    set_world((1, 1, 1), 0.1)
+    v, f = quad()
+    add_object("o", v, f)
+    cam = add_camera((0, 0, 10), resolution=(80, 60), lens=35)
+    r = bpy.context.scene.render
+    r.resolution_percentage = 50
+    full = export().scene.camera
+    assert (full.width, full.height) == (40, 30)
+    r.use_border = True
+    r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = 0.13, 0.77, 0.5, 0.93
+    ex = export()
+    x0, y0, w, h = ex.border
+    assert (x0, y0, w, h) == (5, 15, 25, 12)                     # Blender truncates border * size
+    crop = ex.scene.camera
+    assert (crop.width, crop.height) == (w, h)
+    # the cropped camera's pixel (i, j) is the full camera's pixel (x0 + i, (H - y0 - h) + j)
+    i, j = np.array([0.5, 10.5, 24.5]), np.array([0.5, 5.5, 11.5])
+    assert np.allclose(crop.ray_directions(i, j), full.ray_directions(i + x0, j + (30 - y0 - h)))
+    r.use_border = False
+    cam.data.type, cam.data.ortho_scale = "ORTHO", 3.0
+    o = export().scene.camera
+    assert o.orthographic and o.fx == pytest.approx(40 / 3.0)
+    cam.data.type = "PANO"
+    with pytest.raises(SceneError, match="panoramic"):
+        export()
+
+
+@pytest.mark.parametrize("case", ["no lights", "no meshes", "no camera"])
+def test_unrenderable_scenes_raise_one_line_errors(fresh, case):
+    v, f = quad()
+    if case != "no meshes":
+        add_object("o", v, f)
+    if case != "no camera":
+        add_camera((0, 0, 10))
+    if case != "no lights":
+        set_world((1, 1, 1), 1.0)
+    with pytest.raises(SceneError) as e:
+        export()
+    msg = str(e.value)
+    assert "\n" not in msg
+    assert {"no lights": "no lights", "no meshes": "no visible mesh", "no camera": "no camera"}[case] in msg
+
+
+def test_a_million_triangles_export_in_seconds(fresh):
+    """A 1M-triangle grid (one object, built with foreach_set) exports in a few seconds."""
+    n = 708                                                   # 707^2 quads = 999 698 triangles
+    xs = np.linspace(-1, 1, n, dtype=np.float32)
+    X, Y = np.meshgrid(xs, xs)
+    co = np.stack([X.ravel(), Y.ravel(), 0.05 * np.sin(7 * X.ravel()) * np.cos(5 * Y.ravel())], 1)
+    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
+    a = (j * n + i).ravel()
+    quads = np.stack([a, a + 1, a + n + 1, a + n], 1).astype(np.int32)
+    me = bpy.data.meshes.new("grid")
+    me.vertices.add(len(co))
+    me.vertices.foreach_set("co", co.ravel())
+    me.loops.add(quads.size)
+    me.loops.foreach_set("vertex_index", quads.ravel())
+    me.polygons.add(len(quads))
+    me.polygons.foreach_set("loop_start", np.arange(0, quads.size, 4, dtype=np.int32))
+    me.update()
+    bpy.context.scene.collection.objects.link(bpy.data.objects.new("grid", me))
+    add_camera((0, 0, 3))
+    set_world((1, 1, 1), 1.0)
+    t = time.perf_counter()
+    ex = export()
+    seconds = time.perf_counter() - t
+    print(f"\nexport of {ex.counts['triangles']} triangles: {seconds:.2f} s "
+          f"(add-on part {ex.seconds:.2f} s incl. build_scene)")
+    assert ex.counts["triangles"] == 2 * (n - 1) ** 2
+    assert seconds < 15.0
+
+
+def test_particle_and_geometry_node_instances(fresh):
+    """Particles (object render type, emitter hidden) and Instance on Points (geometry nodes)
+    are exported as instances of the cube, at their own transforms."""
+    minimal(fresh)
+    v, f = box((-0.1, -0.1, -0.1), (0.1, 0.1, 0.1))
+    cube = add_object("cube", v, f, location=(0, 0, -5))
+    pts = add_object("points", [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)], location=(3, 0, 0))
+    ng = bpy.data.node_groups.new("gn", "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gi, go = ng.nodes.new("NodeGroupInput"), ng.nodes.new("NodeGroupOutput")
+    iop, oi = ng.nodes.new("GeometryNodeInstanceOnPoints"), ng.nodes.new("GeometryNodeObjectInfo")
+    oi.inputs["Object"].default_value = cube
+    ng.links.new(gi.outputs[0], iop.inputs["Points"])
+    ng.links.new(oi.outputs["Geometry"], iop.inputs["Instance"])
+    ng.links.new(iop.outputs[0], go.inputs[0])
+    pts.modifiers.new("gn", "NODES").node_group = ng
+    em = add_object("emitter", [(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], [(0, 1, 2, 3)], location=(-5, 0, 0))
+    s = em.modifiers.new("ps", "PARTICLE_SYSTEM").particle_system.settings
+    s.count, s.frame_start, s.frame_end, s.lifetime = 7, 1, 1, 100
+    s.render_type, s.instance_object, s.physics_type, s.particle_size = "OBJECT", cube, "NO", 1.0
+    em.show_instancer_for_render = em.show_instancer_for_viewport = False
+    bpy.context.scene.frame_set(1)
+    ex = export()
+    kinds = sorted((o.instancer or "-", o.is_instance) for o in ex.objects)
+    assert kinds == [("-", False)] + [("emitter", True)] * 7 + [("points", True)] * 4
+    assert ex.counts["triangles"] == 12 * 12
+    sc = ex.scene
+    gn = [k for k, o in enumerate(ex.objects) if o.instancer == "points"]
+    centres = np.array([sc.vertices[sc.triangles[ex.triangle_object[sc.triangle_source] == k]].reshape(-1, 3)
+                        .mean(0) for k in gn])
+    assert np.allclose(np.sort(centres[:, 0]), [3, 3, 4, 4]) and np.allclose(centres[:, 2], 0)
