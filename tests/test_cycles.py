@@ -12,7 +12,7 @@ import sys
 import numpy as np
 import pytest
 
-bpy = pytest.importorskip("bpy")
+import bpy  # noqa: E402  (the test set-up installs bpy: a missing one must fail)
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tools"))
 import cycles_reference as cr  # noqa: E402
 
