@@ -10,10 +10,10 @@ import pytest
 
 from raybundle import pipeline, scenes
 from raybundle.imaging import RenderSettings
-from raybundle.lights import DirectLighting, PatchFirstShot
+from raybundle.lights import DirectLighting
 from raybundle.materials import MaterialTable
 from raybundle.metrics import image_error, light_source_mask
-from raybundle.scene import AreaLights, PointLights, SunLights, build_scene, load_npz, subdivide
+from raybundle.scene import AreaLights, PointLights, SunLights, build_scene, load_npz
 from raybundle.visibility import RayTracer
 
 FLOOR = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.5, 0.5))])
@@ -203,3 +203,38 @@ def test_world_alone_is_a_light_and_bad_lights_are_errors():
         build_scene(v, [[0, 1, 2]], [0], FLOOR, sun_lights=SunLights([[0, 0, -1.0]], [[1.0, 1, 1]] * 2, [0.0]))
     with pytest.raises(SceneError, match="environment"):
         build_scene(v, [[0, 1, 2]], [0], FLOOR, environment=(np.nan, 0, 0))
+
+
+@pytest.mark.parametrize("spec", [dict(base_color=(0.8, 0.5, 0.2), roughness=0.4),
+                                  dict(base_color=(0.9, 0.6, 0.3), metallic=1.0, roughness=0.3)],
+                         ids=["dielectric", "metal"])
+def test_principled_plane_under_a_white_world_renders_its_albedo(spec):
+    """A two-sided Principled plane that sees only a world of radiance Lw reflects
+    Lw a(w_out) towards every viewer, a the directional albedo (one bounce, exact):
+    the image's diffuse part (W_d kd/pi E_bar), glossy gather (sample_glossy, rays
+    escaping to the world) and the solver's layered radiance together must give it.
+    Tolerance: 4.5 standard errors of the mean ratio, from two seeds, plus 0.5% for
+    the albedo tables' interpolation."""
+    from raybundle.camera import Camera
+    from raybundle.materials import principled_material
+
+    mats = MaterialTable.from_list([principled_material(**spec)])
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
+    lw = np.array([1.0, 0.8, 0.6])
+    cam = Camera.look_at((0, -2.0, 1.2), (0, 0, 0), (0, 0, 1), 50.0, 36.0, (24, 24))
+    sc = build_scene(v, [[0, 1, 2], [0, 2, 3]], [0, 0], mats, camera=cam, two_sided=True, environment=lw)
+    ratios = []
+    for seed in (1, 2):
+        r = pipeline.make_renderer(pipeline.prepare(sc, patches=50), RenderSettings(seed=seed))
+        img = r.run(iterations=150).image.reshape(-1, 3)
+        g = r.trace_gbuffer(np.full((24 * 24, 2), 0.5))
+        hit = g.hit.copy()
+        for corner in ((0.001, 0.001), (0.999, 0.001), (0.001, 0.999), (0.999, 0.999)):   # not the plane's rim
+            hit &= r.trace_gbuffer(np.broadcast_to(corner, (24 * 24, 2))).hit
+        cos_o = np.einsum("ij,ij->i", g.normal, g.w_eye)
+        expect = lw * mats.albedo(np.zeros(hit.sum(), int), cos_o[hit])
+        ratios.append(img[hit].mean(axis=0) / expect.mean(axis=0))
+        r.tracer.close()
+    ratio = 0.5 * (ratios[0] + ratios[1])
+    se = np.abs(ratios[0] - ratios[1]) / 2
+    assert np.all(np.abs(ratio - 1) < 4.5 * se + 0.005), (ratio, se)

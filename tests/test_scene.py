@@ -34,8 +34,11 @@ def test_subdivide_preserves_area_and_hits_target():
         assert 0.7 * target < sub.n_patches < 1.3 * target
         assert np.allclose(sub.patch_normal[sub.triangle_patch], sc.triangle_normal[sub.triangle_source])
     sub = subdivide(sc, max_edge=0.05)
-    e = np.linalg.norm(sub.triangle_corners - np.roll(sub.triangle_corners, 1, axis=1), axis=2)
-    assert e.max() <= 0.05 + 1e-9
+    e = np.linalg.norm(sub.triangle_corners - np.roll(sub.triangle_corners, 1, axis=1), axis=2).max(axis=1)
+    reflects = sc.materials.reflects[sub.triangle_material]
+    assert e[reflects].max() <= 0.05 + 1e-9
+    # the lamp reflects nothing: it stays whole (its two triangles)
+    assert (~reflects).sum() == (~sc.materials.reflects[sc.triangle_material]).sum() == 2
 
 
 def test_npz_round_trip(tmp_path):

@@ -108,6 +108,7 @@ def add_camera(camera):
 
 
 def cycles_settings(samples, seed=0, world_strength=0.0):
+    """Cycles as the references use it; ``world_strength`` None keeps the scene's world."""
     bpy = _bpy()
     sc = bpy.context.scene
     sc.render.engine = "CYCLES"
@@ -128,12 +129,13 @@ def cycles_settings(samples, seed=0, world_strength=0.0):
     sc.view_settings.view_transform = "Standard"
     sc.view_settings.look = "None"
     sc.view_settings.exposure = 0.0
-    world = bpy.data.worlds.new("world")
-    world.use_nodes = True
-    bg = world.node_tree.nodes["Background"]
-    bg.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
-    bg.inputs["Strength"].default_value = float(world_strength)
-    sc.world = world
+    if world_strength is not None:
+        world = bpy.data.worlds.new("world")
+        world.use_nodes = True
+        bg = world.node_tree.nodes["Background"]
+        bg.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+        bg.inputs["Strength"].default_value = float(world_strength)
+        sc.world = world
     sc.render.image_settings.file_format = "OPEN_EXR"
     sc.render.image_settings.color_depth = "32"
     sc.render.image_settings.exr_codec = "ZIP"

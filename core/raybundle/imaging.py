@@ -27,7 +27,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .materials import sample_ggx_reflection
 from .sampling import ShiftedKronecker, stratified_2d
 
 
@@ -228,7 +227,8 @@ class Renderer:
     def glossy_gather(self, g, idx, u):
         """Glossy lobe at pixels ``idx`` by one eye path each (the remedy for sharp lobes).
 
-        Sample ``w_i`` from the GGX lobe around the mirror of the eye direction,
+        Sample ``w_i`` from the glossy lobes (GGX around the mirror of the eye
+        direction, :meth:`~raybundle.materials.MaterialTable.sample_glossy`),
         trace it to the surface it sees, and take that surface's outgoing
         radiance from the solver: running-average diffuse part interpolated at
         the hit, first shot, and, for its own glossy lobe, either the current
@@ -251,9 +251,9 @@ class Renderer:
             if len(pix) == 0:
                 break
             uu = u if bounce == 0 else self.rng.random((len(pix), 2))
-            w_i, weight = sample_ggx_reflection(mats.alpha[m], n, wo, uu)
-            throughput = throughput * (mats.glossy_weight[m] * weight)[:, None] * mats.glossy[m]
-            live = np.nonzero(weight > 0)[0]
+            w_i, weight = mats.sample_glossy(m, n, wo, uu)
+            throughput = throughput * weight
+            live = np.nonzero(np.any(weight > 0, axis=1))[0]
             tri, t, bu, bv = self.tracer.first_hit(pts[live] + n[live] * self.tracer.eps, w_i[live])
             self.image_rays += len(live)
             hit = tri >= 0
@@ -310,7 +310,8 @@ class Renderer:
         return out / np.bincount(ids.ravel(), w, minlength=nv)[:, None]
 
     def diffuse_indirect(self, e_bar=None, samples=None):
-        """(N, 3) kd/pi * E_bar at the pixels, box-filtered with ``samples`` (default
+        """(N, 3) W_d kd/pi * E_bar at the pixels (W_d: the diffuse weight under a
+        Principled layer, 1 without), box-filtered with ``samples`` (default
         ``resolve_samples``) stratified sub-pixel samples.
 
         ``e_bar`` (S, 3) defaults to the solver's running average of the incoming radiance.
@@ -329,7 +330,9 @@ class Renderer:
             g = self.trace_gbuffer(np.broadcast_to(offsets[j], (n, 2)))
             h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
             e = self.surface_values(e_bar, vert, g.tside[h], g.bary[h])
-            out[h] += kd[g.material[h]] / np.pi * e
+            m = g.material[h]
+            w_d = sc.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]))
+            out[h] += w_d * kd[m] / np.pi * e
         return out / k
 
     def image(self, diffuse=None, preview=False):

@@ -193,6 +193,11 @@ class MaterialTable:
         return np.any(self.emission > 0, axis=1) | np.any(self.emission_albedo_complement > 0, axis=1)
 
     @property
+    def reflects(self) -> np.ndarray:
+        """(M,) bool: the material reflects some light (a diffuse or a glossy lobe)."""
+        return np.any(self.diffuse_reflectance > 0, axis=1) | self.is_glossy
+
+    @property
     def diffuse_reflectance(self) -> np.ndarray:
         """(M, 3) ``(1 - g) * kd``: the albedo of the diffuse lobe."""
         return (1.0 - self.glossy_weight)[:, None] * self.diffuse

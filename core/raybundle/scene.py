@@ -202,6 +202,8 @@ class PatchScene:
     sun_lights, area_lights : SunLights, AreaLights
     environment : (3,) float  constant radiance of the world around the scene
         [W m^-2 sr^-1] (Blender's world color times strength)
+    triangle_corner_tag : (T, 3) int or None  weld tags of corners on contact
+        lines (:mod:`raybundle.contacts`); corners weld only when their tags agree
     """
 
     vertices: np.ndarray
@@ -220,6 +222,7 @@ class PatchScene:
     sun_lights: SunLights = field(default_factory=SunLights)
     area_lights: AreaLights = field(default_factory=AreaLights)
     environment: np.ndarray | None = None
+    triangle_corner_tag: np.ndarray | None = None
 
     def __post_init__(self):
         if self.triangle_two_sided is None:
@@ -289,14 +292,18 @@ class PatchScene:
 
     @cached_property
     def smooth_vertex_ids(self):
-        """(TS, 3) int: tside corners welded by position *and* side normal, for
-        interpolating side values across a smooth surface without bleeding over
-        creases or from one side of a surface to the other."""
+        """(TS, 3) int: tside corners welded by position *and* side normal (and
+        contact weld tag), for interpolating side values across a smooth surface
+        without bleeding over creases, from one side of a surface to the other,
+        or across a contact line."""
         _, r = self.bounding_sphere
         corners = self.triangle_corners[self.tside_triangle]
         q = np.round(corners.reshape(-1, 3) / max(r * 1e-6, 1e-12)).astype(np.int64)
         nq = np.repeat(np.round(self.tside_normal * 1e3).astype(np.int64), 3, axis=0)
-        _, ids = np.unique(np.concatenate([q, nq], axis=1), axis=0, return_inverse=True)
+        key = [q, nq]
+        if self.triangle_corner_tag is not None:
+            key.append(self.triangle_corner_tag[self.tside_triangle].reshape(-1, 1))
+        _, ids = np.unique(np.concatenate(key, axis=1), axis=0, return_inverse=True)
         return ids.reshape(-1, 3)
 
     # ---------------------------------------------------------------- sides
@@ -552,32 +559,39 @@ def _check_patches(v, t, m, patch, two_sided):
         raise SceneError("a patch mixes triangles that face different ways: patches must be planar")
 
 
-def subdivide(scene: PatchScene, max_edge=None, patches=None) -> PatchScene:
+def subdivide(scene: PatchScene, max_edge=None, patches=None, contacts=True) -> PatchScene:
     """Split every triangle into k^2 similar triangles so that edges are at most
     ``max_edge`` [m] long, or so that there are about ``patches`` patches.
 
     Each resulting triangle is its own patch.  k is chosen per triangle
     (``k = ceil(longest edge / max_edge)``); neighbours with different k meet at
     T-junctions, which are harmless here (patches are flat, visibility is traced).
+    Triangles that reflect nothing (a lamp's Emission shader, a black body) stay
+    whole: their outgoing radiance is known, and a light made of few triangles
+    is sampled with less variance.  With ``contacts``, the patches of subdivided faces are then cut along the
+    lines where other surfaces touch or cross them, gaps narrower than 5% of
+    ``max_edge`` counting as contact (:mod:`raybundle.contacts`).
     """
     if (max_edge is None) == (patches is None):
         raise ValueError("give exactly one of max_edge and patches")
     corners = scene.triangle_corners
     edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    whole = ~scene.materials.reflects[scene.triangle_material]
+    split_edge = np.where(whole, 0.0, edge)
     if patches is not None:
-        if patches < len(scene.triangles):
+        if patches < len(scene.triangles) or not split_edge.any():
             max_edge = float(edge.max()) * 1.0001
         else:
             # bisection on the edge length for sum(k^2) ~ patches
-            lo, hi = 1e-9 * edge.max(), edge.max() * 1.0001
+            lo, hi = 1e-9 * split_edge.max(), split_edge.max() * 1.0001
             for _ in range(60):
                 mid = np.sqrt(lo * hi)
-                n = (np.ceil(edge / mid) ** 2).sum()
+                n = (np.maximum(1, np.ceil(split_edge / mid)) ** 2).sum()
                 lo, hi = (mid, hi) if n > patches else (lo, mid)
             max_edge = hi
     if not max_edge > 0:
         raise ValueError("max_edge must be positive")
-    k_all = np.maximum(1, np.ceil(edge / max_edge - 1e-9)).astype(np.int64)
+    k_all = np.maximum(1, np.ceil(split_edge / max_edge - 1e-9)).astype(np.int64)
     verts, tris, mats, srcs = [], [], [], []
     base = 0
     for k in np.unique(k_all):
@@ -607,11 +621,15 @@ def subdivide(scene: PatchScene, max_edge=None, patches=None) -> PatchScene:
     _, first, inv = np.unique(q, axis=0, return_index=True, return_inverse=True)
     v, t = v[first], inv.reshape(-1)[t]
     per_tri = [np.concatenate([np.repeat(a[np.nonzero(k_all == k)[0]], k * k) for k in np.unique(k_all)])
-               for a in (scene.triangle_solid, scene.triangle_two_sided)]
-    return PatchScene(v, t, np.concatenate(mats), np.arange(len(t)), np.concatenate(srcs),
+               for a in (scene.triangle_solid, scene.triangle_two_sided, k_all)]
+    fine = PatchScene(v, t, np.concatenate(mats), np.arange(len(t)), np.concatenate(srcs),
                       scene.materials, scene.point_lights, scene.camera, scene.analytic_radiance,
-                      scene.name, scene.dropped_triangles, *per_tri, scene.sun_lights, scene.area_lights,
+                      scene.name, scene.dropped_triangles, *per_tri[:2], scene.sun_lights, scene.area_lights,
                       scene.environment)
+    if not contacts:
+        return fine
+    from .contacts import split_at_contacts
+    return split_at_contacts(fine, np.nonzero(per_tri[2] > 1)[0], tol=0.05 * max_edge)[0]
 
 
 def closed_solid_triangles(vertices, triangles, tol=1e-7):

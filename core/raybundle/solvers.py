@@ -80,6 +80,7 @@ class StochasticIterationSolver:
         self.area = np.bincount(scene.tside_side, self.tside_open_area, minlength=scene.n_sides)
         self.kd_over_pi = mats.diffuse_reflectance[pm] / np.pi          # (P, 3)
         self.glossy_mask = mats.is_glossy[pm]
+        self.layered_sides = np.nonzero(mats.has_layer[pm])[0]      # diffuse lobe under a specular layer
         self.glossy_patches = np.nonzero(self.glossy_mask)[0]
         self.diffuse_only = len(self.glossy_patches) == 0
         # incoming first shot, refined by a few shadow rays every iteration
@@ -135,9 +136,11 @@ class StochasticIterationSolver:
     def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True, glossy_iterate=True):
         """Outgoing radiance (N, 3) of the sides ``patch`` (N,) towards ``w_out`` (N, 3):
 
-        ``Le + kd/pi (E + E1) + E f_g(t, w_out) + sum_l E1_l f_g(w_l, w_out)``, with E
+        ``Le + W_d(w_out) kd/pi (E + E1) + E f_g(t, w_out) + sum_l E1_l f_g(w_l, w_out)``, with E
         the current iterate (or ``diffuse_incoming`` (N, 3) for the diffuse lobe,
-        e.g. the running average interpolated at hit points) and E1 the first shot.
+        e.g. the running average interpolated at hit points), E1 the first shot and
+        W_d the diffuse weight of a Principled layer (1 without one,
+        :meth:`~raybundle.materials.MaterialTable.diffuse_weight`).
         ``first_shot_emission=False`` leaves out the emission of first-shot lights
         (for estimators that already count direct light); ``glossy_iterate=False``
         leaves out ``E f_g(t, w_out)`` (for estimators that trace that lobe further).
@@ -154,7 +157,7 @@ class StochasticIterationSolver:
             L[self.direct.first_shot_material[pm]] = 0.0
         fs = self.first_shot
         e = self.incoming[sel] + fs.E[sel].sum(axis=1) if diffuse_incoming is None else diffuse_incoming
-        L += self.kd_over_pi[sel] * e
+        L += self._diffuse_weighted(self.kd_over_pi[sel] * e, sel, pm, cos)
         g = np.nonzero(self.glossy_mask[sel])[0]
         if len(g):
             m, ng, w, pg = pm[g], n[g], w_out[g], patch[g]
@@ -176,7 +179,18 @@ class StochasticIterationSolver:
         view-independent estimate written back as color attributes."""
         cos = np.ones(len(self.normal)) if w_out is None else np.einsum("ij,ij->i", self.normal, w_out)
         le = self.scene.materials.emitted_radiance(self.patch_material, cos)
-        return le + self.kd_over_pi * (self.mean_incoming + self.first_shot.E.sum(axis=1))
+        diffuse = self.kd_over_pi * (self.mean_incoming + self.first_shot.E.sum(axis=1))
+        return le + self._diffuse_weighted(diffuse, slice(None), self.patch_material, cos)
+
+    def _diffuse_weighted(self, diffuse, sel, pm, cos):
+        """``diffuse`` (N, 3) of the sides ``self._all_patches[sel]`` times W_d(cos) where
+        a Principled layer sits over the diffuse lobe (in place; returns it)."""
+        if len(self.layered_sides) == 0:
+            return diffuse
+        lay = np.nonzero(self.scene.materials.has_layer[pm])[0]
+        if len(lay):
+            diffuse[lay] *= self.scene.materials.diffuse_weight(pm[lay], cos[lay])
+        return diffuse
 
 
 def auto_bundle_resolution(scene, lo=32, hi=512):

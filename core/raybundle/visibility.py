@@ -149,8 +149,10 @@ class RayTracer:
         receives light, so side averages must not be divided by it (an FE error
         otherwise: the visible rest of the patch comes out too dark).  Estimated
         from ``points_per_triangle`` stratified points; triangle sides found
-        partly buried get ``refine_points`` more (the receiving area divides E,
-        so its error matters); the result is floored at half a sample.  A scene
+        partly or wholly buried (patches cut at a solid's footprint by
+        :mod:`raybundle.contacts` are often wholly buried) get ``refine_points``
+        more (the receiving area divides E, so its error matters); the result is
+        floored at half a sample.  A scene
         without solids needs no rays: everything is open.
         """
         rng = np.random.default_rng([seed, 11])
@@ -158,7 +160,7 @@ class RayTracer:
         if not self.scene.triangle_solid.any():
             return np.ones(n_t)
         frac = self._open_fraction(np.arange(n_t), points_per_triangle, rng)
-        part = np.nonzero((frac > 0) & (frac < 1))[0]
+        part = np.nonzero(frac < 1)[0]
         if len(part) and refine_points:
             frac[part] = self._open_fraction(part, refine_points, rng)
         k = np.where(np.isin(np.arange(n_t), part), refine_points, points_per_triangle)

@@ -1,0 +1,191 @@
+"""Blender bench: the RAYBUNDLE engine against Cycles on the same ``.blend``, side by side in one run.
+
+Usage (the bpy module is in the project's venv; about 15 minutes on 2 cores)::
+
+    python tools/bench_blender.py demo_scenes/cornell_box.blend --out out/bench-blender
+
+1. A long Cycles reference (CPU, no denoising or clamping, box filter one pixel,
+   Standard view): two independent halves with ``--reference-samples`` each
+   (seeds 1 and 2), kept in ``--out`` and reused.
+2. RAYBUNDLE renders with ``--times`` seconds of iteration, and Cycles renders
+   with 1, 2, 4, ... samples until one takes longer than the longest RAYBUNDLE
+   run.  Every render is timed from opening the ``.blend`` to the EXR written.
+3. The error of each, :func:`raybundle.metrics.image_error` (RMSE / mean of the
+   reference over pixels at least 2 px from a directly seen light, with the
+   reference's own noise from its halves subtracted), and over all pixels.
+
+Writes ``bench.csv``, ``summary.json`` and ``bench.png`` (error against seconds,
+log-log) into ``--out`` and prints, for every RAYBUNDLE time, Cycles' error at the
+same time and the time Cycles needs for RAYBUNDLE's error (log-log
+interpolation between the Cycles runs).
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+
+def _open(path):
+    import bpy
+
+    import raybundle_addon
+
+    if not hasattr(bpy.types.Scene, "raybundle"):
+        raybundle_addon.register()
+    bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path))
+    return bpy.context.scene
+
+
+def _exr_output(scene, path):
+    s = scene.render.image_settings
+    s.file_format = "OPEN_EXR"
+    s.color_depth = "32"
+    s.exr_codec = "ZIP"
+    scene.render.filepath = os.path.abspath(path)
+    scene.render.use_file_extension = False
+
+
+def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None):
+    """Open ``blend``, render with ``engine`` to the EXR ``path``; returns (image, wall seconds)."""
+    import bpy
+
+    from cycles_reference import cycles_settings
+    from raybundle.io import read_exr
+
+    t0 = time.perf_counter()
+    scene = _open(blend)
+    if engine == "CYCLES":
+        cycles_settings(samples, seed, world_strength=None)
+    else:
+        scene.render.engine = "RAYBUNDLE"
+        rb = scene.raybundle
+        rb.time_limit, rb.iterations, rb.seed = float(seconds), 0, seed
+        if patches:
+            rb.patches = patches
+    _exr_output(scene, path)
+    bpy.ops.render.render(write_still=True)
+    wall = time.perf_counter() - t0
+    return read_exr(path), wall
+
+
+def light_mask(blend):
+    """Pixels within 2 px of a directly seen light, from the exported scene."""
+    import bpy
+
+    from raybundle.metrics import light_source_mask
+    from raybundle_addon.export import export_scene
+
+    _open(blend)
+    ex = export_scene(bpy.context.evaluated_depsgraph_get())
+    return light_source_mask(ex.scene, ex.scene.camera)
+
+
+def loglog_at(xs, ys, x):
+    """y at x by linear interpolation in log-log over the sorted points (None outside)."""
+    xs, ys = np.log(np.asarray(xs, float)), np.log(np.maximum(np.asarray(ys, float), 1e-12))
+    lx = np.log(x)
+    if lx < xs.min() or lx > xs.max():
+        return None
+    o = np.argsort(xs)
+    return float(np.exp(np.interp(lx, xs[o], ys[o])))
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("blend")
+    p.add_argument("--out", default="out/bench-blender")
+    p.add_argument("--times", type=float, nargs="+", default=[10.0, 30.0])
+    p.add_argument("--reference-samples", type=int, default=1024)
+    p.add_argument("--patches", type=int, default=None, help="RAYBUNDLE target patch count (default: the file's)")
+    a = p.parse_args(argv)
+    from raybundle.io import read_exr
+    from raybundle.metrics import image_error
+
+    os.makedirs(a.out, exist_ok=True)
+    halves = []
+    for seed in (1, 2):
+        path = os.path.join(a.out, f"reference-{seed}.exr")
+        if not os.path.exists(path):
+            print(f"Cycles reference half {seed}: {a.reference_samples} samples ...", flush=True)
+            render(a.blend, path, "CYCLES", samples=a.reference_samples, seed=seed)
+        halves.append(read_exr(path))
+    reference = 0.5 * (halves[0] + halves[1])
+    mask = light_mask(a.blend)
+
+    def errors(img):
+        e = image_error(img, reference, reference_halves=halves, exclude=mask)
+        full = image_error(img, reference, reference_halves=halves)
+        return e["error"], full["error"]
+
+    rows = []
+    for t in a.times:
+        img, wall = render(a.blend, os.path.join(a.out, f"raybundle-{t:g}s.exr"), "RAYBUNDLE", seconds=t,
+                           seed=3, patches=a.patches)
+        e, full = errors(img)
+        rows.append(dict(engine="raybundle", setting=t, seconds=wall, error=e, error_all_pixels=full))
+        print(f"raybundle {t:g} s: {wall:.1f} s wall, error {e:.4f} (all pixels {full:.4f})", flush=True)
+    samples = 1
+    while True:
+        img, wall = render(a.blend, os.path.join(a.out, f"cycles-{samples}spp.exr"), "CYCLES", samples=samples,
+                           seed=7)
+        e, full = errors(img)
+        rows.append(dict(engine="cycles", setting=samples, seconds=wall, error=e, error_all_pixels=full))
+        print(f"cycles {samples} spp: {wall:.1f} s wall, error {e:.4f} (all pixels {full:.4f})", flush=True)
+        if wall > 1.5 * max(r["seconds"] for r in rows if r["engine"] == "raybundle"):
+            break
+        samples *= 2
+    cyc = [r for r in rows if r["engine"] == "cycles"]
+    summary = []
+    for r in (r for r in rows if r["engine"] == "raybundle"):
+        # Cycles' error is monotone in time up to noise: interpolate its curve
+        c_err = loglog_at([c["seconds"] for c in cyc], [c["error"] for c in cyc], r["seconds"])
+        c_time = loglog_at([c["error"] for c in cyc][::-1], [c["seconds"] for c in cyc][::-1], r["error"])
+        summary.append(dict(raybundle_seconds=r["seconds"], raybundle_error=r["error"],
+                            raybundle_error_all_pixels=r["error_all_pixels"], cycles_error_same_time=c_err,
+                            cycles_seconds_same_error=c_time))
+        print(f"at {r['seconds']:.1f} s: raybundle {r['error']:.4f}, Cycles "
+              f"{'n/a' if c_err is None else f'{c_err:.4f}'}; Cycles reaches {r['error']:.4f} in "
+              f"{'n/a' if c_time is None else f'{c_time:.1f} s'}")
+    with open(os.path.join(a.out, "bench.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    with open(os.path.join(a.out, "summary.json"), "w") as f:
+        json.dump(dict(blend=a.blend, reference_samples_per_half=a.reference_samples, rows=rows, summary=summary),
+                  f, indent=1)
+    chart(os.path.join(a.out, "bench.png"), rows, os.path.basename(a.blend))
+    print(f"wrote {a.out}/bench.csv, summary.json, bench.png")
+    return 0
+
+
+def chart(path, rows, title):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 5))
+    for engine, style in (("raybundle", "o-"), ("cycles", "s--")):
+        pts = sorted((r["seconds"], r["error"], r["error_all_pixels"]) for r in rows if r["engine"] == engine)
+        t, e, full = zip(*pts)
+        ax.loglog(t, e, style, label=f"{engine} (pixels 2 px from lights)")
+        ax.loglog(t, full, style, alpha=0.4, label=f"{engine} (all pixels)")
+    ax.set_xlabel("seconds from opening the .blend to the EXR written (2 cores)")
+    ax.set_ylabel("relative RMSE against a long Cycles render")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
