@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench extension cycles-reference clean
+.PHONY: demo test bench bench-blender extension cycles-reference clean
 
 $(STAMP): core/pyproject.toml requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -14,12 +14,17 @@ $(STAMP): core/pyproject.toml requirements-dev.txt
 
 demo: $(STAMP)
 	$(PY) -m raybundle render cornell --time 30 --out out/cornell.exr --stats out/cornell.json
+	$(PY) -m raybundle_addon demo_scenes/cornell_box.blend --time 30 --out out/cornell_box_blend.exr
 
 test: $(STAMP)
 	$(PY) -m pytest -q tests
 
 bench: $(STAMP)
 	$(PY) -m raybundle bench --out out/bench
+
+# The RAYBUNDLE engine against Cycles on the Cornell .blend (about 15 minutes on 2 cores)
+bench-blender: $(STAMP)
+	$(PY) tools/bench_blender.py demo_scenes/cornell_box.blend --out out/bench-blender
 
 # The installable Blender extension: dist/raybundle-<version>-<platform>.zip for every platform in
 # blender_manifest.toml, built without a Blender binary (Blender's blender_ext.py from the bpy module).

@@ -199,21 +199,11 @@ def look_at_matrix(position, target, up=(0, 0, 1)):
 def render_settings(time_limit=30.0, samples=256):
     """The RAYBUNDLE engine (if registered) and Cycles settings matching raybundle's estimator."""
     bpy = _bpy()
+    sys.path.insert(0, os.path.join(ROOT, "tools"))
+    from cycles_reference import cycles_settings
+
+    cycles_settings(samples, world_strength=None)               # keeps the scene's world
     sc = bpy.context.scene
-    c = sc.cycles
-    c.samples = samples
-    c.use_adaptive_sampling = False
-    c.use_denoising = False
-    c.pixel_filter_type = "BOX"
-    sc.render.filter_size = 1.0
-    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = 64
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-    c.blur_glossy = 0.0
-    c.caustics_reflective = True
-    sc.view_settings.view_transform = "Standard"
-    sc.view_settings.look = "None"
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    sc.render.image_settings.color_depth = "32"
     if hasattr(sc, "raybundle"):
         sc.render.engine = "RAYBUNDLE"
         sc.raybundle.time_limit = time_limit

@@ -2,7 +2,7 @@
 
 Importing this module points ``BLENDER_USER_RESOURCES`` at a temporary folder
 (before ``bpy`` is imported, so nothing touches the user's Blender config),
-imports ``bpy``, and puts the repository and ``demo_scenes/`` on ``sys.path``.
+imports ``bpy``, and puts the repository, ``demo_scenes/`` and ``tools/`` on ``sys.path``.
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import tempfile
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if "bpy" not in sys.modules:
     os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="rb-blender-user-")
-for p in (ROOT, os.path.join(ROOT, "demo_scenes")):
+for p in (ROOT, os.path.join(ROOT, "demo_scenes"), os.path.join(ROOT, "tools")):
     if p not in sys.path:
         sys.path.insert(0, p)
 
@@ -156,22 +156,9 @@ def render_cycles(path, samples=64, seed=0):
     no glossy filter, Standard view) to an EXR; returns (H, W, 3)."""
     from raybundle.io import read_exr
 
-    sc = bpy.context.scene
-    sc.render.engine = "CYCLES"
-    c = sc.cycles
-    c.device = "CPU"
-    c.samples = int(samples)
-    c.use_adaptive_sampling = False
-    c.use_denoising = False
-    c.seed = int(seed)
-    c.pixel_filter_type = "BOX"
-    sc.render.filter_size = 1.0
-    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = 64
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-    c.blur_glossy = 0.0
-    c.caustics_reflective = True
-    sc.view_settings.view_transform = "Standard"
-    sc.view_settings.look = "None"
+    from cycles_reference import cycles_settings
+
+    cycles_settings(samples, seed, world_strength=None)          # keeps the scene's world
     _exr_output(path)
     bpy.ops.render.render(write_still=True)
     return read_exr(path)

@@ -7,6 +7,7 @@ without the cut, from the solver's running averages at a fixed seed.
 """
 import numpy as np
 import pytest
+from geometry_helpers import clipped_area
 
 from raybundle import pipeline
 from raybundle.camera import Camera
@@ -57,26 +58,6 @@ def inside(points2d, poly):
         e = (b - a) / np.linalg.norm(b - a)
         d = np.minimum(d, e[0] * (points2d[:, 1] - a[1]) - e[1] * (points2d[:, 0] - a[0]))
     return d
-
-
-def clipped_area(tri2d, poly):
-    """Area of the triangle (3, 2) inside the convex ccw polygon (Sutherland-Hodgman)."""
-    pts = list(tri2d)
-    for i in range(len(poly)):
-        a, b = poly[i], poly[(i + 1) % len(poly)]
-        side = [(b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]) for p in pts]
-        out = []
-        for k in range(len(pts)):
-            p, q, sp, sq = pts[k], pts[(k + 1) % len(pts)], side[k], side[(k + 1) % len(pts)]
-            if sp >= 0:
-                out.append(p)
-            if sp * sq < 0:
-                out.append(p + sp / (sp - sq) * (q - p))
-        pts = out
-        if not pts:
-            return 0.0
-    x, y = np.array(pts).T
-    return 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 
 
 def floor_minority_fraction(sc, poly):

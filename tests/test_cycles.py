@@ -24,26 +24,9 @@ from raybundle.materials import MaterialTable  # noqa: E402
 def cycles_plane_radiance(tmp_path, roughness, cos_view, samples=512, res=6):
     """Render a Glossy GGX plane (white) under a white world, seen at cos(theta) = cos_view."""
     cr.reset()
-    me = bpy.data.meshes.new("plane")
-    s = 1000.0
-    me.from_pydata([(-s, -s, 0), (s, -s, 0), (s, s, 0), (-s, s, 0)], [], [(0, 1, 2, 3)])
-    me.materials.append(cr.make_material("glossy", (0, 0, 0), (1, 1, 1), roughness, 1.0, (0, 0, 0)))
-    ob = bpy.data.objects.new("plane", me)
-    bpy.context.scene.collection.objects.link(ob)
-    cd = bpy.data.cameras.new("cam")
-    cd.type = "ORTHO"
-    cd.ortho_scale = 0.05
-    cam = bpy.data.objects.new("cam", cd)
-    sin = np.sqrt(1 - cos_view ** 2)
-    cam.location = (10 * sin, 0, 10 * cos_view)
-    cam.rotation_euler = (np.arccos(cos_view), 0, np.pi / 2)     # look at the origin along -location
-    bpy.context.scene.collection.objects.link(cam)
-    sc = bpy.context.scene
-    sc.camera = cam
-    sc.render.resolution_x = sc.render.resolution_y = res
-    cr.cycles_settings(samples, world_strength=1.0)
-    img = cr.render_to(str(tmp_path / f"plane-{roughness}-{cos_view}.exr"))
-    return img.reshape(-1, 3)[:, 0]
+    mat = cr.make_material("glossy", (0, 0, 0), (1, 1, 1), roughness, 1.0, (0, 0, 0))
+    path = tmp_path / f"plane-{roughness}-{cos_view}.exr"
+    return cr.plane_under_white_world(mat, cos_view, res, samples, path)[:, 0]
 
 
 @pytest.mark.parametrize("roughness", [0.2, 0.5])

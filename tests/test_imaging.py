@@ -3,6 +3,7 @@ import os
 
 import numpy as np
 import pytest
+from geometry_helpers import clipped_area
 
 from raybundle import pipeline, scenes
 from raybundle.camera import Camera
@@ -74,6 +75,38 @@ def test_image_of_point_lit_plane_matches_closed_form():
     z = np.abs(img - ref) / np.maximum(se, 1e-12)
     assert np.mean(z < 4.5) > 0.995, z.max()
     assert np.allclose(img.mean(axis=0), ref.mean(axis=0), rtol=0.01)
+    r.tracer.close()
+
+
+def test_light_edges_converge_to_the_exact_pixel_coverage():
+    """An emitting square (L = 1, rotated 20 degrees) seen by an orthographic camera
+    over a black world: each pixel's value is exactly L times the fraction of the
+    pixel it covers.  Edge pixels get a jittered 4 x 4 grid per pass on top of the
+    pass's own sample (once some sample showed them to be edges).  After 20 passes:
+    the mean signed error over the edge pixels is zero within 4.5 standard errors
+    (from the pixels' spread: the estimate is unbiased), and the RMS error is under
+    0.03 (measured 0.020; 0.057 without the extra samples, so this can fail)."""
+    c, s = np.cos(np.radians(20)), np.sin(np.radians(20))
+    sq = np.array([[-0.3, -0.3], [0.3, -0.3], [0.3, 0.3], [-0.3, 0.3]]) @ np.array([[c, s], [-s, c]])
+    v = np.column_stack([sq, np.zeros(4)])
+    mats = MaterialTable.from_list([dict(name="lamp", emission=(1.0, 1.0, 1.0))])
+    m = np.eye(4)
+    m[2, 3] = 1.0                                         # 1 m above, looking down -z
+    cam = Camera(16, 16, 16.0, 16.0, 8.0, 8.0, m, orthographic=True)
+    sc = build_scene(v, [[0, 1, 2], [0, 2, 3]], [0, 0], mats, camera=cam)
+    r = pipeline.make_renderer(sc, RenderSettings(seed=4))
+    for _ in range(20):
+        r.image_pass()
+    img = r.image()[..., 0]
+    exact = np.array([[clipped_area(np.array([[i - 8, 8 - j - 1], [i - 7, 8 - j - 1], [i - 7, 8 - j],
+                                              [i - 8, 8 - j]]) / 16.0, sq) * 256 for i in range(16)]
+                      for j in range(16)])
+    edge = (exact > 0) & (exact < 1)
+    assert edge.sum() > 20
+    assert np.abs(img - exact)[~edge].max() < 1e-6          # inside and outside: exact
+    err = (img - exact)[edge]
+    assert abs(err.mean()) < 4.5 * err.std(ddof=1) / np.sqrt(len(err))
+    assert np.sqrt((err ** 2).mean()) < 0.03
     r.tracer.close()
 
 

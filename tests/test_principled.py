@@ -32,9 +32,6 @@ def cycles_principled_albedo(tmp_path, base, metallic, roughness, cos_view, dist
                              specular_ior_level=0.5, specular_tint=(1, 1, 1), samples=1024, res=8):
     """(pixels (res*res, 3)) radiance of a Principled plane under a white world, seen at cos_view."""
     cr.reset()
-    me = bpy.data.meshes.new("plane")
-    s = 1000.0
-    me.from_pydata([(-s, -s, 0), (s, -s, 0), (s, s, 0), (-s, s, 0)], [], [(0, 1, 2, 3)])
     mat = bpy.data.materials.new("principled")
     mat.use_nodes = True
     node = mat.node_tree.nodes["Principled BSDF"]
@@ -45,23 +42,7 @@ def cycles_principled_albedo(tmp_path, base, metallic, roughness, cos_view, dist
     node.inputs["IOR"].default_value = ior
     node.inputs["Specular IOR Level"].default_value = specular_ior_level
     node.inputs["Specular Tint"].default_value = (*specular_tint, 1.0)
-    me.materials.append(mat)
-    ob = bpy.data.objects.new("plane", me)
-    bpy.context.scene.collection.objects.link(ob)
-    cd = bpy.data.cameras.new("cam")
-    cd.type = "ORTHO"
-    cd.ortho_scale = 0.05
-    cam = bpy.data.objects.new("cam", cd)
-    sin = np.sqrt(1 - cos_view ** 2)
-    cam.location = (10 * sin, 0, 10 * cos_view)
-    cam.rotation_euler = (np.arccos(cos_view), 0, np.pi / 2)     # look at the origin along -location
-    bpy.context.scene.collection.objects.link(cam)
-    sc = bpy.context.scene
-    sc.camera = cam
-    sc.render.resolution_x = sc.render.resolution_y = res
-    cr.cycles_settings(samples, world_strength=1.0)
-    img = cr.render_to(str(tmp_path / "principled.exr"))
-    return img.reshape(-1, 3).astype(float)
+    return cr.plane_under_white_world(mat, cos_view, res, samples, tmp_path / "principled.exr")
 
 
 CASES = [  # (metallic, roughness, cos_view, extra Principled inputs)

@@ -31,7 +31,7 @@ def batch_means(renderer, batches, per_batch):
     for b in range(batches + 1):
         acc = np.zeros(3)
         snap = (r.pass_sum.copy(), r.passes, r.glossy_sum.copy(), r.glossy_iterations,
-                s.mean_incoming * s.stats.iterations)
+                s.mean_incoming * s.stats.iterations, r.emission_sum.copy(), r.emission_count.copy())
         for _ in range(per_batch):
             s.step()
             if not s.diffuse_only:
@@ -44,7 +44,8 @@ def batch_means(renderer, batches, per_batch):
         d_direct = (r.pass_sum - snap[0]) / max(r.passes - snap[1], 1)
         d_glossy = (r.glossy_sum - snap[2]) / max(r.glossy_iterations - snap[3], 1)
         e_batch = (s.mean_incoming * s.stats.iterations - snap[4]) / per_batch
-        img = d_direct + d_glossy + r.diffuse_indirect(e_batch)
+        d_emission = (r.emission_sum - snap[5]) / np.maximum(r.emission_count - snap[6], 1)[:, None]
+        img = d_direct + d_emission + d_glossy + r.diffuse_indirect(e_batch)
         hit = r.gbuffer.hit
         patch_b.append(acc / per_batch)
         img_b.append(img[hit].mean(axis=0))

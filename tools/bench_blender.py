@@ -8,8 +8,8 @@ Usage (the bpy module is in the project's venv; about 15 minutes on 2 cores)::
    Standard view): two independent halves with ``--reference-samples`` each
    (seeds 1 and 2), kept in ``--out`` and reused.
 2. RAYBUNDLE renders with ``--times`` seconds of iteration, and Cycles renders
-   with 1, 2, 4, ... samples until one takes longer than the longest RAYBUNDLE
-   run.  Every render is timed from opening the ``.blend`` to the EXR written.
+   with 1, 2, 4, ... samples until its error is below every RAYBUNDLE error (or a
+   render takes 8 times the longest RAYBUNDLE run, at most 300 s).  Every render is timed from opening the ``.blend`` to the EXR written.
 3. The error of each, :func:`raybundle.metrics.image_error` (RMSE / mean of the
    reference over pixels at least 2 px from a directly seen light, with the
    reference's own noise from its halves subtracted), and over all pixels.
@@ -30,7 +30,8 @@ import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+_TOOLS = os.path.dirname(os.path.abspath(__file__))
+sys.path[:0] = [_TOOLS, os.path.dirname(_TOOLS)]          # cycles_reference; raybundle_addon
 
 
 def _open(path):
@@ -139,7 +140,8 @@ def main(argv=None):
         e, full = errors(img)
         rows.append(dict(engine="cycles", setting=samples, seconds=wall, error=e, error_all_pixels=full))
         print(f"cycles {samples} spp: {wall:.1f} s wall, error {e:.4f} (all pixels {full:.4f})", flush=True)
-        if wall > 1.5 * max(r["seconds"] for r in rows if r["engine"] == "raybundle"):
+        ours = [r for r in rows if r["engine"] == "raybundle"]
+        if e < min(r["error"] for r in ours) or wall > min(8 * max(r["seconds"] for r in ours), 300.0):
             break
         samples *= 2
     cyc = [r for r in rows if r["engine"] == "cycles"]

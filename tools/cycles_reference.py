@@ -151,6 +151,32 @@ def render_to(path):
     return read_exr(path)
 
 
+def plane_under_white_world(material, cos_view, res, samples, path):
+    """Render a huge plane with ``material`` under a uniform white world (strength 1),
+    seen by an orthographic camera at cos(theta) = ``cos_view``: every pixel's
+    radiance is the material's directional albedo a(w_out).  Returns (res*res, 3)."""
+    bpy = _bpy()
+    me = bpy.data.meshes.new("plane")
+    s = 1000.0
+    me.from_pydata([(-s, -s, 0), (s, -s, 0), (s, s, 0), (-s, s, 0)], [], [(0, 1, 2, 3)])
+    me.materials.append(material)
+    ob = bpy.data.objects.new("plane", me)
+    bpy.context.scene.collection.objects.link(ob)
+    cd = bpy.data.cameras.new("cam")
+    cd.type = "ORTHO"
+    cd.ortho_scale = 0.05
+    cam = bpy.data.objects.new("cam", cd)
+    sin = np.sqrt(1 - cos_view ** 2)
+    cam.location = (10 * sin, 0, 10 * cos_view)
+    cam.rotation_euler = (np.arccos(cos_view), 0, np.pi / 2)     # look at the origin along -location
+    bpy.context.scene.collection.objects.link(cam)
+    sc = bpy.context.scene
+    sc.camera = cam
+    sc.render.resolution_x = sc.render.resolution_y = res
+    cycles_settings(samples, world_strength=1.0)
+    return render_to(str(path)).reshape(-1, 3).astype(float)
+
+
 def render_scene(scene, samples, out, seed=0):
     reset()
     add_scene_mesh(scene)

@@ -4,9 +4,15 @@ The pixel value is the box-filtered (one pixel wide) radiance seen through the
 pixel.  It is split into three parts, each estimated where it is cheapest and
 sharpest:
 
-* **direct**: emission seen by the eye plus light reflected from the
-  first-shot lights, evaluated per pixel at the visible point with shadow
-  rays (:meth:`~raybundle.lights.DirectLighting.reflected_radiance`).  Every
+* **emission seen** by the eye (and the world where nothing is hit): its
+  own per-pixel average with its own sample count, from every pass's primary
+  ray plus, where a pixel's samples disagree (the edge of a visible light, a
+  silhouette against a bright world), ``emission_edge_samples`` more rays per
+  pass on a jittered grid, so light edges antialias long before the rest has
+  converged;
+* **direct**: light reflected from the first-shot lights, evaluated per
+  pixel at the visible point with shadow rays
+  (:meth:`~raybundle.lights.DirectLighting.reflected_radiance`).  Every
   *image pass* jitters the sub-pixel position anew, so edges antialias as the
   average converges (as Cycles' box filter does);
 * **glossy indirect**: the glossy lobe applied per pixel to the current
@@ -63,7 +69,9 @@ class RenderSettings:
     importance-sampled eye ray per pixel and pass (see :meth:`Renderer.glossy_gather`)
     instead of the per-iteration ``E f(t, w_eye)``, following up to
     ``glossy_gather_depth`` glossy bounces; ``emission_edge_samples``:
-    extra primary rays per pass for pixels on the edge of a visible emitter.
+    extra samples per pass (a jittered s x s grid, rounded to a square) for the
+    pixels on the edge of a visible emitter and those whose passes disagree
+    most (:meth:`Renderer._noisy_pixels`).
     """
 
     bundle_resolution: int = 0
@@ -76,7 +84,7 @@ class RenderSettings:
     smooth: bool = True
     glossy_gather: bool = True
     glossy_gather_depth: int = 3
-    emission_edge_samples: int = 32
+    emission_edge_samples: int = 16
     threads: int | None = None
 
 
@@ -121,13 +129,17 @@ class Renderer:
                                              self.rng)
         n = camera.width * camera.height
         self.pass_sum = np.zeros((n, 3))
+        self.pass_sq_sum = np.zeros(n)                    # per-pass luminance squared (for the variance)
         self.glossy_sum = np.zeros((n, 3))
         self.passes = 0
+        self._setup_rays = 0                              # one-time rays of the first pass
         self.glossy_iterations = 0
         self.image_rays = 0
         self.gbuffer = None
         self._glossy_pixels = np.zeros(0, np.int64)   # pixels for accumulate_glossy
-        self._emitter_hits = np.zeros(n, np.int64)       # passes whose sample saw an emitter
+        self.emission_sum = np.zeros((n, 3))             # emission seen: sum and count per pixel
+        self.emission_count = np.zeros(n)
+        self._emission_range = np.stack([np.full(n, np.inf), np.full(n, -np.inf)])   # min, max seen
         mats = scene.materials
         self.glossy_material = mats.is_glossy
         py, px = np.divmod(np.arange(n), camera.width)
@@ -170,33 +182,78 @@ class Renderer:
 
     def image_pass(self):
         """One jittered sample per pixel of the per-pass part: emission seen, direct
-        light of the first-shot lights and (with ``glossy_gather``) the glossy lobe.
+        light of the first-shot lights and (with ``glossy_gather``) the glossy lobe;
+        more samples at the edges of visible lights and where the pixel's passes
+        disagree most (:meth:`_noisy_pixels`).
         Keeps the G-buffer for :meth:`accumulate_glossy`."""
         u = self.pass_sampler.next()
         g = self.trace_gbuffer(u[:, :2])
         self.gbuffer = g
+        n = len(g.triangle)
+        emitted, _ = self.seen_radiance(g)
+        if self.passes == 0:                          # a 2 x 2 grid finds most edges at once
+            before = self.image_rays
+            self._emission_samples(np.arange(n), 4)
+            self._setup_rays = self.image_rays - before
+        self._add_emission(np.arange(n), emitted)
+        value, gl = self._shade(g, u[:, 2:4], u[:, 4:])
+        # pixels whose samples disagree (the edge of a visible light, which is also
+        # where a lamp lights a narrow rim) get a jittered grid of extra samples for
+        # both the emission average and this pass's estimate: the mean of 1 + k
+        # samples, chosen from earlier passes only, so every pass stays unbiased
+        lo, hi = self._emission_range
+        extra_pix = np.union1d(np.nonzero(lo < hi)[0], self._noisy_pixels())
+        k = self.settings.emission_edge_samples
+        if len(extra_pix) and k > 0:
+            pix, jitter = self._jittered_grid(extra_pix, k)
+            gx = self.trace_gbuffer(jitter, pixels=pix)
+            le, _ = self.seen_radiance(gx)
+            self._add_emission(pix, le)
+            extra, _ = self._shade(gx, self.rng.random((len(pix), 2)),
+                                   self.rng.random((len(pix), 3 * self.kronecker_light_samples)))
+            k = len(pix) // len(extra_pix)
+            value[extra_pix] = (value[extra_pix] + extra.reshape(len(extra_pix), k, 3).sum(axis=1)) / (k + 1)
+        self.pass_sum += value
+        y = value.sum(axis=1)
+        self.pass_sq_sum += y * y
+        self.passes += 1
+        self._glossy_pixels = gl
+
+    def _shade(self, g, u_lobe, u_light):
+        """Per-pass radiance (N, 3) of the samples in G-buffer ``g``: direct light of the
+        first-shot lights and, with ``glossy_gather``, the glossy lobe; and the pixels
+        left for :meth:`accumulate_glossy`.  ``u_lobe`` (N, 2), ``u_light`` (N, 3K) uniforms."""
+        out = np.zeros((len(g.triangle), 3))
         h = np.nonzero(g.hit)[0]
-        cos_eye = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h])
-        emitted, seen = self.seen_radiance(g)
-        self._emission_edge_samples(emitted, seen)
-        contrib = np.zeros((len(h), 3))
-        front = cos_eye > 0
+        front = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]) > 0
         hf = h[front]
         if self.direct.n_lights and len(hf):
             before = self.direct.rays
-            contrib[front] += self.direct.reflected_radiance(
-                g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], self._light_uniforms(u[hf, 4:]),
+            out[hf] += self.direct.reflected_radiance(
+                g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], self._light_uniforms(u_light[hf]),
                 self.settings.light_samples)
             self.image_rays += self.direct.rays - before
-        glossy = front & self.glossy_material[g.material[h]]
-        gl = h[glossy]
+        gl = hf[self.glossy_material[g.material[hf]]]
         if self.settings.glossy_gather:
-            contrib[glossy] += self.glossy_gather(g, gl, u[gl, 2:4])
+            out[gl] += self.glossy_gather(g, gl, u_lobe[gl])
             gl = gl[:0]
-        self.pass_sum += emitted
-        self.pass_sum[h] += contrib
-        self.passes += 1
-        self._glossy_pixels = gl
+        return out, gl
+
+    def _noisy_pixels(self):
+        """Pixels whose per-pass estimates vary most: the standard error of their
+        mean (from the passes so far) above 4 times the image's RMS standard error,
+        at most 2% of the pixels (e.g. the rim a lamp lights through a narrow gap,
+        where a pixel's direct light changes by orders of magnitude across it)."""
+        if self.passes < 4:
+            return np.zeros(0, np.int64)
+        m = self.pass_sum.sum(axis=1) / self.passes
+        se2 = np.maximum(self.pass_sq_sum / self.passes - m * m, 0.0) / self.passes
+        cut = 16.0 * se2.mean()
+        idx = np.nonzero(se2 > cut)[0]
+        cap = max(1, len(se2) // 50)
+        if len(idx) > cap:
+            idx = idx[np.argsort(se2[idx])[-cap:]]
+        return idx
 
     def _light_uniforms(self, kron):
         """(N, K, 3) light-sample uniforms: Kronecker for the first ones, PRNG for the rest."""
@@ -204,25 +261,31 @@ class Renderer:
         extra = self.n_light_samples - u.shape[1]
         return np.concatenate([u, self.rng.random((len(kron), extra, 3))], axis=1) if extra > 0 else u
 
-    def _emission_edge_samples(self, emitted, seen):
-        """Supersample the emission seen in pixels on the edge of a visible emitter.
+    def _add_emission(self, pixels, le):
+        """Add emission samples ``le`` (N, 3) seen in ``pixels`` (N,) (repeats allowed)."""
+        for k in range(3):
+            self.emission_sum[:, k] += np.bincount(pixels, le[:, k], minlength=len(self.emission_sum))
+        self.emission_count += np.bincount(pixels, minlength=len(self.emission_count))
+        y = le.sum(axis=1)
+        np.minimum.at(self._emission_range[0], pixels, y)
+        np.maximum.at(self._emission_range[1], pixels, y)
 
-        A pixel whose earlier passes saw an emitter in some samples and not in
-        others gets ``emission_edge_samples`` extra primary rays this pass, and its
-        emission estimate becomes the mean of all of them: still unbiased (the
-        choice depends only on earlier passes) and, at the edge of a bright light,
-        far less noisy than one sample per pass.  Updates ``emitted`` in place;
-        ``seen`` (N,) bool: this pass's sample saw an emitter.
-        """
-        edge = np.nonzero((self._emitter_hits > 0) & (self._emitter_hits < self.passes))[0]
-        self._emitter_hits += seen
-        k = self.settings.emission_edge_samples
-        if len(edge) == 0 or k <= 0:
-            return
-        pix = np.repeat(edge, k)
-        g = self.trace_gbuffer(self.rng.random((len(pix), 2)), pixels=pix)
-        le, _ = self.seen_radiance(g)
-        emitted[edge] = (emitted[edge] + le.reshape(len(edge), k, 3).sum(axis=1)) / (k + 1)
+    def _emission_samples(self, pixels, k):
+        """``k`` (rounded to s^2) more primary rays in each of ``pixels`` on a jittered
+        s x s grid, added to the emission average.  The average stays unbiased: which
+        pixels get them depends only on earlier samples."""
+        pix, jitter = self._jittered_grid(pixels, k)
+        le, _ = self.seen_radiance(self.trace_gbuffer(jitter, pixels=pix))
+        self._add_emission(pix, le)
+
+    def _jittered_grid(self, pixels, k):
+        """Sub-pixel positions on a jittered s x s grid (s^2 = ``k`` rounded) in each
+        of ``pixels``: returns (pixel ids (N s^2,), jitter (N s^2, 2))."""
+        s = max(1, int(round(np.sqrt(k))))
+        cell = np.arange(s * s)
+        grid = np.stack([cell % s, cell // s], axis=1).astype(float)
+        pix = np.repeat(pixels, s * s)
+        return pix, (np.tile(grid, (len(pixels), 1)) + self.rng.random((len(pix), 2))) / s
 
     def glossy_gather(self, g, idx, u):
         """Glossy lobe at pixels ``idx`` by one eye path each (the remedy for sharp lobes).
@@ -338,7 +401,7 @@ class Renderer:
     def image(self, diffuse=None, preview=False):
         """The current estimate (H, W, 3) float32; ``diffuse`` = precomputed diffuse
         indirect; ``preview``: resolve it with one sub-pixel sample (fast, aliased)."""
-        img = self.pass_sum / max(self.passes, 1)
+        img = self.pass_sum / max(self.passes, 1) + self.emission_sum / np.maximum(self.emission_count, 1)[:, None]
         if self.glossy_iterations:
             img = img + self.glossy_sum / self.glossy_iterations
         if diffuse is None:
@@ -389,7 +452,7 @@ class Renderer:
                 solver.step()
                 if every is None:   # image passes every k iterations: a fixed share of rays
                     share = self.settings.image_ray_share
-                    per_pass = self.image_rays / max(self.passes, 1)
+                    per_pass = (self.image_rays - self._setup_rays) / max(self.passes, 1)
                     per_iter = solver.stats.rays / max(solver.stats.iterations, 1)
                     every = max(1, int(round(per_pass * (1 - share) / (share * max(per_iter, 1)))))
                 if not solver.diffuse_only:
