@@ -231,6 +231,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
     tag_ids: dict = {}
     n_cut = 0
     n_new_patches = 0
+    n_new_pts = 0
     seg_base = 0
     for group, origin, e1, e2, seg in groups:
         to2d = np.stack([e1, e2], axis=1)
@@ -261,8 +262,9 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
             n_cut += len(polys) > 1
             for poly, tg in zip(polys, tags):
                 m = len(poly)
-                base = sum(len(x) for x in new_pts)
+                base = n_new_pts
                 new_pts.append(origin + poly @ to2d.T)
+                n_new_pts += m
                 for i in range(1, m - 1):
                     idx = (0, i, i + 1)               # pieces keep the triangle's winding
                     new_tris.append([base + x for x in idx])
