@@ -49,7 +49,7 @@ class MeshLight:
     scene: object = None
 
     #: triangles that may look larger than this [sr] are sampled by solid angle, others by area
-    MIN_SOLID_ANGLE = 0.1
+    MIN_SOLID_ANGLE = 0.5
 
     def __post_init__(self):
         c = self.scene.triangle_corners[self.triangles]
