@@ -6,10 +6,11 @@ sharpest:
 
 * **emission seen** by the eye (and the world where nothing is hit): its
   own per-pixel average with its own sample count, from every pass's primary
-  ray plus, where a pixel's samples disagree (the edge of a visible light, a
-  silhouette against a bright world), ``emission_edge_samples`` more rays per
-  pass on a jittered grid, so light edges antialias long before the rest has
-  converged;
+  ray plus, where a pixel's earlier samples disagree (the edge of a visible
+  light, a silhouette against a bright world), ``emission_edge_samples`` more
+  rays per pass on a jittered grid, so light edges antialias long before the
+  rest has converged (a sample-count-weighted average whose weights depend on
+  earlier samples: consistent, its bias falls as 1/passes);
 * **direct**: light reflected from the first-shot lights, evaluated per
   pixel at the visible point with shadow rays
   (:meth:`~raybundle.lights.DirectLighting.reflected_radiance`).  Every
@@ -195,14 +196,14 @@ class Renderer:
             before = self.image_rays
             self._emission_samples(np.arange(n), 4)
             self._setup_rays = self.image_rays - before
-        self._add_emission(np.arange(n), emitted)
-        value, gl = self._shade(g, u[:, 2:4], u[:, 4:])
-        # pixels whose samples disagree (the edge of a visible light, which is also
-        # where a lamp lights a narrow rim) get a jittered grid of extra samples for
-        # both the emission average and this pass's estimate: the mean of 1 + k
-        # samples, chosen from earlier passes only, so every pass stays unbiased
+        # pixels whose earlier samples disagree (the edge of a visible light, which is
+        # also where a lamp lights a narrow rim) get a jittered grid of extra samples
+        # for both the emission average and this pass's estimate, the mean of 1 + k
+        # samples: chosen from earlier passes only, so every pass stays unbiased
         lo, hi = self._emission_range
         extra_pix = np.union1d(np.nonzero(lo < hi)[0], self._noisy_pixels())
+        self._add_emission(np.arange(n), emitted)
+        value, gl = self._shade(g, u[:, 2:4], u[:, 4:])
         k = self.settings.emission_edge_samples
         if len(extra_pix) and k > 0:
             pix, jitter = self._jittered_grid(extra_pix, k)
