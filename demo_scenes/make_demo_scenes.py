@@ -36,19 +36,8 @@ import sys
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def _bpy():
-    import bpy
-
-    return bpy
-
-
-def reset():
-    """An empty scene (factory settings, no world, no objects)."""
-    bpy = _bpy()
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    return bpy.context.scene
+sys.path.insert(0, os.path.join(ROOT, "tools"))
+from cycles_reference import _bpy, cycles_settings, reset  # noqa: E402  (bpy set-up shared with the references)
 
 
 def ensure_addon():
@@ -199,9 +188,6 @@ def look_at_matrix(position, target, up=(0, 0, 1)):
 def render_settings(time_limit=30.0, samples=256):
     """The RAYBUNDLE engine (if registered) and Cycles settings matching raybundle's estimator."""
     bpy = _bpy()
-    sys.path.insert(0, os.path.join(ROOT, "tools"))
-    from cycles_reference import cycles_settings
-
     cycles_settings(samples, world_strength=None)               # keeps the scene's world
     sc = bpy.context.scene
     if hasattr(sc, "raybundle"):

@@ -18,6 +18,7 @@ for p in (ROOT, os.path.join(ROOT, "demo_scenes"), os.path.join(ROOT, "tools")):
         sys.path.insert(0, p)
 
 import bpy  # noqa: E402
+from cycles_reference import cycles_settings, exr_output  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
@@ -49,12 +50,9 @@ def fresh(addon):
 # ------------------------------------------------------------------ building
 def node_material(name, kind="diffuse", color=(0.8, 0.8, 0.8), strength=1.0, roughness=0.5):
     """A material with one shader node ``kind`` (diffuse, glossy, emission) to the output."""
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    from make_demo_scenes import _new_material
+
+    mat, nt, out = _new_material(name)
     node = nt.nodes.new({"diffuse": "ShaderNodeBsdfDiffuse", "glossy": "ShaderNodeBsdfGlossy",
                          "emission": "ShaderNodeEmission", "principled": "ShaderNodeBsdfPrincipled",
                          "translucent": "ShaderNodeBsdfTranslucent"}[kind])
@@ -146,7 +144,7 @@ def render_raybundle(path, time_limit=None, iterations=None, seed=0, patches=Non
         rb.iterations, rb.time_limit = 0, time_limit or 5.0
     if patches is not None:
         rb.patches = patches
-    _exr_output(path)
+    exr_output(path)
     bpy.ops.render.render(write_still=True)
     return read_exr(path)
 
@@ -156,19 +154,10 @@ def render_cycles(path, samples=64, seed=0):
     no glossy filter, Standard view) to an EXR; returns (H, W, 3)."""
     from raybundle.io import read_exr
 
-    from cycles_reference import cycles_settings
-
     cycles_settings(samples, seed, world_strength=None)          # keeps the scene's world
-    _exr_output(path)
+    exr_output(path)
     bpy.ops.render.render(write_still=True)
     return read_exr(path)
-
-
-def _exr_output(path):
-    sc = bpy.context.scene
-    sc.render.image_settings.file_format = "OPEN_EXR"
-    sc.render.image_settings.color_depth = "32"
-    sc.render.filepath = str(path)
 
 
 def object_id_image(export, camera=None):

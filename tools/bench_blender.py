@@ -45,20 +45,11 @@ def _open(path):
     return bpy.context.scene
 
 
-def _exr_output(scene, path):
-    s = scene.render.image_settings
-    s.file_format = "OPEN_EXR"
-    s.color_depth = "32"
-    s.exr_codec = "ZIP"
-    scene.render.filepath = os.path.abspath(path)
-    scene.render.use_file_extension = False
-
-
 def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None):
     """Open ``blend``, render with ``engine`` to the EXR ``path``; returns (image, wall seconds)."""
     import bpy
 
-    from cycles_reference import cycles_settings
+    from cycles_reference import cycles_settings, exr_output
     from raybundle.io import read_exr
 
     t0 = time.perf_counter()
@@ -71,7 +62,7 @@ def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None
         rb.time_limit, rb.iterations, rb.seed = float(seconds), 0, seed
         if patches:
             rb.patches = patches
-    _exr_output(scene, path)
+    exr_output(path)
     bpy.ops.render.render(write_still=True)
     wall = time.perf_counter() - t0
     return read_exr(path), wall

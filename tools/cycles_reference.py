@@ -28,6 +28,7 @@ def _bpy():
 
 
 def reset():
+    """An empty scene (factory settings, no world, no objects)."""
     bpy = _bpy()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     return bpy.context.scene
@@ -136,9 +137,19 @@ def cycles_settings(samples, seed=0, world_strength=0.0):
         bg.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
         bg.inputs["Strength"].default_value = float(world_strength)
         sc.world = world
+    exr_output(None)
+
+
+def exr_output(path):
+    """The current scene saves 32-bit float EXR (linear radiance) to ``path``
+    (None: keep the output path)."""
+    sc = _bpy().context.scene
     sc.render.image_settings.file_format = "OPEN_EXR"
     sc.render.image_settings.color_depth = "32"
     sc.render.image_settings.exr_codec = "ZIP"
+    if path is not None:
+        sc.render.filepath = os.path.abspath(str(path))
+        sc.render.use_file_extension = False
 
 
 def render_to(path):
@@ -146,7 +157,7 @@ def render_to(path):
     bpy = _bpy()
     from raybundle.io import read_exr
 
-    bpy.context.scene.render.filepath = os.path.abspath(path)
+    exr_output(path)
     bpy.ops.render.render(write_still=True)
     return read_exr(path)
 

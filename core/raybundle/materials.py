@@ -545,6 +545,18 @@ def sample_ggx_reflection(alpha, normal, w_out, u):
     return w_i, weight
 
 
+def _ggx_half_vectors(alpha, u, n_phi):
+    """Half vectors (x and z components, (len(u) * n_phi,) each) of a midpoint rule
+    over h ~ D(h) (n.h): ``tan^2 theta_h = alpha^2 u / (1 - u)`` for the given u, and
+    ``n_phi`` midpoints of phi over [0, pi] (the lobe is symmetric about the plane of
+    incidence, y = 0)."""
+    tan2 = alpha * alpha * u / (1.0 - u)
+    cos_h = 1.0 / np.sqrt(1.0 + tan2)
+    sin_h = np.sqrt(1.0 - cos_h * cos_h)
+    phi = np.pi * (np.arange(n_phi) + 0.5) / n_phi
+    return (sin_h[:, None] * np.cos(phi)[None, :]).ravel(), np.repeat(cos_h, n_phi)
+
+
 def ggx_albedo(alpha, cos_out, n_theta=1024, n_phi=256):
     """Directional albedo of the untinted GGX lobe, integral of lobe * cos_i dw_i.
 
@@ -555,14 +567,7 @@ def ggx_albedo(alpha, cos_out, n_theta=1024, n_phi=256):
     a 4x finer rule: below 1e-3 for cos_out >= 0.1, a few 1e-3 at grazing.
     """
     cos_out = np.atleast_1d(np.asarray(cos_out, float))
-    u = (np.arange(n_theta) + 0.5) / n_theta
-    v = (np.arange(n_phi) + 0.5) / n_phi
-    tan2 = alpha * alpha * u / (1.0 - u)
-    cos_h = 1.0 / np.sqrt(1.0 + tan2)
-    sin_h = np.sqrt(1.0 - cos_h * cos_h)
-    phi = np.pi * v
-    hx = (sin_h[:, None] * np.cos(phi)[None, :]).ravel()
-    hz = np.repeat(cos_h, n_phi)
+    hx, hz = _ggx_half_vectors(alpha, (np.arange(n_theta) + 0.5) / n_theta, n_phi)
     out = np.empty(len(cos_out))
     for k, mu in enumerate(cos_out):
         mu = float(np.clip(mu, 1e-6, 1.0))
@@ -664,13 +669,7 @@ def ggx_fresnel_moments(alpha, cos_out, eta=0.0, f82=None, n_theta=512, n_phi=12
     t = (np.arange(n_theta) + 0.5) / n_theta
     u = 1.0 - (1.0 - t) ** 2
     jac = np.repeat(2.0 * (1.0 - t), n_phi)               # du/dt: the quadrature weight
-    v = (np.arange(n_phi) + 0.5) / n_phi
-    tan2 = alpha * alpha * u / (1.0 - u)
-    cos_h = 1.0 / np.sqrt(1.0 + tan2)
-    sin_h = np.sqrt(1.0 - cos_h * cos_h)
-    phi = np.pi * v
-    hx = (sin_h[:, None] * np.cos(phi)[None, :]).ravel()
-    hz = np.repeat(cos_h, n_phi)
+    hx, hz = _ggx_half_vectors(alpha, u, n_phi)
     k = len(cos_out)
     out = {"E": np.empty(k), "Ed": np.zeros(k), "Sd": np.zeros(k)}
     if f82 is not None:

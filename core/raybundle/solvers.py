@@ -157,7 +157,7 @@ class StochasticIterationSolver:
             L[self.direct.first_shot_material[pm]] = 0.0
         fs = self.first_shot
         e = self.incoming[sel] + fs.E[sel].sum(axis=1) if diffuse_incoming is None else diffuse_incoming
-        L += self._diffuse_weighted(self.kd_over_pi[sel] * e, sel, pm, cos)
+        L += self._diffuse_weighted(self.kd_over_pi[sel] * e, pm, cos)
         g = np.nonzero(self.glossy_mask[sel])[0]
         if len(g):
             m, ng, w, pg = pm[g], n[g], w_out[g], patch[g]
@@ -180,11 +180,11 @@ class StochasticIterationSolver:
         cos = np.ones(len(self.normal)) if w_out is None else np.einsum("ij,ij->i", self.normal, w_out)
         le = self.scene.materials.emitted_radiance(self.patch_material, cos)
         diffuse = self.kd_over_pi * (self.mean_incoming + self.first_shot.E.sum(axis=1))
-        return le + self._diffuse_weighted(diffuse, slice(None), self.patch_material, cos)
+        return le + self._diffuse_weighted(diffuse, self.patch_material, cos)
 
-    def _diffuse_weighted(self, diffuse, sel, pm, cos):
-        """``diffuse`` (N, 3) of the sides ``self._all_patches[sel]`` times W_d(cos) where
-        a Principled layer sits over the diffuse lobe (in place; returns it)."""
+    def _diffuse_weighted(self, diffuse, pm, cos):
+        """``diffuse`` (N, 3) of sides with materials ``pm`` (N,) times W_d(cos) where a
+        Principled layer sits over the diffuse lobe (in place; returns it)."""
         if len(self.layered_sides) == 0:
             return diffuse
         lay = np.nonzero(self.scene.materials.has_layer[pm])[0]
