@@ -141,7 +141,11 @@ def _dilate(m, r):
 def test_cornell_blend_matches_cycles_region_by_region(fresh, tmp_path):
     """The Cornell box .blend (full ceiling, lamp 0.5 mm under it, two-sided) rendered by the
     engine and by Cycles (64 x 64): each wall's, the floor's, the ceiling's and the blocks'
-    mean within 3%, and the ring of ceiling pixels around the lamp within 20%."""
+    mean within 3% (plus 4.5 times Cycles' noise), and the ring of ceiling pixels around the
+    lamp within 20%.  A fixed iteration count, not a time limit, so the render is the same
+    on every machine; over seeds 3-10 the region means stayed within 3.2% of a 2 x 1024
+    sample Cycles render (ceiling -1.8% to +0.7%; with independent directions instead of
+    the stratified sequence the ceiling ranged from -6.1% to +2.9%)."""
     import make_demo_scenes as mds
 
     from raybundle_addon.export import export_scene
@@ -151,7 +155,7 @@ def test_cornell_blend_matches_cycles_region_by_region(fresh, tmp_path):
     sc.render.resolution_x = sc.render.resolution_y = 64
     a = render_cycles(tmp_path / "c1.exr", samples=256, seed=1)
     b = render_cycles(tmp_path / "c2.exr", samples=256, seed=2)
-    ours = render_raybundle(tmp_path / "rb.exr", time_limit=20.0, seed=3)
+    ours = render_raybundle(tmp_path / "rb.exr", iterations=4000, seed=3)
     ex = export_scene(bpy.context.evaluated_depsgraph_get())
     ids = object_id_image(ex)
     names = [o.name for o in ex.objects]

@@ -86,6 +86,46 @@ def test_toy_iteration_prng_and_pi_powers_converge():
         assert abs(toy_iteration(seq, n) - 2.0) < 5 * se + start_bias
 
 
+def test_stratified_sequence_covers_every_cell_and_keeps_consecutive_steps_independent():
+    """Each stream deals all k x k cells once per block; step n and n+1 come from different
+    streams, so their joint distribution is uniform on cell pairs (chi-square over
+    16 x 16 pairs of 4 x 4 cells, 255 dof: mean 255, sd 22.6; bound mean + 5 sd).  With
+    one stream the same check fails: a cell cannot follow itself within a block."""
+    from raybundle.sampling import StratifiedSequence
+
+    seq = StratifiedSequence(seed=4, strata=256, streams=4)
+    first = np.array([seq.next(2) for _ in range(4 * 256)])
+    for s in range(4):                                       # stream s: steps s, s+4, ...
+        cells = np.floor(first[s::4] * 16).astype(int)
+        assert len(np.unique(cells[:, 0] * 16 + cells[:, 1])) == 256
+
+    def pair_chi2(seq, n=40_000):
+        u = np.array([seq.next(2) for _ in range(n + 1)])
+        c = np.floor(u[:, 0] * 4).astype(int) * 4 + np.floor(u[:, 1] * 4).astype(int)
+        counts = np.bincount(c[:-1] * 16 + c[1:], minlength=256)
+        return ((counts - n / 256) ** 2 / (n / 256)).sum()
+
+    assert pair_chi2(StratifiedSequence(seed=5, strata=16, streams=16)) < 255 + 5 * 22.6
+    assert pair_chi2(StratifiedSequence(seed=5, strata=16, streams=1)) > 255 + 10 * 22.6
+
+
+def test_toy_iteration_stratified_converges():
+    """The toy iteration driven by the first coordinate of the stratified directions."""
+    from raybundle.sampling import StratifiedSequence
+
+    class FirstOfTwo:
+        def __init__(self):
+            self.seq = StratifiedSequence(seed=9)
+
+        def next(self, dim):
+            return self.seq.next(2)[:dim]
+
+    n = 20_000
+    var = 1.8 ** 2 * (0.04 / 3 - 0.01) / (0.81 * (1 - 0.04 / 3))
+    se = math.sqrt(var * 1.1 / (0.9 * n))      # the PRNG's: stratification only lowers it
+    assert abs(toy_iteration(FirstOfTwo(), n) - 2.0) < 5 * se + 2.0 / n
+
+
 def test_toy_iteration_van_der_corput_is_wrong():
     # Halton's first coordinate (base 2) driving the iteration: a systematic error far
     # beyond Monte Carlo noise (algorithms.md 1.2: -0.0049 at 2e5 steps)

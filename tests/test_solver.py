@@ -61,7 +61,8 @@ def assert_converged(samples, exact, max_se):
 
 
 @pytest.mark.parametrize("glossy", [False, True], ids=["diffuse", "glossy"])
-@pytest.mark.parametrize("sequence,batches,per_batch", [("prng", 16, 250), ("pi-powers", 10, 200)])
+@pytest.mark.parametrize("sequence,batches,per_batch", [("prng", 16, 250), ("stratified", 16, 250),
+                                                           ("pi-powers", 10, 200)])
 def test_furnace_converges_to_analytic(glossy, sequence, batches, per_batch):
     r = furnace_renderer(glossy, sequence)
     exact = r.scene.analytic_radiance

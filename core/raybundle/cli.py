@@ -17,6 +17,7 @@ import time
 import numpy as np
 
 from . import __version__
+from .sampling import DEFAULT_SEQUENCE, SEQUENCES
 
 
 class ProgressBar:
@@ -138,7 +139,7 @@ def build_parser():
                    "patch per input triangle)")
     r.add_argument("--resolution", type=_number(int, 1, 65536, "a resolution in [1, 65536]"), nargs=2,
                    metavar=("W", "H"))
-    r.add_argument("--sequence", default="prng", choices=["prng", "pi-powers", "halton"])
+    r.add_argument("--sequence", default=DEFAULT_SEQUENCE, choices=sorted(SEQUENCES))
     r.add_argument("--bundle-resolution", type=_number(int, 0, 4096, "an integer in [0, 4096]"), default=0,
                    help="rays per bundle side (0 = auto)")
     r.add_argument("--threads", type=POSITIVE_INT, default=None)

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .sampling import ShiftedKronecker, stratified_2d
+from .sampling import DEFAULT_SEQUENCE, ShiftedKronecker, stratified_2d
 
 
 @dataclass
@@ -76,7 +76,7 @@ class RenderSettings:
     """
 
     bundle_resolution: int = 0
-    sequence: str = "prng"
+    sequence: str = DEFAULT_SEQUENCE
     seed: int = 0
     first_shot: str = "auto"
     light_samples: int = 1

@@ -174,6 +174,48 @@ class PRNGSequence:
         return self.rng.random(dim)
 
 
+class StratifiedSequence:
+    """Jittered strata of [0,1)^2, shuffled, dealt round-robin from independent streams.
+
+    Step n takes its point from stream ``n mod streams``; each stream hands out
+    blocks of ``strata`` = k x k jittered grid cells of [0,1)^2 in random order.
+    Over a run every stream covers the square evenly, so the running average of
+    terms that depend on one step's direction (most of the light: a patch's
+    first bounce from the first shot) converges like a stratified estimate; on
+    the Cornell box this cuts the region-mean noise several times at the same
+    number of iterations.
+
+    Each point is uniform on its own, and steps less than ``streams`` apart come
+    from different, independent streams: the light that a chain of up to
+    ``streams`` consecutive transfers carries is averaged exactly as with
+    independent directions (stochastic iteration needs this, thesis 1.2: the
+    Halton sequence fails it).  Steps of the same stream are negatively
+    correlated (two cannot share a cell within a block), which touches only
+    paths of more than ``streams`` bounces, attenuated by albedo^streams, and
+    then by O(1/strata).  Only ``dim`` = 2 is stratified (the direction); other
+    dimensions are plain pseudo-random numbers.
+    """
+
+    name = "stratified"
+
+    def __init__(self, seed=0, strata=256, streams=16):
+        self.k = max(1, int(round(math.sqrt(strata))))
+        self.rngs = [np.random.default_rng([int(seed), 17, s]) for s in range(int(streams))]
+        self.blocks = [np.empty((0, 2)) for _ in range(int(streams))]
+        self.n = 0
+
+    def next(self, dim):
+        s = self.n % len(self.rngs)
+        self.n += 1
+        rng = self.rngs[s]
+        if dim != 2:
+            return rng.random(dim)
+        if len(self.blocks[s]) == 0:
+            self.blocks[s] = stratified_2d(self.k * self.k, rng)
+        u, self.blocks[s] = self.blocks[s][-1], self.blocks[s][:-1]
+        return u.copy()
+
+
 _PI_CACHE = [0, 0]     # [bits, floor(pi 2^bits)] of the most precise pi computed so far
 
 
@@ -291,7 +333,11 @@ class HaltonSequence:
         return out
 
 
-SEQUENCES = {"prng": PRNGSequence, "pi-powers": PiPowersSequence, "halton": HaltonSequence}
+#: the sequence a render uses unless told otherwise
+DEFAULT_SEQUENCE = "stratified"
+
+SEQUENCES = {"prng": PRNGSequence, "stratified": StratifiedSequence, "pi-powers": PiPowersSequence,
+             "halton": HaltonSequence}
 
 
 def make_sequence(name, seed=0):
@@ -299,8 +345,8 @@ def make_sequence(name, seed=0):
     (by 64 numbers per seed value, at most 1000)."""
     if name not in SEQUENCES:
         raise ValueError(f"unknown sequence {name!r}; choose one of {sorted(SEQUENCES)}")
-    if name == "prng":
-        return PRNGSequence(seed)
+    if name in ("prng", "stratified"):
+        return SEQUENCES[name](seed)
     if not 0 <= int(seed) <= 1000:
         raise ValueError(f"seed must lie in [0, 1000] for the {name} sequence")
     return SEQUENCES[name](start=1 + int(seed) * 64)
