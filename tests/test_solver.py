@@ -15,11 +15,11 @@ from raybundle import pipeline, scenes
 from raybundle.imaging import RenderSettings
 
 
-def furnace_renderer(glossy, sequence, patches=600, seed=0, res=(24, 24), glossy_gather=True):
+def furnace_renderer(glossy, sequence, patches=600, seed=0, res=(24, 24), glossy_gather=True, directions=1):
     sc = scenes.furnace(glossy=glossy, resolution=res)
     sc = pipeline.prepare(sc, patches=patches)
     return pipeline.make_renderer(sc, RenderSettings(sequence=sequence, seed=seed, resolve_samples=4,
-                                                     glossy_gather=glossy_gather))
+                                                     glossy_gather=glossy_gather, directions_per_step=directions))
 
 
 def batch_means(renderer, batches, per_batch):
@@ -61,10 +61,12 @@ def assert_converged(samples, exact, max_se):
 
 
 @pytest.mark.parametrize("glossy", [False, True], ids=["diffuse", "glossy"])
-@pytest.mark.parametrize("sequence,batches,per_batch", [("prng", 16, 250), ("stratified", 16, 250),
-                                                           ("pi-powers", 10, 200)])
-def test_furnace_converges_to_analytic(glossy, sequence, batches, per_batch):
-    r = furnace_renderer(glossy, sequence)
+@pytest.mark.parametrize("sequence,batches,per_batch,directions", [
+    ("prng", 16, 250, 1), ("stratified", 16, 250, 1), ("pi-powers", 10, 200, 1), ("stratified", 12, 40, 8)])
+def test_furnace_converges_to_analytic(glossy, sequence, batches, per_batch, directions):
+    """Every sequence, and 8 directions per step (diffuse lobe: their mean; glossy lobe: one
+    drawn per side), converges to Le / (1 - a)."""
+    r = furnace_renderer(glossy, sequence, directions=directions)
     exact = r.scene.analytic_radiance
     patch, img = batch_means(r, batches, per_batch)
     assert_converged(patch, exact, max_se=0.02)

@@ -68,6 +68,26 @@ def test_bundle_equals_brute_force(name, rng):
     tr.close()
 
 
+@pytest.mark.parametrize("name", ["cornell-two-sided-world", "box-in-box"])
+def test_bundles_traced_together_equal_brute_force_one_by_one(name, rng):
+    """K grids traced in one query (the solver's batched step): each bundle holds
+    exactly the pairs brute force finds for its own grid, world ends included."""
+    sc = SCENES[name]()
+    tr = RayTracer(sc, threads=2)
+    k = 5
+    u = rng.random((k, 5))
+    dirs = np.array([uniform_sphere(a, b) for a, b in u[:, :2]])
+    together = tr.bundles(dirs, 24, u[:, 2:4], u[:, 4])
+    world = bool(np.any(sc.environment > 0))
+    assert len(together) == k
+    for j, b in enumerate(together):
+        origins, delta = tr.bundle_origins(dirs[j], 24, u[j, 2:4], u[j, 4])
+        assert b.n_rays == len(origins) and np.isclose(b.cell_area, delta ** 2)
+        assert pair_counts(b) == pair_counts(brute_force_bundle(sc, origins, dirs[j], delta, tr.eps))
+        assert np.any(b.sender == ENVIRONMENT) == world
+    tr.close()
+
+
 def test_two_sided_sides_meet_by_ray_direction():
     """A two-sided quad between two parallel one-sided quads facing it: rays along
     +z link the lower quad's front to the middle's back side, the middle's front to

@@ -72,7 +72,10 @@ class RenderSettings:
     ``glossy_gather_depth`` glossy bounces; ``emission_edge_samples``:
     extra samples per pass (a jittered s x s grid, rounded to a square) for the
     pixels on the edge of a visible emitter and those whose passes disagree
-    most (:meth:`Renderer._noisy_pixels`).
+    most (:meth:`Renderer._noisy_pixels`); ``directions_per_step``: bundle directions
+    per iteration, traced together (:meth:`~raybundle.solvers.StochasticIterationSolver.step`);
+    ``caustics``: the first shot's glossy reflection by lobe-sampled rays (:mod:`raybundle.caustics`)
+    instead of through the bundles.
     """
 
     bundle_resolution: int = 0
@@ -86,6 +89,8 @@ class RenderSettings:
     glossy_gather: bool = True
     glossy_gather_depth: int = 3
     emission_edge_samples: int = 16
+    directions_per_step: int = 16
+    caustics: bool = True
     threads: int | None = None
 
 
@@ -101,6 +106,8 @@ class RenderSettings:
             raise ValueError("image_ray_share must lie strictly between 0 and 1")
         if self.first_shot not in ("auto", "none"):
             raise ValueError("first_shot must be 'auto' or 'none'")
+        if not 1 <= int(self.directions_per_step) <= 1024:
+            raise ValueError("directions_per_step must lie in [1, 1024]")
 
 
 @dataclass
@@ -305,7 +312,7 @@ class Renderer:
         """
         out = np.zeros((len(idx), 3))
         sc, mats, solver = self.scene, self.scene.materials, self.solver
-        e = solver.mean_incoming + solver.first_shot.E.sum(axis=1)
+        e = solver.indirect_incoming() + solver.first_shot.E.sum(axis=1)
         vert = self.vertex_values(e) if self.settings.smooth and len(idx) else None
         pix = np.arange(len(idx))                     # which output row each path belongs to
         m, n, wo, pts = g.material[idx], g.normal[idx], g.w_eye[idx], g.point[idx]
@@ -349,16 +356,19 @@ class Renderer:
         return out
 
     def accumulate_glossy(self):
-        """Add this iterate's glossy lobe per pixel: E_i f_glossy(t_i, w_eye)."""
+        """Add this iterate's glossy lobe per pixel: E_i f_glossy(t_i, w_eye) (+ Ec_i f_glossy(w_c, w_eye))."""
         self.glossy_iterations += 1
         gl = self._glossy_pixels
         if len(gl) == 0:
             return
         g = self.gbuffer
         patch = self.scene.tside_side[g.tside[gl]]
-        f = self.scene.materials.brdf(g.material[gl], g.normal[gl], self.solver.receive_direction[patch],
-                                      g.w_eye[gl], diffuse=False)
-        self.glossy_sum[gl] += self.solver.incoming[patch] * f
+        mats, solver = self.scene.materials, self.solver
+        f = mats.brdf(g.material[gl], g.normal[gl], solver.receive_direction[patch], g.w_eye[gl], diffuse=False)
+        self.glossy_sum[gl] += solver.glossy_incoming[patch] * f
+        if solver.caustic is not None:     # the first shot's glossy reflections arrive as Ec
+            f = mats.brdf(g.material[gl], g.normal[gl], solver.caustic.direction[patch], g.w_eye[gl], diffuse=False)
+            self.glossy_sum[gl] += solver.caustic.E[patch] * f
 
     # -------------------------------------------------------------- resolve
     def vertex_values(self, side_values):
@@ -383,7 +393,7 @@ class Renderer:
         sc = self.scene
         n = len(self._pixel)
         out = np.zeros((n, 3))
-        e_bar = self.solver.mean_incoming if e_bar is None else e_bar
+        e_bar = self.solver.indirect_incoming() if e_bar is None else e_bar
         if not np.any(e_bar):
             return out
         vert = self.vertex_values(e_bar) if self.settings.smooth else None
@@ -471,7 +481,7 @@ class Renderer:
         total = time.perf_counter() - t0
         st = solver.stats
         stats = {"scene": self.scene.name, "solver": solver.name, "iterations": st.iterations,
-                 "seconds": round(total, 4), "solver_seconds": round(st.seconds, 4),
+                 "directions": st.directions, "seconds": round(total, 4), "solver_seconds": round(st.seconds, 4),
                  "resolve_seconds": round(time.perf_counter() - t_res, 4),
                  "rays_traced": int(st.rays + self.image_rays), "bundle_rays": int(st.bundle_rays),
                  "bundle_queries": int(st.rays), "image_rays": int(self.image_rays),

@@ -39,7 +39,8 @@ def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
     direct = DirectLighting(scene, tracer, first_shot=settings.first_shot)
     sequence = make_sequence(settings.sequence, settings.seed)
     solver_obj = SOLVERS[solver](scene, tracer, direct, sequence, bundle_resolution=settings.bundle_resolution,
-                                 seed=settings.seed)
+                                 seed=settings.seed, directions_per_step=settings.directions_per_step,
+                                 caustics=settings.caustics)
     return Renderer(scene, camera if camera is not None else scene.camera, solver_obj, direct, settings)
 
 

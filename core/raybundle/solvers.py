@@ -31,10 +31,19 @@ Diffuse-only scenes take the view-independent path: with ``f = kd/pi`` the
 sent radiance needs no direction, and the image needs only the running
 average of E.
 
+An iteration may use K directions (``directions_per_step``, default 16): the
+diffuse lobe receives the mean of their K transfers (still an unbiased random
+operator), a glossy side keeps one of them drawn at random; the K bundles go
+to Embree as one threaded query and everything else per iteration (first-shot
+refinement, sent radiance of diffuse sides) is shared.  On the Cornell box this
+doubles the directions per second and cuts the image error at 10 s by a third.
+The first shot's glossy reflection leaves glossy sides by lobe-sampled rays
+(:mod:`raybundle.caustics`), not through the bundles.
+
 Parameters: bundle resolution (rays per side of the grid), the random sequence
-that draws the directions (``prng`` or ``pi-powers``; ``halton`` converges to a
-wrong answer, thesis 1.2).  The grid's random offset and rotation come from a
-separate PRNG stream.
+that draws the directions (``stratified`` (default), ``prng`` or ``pi-powers``;
+``halton`` converges to a wrong answer, thesis 1.2).  The grid's random offset
+and rotation come from a separate PRNG stream.
 Failure modes: glossy lobes with low roughness (fireflies, blocky reflections:
 radiance is constant per patch), albedo near 1 (slow convergence), patches
 much smaller than the bundle cell (they are missed in most iterations; raise
@@ -47,8 +56,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .caustics import CausticShot
 from .lights import PatchFirstShot
-from .sampling import uniform_sphere, uniform_sphere_pdf
+from .sampling import points_on_triangles, uniform_sphere, uniform_sphere_pdf
 
 
 @dataclass
@@ -57,6 +67,7 @@ class SolverStats:
     seconds: float = 0.0
     rays: int = 0           # Embree queries issued by the solver (bundles)
     bundle_rays: int = 0    # grid rays (one per line of the bundles)
+    directions: int = 0     # global directions (bundles) used
 
 
 class StochasticIterationSolver:
@@ -64,12 +75,16 @@ class StochasticIterationSolver:
 
     name = "stochastic-iteration"
 
-    def __init__(self, scene, tracer, direct, sequence, bundle_resolution=0, seed=0):
+    def __init__(self, scene, tracer, direct, sequence, bundle_resolution=0, seed=0, directions_per_step=1,
+                 caustics=True):
         self.scene = scene
         self.tracer = tracer
         self.direct = direct
         self.sequence = sequence
         self.bundle_resolution = int(bundle_resolution) or auto_bundle_resolution(scene)
+        if int(directions_per_step) < 1:
+            raise ValueError("directions_per_step must be at least 1")
+        self.directions_per_step = int(directions_per_step)
         mats = scene.materials
         # the unknowns are patch sides: normals, materials and areas are per side
         pm = scene.side_material
@@ -82,15 +97,31 @@ class StochasticIterationSolver:
         self.glossy_mask = mats.is_glossy[pm]
         self.layered_sides = np.nonzero(mats.has_layer[pm])[0]      # diffuse lobe under a specular layer
         self.glossy_patches = np.nonzero(self.glossy_mask)[0]
+        # the tsides of glossy sides with an area CDF per side (side id + fraction), to draw
+        # uniform points of a side for glossy_sent_radiance
+        gts = np.nonzero(self.glossy_mask[scene.tside_side])[0]
+        gts = gts[np.argsort(scene.tside_side[gts], kind="stable")]
+        a = scene.triangle_area[scene.tside_triangle[gts]]
+        own = scene.tside_side[gts]
+        side_total = np.bincount(own, a, minlength=scene.n_sides)
+        self._glossy_tsides = gts
+        self._glossy_tside_cdf = own + (np.cumsum(a) - (np.cumsum(side_total) - side_total)[own]) / side_total[own]
         self.diffuse_only = len(self.glossy_patches) == 0
         # incoming first shot, refined by a few shadow rays every iteration
         self.first_shot = PatchFirstShot(direct, np.random.default_rng([seed, 7]), receiving_area=self.area)
         self.grid_rng = np.random.default_rng([seed, 3])   # bundle grid offset and rotation
         self.first_shot_refine = max(64, len(self.first_shot.receiving_tsides) // 16) if direct.n_lights else 0
+        # the first shot's glossy reflection goes by lobe-sampled rays, not by bundles
+        self.caustic = CausticShot(scene, tracer, self.first_shot, self.area, np.random.default_rng([seed, 11]),
+                                   self.glossy_patches) if caustics else None
+        if self.caustic is not None and not self.caustic.active:
+            self.caustic = None
+        self.caustic_refine = max(256, len(self.caustic.tsides) // 4) if self.caustic is not None else 0
         self.environment = np.asarray(scene.environment, float)
         n = scene.n_sides
         self._all_patches = np.arange(n)
         self.incoming = np.zeros((n, 3))
+        self.glossy_incoming = self.incoming        # E_i(d_k) of glossy sides, received from t_i
         self.receive_direction = np.zeros((n, 3))   # t_i of the current iterate
         self.mean_incoming = np.zeros((n, 3))
         self.direction = None
@@ -98,52 +129,130 @@ class StochasticIterationSolver:
 
     # ------------------------------------------------------------------ step
     def sent_radiance(self, send_dir):
-        """Radiance S_j (P, 3) that each patch sends into ``send_dir`` (P, 3) [W m^-2 sr^-1]:
+        """Radiance S_j (S, 3) that each side sends into ``send_dir`` (S, 3) [W m^-2 sr^-1]:
         the current iterate without the emission of first-shot lights (their light
         enters the iteration as the first shot)."""
-        return self.radiance(self._all_patches, send_dir, first_shot_emission=False)
+        return self.radiance(self._all_patches, send_dir, first_shot_emission=False,
+                             first_shot_glossy=self.caustic is None)
+
+    def glossy_sent_radiance(self, send_dir):
+        """Radiance (G, 3) the glossy sides send into ``send_dir`` (G, 3): their diffuse
+        lobe from the iterate, the glossy lobe by one lobe-sampled gather ray each.
+
+        ``S_j = Le_j + W_d kd/pi (E_j + E1_j + Ec_j) + weight L(y, -w_i)`` with ``w_i`` drawn
+        from side j's glossy lobe for the viewer direction ``s_j`` (``weight = f cos / pdf``,
+        at most the lobe's albedo), y a uniform point of side j and ``L(x, -w_i)`` the
+        radiance of the surface the ray meets there: running-average diffuse part, first
+        shot (with its glossy reflection: the caustic shot leaves out light that reaches
+        j's lobe), caustic and its own glossy iterate; the emission of first-shot lights is
+        left out (j's first shot and caustic shot carry it).  The
+        thesis' ``E_j f(t_j, s_j)`` is unbiased too, but heavy-tailed for sharp lobes: a
+        random pair (t_j, s_j) rarely falls into the lobe, and then with a value ~ 1/alpha^2.
+        """
+        gp = self.glossy_patches
+        fsg = self.caustic is None
+        out = self.radiance(gp, send_dir, first_shot_emission=False, first_shot_glossy=fsg, glossy_iterate=False)
+        sc = self.scene
+        u = self.grid_rng.random((len(gp), 5))
+        ts = self._glossy_tsides[np.minimum(np.searchsorted(self._glossy_tside_cdf, gp + u[:, 0], side="right"),
+                                            len(self._glossy_tsides) - 1)]
+        pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[ts]], u[:, 1], u[:, 2])
+        n = self.normal[gp]
+        w_i, weight = sc.materials.sample_glossy(self.patch_material[gp], n, send_dir, u[:, 3:])
+        live = np.nonzero(np.any(weight > 0, axis=1))[0]
+        tri, _, _, _ = self.tracer.first_hit(pts[live] + n[live] * self.tracer.eps, w_i[live])
+        self.stats.rays += len(live)
+        hit = tri >= 0
+        got = np.zeros((len(live), 3))
+        if np.any(hit):
+            back = -w_i[live][hit]
+            xs = sc.side_facing(tri[hit], back)
+            ok = xs >= 0
+            e = self.indirect_incoming() + self.first_shot.E.sum(axis=1)
+            rows = np.nonzero(hit)[0][ok]
+            got[rows] = self.radiance(xs[ok], back[ok], diffuse_incoming=e[xs[ok]], first_shot_emission=False)
+        if np.any(self.environment > 0):
+            got[~hit] = self.environment
+        out[live] += weight[live] * got
+        return out
 
     def step(self):
-        """One iteration: draw d, trace a bundle, transfer, update the running average."""
+        """One iteration: ``directions_per_step`` directions d_k, one bundle each (traced
+        together on the thread pool), transfer, update the running average.
+
+        The diffuse lobe receives the mean of the K transfers, ``E_i = (1/K) sum_k E_i(d_k)``
+        (an unbiased iterate whatever the joint law of the d_k, as each is uniform); a
+        glossy side keeps one of them, ``E_i(d_k)`` with k drawn uniformly per side, as its
+        single stored direction t_i (unbiased too: its mean over k is the same average).
+        """
         t0 = time.perf_counter()
         before = self.direct.rays
         self.first_shot.refine(self.first_shot_refine)
-        u = self.sequence.next(2)
-        d = uniform_sphere(u[0], u[1])
-        g = self.grid_rng.random(3)
-        bundle = self.tracer.bundle(d, self.bundle_resolution, offset=(g[0], g[1]), rotation=g[2])
-        side = np.sign(self.normal @ d)
-        # the last row is the world's radiance: sender ENVIRONMENT (-1) indexes it
-        S = np.vstack([self.sent_radiance(side[:, None] * d), self.environment])
-        # t_i is uniform on the receiver's hemisphere: pdf = 2 / (4 pi) = 1 / (2 pi)
-        w = bundle.cell_area / (2.0 * uniform_sphere_pdf())
+        if self.caustic is not None:
+            rays = self.caustic.rays
+            self.caustic.refine(self.caustic_refine)
+            self.stats.rays += self.caustic.rays - rays
+        k_dirs = self.directions_per_step
+        d = np.array([uniform_sphere(*self.sequence.next(2)) for _ in range(k_dirs)])
+        g = self.grid_rng.random((k_dirs, 3))
+        bundles = self.tracer.bundles(d, self.bundle_resolution, offsets=g[:, :2], rotations=g[:, 2])
         n = len(self.area)
-        E = np.stack([np.bincount(bundle.receiver, S[bundle.sender, k], minlength=n) for k in range(3)],
-                     axis=1).astype(float)       # an empty bundle gives integer zeros
-        E *= w / self.area[:, None]
+        # diffuse senders send the same radiance into every direction they face (a bundle
+        # pairs only sides that face each other): one evaluation serves all K bundles, and
+        # only glossy sides are evaluated per direction
+        s_fixed = np.vstack([self.sent_radiance(self.normal), self.environment])
+        gp = self.glossy_patches
+        E = np.zeros((n, 3))
+        if not self.diffuse_only:     # the new glossy iterate (senders use the old one)
+            pick = self.grid_rng.integers(k_dirs, size=len(self.glossy_patches))
+            e_glossy, t_glossy = np.zeros((n, 3)), np.zeros((n, 3))
+        for k, bundle in enumerate(bundles):
+            side = np.sign(self.normal @ d[k])
+            # the last row is the world's radiance: sender ENVIRONMENT (-1) indexes it
+            S = s_fixed
+            if len(gp):
+                S = s_fixed.copy()
+                S[gp] = self.glossy_sent_radiance(side[gp, None] * d[k])
+            # t_i is uniform on the receiver's hemisphere: pdf = 2 / (4 pi) = 1 / (2 pi)
+            w = bundle.cell_area / (2.0 * uniform_sphere_pdf())
+            e_k = np.stack([np.bincount(bundle.receiver, S[bundle.sender, c], minlength=n) for c in range(3)],
+                           axis=1) * (w / self.area[:, None])
+            E += e_k
+            if not self.diffuse_only:
+                mine = self.glossy_patches[pick == k]
+                e_glossy[mine] = e_k[mine]
+                t_glossy[mine] = -side[mine, None] * d[k]
+            st = self.stats
+            st.rays += bundle.n_casts
+            st.bundle_rays += bundle.n_rays
+        E /= k_dirs
         self.incoming = E
-        self.receive_direction = -side[:, None] * d
-        self.direction = d
+        if not self.diffuse_only:
+            self.glossy_incoming, self.receive_direction = e_glossy, t_glossy
+        self.direction = d[-1]
         st = self.stats
         st.iterations += 1
+        st.directions += k_dirs
         self.mean_incoming += (E - self.mean_incoming) / st.iterations
-        st.rays += bundle.n_casts + self.direct.rays - before
-        st.bundle_rays += bundle.n_rays
+        st.rays += self.direct.rays - before
         st.seconds += time.perf_counter() - t0
-        return bundle
+        return bundles
 
     # ------------------------------------------------------------- estimates
-    def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True, glossy_iterate=True):
+    def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True, glossy_iterate=True,
+                 first_shot_glossy=True):
         """Outgoing radiance (N, 3) of the sides ``patch`` (N,) towards ``w_out`` (N, 3):
 
-        ``Le + W_d(w_out) kd/pi (E + E1) + E f_g(t, w_out) + sum_l E1_l f_g(w_l, w_out)``, with E
-        the current iterate (or ``diffuse_incoming`` (N, 3) for the diffuse lobe,
-        e.g. the running average interpolated at hit points), E1 the first shot and
+        ``Le + W_d(w_out) kd/pi (E + E1 + Ec) + E f_g(t, w_out) + sum_l E1_l f_g(w_l, w_out)
+        + Ec f_g(w_c, w_out)``, with E the current iterate (or ``diffuse_incoming`` (N, 3)
+        for the diffuse lobe, e.g. the running average with Ec interpolated at hit points),
+        E1 the first shot, Ec the caustic first shot (:mod:`raybundle.caustics`) and
         W_d the diffuse weight of a Principled layer (1 without one,
         :meth:`~raybundle.materials.MaterialTable.diffuse_weight`).
         ``first_shot_emission=False`` leaves out the emission of first-shot lights
         (for estimators that already count direct light); ``glossy_iterate=False``
-        leaves out ``E f_g(t, w_out)`` (for estimators that trace that lobe further).
+        leaves out ``E f_g(t, w_out)`` and ``Ec f_g`` (for estimators that trace that lobe further);
+        ``first_shot_glossy=False`` leaves out ``E1_l f_g`` (carried by the caustic shot).
         """
         mats = self.scene.materials
         # the whole-scene call (every iteration) uses views, not fancy-indexed copies
@@ -155,16 +264,23 @@ class StochasticIterationSolver:
         L = mats.emitted_radiance(pm, cos)
         if not first_shot_emission:
             L[self.direct.first_shot_material[pm]] = 0.0
-        fs = self.first_shot
-        e = self.incoming[sel] + fs.E[sel].sum(axis=1) if diffuse_incoming is None else diffuse_incoming
+        fs, cs = self.first_shot, self.caustic
+        if diffuse_incoming is None:
+            e = self.incoming[sel] + fs.E[sel].sum(axis=1)
+            if cs is not None:
+                e = e + cs.E[sel]
+        else:
+            e = diffuse_incoming
         L += self._diffuse_weighted(self.kd_over_pi[sel] * e, pm, cos)
         g = np.nonzero(self.glossy_mask[sel])[0]
         if len(g):
             m, ng, w, pg = pm[g], n[g], w_out[g], patch[g]
             if self.direction is not None and glossy_iterate:
-                L[g] += self.incoming[pg] * mats.brdf(m, ng, self.receive_direction[pg], w, diffuse=False)
-            for li in range(fs.n_lights):
+                L[g] += self.glossy_incoming[pg] * mats.brdf(m, ng, self.receive_direction[pg], w, diffuse=False)
+            for li in range(fs.n_lights if first_shot_glossy else 0):
                 L[g] += fs.E[pg, li] * mats.brdf(m, ng, fs.direction[pg, li], w, diffuse=False)
+            if cs is not None and glossy_iterate:      # a traced lobe finds this light itself
+                L[g] += cs.E[pg] * mats.brdf(m, ng, cs.direction[pg], w, diffuse=False)
         L[cos <= 0] = 0.0
         return L
 
@@ -179,8 +295,13 @@ class StochasticIterationSolver:
         view-independent estimate written back as color attributes."""
         cos = np.ones(len(self.normal)) if w_out is None else np.einsum("ij,ij->i", self.normal, w_out)
         le = self.scene.materials.emitted_radiance(self.patch_material, cos)
-        diffuse = self.kd_over_pi * (self.mean_incoming + self.first_shot.E.sum(axis=1))
+        diffuse = self.kd_over_pi * (self.indirect_incoming() + self.first_shot.E.sum(axis=1))
         return le + self._diffuse_weighted(diffuse, self.patch_material, cos)
+
+    def indirect_incoming(self):
+        """(S, 3) [W/m^2] the view-independent incoming radiance an image resolves per
+        pixel: the running average of the iterates plus the caustic first shot."""
+        return self.mean_incoming if self.caustic is None else self.mean_incoming + self.caustic.E
 
     def _diffuse_weighted(self, diffuse, pm, cos):
         """``diffuse`` (N, 3) of sides with materials ``pm`` (N,) times W_d(cos) where a

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import orthonormal_basis
+from .sampling import frames_from_normals
 
 _MAX_LAYERS = 10000
 #: sender id of light that comes from the environment (world) in a :class:`Bundle`
@@ -48,7 +48,8 @@ class Bundle:
         (sender :data:`ENVIRONMENT` = the world)
     travel_sign : (K,) int8  +1 when the light travels along +d, -1 along -d
     n_rays : int  rays in the grid (inside the bounding disc)
-    n_casts : int  Embree first-hit queries used (all layers)
+    n_casts : int  Embree first-hit queries used (all layers; bundles traced together
+        share their total in proportion to their grid rays)
     """
 
     direction: np.ndarray
@@ -95,9 +96,9 @@ class RayTracer:
             self._pool.shutdown(wait=False)
             self._pool = None
 
-    def _map_chunks(self, fn, n, min_chunk=2048):
+    def _map_chunks(self, fn, n, min_chunk=2048, threaded=True):
         """Run fn(start, stop) over [0, n) split into one chunk per thread; list of results."""
-        if self._pool is None or n < 2 * min_chunk:
+        if self._pool is None or n < 2 * min_chunk or not threaded:
             return [fn(0, n)]
         bounds = np.linspace(0, n, self.threads + 1).astype(int)
         return list(self._pool.map(fn, bounds[:-1], bounds[1:]))
@@ -167,7 +168,7 @@ class RayTracer:
         return np.maximum(frac, 0.5 / k)
 
     def _open_fraction(self, tsides, k, rng):
-        from .sampling import frames_from_normals, points_on_triangles, stratified_2d
+        from .sampling import points_on_triangles, stratified_2d
 
         sc = self.scene
         ts = np.repeat(tsides, k)
@@ -202,81 +203,115 @@ class RayTracer:
         the disc of radius R miss everything and are dropped.  Origins sit
         1.01 R upstream of the plane.  Returns ``(origins, delta)``.
         """
-        d = np.asarray(direction, float)
-        u, v = orthonormal_basis(d)
-        ang = 2 * np.pi * rotation
-        u, v = np.cos(ang) * u + np.sin(ang) * v, -np.sin(ang) * u + np.cos(ang) * v
+        origins, _, delta = self.grid_origins(np.asarray(direction, float)[None], resolution, [offset], [rotation])
+        return origins, delta
+
+    def grid_origins(self, directions, resolution, offsets, rotations):
+        """:meth:`bundle_origins` of K grids at once: ``(origins (N, 3), counts (K,), delta)``,
+        the origins of grid k following those of grids 0..k-1."""
+        d = np.asarray(directions, float)
+        t, b = frames_from_normals(d)
+        ang = 2 * np.pi * np.asarray(rotations, float)[:, None]
+        u, v = np.cos(ang) * t + np.sin(ang) * b, -np.sin(ang) * t + np.cos(ang) * b
         r = self.radius * 1.0001 + self.eps
         delta = 2.0 * r / resolution
         g = (np.arange(resolution) + 0.5) * delta - r
-        x = (g[:, None] + (offset[0] - 0.5) * delta) * np.ones((1, resolution))
-        y = (g[None, :] + (offset[1] - 0.5) * delta) * np.ones((resolution, 1))
-        x, y = x.ravel(), y.ravel()
+        off = (np.asarray(offsets, float) - 0.5) * delta                       # (K, 2)
+        x = (g[None, :, None] + off[:, 0, None, None]) + np.zeros((1, 1, resolution))
+        y = (g[None, None, :] + off[:, 1, None, None]) + np.zeros((1, resolution, 1))
+        x, y = x.reshape(len(d), -1), y.reshape(len(d), -1)
         inside = x * x + y * y <= r * r
+        k = np.nonzero(inside)[0]
         x, y = x[inside], y[inside]
-        o = self.center + x[:, None] * u + y[:, None] * v - 1.01 * r * d
-        return o, delta
+        o = self.center + x[:, None] * u[k] + y[:, None] * v[k] - 1.01 * r * d[k]
+        return o, inside.sum(axis=1), delta
 
     def all_hit_pairs(self, origins, direction, ends=False):
         """Consecutive hits along parallel rays: ``(upstream_tri, downstream_tri, ray, n_casts)``.
 
         Every hit along every ray is found by re-shooting ``eps`` past the previous
         hit; consecutive hits form one pair.  Triangle ids are Embree prim ids.
+        ``direction`` is one (3,) for all rays or one (N, 3) per ray.
         With ``ends`` also returns the first and the last triangle hit by each ray
         that hits anything (the surfaces that see the world along -d and +d).
         """
-        d = np.asarray(direction, float)
-        d32 = d.astype(np.float32)[None, :]
+        up, down, ray, casts, first, _, last, _ = self._hit_layers(origins, direction, ends)
+        return (up, down, ray, casts) + ((first, last) if ends else ())
+
+    def _hit_layers(self, origins, direction, ends):
+        """:meth:`all_hit_pairs` with the ray ids of the first and last hits too:
+        ``(up, down, ray, casts, first, first_ray, last, last_ray)``."""
+        d32 = np.broadcast_to(np.asarray(direction, float), np.shape(origins)).astype(np.float32)
         eps32 = np.float32(self.eps)
 
         def work(a, b):
-            # active rays are kept compact: origin (float32, scene-centred), start
-            # offset along d, ray index, and the last surface hit
+            # active rays are kept compact: origin (float32, scene-centred), direction,
+            # start offset along it, ray index, and the last surface hit
             o32 = (origins[a:b] - self.center).astype(np.float32)
-            ray = np.arange(len(o32))
+            dr = d32[a:b]
+            ray = np.arange(a, b)
             start = np.zeros(len(o32), np.float32)
             last = np.full(len(o32), -1, np.int64)
-            ups, downs, rays, firsts, lasts = [], [], [], [], []
+            out = [[] for _ in range(7)]     # ups, downs, rays, firsts, first rays, lasts, last rays
             casts = 0
             for layer in range(_MAX_LAYERS):
                 if ray.size == 0:
                     break
                 casts += ray.size
-                r = self._embree.run(o32 + start[:, None] * d32, d32, output=1)
+                r = self._embree.run(o32 + start[:, None] * dr, dr, output=1)
                 prim = r["primID"].astype(np.int64)
                 hit = prim >= 0
                 if ends:
                     if layer == 0:
-                        firsts.append(prim[hit])
-                    lasts.append(last[~hit & (last >= 0)])
-                o32, ray, prim, prev = o32[hit], ray[hit], prim[hit], last[hit]
+                        out[3].append(prim[hit])
+                        out[4].append(ray[hit])
+                    gone = ~hit & (last >= 0)
+                    out[5].append(last[gone])
+                    out[6].append(ray[gone])
+                o32, dr, ray, prim, prev = o32[hit], dr[hit], ray[hit], prim[hit], last[hit]
                 start = start[hit] + r["tfar"][hit] + eps32
                 new = prev != prim          # a re-hit of the same triangle is no new surface
                 pair = new & (prev >= 0)
-                ups.append(prev[pair])
-                downs.append(prim[pair])
-                rays.append(ray[pair] + a)
+                out[0].append(prev[pair])
+                out[1].append(prim[pair])
+                out[2].append(ray[pair])
                 last = prim
             else:
-                warnings.warn(f"a bundle ray met more than {_MAX_LAYERS} surfaces; it was cut off", stacklevel=3)
-            cat = (lambda xs: np.concatenate(xs) if xs else np.zeros(0, np.int64))
-            return cat(ups), cat(downs), cat(rays), casts, cat(firsts), cat(lasts)
+                warnings.warn(f"a bundle ray met more than {_MAX_LAYERS} surfaces; it was cut off", stacklevel=4)
+            return [np.concatenate(x) if x else np.zeros(0, np.int64) for x in out], casts
 
         parts = self._map_chunks(work, len(origins), min_chunk=1024)
-        out = (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]),
-               np.concatenate([p[2] for p in parts]), sum(p[3] for p in parts))
-        if ends:
-            out += (np.concatenate([p[4] for p in parts]), np.concatenate([p[5] for p in parts]))
-        return out
+        cat = [np.concatenate([p[0][k] for p in parts]) for k in range(7)]
+        return (*cat[:3], sum(p[1] for p in parts), *cat[3:])
 
     def bundle(self, direction, resolution, offset=(0.5, 0.5), rotation=0.0) -> Bundle:
         """Global visibility in one direction: all light-carrying segments (see module doc)."""
-        d = np.asarray(direction, float)
-        d = d / np.linalg.norm(d)
-        origins, delta = self.bundle_origins(d, resolution, offset, rotation)
+        return self.bundles(np.asarray(direction, float)[None], resolution, [offset], [rotation])[0]
+
+    def bundles(self, directions, resolution, offsets, rotations) -> list[Bundle]:
+        """:meth:`bundle` in each of ``directions`` (K, 3) with grid ``offsets`` (K, 2) and
+        ``rotations`` (K,), traced as one query: the rays of all K grids go to Embree
+        together, layer by layer, split over the threads (one small grid alone, a few
+        thousand rays, is not worth splitting)."""
+        dirs = np.asarray(directions, float)
+        dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+        origins, counts, delta = self.grid_origins(dirs, resolution, offsets, rotations)
+        bounds = np.concatenate([[0], np.cumsum(counts)])
         world = bool(np.any(self.scene.environment > 0))
-        up, down, _, casts, *ends = self.all_hit_pairs(origins, d, ends=world)
-        return bundle_from_hits(self.scene, d, delta, up, down, len(origins), casts, *ends)
+        up, down, ray, casts, first, first_ray, last, last_ray = self._hit_layers(
+            origins, np.repeat(dirs, counts, axis=0), ends=world)
+        out = []
+        for k in range(len(dirs)):
+            lo, hi = bounds[k], bounds[k + 1]
+
+            def own(x, rays):
+                return x[(rays >= lo) & (rays < hi)]
+            ends = (own(first, first_ray), own(last, last_ray)) if world else ()
+            # Embree queries are shared out in proportion to the rays of each grid
+            out.append(bundle_from_hits(self.scene, dirs[k], delta, own(up, ray), own(down, ray),
+                                        int(counts[k]), int(round(casts * counts[k] / max(bounds[-1], 1))),
+                                        *ends))
+        return out
 
 
 def bundle_from_hits(scene, d, delta, up, down, n_rays, casts, first=None, last=None):

@@ -1,0 +1,110 @@
+"""Caustic first shot: the first shot's glossy reflection, shot along lobe-sampled rays.
+
+A glossy side j lit by the first shot of light l reflects ``E1_jl f_g(w_l, s)``
+into direction s (:class:`~raybundle.lights.PatchFirstShot`: side-average
+irradiance ``E1_jl`` [W/m^2] arriving along the mean travel direction ``w_l``).
+Carried by the bundles, that sharp lobe is met only when a random global
+direction falls into it (probability ~ alpha^2 for a lobe of roughness alpha)
+and then with a value ~ 1/alpha^2: the heavy tail that makes glossy boxes
+blotchy (bright streaks on a ceiling above a glossy floor).
+
+Instead, rays leave points of the lit glossy sides in directions drawn from the
+lobe itself (:meth:`~raybundle.materials.MaterialTable.sample_glossy`, pdf
+~ f cos), and deposit what they carry on the side they hit: a light-tracing
+estimate of the incoming radiance of every receiving side i::
+
+    E_c,i = sum_{j,l} (A_j / A_i) E1_jl  integral_{s: j sees i} f_g(w_l, s) cos_s ds   [W/m^2]
+
+With (tside t, light l) drawn with probability p_tl ~ A_t lum(E1_jl), a uniform
+point on t and s from the lobe, one sample adds
+``A_t E1_jl weight(s) / (p_tl A_i)`` to the side it hits, ``weight = f cos / pdf``
+(bounded: at most the lobe's albedo).  ``E_c`` is the running mean over all
+samples, refined a little every iteration as the first shot is.  The iteration
+then leaves the first shot's glossy reflection out of what glossy sides send
+(:meth:`~raybundle.solvers.StochasticIterationSolver.sent_radiance`) and adds
+``E_c`` to the receivers' incoming radiance instead, in both the iterate and
+the image's diffuse part; for a glossy receiver its own lobe uses the mean
+travel direction of its caustic light (the first shot's approximation).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .sampling import points_on_triangles
+
+
+def luminance(rgb):
+    """Rec. 709 luminance of (..., 3) linear RGB."""
+    return np.asarray(rgb) @ np.array([0.2126, 0.7152, 0.0722])
+
+
+class CausticShot:
+    """Incoming caustic radiance ``E`` (S, 3) [W/m^2] and its mean travel ``direction``
+    (S, 3) for every side, from the first shot reflected by glossy sides."""
+
+    def __init__(self, scene, tracer, first_shot, receiving_area, rng, glossy_sides):
+        self.scene, self.tracer, self.first_shot = scene, tracer, first_shot
+        self.area = receiving_area
+        self.rng = rng
+        sc = scene
+        # tsides of glossy sides that the first shot samples (some light is in front)
+        ts = first_shot.receiving_tsides
+        self.tsides = ts[np.isin(sc.tside_side[ts], glossy_sides)]
+        self.tside_area = sc.triangle_area[sc.tside_triangle[self.tsides]]
+        n = sc.n_sides
+        self._sum = np.zeros((n, 3))
+        self._dsum = np.zeros((n, 3))
+        self.samples = 0
+        self.E = np.zeros((n, 3))
+        self.direction = np.zeros((n, 3))
+        self.rays = 0
+
+    @property
+    def active(self):
+        return len(self.tsides) > 0 and self.first_shot.n_lights > 0
+
+    def refine(self, n_samples):
+        """``n_samples`` more lobe-sampled rays; updates ``E`` and ``direction``."""
+        if not self.active or n_samples <= 0:
+            return
+        sc, fs = self.scene, self.first_shot
+        side = sc.tside_side[self.tsides]
+        e1 = fs.E[side]                                     # (T, L, 3)
+        power = self.tside_area[:, None] * luminance(e1)    # (T, L)
+        total = power.sum()
+        self.samples += n_samples
+        if not total > 0:                 # nothing lit yet: these samples carry zero
+            self._update()
+            return
+        cdf = np.cumsum(power.ravel())
+        pick = np.minimum(np.searchsorted(cdf, self.rng.random(n_samples) * cdf[-1], side="right"),
+                          power.size - 1)
+        t_idx, light = np.divmod(pick, power.shape[1])
+        p = power.ravel()[pick] / total
+        ts = self.tsides[t_idx]
+        u = self.rng.random((n_samples, 4))
+        pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[ts]], u[:, 0], u[:, 1])
+        nrm = sc.tside_normal[ts]
+        travel = fs.direction[side[t_idx], light]               # light arrives along this
+        s, weight = sc.materials.sample_glossy(sc.side_material[side[t_idx]], nrm, -travel, u[:, 2:])
+        carried = (self.tside_area[t_idx] / p)[:, None] * e1[t_idx, light] * weight   # [W]
+        live = np.nonzero(np.any(carried > 0, axis=1))[0]
+        if len(live):
+            tri, _, _, _ = self.tracer.first_hit(pts[live] + nrm[live] * self.tracer.eps, s[live])
+            self.rays += len(live)
+            hit = tri >= 0
+            rec = sc.side_facing(tri[hit], -s[live][hit])
+            ok = rec >= 0
+            rec, c, d = rec[ok], carried[live][hit][ok], s[live][hit][ok]
+            a = self.area[rec]
+            keep = a > 0
+            rec, c, d = rec[keep], c[keep] / a[keep, None], d[keep]
+            for k in range(3):
+                self._sum[:, k] += np.bincount(rec, c[:, k], minlength=sc.n_sides)
+                self._dsum[:, k] += np.bincount(rec, luminance(c) * d[:, k], minlength=sc.n_sides)
+        self._update()
+
+    def _update(self):
+        self.E = self._sum / max(self.samples, 1)
+        norm = np.linalg.norm(self._dsum, axis=1, keepdims=True)
+        self.direction = np.where(norm > 0, self._dsum / np.maximum(norm, 1e-300), 0.0)
