@@ -19,7 +19,7 @@ def run_cli(*args, **kw):
 
 def test_render_furnace_writes_exr_png_and_stats(tmp_path):
     out, stats = tmp_path / "f.exr", tmp_path / "f.json"
-    p = run_cli("render", "furnace", "--iterations", "300", "--patches", "200", "--resolution", "24", "24",
+    p = run_cli("render", "furnace", "--iterations", "20", "--patches", "200", "--resolution", "24", "24",
                 "--seed", "3", "--out", str(out), "--stats", str(stats))
     assert p.returncode == 0, p.stderr
     img = read_exr(out)
@@ -28,7 +28,7 @@ def test_render_furnace_writes_exr_png_and_stats(tmp_path):
     s = json.loads(stats.read_text())
     for key in ("iterations", "seconds", "rays_traced", "patches", "analytic_radiance", "pixel_relative_rmse"):
         assert key in s
-    assert s["iterations"] == 300 and 150 < s["patches"] < 260
+    assert s["iterations"] == 20 and 150 < s["patches"] < 260
     assert np.allclose(s["image_mean"], img.reshape(-1, 3).mean(axis=0), rtol=1e-5)
     assert max(abs(e) for e in s["mean_relative_error"]) < 0.1
     assert "error vs analytic" in p.stderr

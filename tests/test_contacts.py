@@ -108,7 +108,7 @@ def test_smooth_interpolation_does_not_weld_across_the_contact():
     assert len(out_ids) < 3 * len(t_out) / 2
 
 
-def _cavity_ratio(contacts, iterations=60):
+def _cavity_ratio(contacts, iterations=4):
     sc = pipeline.prepare(box_on_floor(), patches=500) if contacts else subdivide(box_on_floor(), patches=500,
                                                                                   contacts=False)
     r = pipeline.make_renderer(sc, RenderSettings(seed=5))

@@ -1,15 +1,21 @@
-"""Blender bench: the RAYBUNDLE engine against Cycles on the same ``.blend``, side by side in one run.
+"""Blender bench: raybundle against Cycles on the same scene, side by side in one run.
 
 Usage (the bpy module is in the project's venv; about 15 minutes on 2 cores)::
 
     python tools/bench_blender.py demo_scenes/cornell_box.blend --out out/bench-blender
+    python tools/bench_blender.py cornell --times 5 10 30 60 --out out/bench-cornell
+
+The scene is a ``.blend`` (rendered by the RAYBUNDLE engine and by Cycles, each
+opening the file) or a built-in scene of the core (``cornell``, ``cornell-glossy``:
+the core renders it from ``load_scene`` to the EXR written; Cycles renders the same
+triangles, built in ``bpy`` by ``tools/cycles_reference.py``).
 
 1. A long Cycles reference (CPU, no denoising or clamping, box filter one pixel,
    Standard view): two independent halves with ``--reference-samples`` each
    (seeds 1 and 2), kept in ``--out`` and reused.
 2. RAYBUNDLE renders with ``--times`` seconds of iteration, and Cycles renders
    with 1, 2, 4, ... samples until its error is below every RAYBUNDLE error (or a
-   render takes 8 times the longest RAYBUNDLE run, at most 300 s).  Every render is timed from opening the ``.blend`` to the EXR written.
+   render takes 8 times the longest RAYBUNDLE run, at most ``--max-cycles-seconds``).  Every render is timed from opening the ``.blend`` to the EXR written.
 3. The error of each, :func:`raybundle.metrics.image_error` (RMSE / mean of the
    reference over pixels at least 2 px from a directly seen light, with the
    reference's own noise from its halves subtracted), and over all pixels.
@@ -17,7 +23,8 @@ Usage (the bpy module is in the project's venv; about 15 minutes on 2 cores)::
 Writes ``bench.csv``, ``summary.json`` and ``bench.png`` (error against seconds,
 log-log) into ``--out`` and prints, for every RAYBUNDLE time, Cycles' error at the
 same time and the time Cycles needs for RAYBUNDLE's error (log-log
-interpolation between the Cycles runs).
+interpolation between the Cycles runs), and the time each engine needs to reach
+5%, 2%, 1.5% and 1% (interpolated the same way; "> T" when its last run is above).
 """
 from __future__ import annotations
 
@@ -45,14 +52,32 @@ def _open(path):
     return bpy.context.scene
 
 
+def is_blend(scene):
+    return scene.endswith(".blend")
+
+
 def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None):
-    """Open ``blend``, render with ``engine`` to the EXR ``path``; returns (image, wall seconds)."""
+    """Open ``blend`` (or build the built-in scene), render with ``engine`` to the EXR
+    ``path``; returns (image, wall seconds)."""
     import bpy
 
-    from cycles_reference import cycles_settings, exr_output
-    from raybundle.io import read_exr
+    from cycles_reference import cycles_settings, exr_output, render_scene
+    from raybundle.io import read_exr, write_exr
+    from raybundle.scenes import load_scene
 
     t0 = time.perf_counter()
+    if not is_blend(blend):
+        if engine == "CYCLES":
+            img = render_scene(load_scene(blend), samples, path, seed)
+        else:
+            from raybundle.pipeline import DEFAULT_PATCHES, make_renderer, prepare
+            from raybundle.imaging import RenderSettings
+
+            r = make_renderer(prepare(load_scene(blend), patches or DEFAULT_PATCHES), RenderSettings(seed=seed))
+            img = r.run(seconds=seconds).image
+            r.tracer.close()
+            write_exr(path, img)
+        return img, time.perf_counter() - t0
     scene = _open(blend)
     if engine == "CYCLES":
         cycles_settings(samples, seed, world_strength=None)
@@ -69,12 +94,15 @@ def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None
 
 
 def light_mask(blend):
-    """Pixels within 2 px of a directly seen light, from the exported scene."""
+    """Pixels within 2 px of a directly seen light, from the exported (or built-in) scene."""
     import bpy
 
     from raybundle.metrics import light_source_mask
+    from raybundle.scenes import load_scene
     from raybundle_addon.export import export_scene
 
+    if not is_blend(blend):
+        return light_source_mask(load_scene(blend))
     _open(blend)
     ex = export_scene(bpy.context.evaluated_depsgraph_get())
     return light_source_mask(ex.scene, ex.scene.camera)
@@ -92,10 +120,12 @@ def loglog_at(xs, ys, x):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("blend")
+    p.add_argument("blend", help="a .blend file or a built-in scene name (cornell, cornell-glossy)")
     p.add_argument("--out", default="out/bench-blender")
     p.add_argument("--times", type=float, nargs="+", default=[10.0, 30.0])
     p.add_argument("--reference-samples", type=int, default=1024)
+    p.add_argument("--max-cycles-seconds", type=float, default=300.0,
+                   help="stop the Cycles ladder after a render this long")
     p.add_argument("--patches", type=int, default=None, help="RAYBUNDLE target patch count (default: the file's)")
     a = p.parse_args(argv)
     from raybundle.io import read_exr
@@ -132,7 +162,7 @@ def main(argv=None):
         rows.append(dict(engine="cycles", setting=samples, seconds=wall, error=e, error_all_pixels=full))
         print(f"cycles {samples} spp: {wall:.1f} s wall, error {e:.4f} (all pixels {full:.4f})", flush=True)
         ours = [r for r in rows if r["engine"] == "raybundle"]
-        if e < min(r["error"] for r in ours) or wall > min(8 * max(r["seconds"] for r in ours), 300.0):
+        if e < min(r["error"] for r in ours) or wall > min(8 * max(r["seconds"] for r in ours), a.max_cycles_seconds):
             break
         samples *= 2
     cyc = [r for r in rows if r["engine"] == "cycles"]
@@ -147,12 +177,29 @@ def main(argv=None):
         print(f"at {r['seconds']:.1f} s: raybundle {r['error']:.4f}, Cycles "
               f"{'n/a' if c_err is None else f'{c_err:.4f}'}; Cycles reaches {r['error']:.4f} in "
               f"{'n/a' if c_time is None else f'{c_time:.1f} s'}")
+    targets = {}
+    for engine in ("raybundle", "cycles"):
+        runs = sorted((r["seconds"], r["error"]) for r in rows if r["engine"] == engine)
+        t, e = zip(*runs)
+        targets[engine] = {}
+        for goal in (0.05, 0.02, 0.015, 0.01):
+            # time to the goal: first crossing of the log-log curve, "> last" if never below
+            hit = next((k for k in range(len(e)) if e[k] <= goal), None)
+            if hit is None:
+                targets[engine][goal] = f"> {t[-1]:.0f} s"
+            elif hit == 0:
+                targets[engine][goal] = f"<= {t[0]:.1f} s"
+            else:
+                x = loglog_at(e[hit - 1:hit + 1][::-1], t[hit - 1:hit + 1][::-1], goal)
+                targets[engine][goal] = f"{x:.1f} s"
+        print(f"{engine} reaches " + ", ".join(f"{100 * g:g}% in {v}" for g, v in targets[engine].items()))
     with open(os.path.join(a.out, "bench.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
     with open(os.path.join(a.out, "summary.json"), "w") as f:
-        json.dump(dict(blend=a.blend, reference_samples_per_half=a.reference_samples, rows=rows, summary=summary),
+        json.dump(dict(blend=a.blend, reference_samples_per_half=a.reference_samples, rows=rows, summary=summary,
+                       time_to_error={k: {f"{100 * g:g}%": v for g, v in d.items()} for k, d in targets.items()}),
                   f, indent=1)
     chart(os.path.join(a.out, "bench.png"), rows, os.path.basename(a.blend))
     print(f"wrote {a.out}/bench.csv, summary.json, bench.png")
@@ -171,7 +218,7 @@ def chart(path, rows, title):
         t, e, full = zip(*pts)
         ax.loglog(t, e, style, label=f"{engine} (pixels 2 px from lights)")
         ax.loglog(t, full, style, alpha=0.4, label=f"{engine} (all pixels)")
-    ax.set_xlabel("seconds from opening the .blend to the EXR written (2 cores)")
+    ax.set_xlabel("seconds from loading the scene to the EXR written (2 cores)")
     ax.set_ylabel("relative RMSE against a long Cycles render")
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)

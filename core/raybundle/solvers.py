@@ -74,6 +74,8 @@ class StochasticIterationSolver:
     """Stochastic iteration with ray bundles and incoming first shot (thesis 3.3, 3.4)."""
 
     name = "stochastic-iteration"
+    #: iterations left out of the running average (it restarts at iteration BURN_IN + 1)
+    BURN_IN = 8
 
     def __init__(self, scene, tracer, direct, sequence, bundle_resolution=0, seed=0, directions_per_step=1,
                  caustics=True):
@@ -116,7 +118,7 @@ class StochasticIterationSolver:
                                    self.glossy_patches) if caustics else None
         if self.caustic is not None and not self.caustic.active:
             self.caustic = None
-        self.caustic_refine = max(256, len(self.caustic.tsides) // 4) if self.caustic is not None else 0
+        self.caustic_refine = max(1024, len(self.caustic.tsides)) if self.caustic is not None else 0
         self.environment = np.asarray(scene.environment, float)
         n = scene.n_sides
         self._all_patches = np.arange(n)
@@ -124,6 +126,7 @@ class StochasticIterationSolver:
         self.glossy_incoming = self.incoming        # E_i(d_k) of glossy sides, received from t_i
         self.receive_direction = np.zeros((n, 3))   # t_i of the current iterate
         self.mean_incoming = np.zeros((n, 3))
+        self.averaged = 0                           # iterations in mean_incoming
         self.direction = None
         self.stats = SolverStats()
 
@@ -233,7 +236,11 @@ class StochasticIterationSolver:
         st = self.stats
         st.iterations += 1
         st.directions += k_dirs
-        self.mean_incoming += (E - self.mean_incoming) / st.iterations
+        # the running average restarts once, after BURN_IN iterations: the iterates start from
+        # zero and approach the solution like albedo^n, a start-up bias ~ 1/(n (1 - albedo))
+        # that would otherwise fade only as fast as 1/n (3% after 100 iterations at albedo 0.7)
+        self.averaged = st.iterations - (self.BURN_IN if st.iterations > self.BURN_IN else 0)
+        self.mean_incoming += (E - self.mean_incoming) / self.averaged
         st.rays += self.direct.rays - before
         st.seconds += time.perf_counter() - t0
         return bundles
