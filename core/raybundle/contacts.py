@@ -21,8 +21,10 @@ cuts every patch that such a segment crosses along the segment's line into
 convex pieces; each piece is a patch of its own (one or more triangles).
 Pieces smaller than ``min_fraction`` (0.5%) of the patch are not cut off (their
 leak is that small).  Corners that lie on a contact segment get a *weld tag*
-naming the segment and the side of it the patch lies on, so that smooth
-(Gouraud) interpolation of patch values does not blend across the contact.
+naming the segment's line and the side of it the triangle lies on, so that
+smooth interpolation of patch values does not blend across the contact but
+does along it; triangles that touch a contact without being cut keep their
+patch and only get the tags.
 """
 from __future__ import annotations
 
@@ -227,6 +229,8 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
     eps = 1e-9 * max(r, 1e-12)
     T = len(scene.triangles)
     replaced = np.zeros(T, bool)
+    corner_tag = (scene.triangle_corner_tag.copy() if scene.triangle_corner_tag is not None
+                  else np.zeros((T, 3), np.int64))
     new_pts, new_tris, new_from, new_patch_local, new_tags = [], [], [], [], []
     tag_ids: dict = {}
     n_cut = 0
@@ -239,7 +243,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
         touch = np.zeros((len(group), len(seg)), bool)
         step = max(1, 4_000_000 // max(len(seg), 1))
         for s in range(0, len(group), step):
-            touch[s:s + step] = _touching(c2[s:s + step], seg, eps)
+            touch[s:s + step] = _touching(c2[s:s + step], seg, eps) | _corner_on(c2[s:s + step], seg, eps)
         for f in np.nonzero(touch.any(axis=1))[0]:
             tri = group[f]
             segs = np.nonzero(touch[f])[0]
@@ -256,7 +260,9 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
                 polys = nxt
             polys = [_without_collinear(poly, eps) for poly in polys]
             tags = [_corner_tags(poly, seg, segs, seg_base, eps, tag_ids) for poly in polys]
-            if len(polys) == 1 and not any(tags[0]):
+            if len(polys) == 1:          # not cut: the triangle keeps its patch, its corners get their tags
+                if any(tags[0]):
+                    corner_tag[tri] = _tags_in_order(tags[0], polys[0], c2[f], eps)
                 continue
             replaced[tri] = True
             n_cut += len(polys) > 1
@@ -273,21 +279,19 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
                     new_patch_local.append(n_new_patches)
                 n_new_patches += 1
         seg_base += len(seg)
-    if not replaced.any():
+    if not replaced.any() and not corner_tag.any():
         return scene, 0
     keep = np.nonzero(~replaced)[0]
-    pts = np.concatenate(new_pts)
+    pts = np.concatenate(new_pts) if new_pts else np.zeros((0, 3))
     v = np.concatenate([scene.vertices, pts])
-    t = np.concatenate([scene.triangles[keep], np.asarray(new_tris, np.int64) + len(scene.vertices)])
+    t = np.concatenate([scene.triangles[keep], np.asarray(new_tris, np.int64).reshape(-1, 3) + len(scene.vertices)])
     src = np.concatenate([keep, np.asarray(new_from, np.int64)])
-    old_tag = (scene.triangle_corner_tag if scene.triangle_corner_tag is not None
-               else np.zeros((T, 3), np.int64))
-    tags = np.concatenate([old_tag[keep], np.asarray(new_tags, np.int64)])
+    tags = np.concatenate([corner_tag[keep], np.asarray(new_tags, np.int64).reshape(-1, 3)])
     # patches: untouched triangles keep theirs (renumbered), pieces get new ids
     old_patch = scene.triangle_patch[keep]
     _, old_patch = np.unique(old_patch, return_inverse=True)
     n_old = int(old_patch.max()) + 1 if len(old_patch) else 0
-    patch = np.concatenate([old_patch.reshape(-1), n_old + np.asarray(new_patch_local, np.int64)])
+    patch = np.concatenate([old_patch.reshape(-1), n_old + np.asarray(new_patch_local, np.int64)]).astype(np.int64)
     # weld the new corners that coincide
     q = np.round(v / max(r * 1e-7, 1e-12)).astype(np.int64)
     _, first, inv = np.unique(q, axis=0, return_index=True, return_inverse=True)
@@ -299,9 +303,31 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
     return out, n_cut
 
 
+def _corner_on(tri2d, seg, eps):
+    """(F, K) bool: a corner of triangle f lies on segment k (a contact at one point)."""
+    a, b = seg[None, None, :, 0], seg[None, None, :, 1]                  # (1, 1, K, 2)
+    p = tri2d[:, :, None, :]                                            # (F, 3, 1, 2)
+    d = b - a
+    length = np.maximum(np.linalg.norm(d, axis=-1), 1e-300)
+    off = np.abs(_cross2(d, p - a)) / length
+    along = np.einsum("...i,...i->...", p - a, d) / length
+    return ((off <= 1e3 * eps) & (along >= -1e3 * eps) & (along <= length + 1e3 * eps)).any(axis=1)
+
+
+def _tags_in_order(tags, poly, tri2d, eps):
+    """Tags of the corners of an uncut triangle, in the triangle's corner order
+    (``_without_collinear`` may have rotated the polygon)."""
+    out = [0, 0, 0]
+    for tg, p in zip(tags, poly):
+        out[int(np.argmin(np.linalg.norm(tri2d - p, axis=1)))] = tg
+    return out
+
+
 def _corner_tags(poly, seg, segs, seg_base, eps, tag_ids):
-    """Weld tag per polygon corner: which contact segments the corner lies on,
-    and on which side of each the polygon lies (0 for none)."""
+    """Weld tag per polygon corner: which contact lines the corner lies on, and on
+    which side of each the polygon lies (0 for none).  A line, not a segment: the
+    collinear segments of one contact (a floor's subdivided edge along a wall) weld
+    along it."""
     centroid = poly.mean(axis=0)
     out = []
     for p in poly:
@@ -313,7 +339,12 @@ def _corner_tags(poly, seg, segs, seg_base, eps, tag_ids):
             off = abs(d[0] * (p[1] - a[1]) - d[1] * (p[0] - a[0])) / length
             along = np.dot(p - a, d) / length
             if off <= 1e3 * eps and -1e3 * eps <= along <= length + 1e3 * eps:
-                side = d[0] * (centroid[1] - a[1]) - d[1] * (centroid[0] - a[0]) > 0
-                key.append((seg_base + int(k), bool(side)))
-        out.append(tag_ids.setdefault(tuple(sorted(key)), len(tag_ids) + 1) if key else 0)
+                u = d / length
+                if u[0] < -1e-9 or (abs(u[0]) <= 1e-9 and u[1] < 0):     # one direction per line
+                    u = -u
+                line = (seg_base, *np.round(u * 1e6).astype(np.int64).tolist(),
+                        int(np.round((u[0] * a[1] - u[1] * a[0]) / (1e3 * eps))))
+                side = u[0] * (centroid[1] - a[1]) - u[1] * (centroid[0] - a[0]) > 0
+                key.append((line, bool(side)))
+        out.append(tag_ids.setdefault(tuple(sorted(set(key))), len(tag_ids) + 1) if key else 0)
     return out
