@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench bench-blender extension cycles-reference clean
+.PHONY: demo test bench bench-blender bench-boxes extension cycles-reference clean
 
 $(STAMP): core/pyproject.toml requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -25,6 +25,11 @@ bench: $(STAMP)
 # The RAYBUNDLE engine against Cycles on the Cornell .blend (about 15 minutes on 2 cores)
 bench-blender: $(STAMP)
 	$(PY) tools/bench_blender.py demo_scenes/cornell_box.blend --out out/bench-blender
+
+# The built-in boxes against Cycles on the same triangles, side by side (about 45 minutes on 2 cores)
+bench-boxes: $(STAMP)
+	$(PY) tools/bench_blender.py cornell --times 5 10 30 60 120 --out out/bench-cornell --max-cycles-seconds 260
+	$(PY) tools/bench_blender.py cornell-glossy --times 5 10 30 60 --out out/bench-cornell-glossy --max-cycles-seconds 130
 
 # The installable Blender extension: dist/raybundle-<version>-<platform>.zip for every platform in
 # blender_manifest.toml, built without a Blender binary (Blender's blender_ext.py from the bpy module).

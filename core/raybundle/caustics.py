@@ -16,9 +16,13 @@ estimate of the incoming radiance of every receiving side i::
     E_c,i = sum_{j,l} (A_j / A_i) E1_jl  integral_{s: j sees i} f_g(w_l, s) cos_s ds   [W/m^2]
 
 With (tside t, light l) drawn with probability p_tl ~ A_t lum(E1_jl), a uniform
-point on t and s from the lobe, one sample adds
-``A_t E1_jl weight(s) / (p_tl A_i)`` to the side it hits, ``weight = f cos / pdf``
-(bounded: at most the lobe's albedo).  ``E_c`` is the running mean over all
+point x on t, one sample of light l at x (irradiance ``e`` with visibility, travel
+direction ``w``: :meth:`~raybundle.lights.DirectLighting._light_samples`) and s from
+the lobe for ``w``, one sample adds ``A_t e weight(s) / (p_tl A_i)`` to the side it
+hits, ``weight = f cos / pdf`` (bounded: at most the lobe's albedo).  The light
+sample, not the side's mean travel direction, spreads a lamp's reflection as its
+extent does (with one mean direction a sharp lobe under a lamp threw a
+too-concentrated spot on the ceiling).  ``E_c`` is the running mean over all
 samples, refined a little every iteration as the first shot is.  The iteration
 then leaves the first shot's glossy reflection out of what glossy sides send
 (:meth:`~raybundle.solvers.StochasticIterationSolver.sent_radiance`) and adds
@@ -85,9 +89,16 @@ class CausticShot:
         u = self.rng.random((n_samples, 4))
         pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[ts]], u[:, 0], u[:, 1])
         nrm = sc.tside_normal[ts]
-        travel = fs.direction[side[t_idx], light]               # light arrives along this
+        # the light arriving at this point: one light sample (irradiance with visibility, travel
+        # direction), so an extended lamp's reflection spreads as the lamp's extent makes it
+        e = np.zeros((n_samples, 3))
+        travel = np.zeros((n_samples, 3))
+        for li in np.unique(light):
+            sel = np.nonzero(light == li)[0]
+            e[sel], travel[sel], _ = fs.direct._light_samples(pts[sel], nrm[sel], fs.lights[li],
+                                                              self.rng.random((len(sel), 3)))
         s, weight = sc.materials.sample_glossy(sc.side_material[side[t_idx]], nrm, -travel, u[:, 2:])
-        carried = (self.tside_area[t_idx] / p)[:, None] * e1[t_idx, light] * weight   # [W]
+        carried = (self.tside_area[t_idx] / p)[:, None] * e * weight   # [W]
         live = np.nonzero(np.any(carried > 0, axis=1))[0]
         if len(live):
             tri, _, _, _ = self.tracer.first_hit(pts[live] + nrm[live] * self.tracer.eps, s[live])

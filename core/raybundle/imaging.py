@@ -77,7 +77,9 @@ class RenderSettings:
     most (:meth:`Renderer._noisy_pixels`); ``directions_per_step``: bundle directions
     per iteration, traced together (:meth:`~raybundle.solvers.StochasticIterationSolver.step`);
     ``caustics``: the first shot's glossy reflection by lobe-sampled rays (:mod:`raybundle.caustics`)
-    instead of through the bundles.
+    instead of through the bundles; ``glossy_mis``: with ``glossy_gather``, the mesh lights a
+    glossy lobe reflects are estimated by light samples and by the lobe's ray together
+    (multiple importance sampling, power heuristic) instead of by light samples alone.
     """
 
     bundle_resolution: int = 0
@@ -93,6 +95,7 @@ class RenderSettings:
     emission_edge_samples: int = 16
     directions_per_step: int = 16
     caustics: bool = True
+    glossy_mis: bool = True
     threads: int | None = None
 
 
@@ -152,6 +155,8 @@ class Renderer:
         self._emission_range = np.stack([np.full(n, np.inf), np.full(n, -np.inf)])   # min, max seen
         mats = scene.materials
         self.glossy_material = mats.is_glossy
+        # glossy lobes seen by the eye: light samples and the lobe's own ray share the mesh lights (MIS)
+        self._light_mis = bool(settings.glossy_gather and settings.glossy_mis)
         py, px = np.divmod(np.arange(n), camera.width)
         self._pixel = np.stack([px, py], axis=1).astype(float)
 
@@ -239,9 +244,10 @@ class Renderer:
         hf = h[front]
         if self.direct.n_lights and len(hf):
             before = self.direct.rays
+            mis = self.glossy_material[g.material[hf]] if self._light_mis else None
             out[hf] += self.direct.reflected_radiance(
                 g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], self._light_uniforms(u_light[hf]),
-                self.settings.light_samples)
+                self.settings.light_samples, mis=mis)
             self.image_rays += self.direct.rays - before
         gl = hf[self.glossy_material[g.material[hf]]]
         if self.settings.glossy_gather:
@@ -317,15 +323,18 @@ class Renderer:
         vert = self.vertex_values(e) if self.settings.smooth and len(idx) else None
         m, n, wo = g.material[idx], g.normal[idx], g.w_eye[idx]
         w_i, weight = sc.materials.sample_glossy(m, n, wo, u)
-        return self._trace_paths(g.point[idx], n, w_i, weight, e, vert)
+        return self._trace_paths(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo) if self._light_mis else None)
 
-    def _trace_paths(self, pts, n, w_i, throughput, e, vert):
+    def _trace_paths(self, pts, n, w_i, throughput, e, vert, light_mis=None):
         """Radiance (N, 3) arriving at ``pts`` (N, 3) with normals ``n`` along ``w_i``
         (N, 3), times ``throughput`` (N, 3), read from the solver where each ray lands
         (:meth:`glossy_gather`): the hit's outgoing radiance from the side values ``e``
         (S, 3) (the diffuse lobe's incoming radiance, interpolated with the vertex
         values ``vert`` or flat when None); at glossy hits the path goes on along
-        the hit's glossy lobe, up to ``glossy_gather_depth`` rays in all."""
+        the hit's glossy lobe, up to ``glossy_gather_depth`` rays in all.  With
+        ``light_mis = (materials, w_out)`` of the glossy lobes the rays were drawn from,
+        first rays that meet a first-shot mesh light add its emission, MIS-weighted
+        against the light samples (:meth:`~raybundle.lights.DirectLighting.lobe_hits_light`)."""
         sc, mats, solver = self.scene, self.scene.materials, self.solver
         out = np.zeros((len(pts), 3))
         pix = np.arange(len(pts))                     # which output row each path belongs to
@@ -345,6 +354,11 @@ class Renderer:
                 gone = live[~hit]
                 np.add.at(out, pix[gone], throughput[gone] * sc.environment)
             live, tri, t = live[hit], tri[hit], t[hit]
+            if bounce == 0 and light_mis is not None and len(live):
+                m0, wo0 = light_mis
+                le = self.direct.lobe_hits_light(pts[live], m0[live], n[live], wo0[live], w_i[live], tri,
+                                                 pts[live] + t[:, None] * w_i[live], self.settings.light_samples)
+                out[live] += throughput[live] * le
             bary = np.stack([1 - bu - bv, bu, bv], axis=1)[hit]
             ts = sc.seen_tside(tri, w_i[live])
             patch = sc.tside_side[ts]

@@ -99,6 +99,28 @@ class MeshLight:
         lit = np.where(self.two_sided[k], cos_l != 0, cos_l > 0)
         return y, (np.abs(e) * lit / p_k)[:, None] * self.radiance
 
+    def pdf(self, points, k, y):
+        """Density [1/sr] with which :meth:`sample` draws, from ``points`` (N, 3), the
+        direction to ``y`` (N, 3) on the light's triangle ``triangles[k]`` (k (N,)):
+        ``p_k / O_k`` where the triangle looks large (solid-angle sampling), else
+        ``p_k r^2 / (A_k |cos_l|) = r^2 / (A |cos_l|)`` (area sampling)."""
+        from .sampling import triangle_solid_angle
+
+        sc = self.scene
+        tri = self.triangles[k]
+        area_k = sc.triangle_area[tri]
+        v = y - points
+        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+        cos_l = np.abs(np.einsum("ij,ij->i", sc.triangle_normal[tri], v)) / np.sqrt(r2)
+        pdf = r2 / (np.maximum(cos_l, 1e-300) * self.area)
+        gap = np.maximum(np.linalg.norm(self._centroid[k] - points, axis=1) - self._radius[k], 0.0)
+        near = np.nonzero(area_k >= self.MIN_SOLID_ANGLE * gap * gap)[0]
+        if len(near):
+            rel = sc.triangle_corners[tri[near]] - points[near, None, :]
+            omega = triangle_solid_angle(rel[:, 0], rel[:, 1], rel[:, 2])
+            pdf[near] = (area_k[near] / self.area) / np.maximum(omega, 1e-300)
+        return pdf
+
     def in_front(self, origin, normal):
         """(N,) bool: some point of the light lies in front of the planes (origin, normal) (N, 3)."""
         c = self.scene.triangle_corners[self.triangles].reshape(-1, 3)
@@ -233,6 +255,13 @@ class DirectLighting:
         self.area_lights += [ShapeLight(al.center[k], al.axis_u[k], al.axis_v[k], al.normal[k], bool(al.shape[k] == 1),
                                         float(al.area[k]), al.radiance[k]) for k in range(len(al))
                              if np.any(al.radiance[k] > 0)]
+        # mesh-light triangles: which light (index into light_list()) and which of its triangles
+        self.triangle_light = np.full(len(scene.triangles), -1, np.int64)
+        self.triangle_light_k = np.zeros(len(scene.triangles), np.int64)
+        for li, light in enumerate(self.area_lights):
+            if isinstance(light, MeshLight):
+                self.triangle_light[light.triangles] = li
+                self.triangle_light_k[light.triangles] = np.arange(len(light.triangles))
         sl = scene.sun_lights
         far = 4.0 * tracer.radius + 1.0
         self.point_lights += [SunLight(sl.direction[k], sl.irradiance[k], float(sl.angle[k]), far)
@@ -276,12 +305,18 @@ class DirectLighting:
         """How many light samples :meth:`reflected_radiance` draws per point."""
         return samples_per_light * len(self.area_lights) + len(self.point_lights)
 
-    def reflected_radiance(self, points, normals, mats, w_out, u, samples_per_light=1):
+    def reflected_radiance(self, points, normals, mats, w_out, u, samples_per_light=1, mis=None):
         """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
 
         Unbiased estimate with ``samples_per_light`` shadow rays per area light
         (one per point light or sun): ``sum_l mean_s e_l cos_x f(w_travel, w_out) V``.
         ``u``: uniforms (N, K, 3) with K = :meth:`samples_per_pass`, or a Generator.
+        ``mis`` (N,) bool: points whose glossy lobe also gets one lobe-sampled ray that
+        counts the mesh lights it meets (:meth:`mis_weight`); the glossy part of their
+        mesh-light samples is weighted by ``w_l = (n p_l)^2 / ((n p_l)^2 + p_g^2)`` (power
+        heuristic; n = ``samples_per_light``, p_l and p_g the light's and the lobe's
+        densities of the sampled direction), so a sharp lobe reflecting a lamp is found by
+        the lobe's ray, not by rare light samples with a huge BRDF value.
         """
         out = np.zeros((len(points), 3))
         if isinstance(u, np.random.Generator):
@@ -290,12 +325,49 @@ class DirectLighting:
         for light in self.light_list():
             n_s = samples_per_light if isinstance(light, (MeshLight, ShapeLight)) else 1
             for _ in range(n_s):
-                e, travel, _ = self._light_samples(points, normals, light, u[:, k])
+                e, travel, cos_x = self._light_samples(points, normals, light, u[:, k])
                 k += 1
                 live = np.any(e > 0, axis=1)
                 if live.any():
-                    f = self.scene.materials.brdf(mats[live], normals[live], travel[live], w_out[live])
+                    mt = self.scene.materials
+                    f = mt.brdf(mats[live], normals[live], travel[live], w_out[live])
+                    if mis is not None and isinstance(light, MeshLight):
+                        sel = np.nonzero(mis[live])[0]
+                        if len(sel):
+                            i = np.nonzero(live)[0][sel]
+                            c = int(np.argmax(light.radiance))
+                            # e = Le cos_x / p_l for an unblocked sample (MeshLight.sample)
+                            p_l = light.radiance[c] * cos_x[i] / e[i, c]
+                            p_g = mt.glossy_pdf(mats[i], normals[i], -travel[i], w_out[i])
+                            w_l = 1.0 - self.mis_weight(p_g, n_s * p_l)
+                            f[sel] -= (1.0 - w_l)[:, None] * mt.brdf(mats[i], normals[i], travel[i], w_out[i],
+                                                                     diffuse=False)
                     out[live] += e[live] * f / n_s
+        return out
+
+    @staticmethod
+    def mis_weight(p_a, p_b):
+        """Power-heuristic weight of strategy a against b: ``p_a^2 / (p_a^2 + p_b^2)``."""
+        a2, b2 = p_a * p_a, p_b * p_b
+        return np.where(a2 > 0, a2 / np.maximum(a2 + b2, 1e-300), 0.0)
+
+    def lobe_hits_light(self, origins, mats, normals, w_out, w_in, triangles, hits, samples_per_light=1):
+        """Emitted radiance (N, 3) of first-shot mesh lights met by lobe-sampled rays,
+        MIS-weighted against light sampling (:meth:`reflected_radiance` with ``mis``):
+        ``Le w_g``, ``w_g = p_g^2 / (p_g^2 + (n p_l)^2)``.  ``origins``, ``normals``,
+        ``w_out``, ``w_in`` (N, 3) at the surface the rays leave along ``w_in``;
+        ``triangles`` (N,) the triangles met (-1 none) at points ``hits`` (N, 3)."""
+        out = np.zeros((len(origins), 3))
+        li = np.where(triangles >= 0, self.triangle_light[np.maximum(triangles, 0)], -1)
+        for l_id in np.unique(li[li >= 0]):
+            light = self.area_lights[l_id]
+            i = np.nonzero(li == l_id)[0]
+            tri = triangles[i]
+            cos_l = np.einsum("ij,ij->i", self.scene.triangle_normal[tri], -w_in[i])
+            lit = np.where(light.two_sided[self.triangle_light_k[tri]], cos_l != 0, cos_l > 0)
+            p_l = samples_per_light * light.pdf(origins[i], self.triangle_light_k[tri], hits[i])
+            p_g = self.scene.materials.glossy_pdf(mats[i], normals[i], w_in[i], w_out[i])
+            out[i] = (lit * self.mis_weight(p_g, p_l))[:, None] * light.radiance
         return out
 
 

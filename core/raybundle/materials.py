@@ -365,6 +365,22 @@ class MaterialTable:
             weight[lay] = w[lay][:, None] * self._glossy_factor(mat[lay], c, cos_o)
         return w_i, weight
 
+    def glossy_pdf(self, mat, normal, w_in, w_out):
+        """Density [1/sr] with which :meth:`sample_glossy` draws ``w_in`` (N, 3), towards
+        the light, for the viewer direction ``w_out`` (N, 3): ``D(h) (n.h) / (4 h.w_out)``
+        (half vectors drawn with density D(h) (n.h), mirrored: Jacobian 1 / (4 h.w_out));
+        0 where either direction is below the surface."""
+        alpha = self.alpha[np.asarray(mat)]
+        h = w_in + w_out
+        h = h / (np.linalg.norm(h, axis=1, keepdims=True) + 1e-300)
+        cos_h = np.einsum("ij,ij->i", normal, h)
+        h_o = np.einsum("ij,ij->i", h, w_out)
+        ok = (np.einsum("ij,ij->i", normal, w_in) > 0) & (np.einsum("ij,ij->i", normal, w_out) > 0) & (h_o > 0)
+        a2 = alpha * alpha
+        denom = cos_h * cos_h * (a2 - 1.0) + 1.0
+        d = a2 / (np.pi * denom * denom)
+        return np.where(ok, d * cos_h / (4.0 * np.maximum(h_o, 1e-300)), 0.0)
+
     def _glossy_factor(self, mat, c, cos_out):
         """(N, 3) ``g F_g(c) C_g(mu_o) + (1 - g) F_s(c) C_s(mu_o)`` of layered materials:
         what multiplies the untinted GGX lobe; ``c = h.w_out``."""
