@@ -1,6 +1,7 @@
-"""Reconstruction of the diffuse light between patches: the L2 projection onto hat functions
-(Renderer.projected_vertex_values) against closed forms, and against averaging the patches
-around a vertex (Renderer.vertex_values), which puts a patch-wide mean on a concave edge.
+"""Reconstruction of the diffuse light between patches: the L2 projection onto hat
+functions (raybundle.reconstruction.LinearReconstruction.projected) against closed forms,
+and against averaging the patches around a vertex (LinearReconstruction.averaged), which
+puts a patch-wide mean on a concave edge.
 
 Deterministic: the patch values fed in are exact patch means (quadrature), so the tests
 measure the reconstruction alone, not the solver's noise.
@@ -60,15 +61,15 @@ def test_projection_keeps_constants_and_halves_the_error_of_linear_functions():
     (which is off by half a patch's slope on every boundary), in RMS and at the worst vertex."""
     r = floor_and_wall()
     sc = r.scene
-    const = r.projected_vertex_values(np.full((sc.n_sides, 1), 2.5))[:, 0]
+    const = r.solver.reconstruction.projected(np.full((sc.n_sides, 1), 2.5))[:, 0]
     assert np.abs(const - 2.5).max() < 1e-12
     slope = np.array([0.3, -0.2, 0.5])
     centroid = sc.triangle_corners[sc.tside_triangle].mean(axis=1)        # a linear function's mean
     area = sc.triangle_area[sc.tside_triangle]
     f_side = np.bincount(sc.tside_side, area * (1.0 + centroid @ slope), minlength=sc.n_sides) / \
         np.bincount(sc.tside_side, area, minlength=sc.n_sides)
-    proj = r.projected_vertex_values(f_side[:, None])[:, 0]
-    avg = r.vertex_values(f_side[:, None])[:, 0]
+    proj = r.solver.reconstruction.projected(f_side[:, None])[:, 0]
+    avg = r.solver.reconstruction.averaged(f_side[:, None])[:, 0]
     exact = 1.0 + vertex_positions(sc, len(proj)) @ slope
     rms = [np.sqrt(np.mean((x - exact) ** 2)) for x in (proj, avg)]
     assert rms[0] < 0.5 * rms[1], rms
@@ -97,8 +98,8 @@ def test_projection_follows_the_corner_profile():
     walls = np.unique(side)
     e_side[walls] = (np.bincount(side, area * e_ts, minlength=sc.n_sides)
                      / np.maximum(np.bincount(side, area, minlength=sc.n_sides), 1e-300))[walls]
-    proj = r.projected_vertex_values(e_side[:, None])[:, 0]
-    avg = r.vertex_values(e_side[:, None])[:, 0]
+    proj = r.solver.reconstruction.projected(e_side[:, None])[:, 0]
+    avg = r.solver.reconstruction.averaged(e_side[:, None])[:, 0]
     pos = vertex_positions(sc, len(proj))
     wall_v = np.unique(sc.smooth_vertex_ids[ts])
     inner = wall_v[np.abs(pos[wall_v, 1]) < 0.6]                  # away from the floor's side edges
@@ -111,3 +112,4 @@ def test_projection_follows_the_corner_profile():
     above = inner[(height > 1e-9) & (height < 0.6)]                # the two rows above the edge
     err_above = np.abs(proj[above] / wall_irradiance(pos[above]) - 1)
     assert err_above.max() < 0.02, err_above
+

@@ -24,7 +24,7 @@ sharpest:
   average at ``resolve_samples`` stratified sub-pixel positions, with ``E_bar``
   interpolated linearly over each smooth surface from vertex values that are
   the L2 projection of the patch values onto hat functions
-  (:meth:`Renderer.projected_vertex_values`), or flat per patch.
+  (:meth:`~raybundle.reconstruction.LinearReconstruction.projected`), or flat per patch.
 
 :class:`Renderer` drives solver iterations and image passes, reports progress,
 honours a stop flag, and returns a :class:`RenderResult`.
@@ -193,7 +193,7 @@ class Renderer:
         (N, 3), or flat per side when ``vert`` is None."""
         if vert is None:
             return side_values[self.scene.tside_side[tside]]
-        return np.einsum("nk,nkc->nc", bary, vert[self.scene.smooth_vertex_ids[tside]])
+        return self.solver.reconstruction.at(vert, tside, bary)
 
     def image_pass(self):
         """One jittered sample per pixel of the per-pass part: emission seen, direct
@@ -320,7 +320,7 @@ class Renderer:
         """
         sc, solver = self.scene, self.solver
         e = solver.indirect_incoming() + solver.first_shot.E.sum(axis=1)
-        vert = self.vertex_values(e) if self.settings.smooth and len(idx) else None
+        vert = self.solver.reconstruction.averaged(e) if self.settings.smooth and len(idx) else None
         m, n, wo = g.material[idx], g.normal[idx], g.w_eye[idx]
         w_i, weight = sc.materials.sample_glossy(m, n, wo, u)
         return self._trace_paths(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo) if self._light_mis else None)
@@ -398,46 +398,6 @@ class Renderer:
             self.glossy_sum[gl] += solver.caustic.E[patch] * f
 
     # -------------------------------------------------------------- resolve
-    def vertex_values(self, side_values):
-        """Side values (S, C) -> per welded vertex (V, C): mean of the adjacent sides
-        weighted by their receiving (not buried) area."""
-        sc = self.scene
-        ids = sc.smooth_vertex_ids
-        nv = int(ids.max()) + 1
-        w = np.repeat(self.solver.tside_open_area, 3)
-        tri_val = side_values[sc.tside_side]
-        out = np.stack([np.bincount(ids.ravel(), np.repeat(tri_val[:, k], 3) * w, minlength=nv)
-                        for k in range(side_values.shape[1])], axis=1)
-        return out / np.bincount(ids.ravel(), w, minlength=nv)[:, None]
-
-    def projected_vertex_values(self, side_values):
-        """Side values (S, C) -> per welded vertex (V, C): the L2 projection of the
-        piecewise-constant patch solution onto piecewise-linear (hat) functions,
-        ``x = M^-1 b`` with ``M_uv = int phi_u phi_v dA`` (the consistent mass matrix
-        over the receiving area) and ``b_v = int phi_v E dA = sum_T A_T E_T / 3``.
-
-        Where a value falls into a concave corner or towards a contact, the patches
-        next to the edge hold the mean over a strip a patch wide: averaging them
-        (:meth:`vertex_values`) puts that mean on the edge itself, while the
-        projection fits the linear function whose patch means match, which slopes
-        on into the edge.  Constants come back exactly; patch means of a linear
-        function with half the error of averaging (``tests/test_reconstruction.py``).
-        Vertices without receiving area keep :meth:`vertex_values`.
-        """
-        sc = self.scene
-        ids = sc.smooth_vertex_ids
-        nv = int(ids.max()) + 1
-        area = self.solver.tside_open_area
-        tri_val = side_values[sc.tside_side]
-        b = np.stack([np.bincount(ids.ravel(), np.repeat(area * tri_val[:, c] / 3, 3), minlength=nv)
-                      for c in range(side_values.shape[1])], axis=1)
-        # the fit may overshoot below zero next to a jump (a caustic's edge): radiance is not negative
-        x = np.maximum(_solve_mass(b, area, ids, nv), 0.0)
-        empty = np.bincount(ids.ravel(), np.repeat(area, 3), minlength=nv) <= 0
-        if empty.any():
-            x[empty] = self.vertex_values(side_values)[empty]
-        return x
-
     def diffuse_indirect(self, e_bar=None, samples=None):
         """(N, 3) W_d kd/pi * E_bar at the pixels (W_d: the diffuse weight under a
         Principled layer, 1 without), box-filtered with ``samples`` (default
@@ -445,9 +405,9 @@ class Renderer:
 
         ``e_bar`` (S, 3) defaults to the solver's :meth:`~raybundle.solvers.StochasticIterationSolver.indirect_incoming`.
         With ``smooth``, the bundles' running average is interpolated by
-        :meth:`projected_vertex_values`, the caustic first shot (sharp-edged and noisier,
-        which a projection would ring on: 5.9% -> 7.6% on ``cornell-glossy``) by
-        :meth:`vertex_values`.
+        :meth:`~raybundle.reconstruction.LinearReconstruction.projected`, the caustic first
+        shot (sharp-edged and noisier, which a projection would ring on: 5.9% -> 7.6% on
+        ``cornell-glossy``) by :meth:`~raybundle.reconstruction.LinearReconstruction.averaged`.
         """
         sc, solver = self.scene, self.solver
         n = len(self._pixel)
@@ -460,9 +420,10 @@ class Renderer:
             return out
         vert = None
         if self.settings.smooth:
-            vert = self.projected_vertex_values(e_bar if sharp is None else e_bar - sharp)
+            rec = solver.reconstruction
+            vert = rec.projected(e_bar if sharp is None else e_bar - sharp)
             if sharp is not None:
-                vert += self.vertex_values(sharp)
+                vert += rec.averaged(sharp)
         kd = sc.materials.diffuse_reflectance
         k = max(1, int(samples or self.settings.resolve_samples))
         offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve
@@ -559,44 +520,3 @@ class Renderer:
         if not np.isfinite(img).all():
             raise FloatingPointError("the image has non-finite values; this is a bug, please report it")
         return RenderResult(img, stats, cancelled)
-
-
-def _solve_mass(b, area, ids, nv, iterations=100, tol=1e-10):
-    """x (V, C) with M x = b (V, C), M the consistent P1 mass matrix of the triangles
-    with areas ``area`` (T,) and vertex ids ``ids`` (T, 3): ``M_uv = sum_T A_T (1 + [u = v]) / 12``
-    over the triangles holding u and v.  Jacobi-preconditioned conjugate gradients
-    (the lumped mass as preconditioner keeps the condition number below 4 on any
-    mesh: a few tens of iterations).  Rows of vertices without area are the identity."""
-    flat = ids.ravel()
-    lumped = np.bincount(flat, np.repeat(area, 3) / 3, minlength=nv)
-    empty = lumped <= 0
-    diag = np.where(empty, 1.0, lumped)
-
-    def mass(v):
-        s = v[ids].sum(axis=1)                         # (TS, 3): sum of the corners
-        # (A/12) (2 v_a + v_b + v_c) = (A/12) (v_a + sum)
-        out = (area[:, None, None] / 12) * (v[ids] + s[:, None, :])
-        r = np.stack([np.bincount(flat, out[..., c].ravel(), minlength=nv) for c in range(v.shape[1])], axis=1)
-        r[empty] = v[empty]
-        return r
-
-    b = b.copy()
-    b[empty] = 0.0
-    x = b / diag[:, None]
-    r = b - mass(x)
-    z = r / diag[:, None]
-    p = z.copy()
-    rz = np.einsum("ij,ij->j", r, z)
-    bnorm = np.maximum(np.einsum("ij,ij->j", b, b / diag[:, None]), 1e-300)
-    for _ in range(iterations):
-        if np.all(rz <= tol * bnorm):
-            break
-        q = mass(p)
-        alpha = rz / np.maximum(np.einsum("ij,ij->j", p, q), 1e-300)
-        x += alpha * p
-        r -= alpha * q
-        z = r / diag[:, None]
-        rz_new = np.einsum("ij,ij->j", r, z)
-        p = z + (rz_new / np.maximum(rz, 1e-300)) * p
-        rz = rz_new
-    return x

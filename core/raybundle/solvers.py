@@ -58,6 +58,7 @@ import numpy as np
 
 from .caustics import CausticShot
 from .lights import PatchFirstShot
+from .reconstruction import LinearReconstruction
 from .sampling import points_on_triangles, uniform_sphere, uniform_sphere_pdf
 
 
@@ -95,6 +96,7 @@ class StochasticIterationSolver:
         # receiving area: the side's area less what is buried inside solids
         self.tside_open_area = tracer.open_fraction() * scene.triangle_area[scene.tside_triangle]
         self.area = np.bincount(scene.tside_side, self.tside_open_area, minlength=scene.n_sides)
+        self.reconstruction = LinearReconstruction(scene, self.tside_open_area)
         self.kd_over_pi = mats.diffuse_reflectance[pm] / np.pi          # (P, 3)
         self.glossy_mask = mats.is_glossy[pm]
         self.layered_sides = np.nonzero(mats.has_layer[pm])[0]      # diffuse lobe under a specular layer
