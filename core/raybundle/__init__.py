@@ -7,6 +7,7 @@ Modules, one job each: :mod:`~raybundle.scene` (patches, validation, .npz),
 :mod:`~raybundle.materials` (BRDFs), :mod:`~raybundle.sampling` (directions,
 sequences), :mod:`~raybundle.visibility` (Embree, bundles),
 :mod:`~raybundle.lights` (first shot), :mod:`~raybundle.solvers`,
+:mod:`~raybundle.reconstruction` (linear interpolation of patch values),
 :mod:`~raybundle.imaging` (camera images), :mod:`~raybundle.io` (EXR/PNG),
 :mod:`~raybundle.scenes` (built-in scenes), :mod:`~raybundle.pipeline`
 (one-call render), :mod:`~raybundle.cli`.

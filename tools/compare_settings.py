@@ -1,0 +1,74 @@
+"""Side-by-side settings on a built-in scene: error, noise and bias against a cached Cycles reference.
+
+Each variant (a JSON object of :class:`raybundle.imaging.RenderSettings` fields, plus
+``"patches"``) renders the scene once per seed, for a fixed time or iteration count, and
+prints its error (``raybundle.metrics.image_error``: pixels >= 2 px from the lamp, the
+reference's own noise subtracted) and image mean against the reference.  With two seeds
+or more it splits the error into per-image noise (from the difference of two seeds) and
+bias (what the mean of the seeds keeps): ``e^2 = bias^2 + noise^2``.
+
+The reference halves are ``OUT/reference-1.exr`` and ``reference-2.exr`` as
+``tools/bench_blender.py`` writes them (``make bench-boxes`` caches them in
+``out/bench-cornell`` and ``out/bench-cornell-glossy``).  Example::
+
+    python tools/compare_settings.py cornell --seconds 20 --seeds 3 4 \\
+        '{}' '{"image_ray_share": 0.5}' '{"patches": 6000}'
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+
+import numpy as np
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scene", help="a built-in scene name")
+    p.add_argument("variants", nargs="+", help="JSON objects of RenderSettings fields (and 'patches')")
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--seconds", type=float)
+    g.add_argument("--iterations", type=int)
+    p.add_argument("--seeds", type=int, nargs="+", default=[3, 4])
+    p.add_argument("--reference", default=None, help="folder of reference-1/2.exr (default out/bench-SCENE)")
+    a = p.parse_args(argv)
+
+    from raybundle.imaging import RenderSettings
+    from raybundle.io import read_exr
+    from raybundle.metrics import image_error, light_source_mask
+    from raybundle.pipeline import DEFAULT_PATCHES, make_renderer, prepare
+    from raybundle.scenes import load_scene
+
+    folder = a.reference or os.path.join("out", f"bench-{a.scene}")
+    halves = [read_exr(os.path.join(folder, f"reference-{k}.exr")) for k in (1, 2)]
+    ref = 0.5 * (halves[0] + halves[1])
+    scene = load_scene(a.scene)
+    mask = light_source_mask(scene)
+    keep = ~mask
+    run = {"seconds": a.seconds} if a.seconds is not None else {"iterations": a.iterations}
+    for text in a.variants:
+        v = json.loads(text)
+        prepared = prepare(scene, v.pop("patches", DEFAULT_PATCHES))
+        images = []
+        for seed in a.seeds:
+            r = make_renderer(prepared, RenderSettings(seed=seed, **v))
+            t0 = time.perf_counter()
+            img = r.run(**run).image
+            wall = time.perf_counter() - t0
+            r.tracer.close()
+            images.append(img)
+            e = image_error(img, ref, reference_halves=halves, exclude=mask)["error"]
+            print(f"{text} seed {seed}: {wall:.1f} s, error {100 * e:.2f}%, "
+                  f"mean ratio {img[keep].mean() / ref[keep].mean():.4f}", flush=True)
+        if len(images) > 1:
+            noise = np.sqrt(np.mean((images[0] - images[1])[keep] ** 2) / 2) / ref[keep].mean()
+            e_mean = image_error(np.mean(images, axis=0), ref, reference_halves=halves, exclude=mask)["error"]
+            bias = np.sqrt(max(e_mean ** 2 - noise ** 2 / len(images), 0.0))
+            print(f"  per-image noise {100 * noise:.2f}%, error of the {len(images)}-seed mean "
+                  f"{100 * e_mean:.2f}%, bias about {100 * bias:.2f}%", flush=True)
+
+
+if __name__ == "__main__":
+    main()
