@@ -11,7 +11,7 @@ The reference halves are ``OUT/reference-1.exr`` and ``reference-2.exr`` as
 ``tools/bench_blender.py`` writes them (``make bench-boxes`` caches them in
 ``out/bench-cornell`` and ``out/bench-cornell-glossy``).  Example::
 
-    python tools/compare_settings.py cornell --seconds 20 --seeds 3 4 \\
+    python tools/compare_settings.py cornell --seconds 20 --seeds 3,4 \\
         '{}' '{"image_ray_share": 0.5}' '{"patches": 6000}'
 """
 from __future__ import annotations
@@ -31,7 +31,8 @@ def main(argv=None):
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--seconds", type=float)
     g.add_argument("--iterations", type=int)
-    p.add_argument("--seeds", type=int, nargs="+", default=[3, 4])
+    p.add_argument("--seeds", type=lambda t: [int(x) for x in t.split(",")], default=[3, 4],
+                   help="comma-separated seeds (default 3,4)")
     p.add_argument("--reference", default=None, help="folder of reference-1/2.exr (default out/bench-SCENE)")
     a = p.parse_args(argv)
 
