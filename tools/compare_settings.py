@@ -1,8 +1,9 @@
 """Side-by-side settings on a built-in scene: error, noise and bias against a cached Cycles reference.
 
 Each variant (a JSON object of :class:`raybundle.imaging.RenderSettings` fields, plus
-``"patches"``) renders the scene once per seed, for a fixed time or iteration count, and
-prints its error (``raybundle.metrics.image_error``: pixels >= 2 px from the lamp, the
+``"patches"``, and ``"solver"``: attributes to set on the solver, e.g.
+``{"solver": {"caustic_refine": 4096}}``) renders the scene once per seed, for a fixed
+time or iteration count, and prints its error (``raybundle.metrics.image_error``: pixels >= 2 px from the lamp, the
 reference's own noise subtracted) and image mean against the reference.  With two seeds
 or more it splits the error into per-image noise (from the difference of two seeds) and
 bias (what the mean of the seeds keeps): ``e^2 = bias^2 + noise^2``.
@@ -52,9 +53,12 @@ def main(argv=None):
     for text in a.variants:
         v = json.loads(text)
         prepared = prepare(scene, v.pop("patches", DEFAULT_PATCHES))
+        solver_attrs = v.pop("solver", {})
         images = []
         for seed in a.seeds:
             r = make_renderer(prepared, RenderSettings(seed=seed, **v))
+            for k, x in solver_attrs.items():
+                setattr(r.solver, k, x)
             t0 = time.perf_counter()
             img = r.run(**run).image
             wall = time.perf_counter() - t0
