@@ -79,7 +79,9 @@ class RenderSettings:
     ``caustics``: the first shot's glossy reflection by lobe-sampled rays (:mod:`raybundle.caustics`)
     instead of through the bundles; ``glossy_mis``: with ``glossy_gather``, the mesh lights a
     glossy lobe reflects are estimated by light samples and by the lobe's ray together
-    (multiple importance sampling, power heuristic) instead of by light samples alone.
+    (multiple importance sampling, power heuristic) instead of by light samples alone;
+    ``glossy_send_rays``: lobe-sampled rays per glossy side and bundle direction that gather
+    what the side's glossy lobe sends (:meth:`~raybundle.solvers.StochasticIterationSolver.glossy_sent_radiance`).
     """
 
     bundle_resolution: int = 0
@@ -96,6 +98,7 @@ class RenderSettings:
     directions_per_step: int = 16
     caustics: bool = True
     glossy_mis: bool = True
+    glossy_send_rays: int = 2
     threads: int | None = None
 
 
@@ -113,6 +116,8 @@ class RenderSettings:
             raise ValueError("first_shot must be 'auto' or 'none'")
         if not 1 <= int(self.directions_per_step) <= 1024:
             raise ValueError("directions_per_step must lie in [1, 1024]")
+        if not 1 <= int(self.glossy_send_rays) <= 64:
+            raise ValueError("glossy_send_rays must lie in [1, 64]")
 
 
 @dataclass

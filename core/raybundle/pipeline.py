@@ -40,7 +40,7 @@ def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
     sequence = make_sequence(settings.sequence, settings.seed)
     solver_obj = SOLVERS[solver](scene, tracer, direct, sequence, bundle_resolution=settings.bundle_resolution,
                                  seed=settings.seed, directions_per_step=settings.directions_per_step,
-                                 caustics=settings.caustics)
+                                 caustics=settings.caustics, glossy_send_rays=settings.glossy_send_rays)
     return Renderer(scene, camera if camera is not None else scene.camera, solver_obj, direct, settings)
 
 

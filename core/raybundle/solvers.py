@@ -79,7 +79,7 @@ class StochasticIterationSolver:
     BURN_IN = 8
 
     def __init__(self, scene, tracer, direct, sequence, bundle_resolution=0, seed=0, directions_per_step=1,
-                 caustics=True):
+                 caustics=True, glossy_send_rays=2):
         self.scene = scene
         self.tracer = tracer
         self.direct = direct
@@ -111,6 +111,9 @@ class StochasticIterationSolver:
         self._glossy_tsides = gts
         self._glossy_tside_cdf = own + (np.cumsum(a) - (np.cumsum(side_total) - side_total)[own]) / side_total[own]
         self.diffuse_only = len(self.glossy_patches) == 0
+        if int(glossy_send_rays) < 1:
+            raise ValueError("glossy_send_rays must be at least 1")
+        self.glossy_send_rays = int(glossy_send_rays)
         # incoming first shot, refined by a few shadow rays every iteration
         self.first_shot = PatchFirstShot(direct, np.random.default_rng([seed, 7]), receiving_area=self.area)
         self.grid_rng = np.random.default_rng([seed, 3])   # bundle grid offset and rotation
@@ -142,7 +145,9 @@ class StochasticIterationSolver:
 
     def glossy_sent_radiance(self, send_dir):
         """Radiance (G, 3) the glossy sides send into ``send_dir`` (G, 3): their diffuse
-        lobe from the iterate, the glossy lobe by one lobe-sampled gather ray each.
+        lobe from the iterate, the glossy lobe by the mean of ``glossy_send_rays``
+        lobe-sampled gather rays each (2 rather than 1: cornell-glossy at 30 s 4.5% -> 4.1%,
+        mean of 3 seeds; 4 gain nothing more).
 
         ``S_j = Le_j + W_d kd/pi (E_j + E1_j + Ec_j) + weight L(y, -w_i)`` with ``w_i`` drawn
         from side j's glossy lobe for the viewer direction ``s_j`` (``weight = f cos / pdf``,
@@ -158,12 +163,14 @@ class StochasticIterationSolver:
         fsg = self.caustic is None
         out = self.radiance(gp, send_dir, first_shot_emission=False, first_shot_glossy=fsg, glossy_iterate=False)
         sc = self.scene
-        u = self.grid_rng.random((len(gp), 5))
-        ts = self._glossy_tsides[np.minimum(np.searchsorted(self._glossy_tside_cdf, gp + u[:, 0], side="right"),
+        m = self.glossy_send_rays
+        gp_m, send_m = np.tile(gp, m), np.tile(send_dir, (m, 1))
+        u = self.grid_rng.random((len(gp_m), 5))
+        ts = self._glossy_tsides[np.minimum(np.searchsorted(self._glossy_tside_cdf, gp_m + u[:, 0], side="right"),
                                             len(self._glossy_tsides) - 1)]
         pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[ts]], u[:, 1], u[:, 2])
-        n = self.normal[gp]
-        w_i, weight = sc.materials.sample_glossy(self.patch_material[gp], n, send_dir, u[:, 3:])
+        n = self.normal[gp_m]
+        w_i, weight = sc.materials.sample_glossy(self.patch_material[gp_m], n, send_m, u[:, 3:])
         live = np.nonzero(np.any(weight > 0, axis=1))[0]
         tri, _, _, _ = self.tracer.first_hit(pts[live] + n[live] * self.tracer.eps, w_i[live])
         self.stats.rays += len(live)
@@ -178,8 +185,9 @@ class StochasticIterationSolver:
             got[rows] = self.radiance(xs[ok], back[ok], diffuse_incoming=e[xs[ok]], first_shot_emission=False)
         if np.any(self.environment > 0):
             got[~hit] = self.environment
-        out[live] += weight[live] * got
-        return out
+        gathered = np.zeros((len(gp_m), 3))
+        gathered[live] = weight[live] * got
+        return out + gathered.reshape(m, len(gp), 3).mean(axis=0)
 
     def step(self):
         """One iteration: ``directions_per_step`` directions d_k, one bundle each (traced
