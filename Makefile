@@ -29,7 +29,7 @@ bench-blender: $(STAMP)
 # The built-in boxes against Cycles on the same triangles, side by side (about 45 minutes on 2 cores)
 bench-boxes: $(STAMP)
 	$(PY) tools/bench_blender.py cornell --times 5 10 30 60 120 --out out/bench-cornell --max-cycles-seconds 260
-	$(PY) tools/bench_blender.py cornell-glossy --times 5 10 30 60 --out out/bench-cornell-glossy --max-cycles-seconds 130
+	$(PY) tools/bench_blender.py cornell-glossy --times 5 10 30 60 --out out/bench-cornell-glossy --max-cycles-seconds 120
 
 # The installable Blender extension: dist/raybundle-<version>-<platform>.zip for every platform in
 # blender_manifest.toml, built without a Blender binary (Blender's blender_ext.py from the bpy module).
