@@ -221,10 +221,12 @@ class RayTracer:
         y = (g[None, None, :] + off[:, 1, None, None]) + np.zeros((1, resolution, 1))
         x, y = x.reshape(len(d), -1), y.reshape(len(d), -1)
         inside = x * x + y * y <= r * r
-        k = np.nonzero(inside)[0]
+        counts = inside.sum(axis=1)
         x, y = x[inside], y[inside]
-        o = self.center + x[:, None] * u[k] + y[:, None] * v[k] - 1.01 * r * d[k]
-        return o, inside.sum(axis=1), delta
+        # grid k's rays follow grid k-1's: per-grid vectors repeat by count
+        o = (x[:, None] * np.repeat(u, counts, axis=0) + y[:, None] * np.repeat(v, counts, axis=0)
+             + np.repeat(self.center - 1.01 * r * d, counts, axis=0))
+        return o, counts, delta
 
     def all_hit_pairs(self, origins, direction, ends=False):
         """Consecutive hits along parallel rays: ``(upstream_tri, downstream_tri, ray, n_casts)``.
@@ -300,15 +302,22 @@ class RayTracer:
         world = bool(np.any(self.scene.environment > 0))
         up, down, ray, casts, first, first_ray, last, last_ray = self._hit_layers(
             origins, np.repeat(dirs, counts, axis=0), ends=world)
-        out = []
-        for k in range(len(dirs)):
-            lo, hi = bounds[k], bounds[k + 1]
+        k_dirs = len(dirs)
 
-            def own(x, rays):
-                return x[(rays >= lo) & (rays < hi)]
-            ends = (own(first, first_ray), own(last, last_ray)) if world else ()
+        def per_grid(rays, *arrays):
+            """``arrays`` split by the grid their ray belongs to (one counting sort)."""
+            grid = (np.searchsorted(bounds, rays, side="right") - 1).astype(np.uint16)
+            order = np.argsort(grid, kind="stable")
+            cuts = np.cumsum(np.bincount(grid, minlength=k_dirs))[:-1]
+            return [np.split(x[order], cuts) for x in arrays]
+        ups, downs = per_grid(ray, up, down)
+        if world:
+            (firsts,), (lasts,) = per_grid(first_ray, first), per_grid(last_ray, last)
+        out = []
+        for k in range(k_dirs):
+            ends = (firsts[k], lasts[k]) if world else ()
             # Embree queries are shared out in proportion to the rays of each grid
-            out.append(bundle_from_hits(self.scene, dirs[k], delta, own(up, ray), own(down, ray),
+            out.append(bundle_from_hits(self.scene, dirs[k], delta, ups[k], downs[k],
                                         int(counts[k]), int(round(casts * counts[k] / max(bounds[-1], 1))),
                                         *ends))
         return out
