@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import frames_from_normals, orthonormal_basis, points_on_triangles
+from .sampling import frames_from_normals, orthonormal_basis, points_on_triangles, triangle_solid_angle
 
 
 @dataclass
@@ -104,8 +104,6 @@ class MeshLight:
         direction to ``y`` (N, 3) on the light's triangle ``triangles[k]`` (k (N,)):
         ``p_k / O_k`` where the triangle looks large (solid-angle sampling), else
         ``p_k r^2 / (A_k |cos_l|) = r^2 / (A |cos_l|)`` (area sampling)."""
-        from .sampling import triangle_solid_angle
-
         sc = self.scene
         tri = self.triangles[k]
         area_k = sc.triangle_area[tri]

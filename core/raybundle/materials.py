@@ -370,15 +370,9 @@ class MaterialTable:
         the light, for the viewer direction ``w_out`` (N, 3): ``D(h) (n.h) / (4 h.w_out)``
         (half vectors drawn with density D(h) (n.h), mirrored: Jacobian 1 / (4 h.w_out));
         0 where either direction is below the surface."""
-        alpha = self.alpha[np.asarray(mat)]
-        h = w_in + w_out
-        h = h / (np.linalg.norm(h, axis=1, keepdims=True) + 1e-300)
-        cos_h = np.einsum("ij,ij->i", normal, h)
+        h, cos_h, d = ggx_distribution(self.alpha[np.asarray(mat)], normal, w_in, w_out)
         h_o = np.einsum("ij,ij->i", h, w_out)
         ok = (np.einsum("ij,ij->i", normal, w_in) > 0) & (np.einsum("ij,ij->i", normal, w_out) > 0) & (h_o > 0)
-        a2 = alpha * alpha
-        denom = cos_h * cos_h * (a2 - 1.0) + 1.0
-        d = a2 / (np.pi * denom * denom)
         return np.where(ok, d * cos_h / (4.0 * np.maximum(h_o, 1e-300)), 0.0)
 
     def _glossy_factor(self, mat, c, cos_out):
@@ -520,17 +514,23 @@ def smith_lambda(alpha, cos_theta):
     return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
 
 
+def ggx_distribution(alpha, n, w_i, w_o):
+    """Half vectors h (N, 3) of ``w_i`` and ``w_o``, ``cos_h = n.h`` and the GGX normal
+    distribution ``D(h) = alpha^2 / (pi (cos_h^2 (alpha^2 - 1) + 1)^2)`` [1/sr]."""
+    h = w_i + w_o
+    h = h / (np.linalg.norm(h, axis=1, keepdims=True) + 1e-300)
+    cos_h = np.einsum("ij,ij->i", n, h)
+    a2 = alpha * alpha
+    denom = cos_h * cos_h * (a2 - 1.0) + 1.0
+    return h, cos_h, a2 / (np.pi * denom * denom)
+
+
 def ggx_lobe(alpha, n, w_i, w_o, cos_i, cos_o):
     """Untinted GGX lobe D(h) G2 / (4 cos_i cos_o) [1/sr] for front-facing pairs.
 
     ``w_i`` points towards the light, ``w_o`` towards the viewer; all arrays (N, ...).
     """
-    h = w_i + w_o
-    h /= np.linalg.norm(h, axis=1, keepdims=True) + 1e-300
-    cos_h = np.einsum("ij,ij->i", n, h)
-    a2 = alpha * alpha
-    denom = cos_h * cos_h * (a2 - 1.0) + 1.0
-    d = a2 / (np.pi * denom * denom)
+    _, _, d = ggx_distribution(alpha, n, w_i, w_o)
     g2 = 1.0 / (1.0 + smith_lambda(alpha, cos_i) + smith_lambda(alpha, cos_o))
     return d * g2 / (4.0 * cos_i * cos_o)
 
