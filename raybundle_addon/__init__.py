@@ -2,14 +2,15 @@
 
 Modules: :mod:`.props` (``scene.raybundle`` settings), :mod:`.export` and
 :mod:`.shaders` (evaluated depsgraph -> the core's arrays), :mod:`.engine` (the
-``RAYBUNDLE`` render engine), :mod:`.ui` (panels); ``python -m raybundle_addon``
-renders a ``.blend`` headless (:mod:`.__main__`).
+``RAYBUNDLE`` render engine), :mod:`.bake` and :mod:`.operators` (the ``raybundle.bake``
+operator: color attributes, lightmaps), :mod:`.ui` (panels); ``python -m raybundle_addon``
+renders or bakes a ``.blend`` headless (:mod:`.__main__`).
 """
 from __future__ import annotations
 
-from . import engine, props, ui
+from . import engine, operators, props, ui
 
-_modules = (props, engine, ui)
+_modules = (props, engine, operators, ui)
 
 
 def register():

@@ -1,7 +1,9 @@
-"""Headless rendering with the ``bpy`` module::
+"""Headless rendering and baking with the ``bpy`` module::
 
     python -m raybundle_addon SCENE.blend --out out.exr [--time S] [--iterations N] [--seed K]
                               [--patches N] [--resolution-percentage P] [--save-npz scene.npz]
+    python -m raybundle_addon SCENE.blend --bake OUT.blend [--lightmaps DIR] [--lightmap-size N]
+                              [--domain point|corner] [--time S] [--iterations N] ...
 
 Registers the add-on in the ``bpy`` module, opens the file, renders its scene
 with the ``RAYBUNDLE`` engine through ``bpy.ops.render.render`` (the same code
@@ -9,6 +11,11 @@ path as ``blender -b SCENE.blend -E RAYBUNDLE -o //out -f 1``, with Blender's
 render-time depsgraph: render modifier levels, render visibility) and writes
 the linear radiance as a 32-bit float EXR (plus an sRGB PNG preview beside it).
 Options not given come from the file's ``scene.raybundle`` settings.
+
+``--bake`` runs the ``raybundle.bake`` job instead (:mod:`.bake`): a ``RayBundle``
+color attribute on every mesh and, with ``--lightmaps DIR``, a lightmap EXR per mesh
+with a UV map in ``DIR`` (loaded into the file as Images), then saves the baked
+copy of the file as ``OUT.blend`` (the input file is not changed).
 ``--save-npz`` also writes the exported scene in the core's ``.npz`` format
 (``python -m raybundle render scene.npz`` renders it without Blender).
 
@@ -30,7 +37,13 @@ def build_parser():
     p = OneLineErrors(prog="python -m raybundle_addon",
                       description="Render a .blend with the Ray Bundle GI engine (bpy module, no Blender UI).")
     p.add_argument("blend", help="the .blend file")
-    p.add_argument("--out", required=True, help="output EXR (linear radiance, 32-bit float)")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--out", help="render: the output EXR (linear radiance, 32-bit float)")
+    what.add_argument("--bake", metavar="OUT.blend", help="bake: save the baked copy of the file here")
+    p.add_argument("--lightmaps", metavar="DIR", help="bake: also a lightmap per mesh with a UV map, into DIR")
+    p.add_argument("--lightmap-size", type=_number(int, 16, 16384, "an integer in [16, 16384]"),
+                   help="bake: lightmap width and height in texels (default: the file's)")
+    p.add_argument("--domain", choices=("point", "corner"), help="bake: color attribute domain (default: the file's)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--time", type=SECONDS, help="seconds to iterate (default: the file's time limit)")
     g.add_argument("--iterations", type=_number(int, 1, what="a positive integer"),
@@ -55,8 +68,12 @@ def main(argv=None):
         return _fail(f"{args.blend}: no such file")
     if not args.blend.endswith(".blend"):
         return _fail(f"{args.blend}: not a .blend file")
-    if not args.out.lower().endswith(".exr"):
+    if args.out is not None and not args.out.lower().endswith(".exr"):
         return _fail(f"--out {args.out}: the output must be an .exr file")
+    if args.bake is not None and not args.bake.endswith(".blend"):
+        return _fail(f"--bake {args.bake}: the output must be a .blend file")
+    if args.bake is None and (args.lightmaps or args.lightmap_size or args.domain):
+        return _fail("--lightmaps, --lightmap-size and --domain go with --bake")
 
     import bpy
 
@@ -87,6 +104,8 @@ def main(argv=None):
         rb.patches = args.patches
     if args.resolution_percentage is not None:
         scene.render.resolution_percentage = args.resolution_percentage
+    if args.bake is not None:
+        return _bake(args, scene)
     scene.render.engine = "RAYBUNDLE"
 
     bar = ProgressBar()
@@ -128,6 +147,53 @@ def main(argv=None):
           f"{stats.get('seconds', 0):.1f} s, {stats.get('patches', 0)} patches, "
           f"{stats.get('rays_traced', 0) / 1e6:.1f} M rays -> {args.out}", file=sys.stderr)
     return 130 if cancelled else 0
+
+
+def _bake(args, scene):
+    """The ``--bake`` path: :class:`.bake.BakeJob` with a progress bar, then save the copy."""
+    import bpy
+
+    from raybundle.cli import ProgressBar
+    from raybundle.scene import SceneError
+
+    from .bake import BakeJob
+
+    rb = scene.raybundle
+    rb.bake_color_attribute = True
+    if args.domain:
+        rb.bake_domain = args.domain.upper()
+    if args.lightmaps:
+        rb.bake_lightmaps = True
+        rb.bake_directory = os.path.abspath(args.lightmaps)
+    else:
+        rb.bake_lightmaps = False
+    if args.lightmap_size:
+        rb.lightmap_size = args.lightmap_size
+    job = BakeJob(bpy.context.evaluated_depsgraph_get())
+    bar = ProgressBar()
+    old = signal.signal(signal.SIGINT, lambda *_: job.stop.set())
+    try:
+        job.start()
+        t0 = time.perf_counter()
+        while job.step(0.5):
+            bar(job.fraction, {"iterations": job.solver.stats.iterations, "seconds": time.perf_counter() - t0})
+        bar.close()
+        out = job.finish()
+    except (SceneError, ValueError) as e:
+        bar.close()
+        return _fail(str(e))
+    finally:
+        signal.signal(signal.SIGINT, old)
+    for w in out.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    target = os.path.abspath(args.bake)
+    os.makedirs(os.path.dirname(target), exist_ok=True)
+    bpy.ops.wm.save_as_mainfile(filepath=target, copy=True)
+    st = out.stats
+    print(f"{'stopped early' if out.cancelled else 'baked'}: {len(out.attributes)} color attributes, "
+          f"{len(out.lightmaps)} lightmaps; {st['iterations']} iterations, {st['patches']} patches, "
+          f"{st['total_seconds']:.1f} s -> {target}", file=sys.stderr)
+    return 130 if out.cancelled else 0
 
 
 if __name__ == "__main__":

@@ -268,10 +268,12 @@ def export_camera(cam_ob, render, size=None, border=None, warn=print):
 
 
 # -------------------------------------------------------------------- export
-def export_scene(depsgraph, camera_object=None, use_border=True, name=None):
+def export_scene(depsgraph, camera_object=None, use_border=True, name=None, require_camera=True):
     """Export the evaluated ``depsgraph`` (its scene and view layer) for rendering.
 
-    ``camera_object`` overrides the scene camera (e.g. ``RenderEngine.camera_override``).
+    ``camera_object`` overrides the scene camera (e.g. ``RenderEngine.camera_override``);
+    with ``require_camera`` False (bakes) a scene without a camera exports with
+    ``scene.camera = None``.
     Raises :class:`raybundle.scene.SceneError` (a ValueError) with a one-line reason
     when there is nothing to render: no mesh, no light, no camera.
     Returns :class:`ExportResult`.
@@ -359,7 +361,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None):
     cam_ob = camera_object if camera_object is not None else scene.camera
     if cam_ob is not None:
         cam_ob = cam_ob.evaluated_get(depsgraph)
-    camera = export_camera(cam_ob, render, size, border, warn)
+    camera = export_camera(cam_ob, render, size, border, warn) if cam_ob is not None or require_camera else None
     environment = world_radiance(scene.world, warn)
     if render.use_motion_blur:
         warn("motion blur is not supported: the scene is rendered at the current frame")
@@ -385,7 +387,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None):
                          name=name or scene.name)
     for w in caught:
         warn(str(w.message))
-    far = float(np.sqrt(((v - camera.position) ** 2).sum(axis=1).max()))
+    far = float(np.sqrt(((v - camera.position) ** 2).sum(axis=1).max())) if camera is not None else 0.0
     if cam_ob is not None and far > cam_ob.data.clip_end:
         warn(f"camera {cam_ob.name!r}: geometry beyond the clip end ({cam_ob.data.clip_end:g} m) is rendered "
              "(clip end is not modelled)")

@@ -13,6 +13,8 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, St
 
 #: scene name -> statistics of that scene's last render (filled by :mod:`.engine`)
 LAST_RUN: dict[str, dict] = {}
+#: scene name -> statistics of that scene's last bake (filled by :mod:`.bake`)
+LAST_BAKE: dict[str, dict] = {}
 
 
 def _solver_items():
@@ -50,6 +52,41 @@ class RAYBUNDLE_PG_settings(bpy.types.PropertyGroup):
         name="First Shot", description="Shoot the power of lights and small emitters first with shadow rays "
         "(sharp direct light); off = everything through the iteration", default=True)
     method: EnumProperty(name="Method", description="Solver of the rendering equation", items=_solver_items())
+
+    # bake (raybundle.bake); glossy lobes are view-dependent: a bake holds the diffuse part and emission
+    bake_color_attribute: BoolProperty(
+        name="Color Attribute", default=True,
+        description="Write the view-independent radiance (diffuse light and emission; glossy reflections "
+        "depend on the viewer and are left out) into a FLOAT_COLOR attribute 'RayBundle' of every mesh, "
+        "set active for viewport shading. The geometry itself is not changed")
+    bake_domain: EnumProperty(
+        name="Domain", default="POINT",
+        items=[("POINT", "Vertex", "One value per vertex (smooth; a vertex on a crease averages its faces)"),
+               ("CORNER", "Face Corner", "One value per face corner (each face keeps its own light: hard edges "
+                "between faces)")],
+        description="Domain of the color attribute")
+    bake_lightmaps: BoolProperty(
+        name="Lightmaps", default=False,
+        description="For each selected mesh with a UV map: an image filled texel by texel with the "
+        "view-independent radiance (glossy reflections are left out), saved as EXR and kept as an Image")
+    lightmap_size: IntProperty(name="Lightmap Size", description="Width and height of each lightmap in texels",
+                               default=1024, min=16, max=16384)
+    lightmap_margin: IntProperty(
+        name="Margin", description="Texels filled around each UV island (seams, bilinear and mip-map lookups)",
+        default=16, min=0, max=256)
+    bake_camera: BoolProperty(
+        name="Camera View", default=False,
+        description="Also write the active camera's view (with glossy reflections) as an EXR and an Image")
+    bake_directory: StringProperty(
+        name="Output", subtype="DIR_PATH", default="//raybundle_bake/",
+        description="Folder of the lightmap and camera EXRs ('//' = next to the .blend file)")
+    bake_light_samples: IntProperty(
+        name="Light Samples", default=32, min=1, max=4096,
+        description="Shadow rays per light per baked point (vertex, corner or texel) for the direct light")
+    bake_single_user: BoolProperty(
+        name="Make Single User", default=False,
+        description="Objects sharing one mesh get their own copy of it, each baked with its own light; "
+        "off = they keep sharing it and it holds the first object's light")
 
     # read-only statistics of the last render (see LAST_RUN)
     last_status: StringProperty(name="Status", get=_stat("status", ""))

@@ -70,7 +70,44 @@ class RAYBUNDLE_PT_stats(RaybundlePanel, bpy.types.Panel):
             layout.label(text=w, icon="ERROR")
 
 
-classes = (RAYBUNDLE_PT_settings, RAYBUNDLE_PT_stats)
+class RAYBUNDLE_PT_bake(RaybundlePanel, bpy.types.Panel):
+    bl_label = "Bake"
+    bl_parent_id = "RAYBUNDLE_PT_settings"
+
+    def draw(self, context):
+        from .props import LAST_BAKE
+
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        rb = context.scene.raybundle
+        col = layout.column(heading="Write")
+        col.prop(rb, "bake_color_attribute")
+        sub = col.column()
+        sub.active = rb.bake_color_attribute
+        sub.prop(rb, "bake_domain")
+        sub.prop(rb, "bake_single_user")
+        col = layout.column()
+        col.prop(rb, "bake_lightmaps")
+        sub = col.column()
+        sub.active = rb.bake_lightmaps
+        sub.prop(rb, "lightmap_size")
+        sub.prop(rb, "lightmap_margin")
+        col.prop(rb, "bake_camera")
+        col.prop(rb, "bake_directory")
+        col.prop(rb, "bake_light_samples")
+        layout.label(text="Glossy reflections are view-dependent: attributes and lightmaps hold diffuse light",
+                     icon="INFO")
+        layout.operator("raybundle.bake", icon="RENDER_STILL")
+        last = LAST_BAKE.get(context.scene.name)
+        if last:
+            layout.label(text=f"Last bake: {last['status']}",
+                         icon="ERROR" if last["status"].startswith("error") else "INFO")
+            for w in last.get("warnings", [])[:6]:
+                layout.label(text=w, icon="ERROR")
+
+
+classes = (RAYBUNDLE_PT_settings, RAYBUNDLE_PT_stats, RAYBUNDLE_PT_bake)
 
 
 def _stock_panels():

@@ -72,6 +72,24 @@ def node_material(name, kind="diffuse", color=(0.8, 0.8, 0.8), strength=1.0, rou
     return mat
 
 
+def furnace_material(le, albedo):
+    """Add(Emission white x ``le``, Diffuse ``albedo``): a closed room of it glows at Le / (1 - a)."""
+    mat = bpy.data.materials.new("furnace")
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    e, d, add = (nt.nodes.new(t) for t in ("ShaderNodeEmission", "ShaderNodeBsdfDiffuse", "ShaderNodeAddShader"))
+    e.inputs["Color"].default_value = (1, 1, 1, 1)
+    e.inputs["Strength"].default_value = le
+    d.inputs["Color"].default_value = (*albedo, 1)
+    nt.links.new(e.outputs[0], add.inputs[0])
+    nt.links.new(d.outputs[0], add.inputs[1])
+    nt.links.new(add.outputs[0], out.inputs["Surface"])
+    return mat
+
+
 def add_object(name, verts, faces, materials=(), location=(0, 0, 0)):
     me = bpy.data.meshes.new(name)
     me.from_pydata([tuple(map(float, v)) for v in verts], [], [tuple(f) for f in faces])

@@ -11,7 +11,7 @@ import threading
 import numpy as np
 import pytest
 from addon_helpers import (add_camera, add_light, add_object, addon, box, bpy, erode, fresh,  # noqa: F401
-                           node_material, object_id_image, render_cycles, render_raybundle)
+                           furnace_material, node_material, object_id_image, render_cycles, render_raybundle)
 
 
 def last_run():
@@ -34,17 +34,7 @@ def test_furnace_renders_le_over_one_minus_albedo(fresh, tmp_path):
     from raybundle_addon import engine
 
     le, a = 0.5, np.array([0.3, 0.5, 0.7])
-    mat = new_mat("furnace")
-    nt = mat.node_tree
-    nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    e, d, add = (nt.nodes.new(t) for t in ("ShaderNodeEmission", "ShaderNodeBsdfDiffuse", "ShaderNodeAddShader"))
-    e.inputs["Color"].default_value = (1, 1, 1, 1)
-    e.inputs["Strength"].default_value = le
-    d.inputs["Color"].default_value = (*a, 1)
-    nt.links.new(e.outputs[0], add.inputs[0])
-    nt.links.new(d.outputs[0], add.inputs[1])
-    nt.links.new(add.outputs[0], out.inputs["Surface"])
+    mat = furnace_material(le, a)
     v, f = box((-1, -1, -1), (1, 1, 1))
     f = [q if k % 2 else tuple(reversed(q)) for k, q in enumerate(f)]        # half the normals point out
     add_object("room", v, f, [mat])

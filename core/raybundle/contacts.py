@@ -296,6 +296,14 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
     q = np.round(v / max(r * 1e-7, 1e-12)).astype(np.int64)
     _, first, inv = np.unique(q, axis=0, return_index=True, return_inverse=True)
     v, t = v[first], inv.reshape(-1)[t]
+    # pieces that welding or a sliver cut flattened to zero area carry nothing (their
+    # normal would be NaN): drop them, and renumber the patches densely
+    c = v[t]
+    area2 = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+    ok = area2 > (r * 1e-9) ** 2
+    if not ok.all():
+        t, src, tags = t[ok], src[ok], tags[ok]
+        patch = np.unique(patch[ok], return_inverse=True)[1].reshape(-1).astype(np.int64)
     out = PatchScene(v, t, scene.triangle_material[src], patch, scene.triangle_source[src], scene.materials,
                      scene.point_lights, scene.camera, scene.analytic_radiance, scene.name,
                      scene.dropped_triangles, scene.triangle_solid[src], scene.triangle_two_sided[src],

@@ -153,6 +153,7 @@ class Renderer:
         self._setup_rays = 0                              # one-time rays of the first pass
         self.glossy_iterations = 0
         self.image_rays = 0
+        self._every = None                                # image pass every k iterations (step)
         self.gbuffer = None
         self._glossy_pixels = np.zeros(0, np.int64)   # pixels for accumulate_glossy
         self.emission_sum = np.zeros((n, 3))             # emission seen: sum and count per pixel
@@ -473,10 +474,10 @@ class Renderer:
         solver = self.solver
         t0 = time.perf_counter()
         cancelled = False
-        every = None
         pending = sorted(snapshots)
         try:
-            self.image_pass()
+            if self.passes == 0:
+                self.image_pass()
             while True:
                 elapsed = time.perf_counter() - t0
                 while pending and elapsed >= pending[0] and on_snapshot is not None:
@@ -492,16 +493,7 @@ class Renderer:
                 if should_stop():
                     cancelled = True
                     break
-                solver.step()
-                if every is None:   # image passes every k iterations: a fixed share of rays
-                    share = self.settings.image_ray_share
-                    per_pass = (self.image_rays - self._setup_rays) / max(self.passes, 1)
-                    per_iter = solver.stats.rays / max(solver.stats.iterations, 1)
-                    every = max(1, int(round(per_pass * (1 - share) / (share * max(per_iter, 1)))))
-                if not solver.diffuse_only:
-                    self.accumulate_glossy()
-                if solver.stats.iterations % every == 0:
-                    self.image_pass()
+                self.step()
                 if progress is not None:
                     it = solver.stats.iterations
                     frac = it / iterations if iterations else (time.perf_counter() - t0) / seconds
@@ -510,11 +502,36 @@ class Renderer:
             cancelled = True
         t_res = time.perf_counter()
         img = self.image()
-        total = time.perf_counter() - t0
+        if not np.isfinite(img).all():
+            raise FloatingPointError("the image has non-finite values; this is a bug, please report it")
+        return RenderResult(img, self.stats(time.perf_counter() - t0, time.perf_counter() - t_res, cancelled),
+                            cancelled)
+
+    def step(self):
+        """One solver iteration, this iterate's glossy lobe per pixel, and an image pass
+        every k-th iteration, k chosen after the first so that image passes take
+        ``image_ray_share`` of the rays (the first call also makes the first pass)."""
+        solver = self.solver
+        if self.passes == 0:
+            self.image_pass()
+        solver.step()
+        if self._every is None:
+            share = self.settings.image_ray_share
+            per_pass = (self.image_rays - self._setup_rays) / max(self.passes, 1)
+            per_iter = solver.stats.rays / max(solver.stats.iterations, 1)
+            self._every = max(1, int(round(per_pass * (1 - share) / (share * max(per_iter, 1)))))
+        if not solver.diffuse_only:
+            self.accumulate_glossy()
+        if solver.stats.iterations % self._every == 0:
+            self.image_pass()
+
+    def stats(self, total_seconds, resolve_seconds=0.0, cancelled=False):
+        """The run's figures as a plain dict (what the CLI, the add-on and the bench report)."""
+        solver = self.solver
         st = solver.stats
-        stats = {"scene": self.scene.name, "solver": solver.name, "iterations": st.iterations,
-                 "directions": st.directions, "seconds": round(total, 4), "solver_seconds": round(st.seconds, 4),
-                 "resolve_seconds": round(time.perf_counter() - t_res, 4),
+        return {"scene": self.scene.name, "solver": solver.name, "iterations": st.iterations,
+                 "directions": st.directions, "seconds": round(total_seconds, 4), "solver_seconds": round(st.seconds, 4),
+                 "resolve_seconds": round(resolve_seconds, 4),
                  "rays_traced": int(st.rays + self.image_rays), "bundle_rays": int(st.bundle_rays),
                  "bundle_queries": int(st.rays), "image_rays": int(self.image_rays),
                  "image_passes": self.passes, "patches": int(self.scene.n_patches),
@@ -522,6 +539,3 @@ class Renderer:
                  "bundle_resolution": solver.bundle_resolution, "sequence": self.settings.sequence,
                  "seed": self.settings.seed, "diffuse_only": bool(solver.diffuse_only),
                  "first_shot_lights": self.direct.n_lights, "cancelled": cancelled}
-        if not np.isfinite(img).all():
-            raise FloatingPointError("the image has non-finite values; this is a bug, please report it")
-        return RenderResult(img, stats, cancelled)

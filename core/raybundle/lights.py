@@ -343,6 +343,29 @@ class DirectLighting:
                     out[live] += e[live] * f / n_s
         return out
 
+    def irradiance(self, points, normals, rng, samples_per_light=16):
+        """Direct irradiance (N, 3) [W/m^2] of the first-shot lights at surface points
+        with unit ``normals`` (N, 3): ``sum_l mean_s e_l cos_x V``, ``samples_per_light``
+        shadow rays per light with an extent (mesh, area, sphere and sun-disc lights),
+        one per point light of radius 0 and per sun of angle 0 (exact with one).
+        ``rng``: a Generator.  A point's samples are a randomly shifted Kronecker
+        (R_3) set, stratified over the light's triangles and their areas (a point
+        under one face of a 6-face mesh light gets that face's share of samples
+        evenly, not by chance).  Used by bakes, where a point's value is final."""
+        from .sampling import kronecker_alpha
+
+        out = np.zeros((len(points), 3))
+        alpha = kronecker_alpha(3)
+        for light in self.light_list():
+            sharp = (isinstance(light, PointLight) and float(light.lights.radius[light.k]) == 0.0) or \
+                (isinstance(light, SunLight) and light.angle == 0.0)
+            n_s = 1 if sharp else max(1, int(samples_per_light))
+            shift = rng.random((len(points), 3))
+            for s in range(n_s):
+                e, _, _ = self._light_samples(points, normals, light, (shift + s * alpha) % 1.0)
+                out += e / n_s
+        return out
+
     @staticmethod
     def mis_weight(p_a, p_b):
         """Power-heuristic weight of strategy a against b: ``p_a^2 / (p_a^2 + p_b^2)``."""

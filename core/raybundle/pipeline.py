@@ -26,22 +26,29 @@ def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None):
     return scene
 
 
-def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
-                  solver=StochasticIterationSolver.name):
-    """Tracer + first shot + solver + image accumulator for a prepared scene."""
+def make_solver(scene, settings: RenderSettings | None = None, solver=StochasticIterationSolver.name):
+    """Tracer + first shot + solver for a prepared scene (no camera needed: bakes);
+    the solver holds them as ``solver.tracer`` and ``solver.direct``."""
     settings = settings or RenderSettings()
     settings.validate()
     if settings.sequence == "halton":
         warnings.warn("the Halton sequence is not completely uniformly distributed: stochastic iteration "
                       "driven by it converges to a wrong image (thesis 1.2); use 'prng' or 'pi-powers'",
-                      stacklevel=2)
+                      stacklevel=3)
     tracer = RayTracer(scene, threads=settings.threads)
     direct = DirectLighting(scene, tracer, first_shot=settings.first_shot)
     sequence = make_sequence(settings.sequence, settings.seed)
-    solver_obj = SOLVERS[solver](scene, tracer, direct, sequence, bundle_resolution=settings.bundle_resolution,
-                                 seed=settings.seed, directions_per_step=settings.directions_per_step,
-                                 caustics=settings.caustics, glossy_send_rays=settings.glossy_send_rays)
-    return Renderer(scene, camera if camera is not None else scene.camera, solver_obj, direct, settings)
+    return SOLVERS[solver](scene, tracer, direct, sequence, bundle_resolution=settings.bundle_resolution,
+                           seed=settings.seed, directions_per_step=settings.directions_per_step,
+                           caustics=settings.caustics, glossy_send_rays=settings.glossy_send_rays)
+
+
+def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
+                  solver=StochasticIterationSolver.name):
+    """Tracer + first shot + solver + image accumulator for a prepared scene."""
+    settings = settings or RenderSettings()
+    solver_obj = make_solver(scene, settings, solver)
+    return Renderer(scene, camera if camera is not None else scene.camera, solver_obj, solver_obj.direct, settings)
 
 
 def render(scene, settings=None, iterations=None, seconds=None, progress=None, stop=None, camera=None):

@@ -1,0 +1,463 @@
+"""Bake the solution into the file: color attributes, lightmaps and the camera's view.
+
+:class:`BakeJob` is the whole bake, in three calls that the operator
+(:mod:`.operators`), the command line and the tests share:
+
+* :meth:`BakeJob.start` exports the evaluated depsgraph (:mod:`.export`), picks
+  the targets and reads what they need (corners, UVs), subdivides into patches
+  and sets up the core's solver;
+* :meth:`BakeJob.step` iterates for about ``budget`` seconds and returns False
+  once the time limit or the iteration count is reached or ``stop`` is set (the
+  modal operator calls it on every timer tick, headless code in a loop);
+* :meth:`BakeJob.finish` evaluates the radiance at the targets' points
+  (:func:`raybundle.baking.baked_radiance`: per-point direct light with
+  ``light_samples`` shadow rays, the indirect light interpolated from the patches)
+  and writes it into the file, on the main thread.
+
+What is written (Blender's units: linear radiance [W m^-2 sr^-1], view-independent:
+the diffuse light and the emission; glossy reflections depend on the viewer and
+are left out):
+
+* a ``FLOAT_COLOR`` attribute ``RayBundle`` (point or face-corner domain) on every
+  baked mesh, active for display and render.  The mesh's geometry is not changed.
+  A face is baked on the side its normal points to, as Cycles' bake does.  A
+  corner's value is the radiance at the corner on its own face; a vertex's, the
+  mean over its corners (a vertex on a crease averages its faces).  Objects that
+  share a mesh (linked duplicates, instances) share the first object's values
+  (warned) unless ``single_user`` gives each its own copy of the mesh.  An object
+  whose modifiers change the topology (or a curve, text...) is baked into a new
+  mesh object ``<name>.RayBundle`` made from its evaluated mesh, hidden from
+  renders (so it does not add its geometry twice), and the original is left alone;
+* a lightmap per selected mesh with a UV map: an RGB float EXR
+  ``<object>.lightmap.exr`` of ``lightmap_size``² texels, each texel the radiance at
+  its centre's point (the active UV map), dilated by ``lightmap_margin`` texels
+  around the islands, loaded as an Image of the same name;
+* with ``camera``, the active camera's view as ``<scene>.camera.exr`` and an Image.
+
+Files go to ``directory`` (``//`` = next to the .blend); an unsaved file's
+relative folder falls back to a temporary one and the Images are packed into the
+file (warned), so nothing is lost.  EXRs are written atomically.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from .engine import JobSettings
+from .export import export_scene
+from .props import LAST_BAKE
+
+ATTRIBUTE = "RayBundle"
+COPY_SUFFIX = ".RayBundle"
+
+
+@dataclass
+class BakeSettings:
+    """Plain copy of the bake settings of ``scene.raybundle`` (see :mod:`.props`)."""
+
+    color_attribute: bool = True
+    domain: str = "POINT"
+    lightmaps: bool = False
+    lightmap_size: int = 1024
+    lightmap_margin: int = 16
+    camera: bool = False
+    directory: str = "//raybundle_bake/"
+    light_samples: int = 32
+    single_user: bool = False
+
+    @classmethod
+    def from_scene(cls, scene):
+        rb = getattr(scene, "raybundle", None)
+        if rb is None:
+            return cls()
+        return cls(bool(rb.bake_color_attribute), str(rb.bake_domain), bool(rb.bake_lightmaps),
+                   int(rb.lightmap_size), int(rb.lightmap_margin), bool(rb.bake_camera), str(rb.bake_directory),
+                   int(rb.bake_light_samples), bool(rb.bake_single_user))
+
+    def validate(self):
+        if not (self.color_attribute or self.lightmaps or self.camera):
+            raise ValueError("nothing to bake: turn on Color Attribute, Lightmaps or Camera View")
+        if self.domain not in ("POINT", "CORNER"):
+            raise ValueError(f"unknown color attribute domain {self.domain!r}: POINT or CORNER")
+        if self.lightmaps and not 1 <= self.lightmap_size <= 16384:
+            raise ValueError("the lightmap size must lie in [1, 16384]")
+        if self.light_samples < 1:
+            raise ValueError("light samples must be at least 1")
+
+
+@dataclass
+class _Target:
+    """One mesh to write: the export's object entry and, per corner of its evaluated
+    mesh, the export triangle (-1: none) and barycentrics there."""
+
+    info: object
+    corner_face: np.ndarray
+    corner_bary: np.ndarray
+    copy: bool = False                  # bake into a new object made from the evaluated mesh
+    own_mesh: bool = False              # give the object its own copy of a shared mesh first
+    sharing: list = field(default_factory=list)      # other objects that share the mesh
+
+
+@dataclass
+class BakeOutcome:
+    stats: dict
+    warnings: list
+    cancelled: bool
+    attributes: list            # (object name, mesh name) written
+    lightmaps: dict             # object name -> EXR path
+    camera: str | None          # camera EXR path
+
+
+class BakeJob:
+    """One bake of an evaluated depsgraph (module docstring).  ``lightmap_objects``:
+    names of the objects to bake lightmaps for (None: every mesh object with a UV map)."""
+
+    def __init__(self, depsgraph, settings=None, bake=None, lightmap_objects=None, stop=None):
+        self.depsgraph = depsgraph
+        self.scene = depsgraph.scene
+        self.settings = settings or JobSettings.from_scene(self.scene)
+        self.bake = bake or BakeSettings.from_scene(self.scene)
+        self.lightmap_objects = None if lightmap_objects is None else set(lightmap_objects)
+        self.stop = stop if stop is not None else threading.Event()
+        self.warnings = []
+        self.fraction = 0.0
+        self.export = self.solver = self.renderer = None
+        self.targets, self.lightmap_targets = [], []
+        self.t_start = self._t_iter = None
+        self._iter_seconds = 0.0
+        self.timings = {}
+
+    def warn(self, message):
+        if message not in self.warnings:
+            self.warnings.append(message)
+
+    # ----------------------------------------------------------------- start
+    def start(self):
+        """Export, choose the targets, prepare the solver.  Raises SceneError/ValueError
+        (one-line reasons) for what cannot be baked."""
+        from raybundle import pipeline
+        from raybundle.imaging import RenderSettings
+        from raybundle.solvers import SOLVERS
+
+        self.t_start = time.perf_counter()
+        s, b = self.settings, self.bake
+        s.validate()
+        b.validate()
+        if s.method not in SOLVERS:
+            raise ValueError(f"unknown method {s.method!r}: the core has {sorted(SOLVERS)}")
+        self.export = export_scene(self.depsgraph, require_camera=b.camera)
+        for w in self.export.warnings:
+            self.warn(w)
+        if b.color_attribute:
+            self._pick_attribute_targets()
+        if b.lightmaps:
+            self._pick_lightmap_targets()
+            if not self.lightmap_targets and not b.color_attribute and not b.camera:
+                raise ValueError("nothing to bake: no selected mesh has a UV map for a lightmap")
+        self.timings["export_seconds"] = time.perf_counter() - self.t_start
+        scene = pipeline.prepare(self.export.scene, patches=s.patches)
+        rs = RenderSettings(seed=s.seed, bundle_resolution=s.bundle_resolution,
+                            first_shot="auto" if s.first_shot else "none")
+        if b.camera:
+            self.renderer = pipeline.make_renderer(scene, rs, solver=s.method)
+            self.solver = self.renderer.solver
+        else:
+            self.solver = pipeline.make_solver(scene, rs, solver=s.method)
+        self.timings["prepare_seconds"] = time.perf_counter() - self.t_start - self.timings["export_seconds"]
+        self._t_iter = time.perf_counter()
+        return self
+
+    def _corners(self, info):
+        """Per corner of ``info``'s evaluated mesh: export triangle and barycentrics."""
+        tri = np.arange(info.first_triangle, info.first_triangle + info.n_triangles)
+        loops = self.export.triangle_loops[tri].ravel()
+        face = np.full(info.n_loops, -1, np.int64)
+        bary = np.zeros((info.n_loops, 3))
+        face[loops] = np.repeat(tri, 3)
+        bary[loops] = np.tile(np.eye(3), (len(tri), 1))
+        return face, bary
+
+    def _pick_attribute_targets(self):
+        by_mesh = {}
+        infos = sorted(self.export.objects, key=lambda i: i.is_instance)      # real objects before instances
+        for info in infos:
+            ob = bpy.data.objects.get(info.original)
+            if ob is None:
+                continue
+            same = (ob.type == "MESH" and len(ob.data.loops) == info.n_loops
+                    and len(ob.data.polygons) == info.n_polygons)
+            if ob.type == "MESH" and not same:
+                self.warn(f"object {ob.name!r}: its modifiers change the topology; baked into a new object "
+                          f"{ob.name + COPY_SUFFIX!r} made from the evaluated mesh (hidden from renders)")
+            elif ob.type != "MESH":
+                self.warn(f"object {ob.name!r} ({ob.type.lower()}) has no mesh to hold a color attribute; baked "
+                          f"into a new mesh object {ob.name + COPY_SUFFIX!r} (hidden from renders)")
+            if same and ob.data.library is not None:
+                self.warn(f"object {ob.name!r}: its mesh is linked from a library and cannot be written; not baked")
+                continue
+            key = ob.data.name_full if same else ("copy", info.original)
+            first = by_mesh.get(key)
+            own = False
+            if first is not None:
+                if same and self.bake.single_user and not info.is_instance and info.original != first.info.original:
+                    key, own = ("single", info.original), True      # gets its own copy of the mesh
+                    if key in by_mesh:
+                        continue
+                else:
+                    if info.original != first.info.original or info.is_instance:
+                        first.sharing.append(info.instancer if info.is_instance and info.instancer else info.name)
+                    continue
+            face, bary = self._corners(info)
+            by_mesh[key] = t = _Target(info, face, bary, copy=not same, own_mesh=own)
+            self.targets.append(t)
+        for t in self.targets:
+            if t.sharing:
+                names = ", ".join(repr(n) for n in sorted(set(t.sharing))[:5])
+                more = f" and {len(set(t.sharing)) - 5} more" if len(set(t.sharing)) > 5 else ""
+                self.warn(f"mesh of {t.info.original!r} is shared with {names}{more}: it holds "
+                          f"{t.info.original!r}'s light (turn on Make Single User to bake each)")
+
+    def _pick_lightmap_targets(self):
+        seen = set()
+        for info in self.export.objects:
+            if info.is_instance or info.original in seen:
+                continue
+            if self.lightmap_objects is not None and info.original not in self.lightmap_objects:
+                continue
+            seen.add(info.original)
+            ob = bpy.data.objects.get(info.original)
+            if ob is None:
+                continue
+            ev = ob.evaluated_get(self.depsgraph)
+            me = ev.data if ev.type == "MESH" else None
+            layer = me.uv_layers.active if me is not None else None
+            if layer is None or len(me.loops) != info.n_loops:
+                self.warn(f"object {info.original!r} has no UV map: no lightmap (add one, e.g. UV > Smart UV "
+                          "Project or Lightmap Pack)")
+                continue
+            uv = np.empty(2 * info.n_loops, np.float32)
+            layer.uv.foreach_get("vector", uv)
+            tri = np.arange(info.first_triangle, info.first_triangle + info.n_triangles)
+            loops = self.export.triangle_loops[tri]
+            self.lightmap_targets.append((info, uv.reshape(-1, 2)[loops].astype(float), layer.name))
+        if self.lightmap_objects is not None:
+            missing = sorted(self.lightmap_objects - seen)
+            for name in missing:
+                ob = bpy.data.objects.get(name)
+                if ob is not None and ob.type in ("MESH",):
+                    self.warn(f"object {name!r} is not rendered (hidden or excluded): no lightmap")
+
+    # ------------------------------------------------------------------ step
+    def step(self, budget=0.1):
+        """Iterate for about ``budget`` seconds; False once done (limit reached or stopped)."""
+        s = self.settings
+        t_end = time.perf_counter() + budget
+        while True:
+            it = self.solver.stats.iterations
+            elapsed = self._iter_seconds + (time.perf_counter() - self._t_iter)
+            if s.iterations:
+                self.fraction = min(1.0, it / s.iterations)
+                done = it >= s.iterations
+            else:
+                self.fraction = min(1.0, elapsed / s.time_limit)
+                done = elapsed >= s.time_limit
+            if done or self.stop.is_set():
+                return False
+            if time.perf_counter() >= t_end:
+                return True
+            if self.renderer is not None:
+                self.renderer.step()
+            else:
+                self.solver.step()
+
+    def run(self):
+        """start, step to the end, finish: the headless bake.  Returns :class:`BakeOutcome`."""
+        self.start()
+        try:
+            while self.step(1.0):
+                pass
+        except KeyboardInterrupt:
+            self.stop.set()
+        return self.finish()
+
+    # ---------------------------------------------------------------- finish
+    def _directory(self):
+        raw = self.bake.directory or "//"
+        if raw.startswith("//") and not bpy.data.filepath:
+            self.warn("the file is not saved: the EXRs went to a temporary folder and the Images are packed "
+                      "into the file (save it to keep them)")
+            return tempfile.mkdtemp(prefix="raybundle-bake-"), True
+        path = bpy.path.abspath(raw)
+        os.makedirs(path, exist_ok=True)
+        return path, False
+
+    def finish(self):
+        """Evaluate and write everything (main thread).  Returns :class:`BakeOutcome`."""
+        from raybundle.baking import baked_radiance, locate_points
+
+        t0 = time.perf_counter()
+        cancelled = self.stop.is_set()
+        solver, ex = self.solver, self.export
+        rng = np.random.default_rng([self.settings.seed, 21])
+        n = self.bake.light_samples
+        attributes, lightmaps, camera_path = [], {}, None
+        try:
+            if self.targets:
+                face = np.concatenate([t.corner_face for t in self.targets])
+                bary = np.concatenate([t.corner_bary for t in self.targets])
+                pts = locate_points(ex.scene, solver.scene, solver.tracer, face, bary)
+                values = baked_radiance(solver, pts, n, rng)
+                k = 0
+                for t in self.targets:
+                    m = len(t.corner_face)
+                    got = self._write_attribute(t, values[k:k + m], pts.found[k:k + m])
+                    if got:
+                        attributes.append(got)
+                    k += m
+            directory = packed = None
+            if self.lightmap_targets or self.bake.camera:
+                directory, packed = self._directory()
+            for info, uv, uv_name in self.lightmap_targets:
+                path = self._lightmap(info, uv, uv_name, directory, packed, rng)
+                if path:
+                    lightmaps[info.original] = path
+            if self.bake.camera:
+                camera_path = self._camera_image(directory, packed)
+        finally:
+            solver.tracer.close()
+        t_done = time.perf_counter()
+        st = solver.stats
+        stats = {"iterations": st.iterations, "directions": st.directions, "patches": int(solver.scene.n_patches),
+                 "triangles": int(len(solver.scene.triangles)), "rays_traced": int(st.rays),
+                 "solve_seconds": round(self._iter_seconds + (t0 - self._t_iter), 4),
+                 "bake_seconds": round(t_done - t0, 4), "total_seconds": round(t_done - self.t_start, 4),
+                 "attributes": len(attributes), "lightmaps": len(lightmaps), "cancelled": cancelled,
+                 **{k: round(v, 4) for k, v in self.timings.items()}}
+        LAST_BAKE[self.scene.name] = {"status": ("stopped early" if cancelled else "done") +
+                                      (f", {len(self.warnings)} warnings" if self.warnings else ""),
+                                      "stats": stats, "warnings": list(self.warnings)}
+        return BakeOutcome(stats, list(self.warnings), cancelled, attributes, lightmaps, camera_path)
+
+    def _target_mesh(self, t):
+        """The mesh to write for target ``t`` (making the copy object when needed)."""
+        ob = bpy.data.objects.get(t.info.original)
+        if ob is None:
+            self.warn(f"object {t.info.original!r} was deleted during the bake; not written")
+            return None, None
+        if not t.copy:
+            me = ob.data
+            if len(me.loops) != t.info.n_loops:
+                self.warn(f"object {ob.name!r} changed during the bake; not written")
+                return None, None
+            if t.own_mesh and me.users > 1:
+                ob.data = me = me.copy()
+            return ob, me
+        ev = ob.evaluated_get(self.depsgraph)
+        me = bpy.data.meshes.new_from_object(ev)
+        if len(me.loops) != t.info.n_loops:
+            bpy.data.meshes.remove(me)
+            self.warn(f"object {ob.name!r}: its evaluated mesh changed during the bake; not written")
+            return None, None
+        name = ob.name + COPY_SUFFIX
+        old = bpy.data.objects.get(name)
+        if old is not None and old.type == "MESH":
+            old_mesh = old.data
+            old.data = me
+            if old_mesh.users == 0:
+                bpy.data.meshes.remove(old_mesh)
+            copy = old
+        else:
+            copy = bpy.data.objects.new(name, me)
+            for coll in ob.users_collection or [self.scene.collection]:
+                coll.objects.link(copy)
+        copy.matrix_world = ob.matrix_world.copy()
+        copy.hide_render = True
+        return copy, me
+
+    def _write_attribute(self, t, values, found):
+        """Write corner ``values`` (n_loops, 3) of target ``t`` as the ``RayBundle`` attribute."""
+        ob, me = self._target_mesh(t)
+        if me is None:
+            return None
+        if self.bake.domain == "POINT":
+            cv = np.empty(len(me.loops), np.int32)
+            attr = me.attributes.get(".corner_vert")
+            if attr is not None:
+                attr.data.foreach_get("value", cv)
+            else:
+                me.loops.foreach_get("vertex_index", cv)
+            w = found.astype(float)
+            num = np.stack([np.bincount(cv, w * values[:, c], minlength=len(me.vertices)) for c in range(3)], axis=1)
+            den = np.bincount(cv, w, minlength=len(me.vertices))
+            values = num / np.maximum(den, 1e-300)[:, None]
+            if np.any(den == 0):
+                self.warn(f"mesh {me.name!r}: {int((den == 0).sum())} loose or degenerate vertices baked black")
+        elif not found.all():
+            self.warn(f"mesh {me.name!r}: {int((~found).sum())} corners of degenerate faces baked black")
+        attr = me.color_attributes.get(ATTRIBUTE)
+        if attr is not None and (attr.domain != self.bake.domain or attr.data_type != "FLOAT_COLOR"):
+            me.color_attributes.remove(attr)
+            attr = None
+        if attr is None:
+            attr = me.color_attributes.new(ATTRIBUTE, "FLOAT_COLOR", self.bake.domain)
+        rgba = np.ones((len(values), 4), np.float32)
+        rgba[:, :3] = values
+        attr.data.foreach_set("color", rgba.ravel())
+        me.color_attributes.active_color = attr
+        me.color_attributes.render_color_index = me.color_attributes.find(attr.name)
+        me.update()
+        return ob.name, me.name
+
+    def _save_image(self, name, rgb_bottom_up, directory, packed, header):
+        """Write (H, W, 3) rows bottom-up as ``directory/name.exr`` and load it as Image ``name``."""
+        from raybundle.io import write_exr
+
+        safe = "".join("_" if ch in '/\\:*?"<>|' else ch for ch in name)
+        path = os.path.join(directory, safe + ".exr")
+        write_exr(path, rgb_bottom_up[::-1].astype(np.float32), header)
+        img = bpy.data.images.get(name)
+        if img is not None and bpy.path.abspath(img.filepath) == path:
+            img.reload()
+        else:
+            img = bpy.data.images.load(path, check_existing=False)
+            img.name = name
+        img.use_fake_user = True          # kept when the file is saved, though no material uses it yet
+        if packed:
+            img.pack()
+        return path
+
+    def _lightmap(self, info, uv, uv_name, directory, packed, rng):
+        from raybundle.baking import baked_radiance, dilate, locate_points, texel_points
+
+        size = self.bake.lightmap_size
+        tx = texel_points(uv, size, size)
+        if tx.overlap:
+            self.warn(f"object {info.original!r}: overlapping UV islands ({tx.overlap} texels claimed twice); "
+                      "use a UV map without overlaps (e.g. Lightmap Pack) for lightmaps")
+        if len(tx.texel) == 0:
+            self.warn(f"object {info.original!r}: its UV map covers no texel centre of a {size}² lightmap; "
+                      "no lightmap")
+            return None
+        pts = locate_points(self.export.scene, self.solver.scene, self.solver.tracer,
+                            info.first_triangle + tx.triangle, tx.bary)
+        values = baked_radiance(self.solver, pts, self.bake.light_samples, rng)
+        img = np.zeros((size * size, 3))
+        img[tx.texel] = values
+        filled = np.zeros(size * size, bool)
+        filled[tx.texel] = pts.found
+        img, _ = dilate(img.reshape(size, size, 3), filled.reshape(size, size), self.bake.lightmap_margin)
+        return self._save_image(f"{info.original}.lightmap", img, directory, packed,
+                                {"raybundle_object": info.original, "raybundle_uv_map": uv_name,
+                                 "raybundle_iterations": self.solver.stats.iterations})
+
+    def _camera_image(self, directory, packed):
+        r = self.renderer
+        img = r.image()
+        return self._save_image(f"{self.scene.name}.camera", img[::-1], directory, packed,
+                                {"raybundle_iterations": self.solver.stats.iterations})
