@@ -16,6 +16,9 @@ Writes:
   ``tall_block``.  Black world, the Cornell camera (35 mm lens, 25 mm sensor).
 * ``cornell_glossy.blend``: the same with the floor Mix(Diffuse white, Glossy GGX
   white roughness 0.3, 0.5) and the tall block Glossy GGX (0.8, roughness 0.2).
+* ``cornell_bake.blend``: ``cornell_box.blend`` with every face cut 16 x 16 into its
+  own 17 x 17 vertices (4,624 in all) and a lightmap UV map per object (a tile per
+  face): press Bake in the Ray Bundle GI panel.
 * ``sierpinski.blend``: a level-4 Sierpinski tetrahedron (1024 triangles) on a floor
   under a sky-colored world and a sun (in the style of the thesis' Figure 1).
 * ``room.blend``: a small room with Principled BSDF materials (wooden floor, painted
@@ -322,8 +325,58 @@ def build_room(resolution=(320, 240)):
     render_settings()
 
 
+def grid_faces(ob, n=16):
+    """Replace ``ob``'s quads by n x n grids, each face with its own (n+1)^2 vertices
+    (bilinear over the quad), and give it a lightmap UV map: one square tile per face
+    on a ceil(sqrt F)^2 atlas, a 1/32 gap between tiles."""
+    bpy = _bpy()
+    me = ob.data
+    co = np.empty(3 * len(me.vertices))
+    me.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    polys = [list(p.vertices) for p in me.polygons]
+    cols = int(math.ceil(math.sqrt(len(polys))))
+    tile, gap = 1.0 / cols, 1.0 / 32
+    s, t = np.meshgrid(np.linspace(0, 1, n + 1), np.linspace(0, 1, n + 1))
+    s, t = s.ravel(), t.ravel()
+    j, i = np.divmod(np.arange(n * n), n)
+    cell = j * (n + 1) + i
+    quad = np.stack([cell, cell + 1, cell + n + 2, cell + n + 1], axis=1)
+    verts, faces, uvs = [], [], []
+    for k, p in enumerate(polys):
+        q = co[p]
+        pts = (((1 - s) * (1 - t))[:, None] * q[0] + (s * (1 - t))[:, None] * q[1] + (s * t)[:, None] * q[2]
+               + ((1 - s) * t)[:, None] * q[3])
+        faces.append(quad + sum(len(v) for v in verts))
+        verts.append(pts)
+        ty, tx = divmod(k, cols)
+        uv = np.stack([tx + gap / 2 + s * (1 - gap), ty + gap / 2 + t * (1 - gap)], axis=1) * tile
+        uvs.append(uv[quad].reshape(-1, 2))
+    new = bpy.data.meshes.new(me.name)
+    new.from_pydata(np.concatenate(verts).tolist(), [], np.concatenate(faces).tolist())
+    for m in me.materials:
+        new.materials.append(m)
+    layer = new.uv_layers.new(name="Lightmap")
+    layer.uv.foreach_set("vector", np.concatenate(uvs).astype(np.float32).ravel())
+    new.update()
+    ob.data = new
+    bpy.data.meshes.remove(me)
+    return ob
+
+
+def build_cornell_bake(n=16):
+    """The Cornell box .blend with every face cut n x n into its own (n+1)^2 vertices
+    (16 faces, 4,624 vertices at n = 16) and a lightmap UV map per object: the bake
+    demo and the bake bench's scene."""
+    obs = build_cornell(False)
+    for ob in obs.values():
+        grid_faces(ob, n)
+    return obs
+
+
 SCENES = {
     "cornell_box": lambda: build_cornell(False),
+    "cornell_bake": build_cornell_bake,
     "cornell_glossy": lambda: build_cornell(True),
     "sierpinski": build_sierpinski,
     "room": build_room,

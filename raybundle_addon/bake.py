@@ -68,7 +68,7 @@ class BakeSettings:
     lightmap_margin: int = 16
     camera: bool = False
     directory: str = "//raybundle_bake/"
-    light_samples: int = 32
+    light_samples: int = 16
     single_user: bool = False
 
     @classmethod

@@ -81,8 +81,9 @@ class RAYBUNDLE_PG_settings(bpy.types.PropertyGroup):
         name="Output", subtype="DIR_PATH", default="//raybundle_bake/",
         description="Folder of the lightmap and camera EXRs ('//' = next to the .blend file)")
     bake_light_samples: IntProperty(
-        name="Light Samples", default=32, min=1, max=4096,
-        description="Shadow rays per light per baked point (vertex, corner or texel) for the direct light")
+        name="Light Samples", default=16, min=1, max=4096,
+        description="Shadow rays per light per baked point (vertex, corner or texel) for the direct light; "
+        "polygonal lights are integrated exactly and the rays only find their shadows")
     bake_single_user: BoolProperty(
         name="Make Single User", default=False,
         description="Objects sharing one mesh get their own copy of it, each baked with its own light; "

@@ -97,10 +97,11 @@ def test_furnace_bake_is_le_over_one_minus_albedo(seed=0):
     exact = sc_in.analytic_radiance
     rel = L / exact - 1
     # measured (seeds 0, 1; 150 iterations x 16 directions; the block is a first-shot light,
-    # 16 shadow rays per point): channel means within 0.27% of exact, spread of the point
-    # values (std) 0.77-0.84%, largest 8.3% (under the block, where only its bottom face lights)
+    # its 12 triangles integrated analytically, 16 shadow rays per point): channel means within
+    # 0.26% of exact, spread of the point values (std) 0.40-0.54%, largest 3.1% (with plain
+    # light sampling: 0.84% and 8.3%, under the block where only its bottom face lights)
     assert np.all(np.abs(rel.mean(axis=0)) < 0.012), rel.mean(axis=0)
-    assert rel.std() < 0.015 and np.abs(rel).max() < 0.15
+    assert rel.std() < 0.011 and np.abs(rel).max() < 0.07
     r.tracer.close()
 
 

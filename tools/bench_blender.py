@@ -118,6 +118,29 @@ def loglog_at(xs, ys, x):
     return float(np.exp(np.interp(lx, xs[o], ys[o])))
 
 
+def time_to_errors(rows, goals):
+    """{engine: {"5%": "12.3 s", ...}}: when each engine's error curve (rows with ``engine``,
+    ``seconds``, ``error``) first reaches each goal, by log-log interpolation between its
+    runs; "<= t" when its first run is already below, "> T" when its last is still above.
+    Printed as it goes."""
+    targets = {}
+    for engine in dict.fromkeys(r["engine"] for r in rows):
+        runs = sorted((r["seconds"], r["error"]) for r in rows if r["engine"] == engine)
+        t, e = zip(*runs)
+        targets[engine] = {}
+        for goal in goals:
+            hit = next((k for k in range(len(e)) if e[k] <= goal), None)
+            if hit is None:
+                got = f"> {t[-1]:.0f} s"
+            elif hit == 0:
+                got = f"<= {t[0]:.1f} s"
+            else:
+                got = f"{loglog_at(e[hit - 1:hit + 1][::-1], t[hit - 1:hit + 1][::-1], goal):.1f} s"
+            targets[engine][f"{100 * goal:g}%"] = got
+        print(f"{engine} reaches " + ", ".join(f"{g} in {v}" for g, v in targets[engine].items()))
+    return targets
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("blend", help="a .blend file or a built-in scene name (cornell, cornell-glossy)")
@@ -177,36 +200,24 @@ def main(argv=None):
         print(f"at {r['seconds']:.1f} s: raybundle {r['error']:.4f}, Cycles "
               f"{'n/a' if c_err is None else f'{c_err:.4f}'}; Cycles reaches {r['error']:.4f} in "
               f"{'n/a' if c_time is None else f'{c_time:.1f} s'}")
-    targets = {}
-    for engine in ("raybundle", "cycles"):
-        runs = sorted((r["seconds"], r["error"]) for r in rows if r["engine"] == engine)
-        t, e = zip(*runs)
-        targets[engine] = {}
-        for goal in (0.05, 0.02, 0.015, 0.01):
-            # time to the goal: first crossing of the log-log curve, "> last" if never below
-            hit = next((k for k in range(len(e)) if e[k] <= goal), None)
-            if hit is None:
-                targets[engine][goal] = f"> {t[-1]:.0f} s"
-            elif hit == 0:
-                targets[engine][goal] = f"<= {t[0]:.1f} s"
-            else:
-                x = loglog_at(e[hit - 1:hit + 1][::-1], t[hit - 1:hit + 1][::-1], goal)
-                targets[engine][goal] = f"{x:.1f} s"
-        print(f"{engine} reaches " + ", ".join(f"{100 * g:g}% in {v}" for g, v in targets[engine].items()))
+    targets = time_to_errors(rows, goals=(0.05, 0.02, 0.015, 0.01))
     with open(os.path.join(a.out, "bench.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
     with open(os.path.join(a.out, "summary.json"), "w") as f:
         json.dump(dict(blend=a.blend, reference_samples_per_half=a.reference_samples, rows=rows, summary=summary,
-                       time_to_error={k: {f"{100 * g:g}%": v for g, v in d.items()} for k, d in targets.items()}),
+                       time_to_error=targets),
                   f, indent=1)
     chart(os.path.join(a.out, "bench.png"), rows, os.path.basename(a.blend))
     print(f"wrote {a.out}/bench.csv, summary.json, bench.png")
     return 0
 
 
-def chart(path, rows, title):
+def chart(path, rows, title, ylabel="relative RMSE against a long Cycles render",
+          xlabel="seconds from loading the scene to the EXR written (2 cores)", all_pixels=True):
+    """Error against seconds, log-log, one curve per engine (and, with ``all_pixels``,
+    the error over all pixels, faint)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -214,12 +225,13 @@ def chart(path, rows, title):
 
     fig, ax = plt.subplots(figsize=(7, 5))
     for engine, style in (("raybundle", "o-"), ("cycles", "s--")):
-        pts = sorted((r["seconds"], r["error"], r["error_all_pixels"]) for r in rows if r["engine"] == engine)
+        pts = sorted((r["seconds"], r["error"], r.get("error_all_pixels")) for r in rows if r["engine"] == engine)
         t, e, full = zip(*pts)
-        ax.loglog(t, e, style, label=f"{engine} (pixels 2 px from lights)")
-        ax.loglog(t, full, style, alpha=0.4, label=f"{engine} (all pixels)")
-    ax.set_xlabel("seconds from loading the scene to the EXR written (2 cores)")
-    ax.set_ylabel("relative RMSE against a long Cycles render")
+        ax.loglog(t, e, style, label=f"{engine} (pixels 2 px from lights)" if all_pixels else engine)
+        if all_pixels:
+            ax.loglog(t, full, style, alpha=0.4, label=f"{engine} (all pixels)")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)

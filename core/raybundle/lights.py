@@ -220,6 +220,73 @@ def _box_in_front(lo, hi, origin, normal):
     return np.einsum("ij,ij->i", corner - origin, normal) > 0
 
 
+#: mesh lights with more triangles than this are not integrated analytically in bakes
+ANALYTIC_MAX_TRIANGLES = 64
+
+
+def polygon_irradiance(points, normals, polygons):
+    """Cosine-weighted solid angle (N,) [sr] of planar polygons ``polygons`` (N, M, 3)
+    seen from ``points`` (N, 3) with unit ``normals`` (N, 3), clipped to the points'
+    upper hemispheres: ``I = int cos_x dw``, so a Lambertian emitter of radiance Le
+    gives the irradiance ``E = Le I`` [W/m^2] (no occlusion).
+
+    Lambert's formula on the clipped polygon (Sutherland-Hodgman against the tangent
+    plane; vertices repeated to pad a row, whose zero-length edges add nothing):
+    ``I = |sum_i theta_i n . g_i| / 2``, ``theta_i`` the angle between the directions to
+    vertices i and i+1 and ``g_i`` the unit normal of the plane through them and the point.
+    """
+    pts = np.asarray(points, float)
+    poly = np.asarray(polygons, float)
+    n_pts, m = poly.shape[:2]
+    d = np.einsum("nmk,nk->nm", poly - pts[:, None], normals)
+    a, b = poly, np.roll(poly, -1, axis=1)
+    da, db = d, np.roll(d, -1, axis=1)
+    inside_a, inside_b = da >= 0, db >= 0
+    t = np.where(inside_a != inside_b, da / np.where(da != db, da - db, 1.0), 0.0)
+    cut = a + t[..., None] * (b - a)
+    cand = np.stack([a, cut], axis=2).reshape(n_pts, 2 * m, 3)
+    valid = np.stack([inside_a, inside_a != inside_b], axis=2).reshape(n_pts, 2 * m)
+    order = np.argsort(~valid, axis=1, kind="stable")
+    cand = np.take_along_axis(cand, order[..., None], axis=1)
+    count = valid.sum(axis=1)
+    last = np.take_along_axis(cand, np.maximum(count - 1, 0)[:, None, None], axis=1)
+    cand = np.where((np.arange(2 * m)[None, :] < count[:, None])[..., None], cand, last)
+    v = cand - pts[:, None]
+    v /= np.maximum(np.linalg.norm(v, axis=2, keepdims=True), 1e-300)
+    w = np.roll(v, -1, axis=1)
+    c = np.cross(v, w)
+    sin = np.linalg.norm(c, axis=2)
+    theta = np.arctan2(sin, np.einsum("nmk,nmk->nm", v, w))
+    g = np.einsum("nmk,nk->nm", c, normals) / np.maximum(sin, 1e-300)
+    total = np.abs((theta * g).sum(axis=1)) / 2
+    return np.where(count >= 3, total, 0.0)
+
+
+def light_polygon_irradiance(light, points, normals):
+    """``I(x)`` (N,) of :func:`polygon_irradiance` for a polygonal light seen from
+    the emitting side (a :class:`MeshLight` of at most :data:`ANALYTIC_MAX_TRIANGLES`
+    triangles, a rectangular :class:`ShapeLight`), None for other lights."""
+    if isinstance(light, MeshLight) and len(light.triangles) <= ANALYTIC_MAX_TRIANGLES:
+        sc = light.scene
+        out = np.zeros(len(points))
+        for k, tri in enumerate(light.triangles):
+            c = sc.triangle_corners[tri]
+            front = (points - c[0]) @ sc.triangle_normal[tri]
+            lit = front != 0 if light.two_sided[k] else front > 0
+            if lit.any():
+                out[lit] += polygon_irradiance(points[lit], normals[lit], np.broadcast_to(c, (int(lit.sum()), 3, 3)))
+        return out
+    if isinstance(light, ShapeLight) and not light.ellipse:
+        corners = np.array([light.center + a * light.axis_u + b * light.axis_v
+                            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+        lit = (points - light.center) @ light.normal > 0
+        out = np.zeros(len(points))
+        if lit.any():
+            out[lit] = polygon_irradiance(points[lit], normals[lit], np.broadcast_to(corners, (int(lit.sum()), 4, 3)))
+        return out
+    return None
+
+
 class DirectLighting:
     """First-shot lights of a scene and the direct-illumination estimators."""
 
@@ -269,11 +336,12 @@ class DirectLighting:
     def n_lights(self):
         return len(self.area_lights) + len(self.point_lights)
 
-    def _light_samples(self, points, normals, light, u):
+    def _light_samples(self, points, normals, light, u, unshadowed=False):
         """One sample of every point's irradiance from one light.
 
         Returns ``(E (N,3) [W/m^2], travel (N,3), cos_x (N,))`` where E already
-        includes visibility, so ``E f(travel, w_out)`` is the reflected radiance.
+        includes visibility, so ``E f(travel, w_out)`` is the reflected radiance;
+        with ``unshadowed``, also E without the visibility test (4th item).
         """
         y, e = light.sample(points, u)
         v = y - points
@@ -281,6 +349,7 @@ class DirectLighting:
         w = v / r[:, None]                      # from the point towards the light
         cos_x = np.einsum("ij,ij->i", normals, w)
         e *= np.maximum(cos_x, 0.0)[:, None]
+        free = e.copy() if unshadowed else None
         live = np.any(e > 0, axis=1)
         if live.any():
             eps = self.tracer.eps
@@ -294,7 +363,7 @@ class DirectLighting:
                                            np.maximum(dist - 2 * eps, 0.0))
             idx = np.nonzero(live)[0][blocked]
             e[idx] = 0.0
-        return e, -w, cos_x
+        return (e, -w, cos_x, free) if unshadowed else (e, -w, cos_x)
 
     def light_list(self):
         return self.area_lights + self.point_lights
@@ -345,13 +414,20 @@ class DirectLighting:
 
     def irradiance(self, points, normals, rng, samples_per_light=16):
         """Direct irradiance (N, 3) [W/m^2] of the first-shot lights at surface points
-        with unit ``normals`` (N, 3): ``sum_l mean_s e_l cos_x V``, ``samples_per_light``
-        shadow rays per light with an extent (mesh, area, sphere and sun-disc lights),
-        one per point light of radius 0 and per sun of angle 0 (exact with one).
-        ``rng``: a Generator.  A point's samples are a randomly shifted Kronecker
-        (R_3) set, stratified over the light's triangles and their areas (a point
-        under one face of a 6-face mesh light gets that face's share of samples
-        evenly, not by chance).  Used by bakes, where a point's value is final."""
+        with unit ``normals`` (N, 3), for bakes, where a point's value is final.
+
+        Polygonal lights (mesh lights of at most :data:`ANALYTIC_MAX_TRIANGLES`
+        triangles, rectangular area lights) use the ratio estimator of analytic
+        direct light and stochastic shadows (Heitz, Hill & McGuire 2018):
+        ``E = Le I(x) sum_s e_s V_s / sum_s e_s``, ``I(x)`` the exact unoccluded
+        cosine-weighted solid angle of the light (:func:`polygon_irradiance`) and
+        ``e_s`` the unshadowed sample estimates: exact where no sample is blocked,
+        0 where all are, and consistent in between (its bias in a penumbra falls as
+        1 / samples).  Other lights: the mean of the samples.  ``samples_per_light``
+        shadow rays per light with an extent, one per point light of radius 0 and
+        per sun of angle 0 (exact with one).  A point's samples are a randomly
+        shifted Kronecker (R_3) set, stratified over the light's triangles and
+        their areas.  ``rng``: a Generator."""
         from .sampling import kronecker_alpha
 
         out = np.zeros((len(points), 3))
@@ -361,9 +437,18 @@ class DirectLighting:
                 (isinstance(light, SunLight) and light.angle == 0.0)
             n_s = 1 if sharp else max(1, int(samples_per_light))
             shift = rng.random((len(points), 3))
+            exact = None if sharp else light_polygon_irradiance(light, points, normals)
+            seen = np.zeros((len(points), 3))
+            total = np.zeros((len(points), 3))
             for s in range(n_s):
-                e, _, _ = self._light_samples(points, normals, light, (shift + s * alpha) % 1.0)
-                out += e / n_s
+                e, _, _, free = self._light_samples(points, normals, light, (shift + s * alpha) % 1.0, unshadowed=True)
+                seen += e
+                total += free
+            if exact is None:
+                out += seen / n_s
+            else:
+                ratio = np.where(total > 0, seen / np.maximum(total, 1e-300), 0.0)
+                out += exact[:, None] * np.asarray(light.radiance, float) * ratio
         return out
 
     @staticmethod
