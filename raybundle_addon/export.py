@@ -151,6 +151,39 @@ def _ray_visible(ob, warn):
     return True
 
 
+def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, warn):
+    """For an object whose materials have albedo textures (``converter.textures``):
+    ((T, 3, 2) corner UVs, (T,) image index into ``images``, -1 untextured), or None.
+    ``images`` (image name -> (index, bpy Image)) grows as new images are met."""
+    for m in slots:
+        converter.convert(m)                  # (cached) fills converter.textures
+    tex = [converter.textures.get(m.name_full) if m is not None else None for m in slots] or [None]
+    if not any(tex):
+        return None
+    slot = np.clip(poly_mat[tri_poly], 0, len(tex) - 1)
+    uv = np.zeros((len(loops), 3, 2))
+    img = np.full(len(loops), -1, np.int64)
+    layers = {}
+    for k, got in enumerate(tex):
+        sel = np.nonzero(slot == k)[0]
+        if got is None or len(sel) == 0:
+            continue
+        image, name = got
+        layer = (me.uv_layers.get(name) if name else
+                 next((l for l in me.uv_layers if l.active_render), me.uv_layers.active))
+        if layer is None:
+            warn(f"object {ob.name!r}: material {slots[k].name!r} has the image texture {image.name!r} but the "
+                 f"mesh has no UV map{' ' + repr(name) if name else ''}: its mean color is used")
+            continue
+        if layer.name not in layers:
+            a = np.empty(2 * len(me.loops), np.float32)
+            layer.uv.foreach_get("vector", a)
+            layers[layer.name] = a.reshape(-1, 2)
+        uv[sel] = layers[layer.name][loops[sel]]
+        img[sel] = images.setdefault(image.name_full, (len(images), image))[0]
+    return (uv, img) if np.any(img >= 0) else None
+
+
 # -------------------------------------------------------------------- lights
 def light_color(ld):
     """(3,) color x 2**exposure (x temperature color when enabled) of a bpy Light."""
@@ -297,6 +330,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
 
     cache = {}
     verts, tris, tmats, tobj, tpoly, tloops = [], [], [], [], [], []
+    tuv, timg, images = [], [], {}          # albedo textures: corner UVs, image index per triangle
     objects = []
     lights = {"point": [], "sun": [], "area": []}
     n_vert = n_tri = 0
@@ -334,6 +368,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
                     cache[key] = arrays
             pos, tri, loops, tp, mi = arrays
             slots = [s.material for s in ob.material_slots] if len(ob.material_slots) else list(me.materials)
+            textured = _texture_uvs(me, ob, slots, tp, mi, loops, converter, images, warn)
             info = ObjectInfo(ob.name, ob.original.name, me.name, bool(inst.is_instance),
                               inst.parent.name if inst.is_instance and inst.parent else None,
                               n_tri, len(tri), len(me.polygons), len(me.loops), M)
@@ -349,6 +384,8 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
         tobj.append(np.full(len(tri), len(objects), np.int32))
         tpoly.append(tp)
         tloops.append(loops)
+        tuv.append(textured[0] if textured else np.zeros((len(tri), 3, 2)))
+        timg.append(textured[1] if textured else np.full(len(tri), -1, np.int64))
         objects.append(info)
         n_vert += len(pos)
         n_tri += len(tri)
@@ -378,13 +415,19 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
             return cls()
         return cls(**{k: np.array([r[k] for r in rows]) for k in rows[0]})
 
+    texture = None
+    if images:
+        from raybundle.textures import SurfaceTexture, modulation_map
+
+        maps = [modulation_map(converter.image_pixels(im))[0] for _, im in sorted(images.values(), key=lambda x: x[0])]
+        texture = SurfaceTexture(maps, np.concatenate(timg), v[t], np.concatenate(tuv))
     with _warnings.catch_warnings(record=True) as caught:
         _warnings.simplefilter("always")
         sc = build_scene(v, t, m, mats, point_lights=group(PointLights, lights["point"]),
                          sun_lights=group(SunLights, lights["sun"]), area_lights=group(AreaLights, lights["area"]),
                          environment=environment, camera=camera, two_sided=True,
                          triangle_solid=np.zeros(len(t), bool),    # two-sided surfaces are never solids
-                         name=name or scene.name)
+                         name=name or scene.name, texture=texture)
     for w in caught:
         warn(str(w.message))
     far = float(np.sqrt(((v - camera.position) ** 2).sum(axis=1).max())) if camera is not None else 0.0

@@ -17,9 +17,13 @@ model.  A material's node tree is read from its Cycles output node:
   two reflective closures) creates energy: it is clipped, with a warning.
 * **Emission**: radiance = Color x Strength [W m^-2 sr^-1], from both sides.
 * **Principled BSDF**: :func:`principled_to_material` (the one place that maps it).
-* A color input driven by an **Image Texture** uses the image's mean color
-  (linear), with a warning; an **RGB** / **Value** node gives its value; any
-  other link uses the socket's own value, with a warning.
+* An **Image Texture** on a Diffuse BSDF's Color or a Principled BSDF's Base Color,
+  looked up through a UV map (the Vector input unlinked, or from a UV Map node or
+  Texture Coordinate's UV), is an albedo texture (:attr:`MaterialConverter.textures`,
+  :mod:`raybundle.textures`): the material holds the image's mean linear color, each
+  patch its mean over the patch, and images and bakes its detail.  On any other
+  color input an image texture is its mean color (warned); an **RGB** / **Value** node
+  gives its value; any other link uses the socket's own value, with a warning.
 * Anything else (Glass, Translucent, Transparent, Subsurface, groups...) makes the
   whole material fall back to its viewport color (``Material.diffuse_color``) as a
   Diffuse BSDF, with one warning naming the material.  A material without nodes
@@ -76,7 +80,11 @@ class MaterialConverter:
     def __init__(self, warn):
         self.warn = warn
         self._cache = {}
-        self._image_means = {}
+        self._image_pixels = {}
+        #: material name -> (bpy Image, UV map name or "" for the active render UV map)
+        #: of its albedo texture
+        self.textures = {}
+        self._albedo = []               # albedo textures met while converting one material
 
     # ------------------------------------------------------------ materials
     def convert(self, mat):
@@ -98,12 +106,18 @@ class MaterialConverter:
             self.warn(f"material {name!r} has no surface shader connected to its output: rendered black")
             return dict(name=name)
         notes = []
+        self._albedo = []
         try:
             acc = _Closure()
             self._closure(out.inputs["Surface"], 1.0, acc, notes, 0)
         except Unsupported as e:
             self.warn(f"material {name!r}: {e}; using its viewport color")
             return self._viewport(mat)
+        found = list(dict.fromkeys((im.name_full, uv) for im, uv in self._albedo))
+        if len(found) == 1:
+            self.textures[name] = self._albedo[0]
+        elif len(found) > 1:
+            notes.append(f"{len(found)} different image textures on its albedo: each is replaced by its mean color")
         for n in dict.fromkeys(notes):        # once each, in order
             self.warn(f"material {name!r}: {n}")
         return self._flatten(name, acc)
@@ -183,8 +197,19 @@ class MaterialConverter:
             if node is not None and node.type in ("TEX_IMAGE", "TEX_ENVIRONMENT"):
                 mean = self.image_mean(node.image)
                 if mean is not None:
+                    uv = _uv_source(node) if node.type == "TEX_IMAGE" else None
+                    albedo = sock.name in ("Color", "Base Color") and sock.node.type in ("BSDF_DIFFUSE",
+                                                                                         "BSDF_PRINCIPLED")
+                    if albedo and uv is not None:
+                        self._albedo.append((node.image, uv))
+                        if node.extension != "REPEAT":
+                            notes.append(f"image texture {node.image.name!r}: {node.extension.lower()} extension "
+                                         "is treated as repeat")
+                        return mean
+                    why = ("its texture coordinates are not a UV map" if albedo else
+                           "only textures on a Diffuse Color or Base Color are modelled")
                     notes.append(f"image texture {node.image.name!r} on {sock.name!r} is replaced by its mean color "
-                                 f"{tuple(np.round(mean, 3))} (textures come with baking)")
+                                 f"{tuple(np.round(mean, 3))} ({why})")
                     return mean
                 notes.append(f"image texture on {sock.name!r} has no image data: using the socket's value")
             elif node is not None:
@@ -202,14 +227,19 @@ class MaterialConverter:
                 notes.append(f"{sock.name!r} is driven by a {node.bl_label} node: using the socket's own value")
         return float(sock.default_value)
 
-    def image_mean(self, image):
-        """(3,) mean linear color of ``image``, or None without pixel data."""
+    def image_pixels(self, image):
+        """(H, W, 3) linear RGB of ``image`` (row 0 at the bottom), or None without pixel data."""
         if image is None:
             return None
         key = image.name_full
-        if key not in self._image_means:
-            self._image_means[key] = _image_mean(image)
-        return self._image_means[key]
+        if key not in self._image_pixels:
+            self._image_pixels[key] = _image_pixels(image)
+        return self._image_pixels[key]
+
+    def image_mean(self, image):
+        """(3,) mean linear color of ``image``, or None without pixel data."""
+        px = self.image_pixels(image)
+        return None if px is None else px.reshape(-1, 3).mean(axis=0)
 
     # -------------------------------------------------------------- flatten
     def _flatten(self, name, acc):
@@ -325,9 +355,25 @@ def _follow_reroutes(node):
     return None
 
 
-def _image_mean(image):
-    """Mean linear RGB of an image's pixels (None without data).  Byte images in an
-    sRGB color space hold encoded values in ``Image.pixels``: they are decoded first."""
+def _uv_source(tex_node):
+    """The UV map an Image Texture node reads: a UV Map node's map, "" for the active
+    render UV map (Vector unlinked, or Texture Coordinate's UV), None for other coordinates."""
+    vec = tex_node.inputs.get("Vector")
+    if vec is None or not vec.is_linked:
+        return ""
+    link = vec.links[0]
+    node = _follow_reroutes(link.from_node)
+    if node is not None and node.type == "UVMAP":
+        return node.uv_map
+    if node is not None and node.type == "TEX_COORD" and link.from_socket.name == "UV":
+        return ""
+    return None
+
+
+def _image_pixels(image):
+    """(H, W, 3) linear RGB of an image's pixels (None without data), row 0 at the
+    bottom.  Byte images in an sRGB color space hold encoded values in
+    ``Image.pixels``: they are decoded first."""
     try:
         w, h = image.size
         ch = image.channels
@@ -339,11 +385,11 @@ def _image_mean(image):
         return None
     if px.size == 0:
         return None
-    px = px.reshape(-1, ch)
-    rgb = px[:, :3] if ch >= 3 else np.repeat(px[:, :1], 3, axis=1)
+    px = px.reshape(h, w, ch)
+    rgb = px[..., :3] if ch >= 3 else np.repeat(px[..., :1], 3, axis=2)
     if not image.is_float and image.colorspace_settings.name in ("sRGB",):
         rgb = srgb_to_linear(rgb)
-    return np.asarray(rgb, float).mean(axis=0)
+    return np.asarray(rgb, np.float32)
 
 
 def world_radiance(world, warn):

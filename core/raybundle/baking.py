@@ -9,7 +9,8 @@ Cycles' bake does),
 
     L(x) = Le(x) + W_d kd(x) / pi * (E_ind(x) + E_dir(x))      [W m^-2 sr^-1]
 
-with ``E_ind`` the running average of the incoming (indirect) irradiance
+with ``kd(x)`` the diffuse reflectance at the point (a texture's texel there,
+:mod:`raybundle.textures`), ``E_ind`` the running average of the incoming (indirect) irradiance
 interpolated linearly from the patch values (the image's reconstruction:
 :meth:`~raybundle.reconstruction.LinearReconstruction.projected`, the caustic
 first shot by :meth:`~raybundle.reconstruction.LinearReconstruction.averaged`),
@@ -170,6 +171,8 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None):
     if direct.n_lights:
         e = e + direct.irradiance(points.point[idx], n, rng, light_samples)
     kd = mats.diffuse_reflectance[m]
+    if sc.texture is not None:                  # the texel's albedo: texture detail stays sharp
+        kd = kd * sc.texture.at(sc.triangle_source[tri], points.point[idx])
     out[idx] += mats.diffuse_weight(m, ones) * kd / np.pi * e
     return out
 

@@ -307,7 +307,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
     out = PatchScene(v, t, scene.triangle_material[src], patch, scene.triangle_source[src], scene.materials,
                      scene.point_lights, scene.camera, scene.analytic_radiance, scene.name,
                      scene.dropped_triangles, scene.triangle_solid[src], scene.triangle_two_sided[src],
-                     scene.sun_lights, scene.area_lights, scene.environment, tags)
+                     scene.sun_lights, scene.area_lights, scene.environment, tags, texture=scene.texture)
     return out, n_cut
 
 

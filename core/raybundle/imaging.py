@@ -201,6 +201,12 @@ class Renderer:
             return side_values[self.scene.tside_side[tside]]
         return self.solver.reconstruction.at(vert, tside, bary)
 
+    def albedo_scale(self, triangles, points):
+        """Texture modulation (N, 3) of the diffuse reflectance at ``points`` on patch
+        ``triangles`` (:mod:`raybundle.textures`), None for an untextured scene."""
+        tex = self.scene.texture
+        return None if tex is None else tex.at(self.scene.triangle_source[triangles], points)
+
     def image_pass(self):
         """One jittered sample per pixel of the per-pass part: emission seen, direct
         light of the first-shot lights and (with ``glossy_gather``) the glossy lobe;
@@ -253,7 +259,7 @@ class Renderer:
             mis = self.glossy_material[g.material[hf]] if self._light_mis else None
             out[hf] += self.direct.reflected_radiance(
                 g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], self._light_uniforms(u_light[hf]),
-                self.settings.light_samples, mis=mis)
+                self.settings.light_samples, mis=mis, diffuse_scale=self.albedo_scale(g.triangle[hf], g.point[hf]))
             self.image_rays += self.direct.rays - before
         gl = hf[self.glossy_material[g.material[hf]]]
         if self.settings.glossy_gather:
@@ -439,7 +445,8 @@ class Renderer:
             e = self.surface_values(e_bar, vert, g.tside[h], g.bary[h])
             m = g.material[h]
             w_d = sc.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]))
-            out[h] += w_d * kd[m] / np.pi * e
+            scale = self.albedo_scale(g.triangle[h], g.point[h])
+            out[h] += w_d * kd[m] / np.pi * e * (1.0 if scale is None else scale)
         return out / k
 
     def image(self, diffuse=None, preview=False):

@@ -372,7 +372,7 @@ class DirectLighting:
         """How many light samples :meth:`reflected_radiance` draws per point."""
         return samples_per_light * len(self.area_lights) + len(self.point_lights)
 
-    def reflected_radiance(self, points, normals, mats, w_out, u, samples_per_light=1, mis=None):
+    def reflected_radiance(self, points, normals, mats, w_out, u, samples_per_light=1, mis=None, diffuse_scale=None):
         """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
 
         Unbiased estimate with ``samples_per_light`` shadow rays per area light
@@ -384,6 +384,7 @@ class DirectLighting:
         heuristic; n = ``samples_per_light``, p_l and p_g the light's and the lobe's
         densities of the sampled direction), so a sharp lobe reflecting a lamp is found by
         the lobe's ray, not by rare light samples with a huge BRDF value.
+        ``diffuse_scale`` (N, 3): texture modulation of the diffuse reflectance.
         """
         out = np.zeros((len(points), 3))
         if isinstance(u, np.random.Generator):
@@ -397,7 +398,8 @@ class DirectLighting:
                 live = np.any(e > 0, axis=1)
                 if live.any():
                     mt = self.scene.materials
-                    f = mt.brdf(mats[live], normals[live], travel[live], w_out[live])
+                    f = mt.brdf(mats[live], normals[live], travel[live], w_out[live],
+                                diffuse_scale=None if diffuse_scale is None else diffuse_scale[live])
                     if mis is not None and isinstance(light, MeshLight):
                         sel = np.nonzero(mis[live])[0]
                         if len(sel):

@@ -236,7 +236,7 @@ class MaterialTable:
                 raise ValueError(f"material {self.names[m]!r}: {k} must be 0 or 1")
 
     # --------------------------------------------------------------- evaluation
-    def brdf(self, mat, normal, w_in, w_out, diffuse=True, glossy=True) -> np.ndarray:
+    def brdf(self, mat, normal, w_in, w_out, diffuse=True, glossy=True, diffuse_scale=None) -> np.ndarray:
         """BRDF value f(w_in, w_out) [1/sr], RGB.
 
         Parameters
@@ -246,6 +246,8 @@ class MaterialTable:
         w_in : (N, 3) or (3,) float  travel direction of the incoming light
         w_out : (N, 3) or (3,) float  outgoing direction
         diffuse, glossy : bool  which lobes to include
+        diffuse_scale : (N, 3) float or None  texture modulation of the diffuse
+            reflectance at each point (:mod:`raybundle.textures`)
 
         Returns
         -------
@@ -262,6 +264,8 @@ class MaterialTable:
         lay = self.is_layered[mat]
         if diffuse:
             out += self.diffuse_reflectance[mat] / np.pi
+            if diffuse_scale is not None:
+                out *= diffuse_scale
             if lay.any():
                 out[lay] *= self.diffuse_weight(mat[lay], cos_o[lay])
         if glossy:

@@ -204,6 +204,8 @@ class PatchScene:
         [W m^-2 sr^-1] (Blender's world color times strength)
     triangle_corner_tag : (T, 3) int or None  weld tags of corners on contact
         lines (:mod:`raybundle.contacts`); corners weld only when their tags agree
+    texture : :class:`~raybundle.textures.SurfaceTexture` or None  image textures on
+        the diffuse albedo of the input faces (kept through subdivision)
     """
 
     vertices: np.ndarray
@@ -223,6 +225,7 @@ class PatchScene:
     area_lights: AreaLights = field(default_factory=AreaLights)
     environment: np.ndarray | None = None
     triangle_corner_tag: np.ndarray | None = None
+    texture: object = None
 
     def __post_init__(self):
         if self.triangle_two_sided is None:
@@ -449,8 +452,11 @@ def load_npz(path) -> PatchScene:
 def build_scene(vertices, triangles, triangle_material, materials, point_lights=None, camera=None,
                 triangle_patch=None, triangle_source=None, analytic_radiance=None, name="",
                 area_epsilon=1e-14, triangle_solid=None, two_sided=False,
-                sun_lights=None, area_lights=None, environment=None) -> PatchScene:
+                sun_lights=None, area_lights=None, environment=None, texture=None) -> PatchScene:
     """Validate raw triangles and make a :class:`PatchScene`.
+
+    ``texture``: a :class:`~raybundle.textures.SurfaceTexture` whose faces are the
+    input triangles (indexed like ``triangle_source``).
 
     ``two_sided``: bool or (T,) bool, Blender's semantics when true (module
     docstring); the default, one-sided, is the core's own convention.
@@ -519,7 +525,7 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
     ar = None if analytic_radiance is None else np.asarray(analytic_radiance, float).reshape(3)
     solid = None if triangle_solid is None else np.asarray(triangle_solid, bool).reshape(-1)[keep] & ~two
     return PatchScene(v, t, m, patch, src, materials, point_lights, camera, ar, name, dropped, solid,
-                      two, sun_lights, area_lights, env)
+                      two, sun_lights, area_lights, env, texture=texture)
 
 
 def _check_lights(point, sun, area):
@@ -625,7 +631,7 @@ def subdivide(scene: PatchScene, max_edge=None, patches=None, contacts=True) -> 
     fine = PatchScene(v, t, np.concatenate(mats), np.arange(len(t)), np.concatenate(srcs),
                       scene.materials, scene.point_lights, scene.camera, scene.analytic_radiance,
                       scene.name, scene.dropped_triangles, *per_tri[:2], scene.sun_lights, scene.area_lights,
-                      scene.environment)
+                      scene.environment, texture=scene.texture)
     if not contacts:
         return fine
     from .contacts import split_at_contacts

@@ -98,6 +98,8 @@ class StochasticIterationSolver:
         self.area = np.bincount(scene.tside_side, self.tside_open_area, minlength=scene.n_sides)
         self.reconstruction = LinearReconstruction(scene, self.tside_open_area)
         self.kd_over_pi = mats.diffuse_reflectance[pm] / np.pi          # (P, 3)
+        if scene.texture is not None:         # a textured patch reflects with its mean albedo
+            self.kd_over_pi = self.kd_over_pi * scene.texture.side_means(scene, seed)
         self.glossy_mask = mats.is_glossy[pm]
         self.layered_sides = np.nonzero(mats.has_layer[pm])[0]      # diffuse lobe under a specular layer
         self.glossy_patches = np.nonzero(self.glossy_mask)[0]
