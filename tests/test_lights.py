@@ -136,3 +136,39 @@ def test_polygon_irradiance_matches_the_rectangle_closed_form_and_clips_at_the_h
     assert polygon_irradiance(p[None], -np.array([[0, 0, 1.0]]), rect[None])[0] == 0
     two = polygon_irradiance(np.zeros((2, 3)), np.array([[0, 0, 1.0]] * 2), np.stack([rect[[0, 1, 2]], rect[[0, 2, 3]]]))
     assert np.isclose(two.sum(), np.pi * f, rtol=1e-12)
+
+
+def test_a_lamp_cut_into_a_grid_integrates_by_its_outline_like_the_whole_lamp():
+    """A mesh lamp of 2 x 5 x 5 triangles: its plane's outline is merged to 4 edges, and the
+    analytic irradiance (outline where the lamp is above the horizon, clipped triangles
+    where the horizon cuts it) equals the two-triangle lamp's at random points."""
+    from raybundle.lights import MeshLight, _light_planes, light_polygon_irradiance
+
+    def lamp_scene(n):
+        g = np.linspace(-0.5, 0.5, n + 1)
+        v = np.array([[x, y, 1.0] for y in g for x in g])
+        q = [(j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
+             for j in range(n) for i in range(n)]
+        t = [[a, c, b] for a, b, c, d in q] + [[a, d, c] for a, b, c, d in q]    # facing down
+        floor = np.array([[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0]], float)
+        v = np.concatenate([v, floor])
+        f0 = len(v) - 4
+        t += [[f0, f0 + 1, f0 + 2], [f0, f0 + 2, f0 + 3]]
+        mats = MaterialTable.from_list([dict(name="lamp", emission=(5.0, 5.0, 5.0)),
+                                        dict(name="floor", diffuse=(0.5, 0.5, 0.5))])
+        sc = build_scene(v, t, [0] * (len(t) - 2) + [1, 1], mats)
+        tri = np.nonzero(sc.triangle_material == 0)[0]
+        return MeshLight(0, tri, np.cumsum(sc.triangle_area[tri]) / sc.triangle_area[tri].sum(),
+                         float(sc.triangle_area[tri].sum()), np.full(3, 5.0), np.zeros(len(tri), bool), sc)
+
+    grid, whole = lamp_scene(5), lamp_scene(1)
+    planes = _light_planes(grid)
+    assert len(planes) == 1 and len(planes[0][5]) == 4
+    rng = np.random.default_rng(3)
+    p = rng.uniform([-1, -1, 0], [1, 1, 0.99], (500, 3))
+    n = rng.normal(size=(500, 3)) + [0, 0, 2]
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    a, ok_a = light_polygon_irradiance(grid, p, n)
+    b, ok_b = light_polygon_irradiance(whole, p, n)
+    assert ok_a.all() and ok_b.all() and np.allclose(a, b, rtol=1e-9, atol=1e-12)
+    assert (np.einsum("ij,ij->i", n, [0, 0, 1] - p) < 0.5).any()      # some points see it cut by the horizon

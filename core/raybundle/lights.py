@@ -220,7 +220,8 @@ def _box_in_front(lo, hi, origin, normal):
     return np.einsum("ij,ij->i", corner - origin, normal) > 0
 
 
-#: mesh lights with more triangles than this are not integrated analytically in bakes
+#: a mesh light's plane cut by a point's horizon is integrated triangle by triangle
+#: (each clipped) only when it has at most this many triangles
 ANALYTIC_MAX_TRIANGLES = 64
 
 
@@ -262,20 +263,135 @@ def polygon_irradiance(points, normals, polygons):
     return np.where(count >= 3, total, 0.0)
 
 
+def boundary_edge_irradiance(points, normals, edges, chunk=16384):
+    """``I`` (N,) of a planar polygon given by its directed boundary edges ``edges``
+    (B, 2, 3) [m], wholly above the points' horizons: Lambert's formula is a sum over the
+    boundary, so a polygon meshed into many triangles costs its outline only
+    (``|sum_e theta_e n . g_e| / 2``, :func:`polygon_irradiance`)."""
+    out = np.zeros(len(points))
+    for lo in range(0, len(points), chunk):
+        p, n = points[lo:lo + chunk], normals[lo:lo + chunk]
+        v = edges[None, :, 0] - p[:, None]
+        w = edges[None, :, 1] - p[:, None]
+        v /= np.maximum(np.sqrt(np.einsum("nbk,nbk->nb", v, v)), 1e-300)[..., None]
+        w /= np.maximum(np.sqrt(np.einsum("nbk,nbk->nb", w, w)), 1e-300)[..., None]
+        c = np.cross(v, w)
+        sin = np.sqrt(np.einsum("nbk,nbk->nb", c, c))
+        theta = np.arctan2(sin, np.einsum("nbk,nbk->nb", v, w))
+        g = np.einsum("nbk,nk->nb", c, n) / np.maximum(sin, 1e-300)
+        out[lo:lo + chunk] = np.abs((theta * g).sum(axis=1)) / 2
+    return out
+
+
+def _merge_collinear(vertices, directed):
+    """Directed boundary edges (B, 2) (vertex ids) -> edge end points (B', 2, 3), chains of
+    collinear edges merged into one (the outline of a light cut into a grid of triangles
+    has 4 edges, not 4 n: Lambert's sum over a straight edge does not depend on how it is
+    split).  Outlines whose loops cannot be walked (a vertex with two outgoing edges) stay as they are."""
+    nxt = {}
+    for a, b in directed.tolist():
+        if a in nxt:
+            return vertices[directed]
+        nxt[a] = b
+    out, seen = [], set()
+    for start in list(nxt):
+        if start in seen:
+            continue
+        loop = [start]
+        seen.add(start)
+        v = nxt[start]
+        while v != start and v in nxt and v not in seen:
+            loop.append(v)
+            seen.add(v)
+            v = nxt[v]
+        pts = vertices[loop]
+        d_in = pts - np.roll(pts, 1, axis=0)
+        d_out = np.roll(pts, -1, axis=0) - pts
+        cross = np.linalg.norm(np.cross(d_in, d_out), axis=1)
+        scale = np.linalg.norm(d_in, axis=1) * np.linalg.norm(d_out, axis=1)
+        corner = (cross > 1e-9 * scale) | (np.einsum("ij,ij->i", d_in, d_out) < 0)
+        keep = pts[corner] if corner.sum() >= 3 else pts
+        out.append(np.stack([keep, np.roll(keep, -1, axis=0)], axis=1))
+    return np.concatenate(out) if out else vertices[directed]
+
+
+def _light_planes(light):
+    """The planar parts of a mesh light (cached on it): a list of (triangle rows into
+    ``light.triangles``, unit normal, a point of the plane, two-sided, bounding-box
+    corners (8, 3), directed boundary edges (B, 2, 3) or None when the triangles do not
+    form a consistently oriented, T-junction-free surface, whose outline cannot stand
+    for them)."""
+    if getattr(light, "_planes", None) is not None:
+        return light._planes
+    sc = light.scene
+    tri = light.triangles
+    nrm = sc.triangle_normal[tri]
+    p0 = sc.triangle_corners[tri, 0]
+    _, r = sc.bounding_sphere
+    key = np.concatenate([np.round(nrm * 1e5), np.round((nrm * p0).sum(axis=1) / max(r * 1e-7, 1e-12))[:, None],
+                          light.two_sided[:, None]], axis=1).astype(np.int64)
+    _, label = np.unique(key, axis=0, return_inverse=True)
+    planes = []
+    for g in range(int(label.max()) + 1 if len(label) else 0):
+        rows = np.nonzero(label.reshape(-1) == g)[0]
+        ids = sc.triangles[tri[rows]]
+        corners = sc.triangle_corners[tri[rows]]
+        lo, hi = corners.reshape(-1, 3).min(axis=0), corners.reshape(-1, 3).max(axis=0)
+        box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        e = np.concatenate([ids[:, [0, 1]], ids[:, [1, 2]], ids[:, [2, 0]]])
+        und = np.sort(e, axis=1)
+        uniq, inv, cnt = np.unique(und, axis=0, return_inverse=True, return_counts=True)
+        inv = inv.reshape(-1)
+        edges = None
+        once = cnt[inv] == 1
+        twice_ok = np.all(cnt <= 2)
+        if twice_ok:
+            # interior edges must be traversed both ways (consistent winding)
+            fwd = (e[:, 0] == und[:, 0]).astype(int)
+            per = np.bincount(inv, fwd, minlength=len(uniq))
+            if np.all(per[cnt == 2] == 1):
+                edges = _merge_collinear(sc.vertices, e[once])      # (B, 2, 3)
+                # the outline's area vector must equal the triangles' total area (no T-junctions)
+                area_vec = 0.5 * np.cross(edges[:, 0], edges[:, 1]).sum(axis=0)
+                total = sc.triangle_area[tri[rows]].sum()
+                if abs(area_vec @ nrm[rows[0]] - total) > 1e-6 * total:
+                    edges = None
+        planes.append((rows, nrm[rows[0]], p0[rows[0]], bool(light.two_sided[rows[0]]), box, edges))
+    light._planes = planes
+    return planes
+
+
 def light_polygon_irradiance(light, points, normals):
-    """``I(x)`` (N,) of :func:`polygon_irradiance` for a polygonal light seen from
-    the emitting side (a :class:`MeshLight` of at most :data:`ANALYTIC_MAX_TRIANGLES`
-    triangles, a rectangular :class:`ShapeLight`), None for other lights."""
-    if isinstance(light, MeshLight) and len(light.triangles) <= ANALYTIC_MAX_TRIANGLES:
+    """``I(x)`` (N,) of :func:`polygon_irradiance` for a polygonal light seen from its
+    emitting side (a :class:`MeshLight`, a rectangular :class:`ShapeLight`), and (N,)
+    bool: where it is exact.  ``None`` for other lights.
+
+    A mesh light is integrated plane by plane: a plane wholly above a point's horizon by
+    its outline (:func:`boundary_edge_irradiance`); a plane that the horizon cuts by its
+    triangles, each clipped, when it has at most :data:`ANALYTIC_MAX_TRIANGLES` of them
+    (otherwise such points are not exact, and the caller samples them instead)."""
+    if isinstance(light, MeshLight):
         sc = light.scene
         out = np.zeros(len(points))
-        for k, tri in enumerate(light.triangles):
-            c = sc.triangle_corners[tri]
-            front = (points - c[0]) @ sc.triangle_normal[tri]
-            lit = front != 0 if light.two_sided[k] else front > 0
-            if lit.any():
-                out[lit] += polygon_irradiance(points[lit], normals[lit], np.broadcast_to(c, (int(lit.sum()), 3, 3)))
-        return out
+        exact = np.ones(len(points), bool)
+        for rows, nrm, p0, two, box, edges in _light_planes(light):
+            front = (points - p0) @ nrm
+            lit = np.nonzero(front != 0 if two else front > 0)[0]
+            if len(lit) == 0:
+                continue
+            d = np.einsum("nk,nck->nc", normals[lit], box[None] - points[lit, None])
+            above, below = np.all(d >= 0, axis=1), np.all(d <= 0, axis=1)
+            whole = lit[above] if edges is not None else lit[:0]
+            if len(whole):
+                out[whole] += boundary_edge_irradiance(points[whole], normals[whole], edges)
+            cut = lit[~below & ~np.isin(lit, whole)]
+            if len(cut) and len(rows) <= ANALYTIC_MAX_TRIANGLES:
+                for k in rows:
+                    c = sc.triangle_corners[light.triangles[k]]
+                    out[cut] += polygon_irradiance(points[cut], normals[cut], np.broadcast_to(c, (len(cut), 3, 3)))
+            elif len(cut):
+                exact[cut] = False
+        return out, exact
     if isinstance(light, ShapeLight) and not light.ellipse:
         corners = np.array([light.center + a * light.axis_u + b * light.axis_v
                             for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
@@ -283,7 +399,7 @@ def light_polygon_irradiance(light, points, normals):
         out = np.zeros(len(points))
         if lit.any():
             out[lit] = polygon_irradiance(points[lit], normals[lit], np.broadcast_to(corners, (int(lit.sum()), 4, 3)))
-        return out
+        return out, np.ones(len(points), bool)
     return None
 
 
@@ -418,8 +534,8 @@ class DirectLighting:
         """Direct irradiance (N, 3) [W/m^2] of the first-shot lights at surface points
         with unit ``normals`` (N, 3), for bakes, where a point's value is final.
 
-        Polygonal lights (mesh lights of at most :data:`ANALYTIC_MAX_TRIANGLES`
-        triangles, rectangular area lights) use the ratio estimator of analytic
+        Polygonal lights (mesh lights, rectangular area lights;
+        :func:`light_polygon_irradiance`) use the ratio estimator of analytic
         direct light and stochastic shadows (Heitz, Hill & McGuire 2018):
         ``E = Le I(x) sum_s e_s V_s / sum_s e_s``, ``I(x)`` the exact unoccluded
         cosine-weighted solid angle of the light (:func:`polygon_irradiance`) and
@@ -439,18 +555,19 @@ class DirectLighting:
                 (isinstance(light, SunLight) and light.angle == 0.0)
             n_s = 1 if sharp else max(1, int(samples_per_light))
             shift = rng.random((len(points), 3))
-            exact = None if sharp else light_polygon_irradiance(light, points, normals)
+            analytic = None if sharp else light_polygon_irradiance(light, points, normals)
             seen = np.zeros((len(points), 3))
             total = np.zeros((len(points), 3))
             for s in range(n_s):
                 e, _, _, free = self._light_samples(points, normals, light, (shift + s * alpha) % 1.0, unshadowed=True)
                 seen += e
                 total += free
-            if exact is None:
+            if analytic is None:
                 out += seen / n_s
             else:
+                exact_i, ok = analytic
                 ratio = np.where(total > 0, seen / np.maximum(total, 1e-300), 0.0)
-                out += exact[:, None] * np.asarray(light.radiance, float) * ratio
+                out += np.where(ok[:, None], exact_i[:, None] * np.asarray(light.radiance, float) * ratio, seen / n_s)
         return out
 
     @staticmethod
