@@ -130,7 +130,6 @@ class BakeJob:
         self.export = self.solver = self.renderer = None
         self.targets, self.lightmap_targets = [], []
         self.t_start = self._t_iter = None
-        self._iter_seconds = 0.0
         self.timings = {}
 
     def warn(self, message):
@@ -260,7 +259,7 @@ class BakeJob:
         t_end = time.perf_counter() + budget
         while True:
             it = self.solver.stats.iterations
-            elapsed = self._iter_seconds + (time.perf_counter() - self._t_iter)
+            elapsed = time.perf_counter() - self._t_iter
             if s.iterations:
                 self.fraction = min(1.0, it / s.iterations)
                 done = it >= s.iterations
@@ -335,7 +334,7 @@ class BakeJob:
         st = solver.stats
         stats = {"iterations": st.iterations, "directions": st.directions, "patches": int(solver.scene.n_patches),
                  "triangles": int(len(solver.scene.triangles)), "rays_traced": int(st.rays),
-                 "solve_seconds": round(self._iter_seconds + (t0 - self._t_iter), 4),
+                 "solve_seconds": round(t0 - self._t_iter, 4),
                  "bake_seconds": round(t_done - t0, 4), "total_seconds": round(t_done - self.t_start, 4),
                  "attributes": len(attributes), "lightmaps": len(lightmaps), "cancelled": cancelled,
                  **{k: round(v, 4) for k, v in self.timings.items()}}

@@ -172,3 +172,18 @@ def test_a_lamp_cut_into_a_grid_integrates_by_its_outline_like_the_whole_lamp():
     b, ok_b = light_polygon_irradiance(whole, p, n)
     assert ok_a.all() and ok_b.all() and np.allclose(a, b, rtol=1e-9, atol=1e-12)
     assert (np.einsum("ij,ij->i", n, [0, 0, 1] - p) < 0.5).any()      # some points see it cut by the horizon
+    # sampling it from 2 mm below: unbiased (4.5 SE, fixed seed) and bounded, as for the
+    # two-triangle lamp; triangle by triangle (by area) the estimate is heavy-tailed there
+    q = np.array([[0.1, -0.05, 0.998]] * 40000)
+    nq = np.tile([0.0, 0.0, 1.0], (40000, 1))
+    exact = 5.0 * light_polygon_irradiance(grid, q[:1], nq[:1])[0][0]
+    for light, max_rel_std in ((grid, 1.0), (whole, 1.0)):    # measured 0.58 (cos_x over a lamp filling the sky)
+        y, e = light.sample(q, np.random.default_rng(5).random((40000, 3)))
+        v = y - q
+        est = e[:, 0] * np.maximum(np.einsum("ij,ij->i", nq, v) / np.linalg.norm(v, axis=1), 0)
+        se = est.std() / np.sqrt(len(est))
+        assert abs(est.mean() - exact) < 4.5 * se and est.std() / exact < max_rel_std, (est.mean(), exact, est.std())
+    y, e = grid._sample_triangles(q, np.random.default_rng(5).random((40000, 3)))
+    v = y - q
+    est = e[:, 0] * np.maximum(np.einsum("ij,ij->i", nq, v) / np.linalg.norm(v, axis=1), 0)
+    assert est.std() / exact > 2      # measured 5.6

@@ -137,7 +137,7 @@ def _locate_by_search(scene, face, point, todo, tri, fb, chunk):
         lo = hi
 
 
-def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None):
+def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, gather_rays=0):
     """View-independent outgoing radiance (N, 3) [W m^-2 sr^-1] at located ``points``
     (the module docstring's L(x)); points not found are 0.
 
@@ -160,7 +160,9 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None):
     rec = solver.reconstruction
     e_bar = solver.indirect_incoming()
     sharp = solver.caustic.E if solver.caustic is not None else None
-    if np.any(e_bar):
+    if gather_rays:
+        e = gathered_irradiance(solver, points, idx, int(gather_rays), rng)
+    elif np.any(e_bar):
         vert = rec.projected(e_bar if sharp is None else e_bar - sharp)
         if sharp is not None:
             vert += rec.averaged(sharp)
@@ -270,3 +272,39 @@ def dilate(image, filled, margin):
         img[grow] = total[grow] / num[grow][:, None]
         ok = ok | grow
     return img, ok
+
+
+def gathered_irradiance(solver, points: SurfacePoints, idx, rays, rng, vert=None):
+    """Indirect irradiance (len(idx), 3) [W/m^2] at points ``idx`` by a final gather:
+    ``rays`` cosine-distributed rays per point (a shifted Kronecker set each), each
+    reading the outgoing radiance of the surface it meets from the solution (its diffuse
+    part from the linear reconstruction of the running average plus the first shot,
+    its glossy lobe from the iterate; the emission of first-shot lights left out: the
+    direct light counts it), ``E = pi mean L``.  The finite-element error of the
+    reconstruction then enters one bounce later, averaged over the hemisphere: next to
+    a concave edge or a contact, where a patch value cannot follow the fall-off, the
+    gather is right where the reconstruction is not."""
+    from .sampling import frames_from_normals, kronecker_alpha
+
+    sc = solver.scene
+    e = solver.indirect_incoming() + solver.first_shot.E.sum(axis=1)
+    if vert is None:
+        vert = solver.reconstruction.averaged(e)
+    p = np.repeat(points.point[idx], rays, axis=0)
+    n = np.repeat(sc.tside_normal[points.tside[idx]], rays, axis=0)
+    alpha = kronecker_alpha(2)
+    u = (np.repeat(rng.random((len(idx), 2)), rays, axis=0) + np.tile(np.arange(rays), len(idx))[:, None] * alpha) % 1
+    r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
+    t, b = frames_from_normals(n)
+    w = (r * np.cos(phi))[:, None] * t + (r * np.sin(phi))[:, None] * b + np.sqrt(1 - u[:, :1])[:, :1] * n
+    tri, dist, bu, bv = solver.tracer.first_hit(p + n * solver.tracer.eps, w)
+    L = np.zeros((len(p), 3))
+    hit = np.nonzero(tri >= 0)[0]
+    if len(hit):
+        ts = sc.seen_tside(tri[hit], w[hit])
+        bary = np.stack([1 - bu[hit] - bv[hit], bu[hit], bv[hit]], axis=1)
+        e_hit = solver.reconstruction.at(vert, ts, bary)
+        L[hit] = solver.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False)
+    if np.any(solver.environment > 0):
+        L[tri < 0] = solver.environment
+    return np.pi * L.reshape(len(idx), rays, 3).mean(axis=1)

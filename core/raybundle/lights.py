@@ -17,9 +17,11 @@ solves ``L~ = (Le_r + L1) + T L~`` with ``L1 = T Le_s`` as extra emission.
 Lights (each an object with ``sample(points, u)``, see :class:`MeshLight`):
 
 * every emitting material whose emission is constant and whose area is at
-  most ``small_fraction`` of the scene's area: a :class:`MeshLight`, sampled
-  uniformly by area, a Lambertian emitter on its front (and, for two-sided
-  triangles, on its back too);
+  most ``small_fraction`` of the scene's area: a :class:`MeshLight`, a Lambertian
+  emitter on its front (and, for two-sided triangles, on its back too), sampled
+  by area where it looks small and by solid angle where it may look large, one
+  planar part at a time when its parts have convex outlines (so a lamp modelled as
+  a grid of many triangles is sampled as well as a single quad);
 * point and spot lights (:class:`PointLight`): ``E = I s(w) cos / r^2`` with
   Cycles' spot attenuation s, and a disc of the light's radius for soft shadows;
 * Blender area lights (:class:`ShapeLight`): one-sided rectangles and ellipses
@@ -32,7 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import frames_from_normals, orthonormal_basis, points_on_triangles, triangle_solid_angle
+from .sampling import (frames_from_normals, orthonormal_basis, points_on_triangles, sample_spherical_triangle,
+                       triangle_solid_angle)
 
 
 @dataclass
@@ -55,6 +58,8 @@ class MeshLight:
         c = self.scene.triangle_corners[self.triangles]
         self._centroid = c.mean(axis=1)
         self._radius = np.linalg.norm(c - self._centroid[:, None], axis=2).max(axis=1)
+        self._planes = None
+        self._fans = _plane_fans(self)
 
     def sample(self, points, u):
         """One sample of the light for each point (N, 3) from uniforms ``u`` (N, 3).
@@ -63,7 +68,53 @@ class MeshLight:
         unshadowed irradiance estimate on a plane facing it: the caller
         multiplies by ``cos_x`` (w = direction to y) and tests visibility.
 
-        A triangle k is picked with probability p_k = A_k / A.  If it looks
+        A light whose planar parts have convex outlines (:func:`_plane_fans`: a lamp
+        quad, a box, a lamp cut into a grid of many triangles) is sampled part by part:
+        part g with probability ``p_g = A_g / A``; where it looks small, a point uniform
+        on it (``e = Le cos_l A_g / (r^2 p_g)``); where it may look large, a direction
+        uniform in its whole solid angle (a fan triangle of its outline by its solid
+        angle, then Arvo's sampling in it: ``e = Le O_g / p_g``, bounded next to the
+        light however finely it is meshed).  Other lights: triangle by triangle
+        (:meth:`_sample_triangles`)."""
+        if self._fans is None:
+            return self._sample_triangles(points, u)
+        f = self._fans
+        g = np.minimum(np.searchsorted(f["cdf"], u[:, 0], side="right"), len(f["area"]) - 1)
+        lo = f["cdf"][g] - f["p"][g]
+        u0 = np.clip((u[:, 0] - lo) / f["p"][g], 0.0, 1.0 - 1e-12)
+        normal = f["normal"][g]
+        # far: a fan triangle by area, a point uniform on it
+        j = np.minimum(np.searchsorted(f["fan_key"], g + u0, side="right"), len(f["fan_key"]) - 1)
+        y = points_on_triangles(f["fan"][j], u[:, 1], u[:, 2])
+        v = y - points
+        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+        cos_l = -np.einsum("ij,ij->i", normal, v) / np.sqrt(r2)
+        e = cos_l * f["area"][g] / r2
+        gap = np.maximum(np.linalg.norm(f["centroid"][g] - points, axis=1) - f["radius"][g], 0.0)
+        near = f["area"][g] >= self.MIN_SOLID_ANGLE * gap * gap
+        for gi in np.unique(g[near]):
+            idx = np.nonzero(near & (g == gi))[0]
+            fans = np.nonzero(f["fan_group"] == gi)[0]
+            rel = f["fan"][fans][None] - points[idx, None, None, :]                 # (n, F, 3, 3)
+            omega = triangle_solid_angle(rel[..., 0, :], rel[..., 1, :], rel[..., 2, :])   # (n, F)
+            total = omega.sum(axis=1)
+            cdf = np.cumsum(omega, axis=1) / np.maximum(total, 1e-300)[:, None]
+            k = np.minimum((cdf <= u0[idx, None]).sum(axis=1), len(fans) - 1)
+            lo_k = np.where(k > 0, cdf[np.arange(len(idx)), np.maximum(k - 1, 0)], 0.0)
+            w_k = np.maximum(cdf[np.arange(len(idx)), k] - lo_k, 1e-300)
+            u1 = np.clip((u0[idx] - lo_k) / w_k, 0.0, 1.0)
+            tri = rel[np.arange(len(idx)), k]
+            d, _ = sample_spherical_triangle(tri[:, 0], tri[:, 1], tri[:, 2], u1, u[idx, 2])
+            nd = np.einsum("ij,ij->i", normal[idx], d)
+            t = np.einsum("ij,ij->i", normal[idx], tri[:, 0]) / np.where(nd != 0, nd, 1e-300)
+            y[idx] = points[idx] + t[:, None] * d
+            cos_l[idx] = -nd
+            e[idx] = total
+        lit = np.where(f["two_sided"][g], cos_l != 0, cos_l > 0)
+        return y, (np.abs(e) * lit / f["p"][g])[:, None] * self.radiance
+
+    def _sample_triangles(self, points, u):
+        """:meth:`sample` triangle by triangle.  A triangle k is picked with probability p_k = A_k / A.  If it looks
         small from the point (its solid angle is surely below :attr:`MIN_SOLID_ANGLE`:
         ``A_k < MIN_SOLID_ANGLE d^2`` with d the distance to its bounding sphere) a point
         uniform on it gives ``e = Le cos_l A_k / (r^2 p_k)``; if it looks large, a
@@ -102,9 +153,25 @@ class MeshLight:
     def pdf(self, points, k, y):
         """Density [1/sr] with which :meth:`sample` draws, from ``points`` (N, 3), the
         direction to ``y`` (N, 3) on the light's triangle ``triangles[k]`` (k (N,)):
-        ``p_k / O_k`` where the triangle looks large (solid-angle sampling), else
-        ``p_k r^2 / (A_k |cos_l|) = r^2 / (A |cos_l|)`` (area sampling)."""
+        ``p / O`` where the part (or triangle) looks large (solid-angle sampling), else
+        ``p r^2 / (A_part |cos_l|) = r^2 / (A |cos_l|)`` (area sampling)."""
         sc = self.scene
+        if self._fans is not None:
+            f = self._fans
+            g = f["tri_group"][k]
+            v = y - points
+            r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+            cos_l = np.abs(np.einsum("ij,ij->i", f["normal"][g], v)) / np.sqrt(r2)
+            pdf = r2 / (np.maximum(cos_l, 1e-300) * self.area)
+            gap = np.maximum(np.linalg.norm(f["centroid"][g] - points, axis=1) - f["radius"][g], 0.0)
+            near = f["area"][g] >= self.MIN_SOLID_ANGLE * gap * gap
+            for gi in np.unique(g[near]):
+                idx = np.nonzero(near & (g == gi))[0]
+                fans = f["fan"][f["fan_group"] == gi]
+                rel = fans[None] - points[idx, None, None, :]
+                omega = triangle_solid_angle(rel[..., 0, :], rel[..., 1, :], rel[..., 2, :]).sum(axis=1)
+                pdf[idx] = f["p"][gi] / np.maximum(omega, 1e-300)
+            return pdf
         tri = self.triangles[k]
         area_k = sc.triangle_area[tri]
         v = y - points
@@ -359,6 +426,56 @@ def _light_planes(light):
         planes.append((rows, nrm[rows[0]], p0[rows[0]], bool(light.two_sided[rows[0]]), box, edges))
     light._planes = planes
     return planes
+
+
+def _plane_fans(light, max_planes=64):
+    """Sampling tables of a mesh light whose planar parts (:func:`_light_planes`) each
+    have one convex outline: per part its area, probability ``A_g / A`` and CDF, normal,
+    sidedness, bounding sphere, and the fan triangles of its outline (``fan`` (F, 3, 3),
+    ``fan_group``, ``fan_key`` = group + area CDF within it); ``tri_group`` maps the
+    light's triangles to parts.  None when a part's outline is not one convex loop (or
+    there are more than ``max_planes`` parts): the light is then sampled triangle by triangle."""
+    planes = _light_planes(light)
+    if not planes or len(planes) > max_planes:
+        return None
+    sc = light.scene
+    fans, fan_group, areas, normals, two, cents, radii = [], [], [], [], [], [], []
+    tri_group = np.zeros(len(light.triangles), np.int64)
+    for gi, (rows, nrm, _, two_sided, _, edges) in enumerate(planes):
+        if edges is None or len(edges) < 3 or not np.allclose(edges[:, 1], np.roll(edges[:, 0], -1, axis=0)):
+            return None
+        pts = edges[:, 0]
+        d = np.roll(pts, -1, axis=0) - pts
+        turn = np.cross(d, np.roll(d, -1, axis=0)) @ nrm
+        scale = np.linalg.norm(d, axis=1) * np.linalg.norm(np.roll(d, -1, axis=0), axis=1)
+        if not (np.all(turn >= -1e-9 * scale) or np.all(turn <= 1e-9 * scale)):
+            return None                                    # not convex
+        fan = np.stack([np.broadcast_to(pts[0], (len(pts) - 2, 3)), pts[1:-1], pts[2:]], axis=1)
+        fa = 0.5 * np.linalg.norm(np.cross(fan[:, 1] - fan[:, 0], fan[:, 2] - fan[:, 0]), axis=1)
+        area = float(sc.triangle_area[light.triangles[rows]].sum())
+        if abs(fa.sum() - area) > 1e-6 * area:
+            return None
+        fans.append(fan)
+        fan_group.append(np.full(len(fan), gi))
+        areas.append(area)
+        normals.append(nrm)
+        two.append(two_sided)
+        c = pts.mean(axis=0)
+        cents.append(c)
+        radii.append(float(np.linalg.norm(pts - c, axis=1).max()))
+        tri_group[rows] = gi
+    fan = np.concatenate(fans)
+    fan_group = np.concatenate(fan_group)
+    fa = 0.5 * np.linalg.norm(np.cross(fan[:, 1] - fan[:, 0], fan[:, 2] - fan[:, 0]), axis=1)
+    areas = np.array(areas)
+    within = np.zeros(len(fan))
+    for gi in range(len(areas)):
+        sel = fan_group == gi
+        within[sel] = np.cumsum(fa[sel]) / fa[sel].sum()
+    p = areas / areas.sum()
+    return {"area": areas, "p": p, "cdf": np.cumsum(p), "normal": np.array(normals), "two_sided": np.array(two),
+            "centroid": np.array(cents), "radius": np.array(radii), "fan": fan, "fan_group": fan_group,
+            "fan_key": fan_group + within, "tri_group": tri_group}
 
 
 def light_polygon_irradiance(light, points, normals):
