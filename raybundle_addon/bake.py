@@ -11,8 +11,9 @@
   modal operator calls it on every timer tick, headless code in a loop);
 * :meth:`BakeJob.finish` evaluates the radiance at the targets' points
   (:func:`raybundle.baking.baked_radiance`: per-point direct light with
-  ``light_samples`` shadow rays, the indirect light interpolated from the patches)
-  and writes it into the file, on the main thread.
+  ``light_samples`` shadow rays; the indirect light of vertices and corners by a final
+  gather of ``gather_rays`` rays each into the solution, that of lightmap texels
+  interpolated from the patches) and writes it into the file, on the main thread.
 
 What is written (Blender's units: linear radiance [W m^-2 sr^-1], view-independent:
 the diffuse light and the emission; glossy reflections depend on the viewer and
@@ -70,6 +71,7 @@ class BakeSettings:
     directory: str = "//raybundle_bake/"
     light_samples: int = 16
     single_user: bool = False
+    gather_rays: int = 256
 
     @classmethod
     def from_scene(cls, scene):
@@ -78,7 +80,7 @@ class BakeSettings:
             return cls()
         return cls(bool(rb.bake_color_attribute), str(rb.bake_domain), bool(rb.bake_lightmaps),
                    int(rb.lightmap_size), int(rb.lightmap_margin), bool(rb.bake_camera), str(rb.bake_directory),
-                   int(rb.bake_light_samples), bool(rb.bake_single_user))
+                   int(rb.bake_light_samples), bool(rb.bake_single_user), int(rb.bake_gather_rays))
 
     def validate(self):
         if not (self.color_attribute or self.lightmaps or self.camera):
@@ -89,6 +91,27 @@ class BakeSettings:
             raise ValueError("the lightmap size must lie in [1, 16384]")
         if self.light_samples < 1:
             raise ValueError("light samples must be at least 1")
+        if self.gather_rays < 0:
+            raise ValueError("gather rays must be 0 (off) or more")
+
+
+def _unique_points(input_scene, face, bary):
+    """Representatives of the bake points (input face ids ``face`` (N,), barycentrics
+    (N, 3)) that share a position and a face normal: ``(rep (M,), back (N,))`` with point
+    i baked as point ``rep[back[i]]``."""
+    row = np.full(int(max(input_scene.triangle_source.max(initial=-1), face.max(initial=-1))) + 1, -1, np.int64)
+    row[input_scene.triangle_source] = np.arange(len(input_scene.triangle_source))
+    r = np.where(face >= 0, row[np.maximum(face, 0)], -1)
+    ok = r >= 0
+    p = np.zeros((len(face), 3))
+    nrm = np.zeros((len(face), 3))
+    p[ok] = np.einsum("nk,nkc->nc", bary[ok], input_scene.triangle_corners[r[ok]])
+    nrm[ok] = input_scene.triangle_normal[r[ok]]
+    _, radius = input_scene.bounding_sphere
+    key = np.concatenate([np.round(p / max(radius * 1e-7, 1e-12)), np.round(nrm * 1e4), (~ok)[:, None] *
+                          np.arange(len(face))[:, None]], axis=1).astype(np.int64)
+    _, rep, back = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    return rep, back.reshape(-1)
 
 
 @dataclass
@@ -310,12 +333,15 @@ class BakeJob:
             if self.targets:
                 face = np.concatenate([t.corner_face for t in self.targets])
                 bary = np.concatenate([t.corner_bary for t in self.targets])
-                pts = locate_points(ex.scene, solver.scene, solver.tracer, face, bary)
-                values = baked_radiance(solver, pts, n, rng)
+                # corners at one point of one plane (a vertex inside a face) are one bake point
+                rep, back = _unique_points(ex.scene, face, bary)
+                pts = locate_points(ex.scene, solver.scene, solver.tracer, face[rep], bary[rep])
+                values = baked_radiance(solver, pts, n, rng, gather_rays=self.bake.gather_rays)[back]
+                found = pts.found[back]
                 k = 0
                 for t in self.targets:
                     m = len(t.corner_face)
-                    got = self._write_attribute(t, values[k:k + m], pts.found[k:k + m])
+                    got = self._write_attribute(t, values[k:k + m], found[k:k + m])
                     if got:
                         attributes.append(got)
                     k += m

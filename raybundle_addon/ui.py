@@ -86,6 +86,7 @@ class RAYBUNDLE_PT_bake(RaybundlePanel, bpy.types.Panel):
         sub = col.column()
         sub.active = rb.bake_color_attribute
         sub.prop(rb, "bake_domain")
+        sub.prop(rb, "bake_gather_rays")
         sub.prop(rb, "bake_single_user")
         col = layout.column()
         col.prop(rb, "bake_lightmaps")

@@ -6,6 +6,7 @@ twice the spread measured with two seeds (the furnace has no model error: its ra
 is constant, so everything measured is noise).
 """
 import numpy as np
+import pytest
 
 from raybundle import pipeline, scenes
 from raybundle.baking import _locate_by_search, baked_radiance, locate_points
@@ -86,20 +87,24 @@ def test_dropped_faces_and_bad_ids_are_not_found_and_bake_to_zero():
     r.tracer.close()
 
 
-def test_furnace_bake_is_le_over_one_minus_albedo(seed=0):
-    """Points on every face of the furnace (corners included) bake to Le / (1 - a)."""
+@pytest.mark.parametrize("gather", [0, 64])
+def test_furnace_bake_is_le_over_one_minus_albedo(gather, seed=0):
+    """Points on every face of the furnace (corners included) bake to Le / (1 - a), with
+    the indirect light interpolated from the patches or gathered by 64 rays per point."""
     sc_in = scenes.furnace()
     r = pipeline.make_renderer(pipeline.prepare(sc_in, patches=400), RenderSettings(seed=seed))
     for _ in range(150):
         r.solver.step()
     face, bary = random_face_points(sc_in, 4000, np.random.default_rng(3))
-    L = baked_radiance(r.solver, locate_points(sc_in, r.scene, r.tracer, face, bary), light_samples=16)
+    L = baked_radiance(r.solver, locate_points(sc_in, r.scene, r.tracer, face, bary), light_samples=16,
+                       gather_rays=gather)
     exact = sc_in.analytic_radiance
     rel = L / exact - 1
     # measured (seeds 0, 1; 150 iterations x 16 directions; the block is a first-shot light,
     # its 12 triangles integrated analytically, 16 shadow rays per point): channel means within
-    # 0.26% of exact, spread of the point values (std) 0.40-0.54%, largest 3.1% (with plain
-    # light sampling: 0.84% and 8.3%, under the block where only its bottom face lights)
+    # 0.2% of exact; spread of the point values (std) 0.41-0.58%, largest 3.1% interpolated,
+    # 0.24-0.28% and 1.7% gathered (with plain light sampling: 0.84% and 8.3%, under the
+    # block where only its bottom face lights)
     assert np.all(np.abs(rel.mean(axis=0)) < 0.012), rel.mean(axis=0)
     assert rel.std() < 0.011 and np.abs(rel).max() < 0.07
     r.tracer.close()

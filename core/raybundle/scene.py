@@ -635,7 +635,10 @@ def subdivide(scene: PatchScene, max_edge=None, patches=None, contacts=True) -> 
     if not contacts:
         return fine
     from .contacts import split_at_contacts
-    return split_at_contacts(fine, np.nonzero(per_tri[2] > 1)[0], tol=0.05 * max_edge)[0]
+    # every reflecting patch is cut, also faces the user meshed finer than the patches (a
+    # ceiling cut into a grid over a lamp hanging under it still traps the lamp's upper light)
+    return split_at_contacts(fine, np.nonzero(scene.materials.reflects[fine.triangle_material])[0],
+                             tol=0.05 * max_edge)[0]
 
 
 def closed_solid_triangles(vertices, triangles, tol=1e-7):
