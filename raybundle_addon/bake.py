@@ -12,7 +12,7 @@
 * :meth:`BakeJob.finish` evaluates the radiance at the targets' points
   (:func:`raybundle.baking.baked_radiance`: per-point direct light with
   ``light_samples`` shadow rays; the indirect light of vertices and corners by a final
-  gather of ``gather_rays`` rays each into the solution, that of lightmap texels
+  gather of ``gather_rays`` rays each (1024) into the solution, that of lightmap texels
   interpolated from the patches) and writes it into the file, on the main thread.
 
 What is written (Blender's units: linear radiance [W m^-2 sr^-1], view-independent:
@@ -71,7 +71,7 @@ class BakeSettings:
     directory: str = "//raybundle_bake/"
     light_samples: int = 16
     single_user: bool = False
-    gather_rays: int = 256
+    gather_rays: int = 1024
 
     @classmethod
     def from_scene(cls, scene):

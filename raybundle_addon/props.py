@@ -85,7 +85,7 @@ class RAYBUNDLE_PG_settings(bpy.types.PropertyGroup):
         description="Shadow rays per light per baked point (vertex, corner or texel) for the direct light; "
         "polygonal lights are integrated exactly and the rays only find their shadows")
     bake_gather_rays: IntProperty(
-        name="Gather Rays", default=256, min=0, max=65536,
+        name="Gather Rays", default=1024, min=0, max=65536,
         description="Color attributes: rays per vertex or corner that gather the indirect light from the "
         "solution (right next to corners and contacts, where patch values cannot follow the light); "
         "0 = interpolate the patches (faster). Lightmaps always interpolate")
