@@ -42,7 +42,7 @@ _TOOLS = os.path.dirname(os.path.abspath(__file__))
 _ROOT = os.path.dirname(_TOOLS)
 sys.path[:0] = [_TOOLS, _ROOT, os.path.join(_ROOT, "demo_scenes")]
 
-from bench_blender import _open, chart, loglog_at, time_to_errors  # noqa: E402
+from bench_blender import _open, chart, side_by_side, time_to_errors  # noqa: E402
 
 BLEND = os.path.join(_ROOT, "demo_scenes", "cornell_bake.blend")
 CYCLES_ATTRIBUTE = "CyclesBake"
@@ -168,16 +168,7 @@ def main(argv=None):
         if e["error"] < min(r["error"] for r in rows if r["engine"] == "raybundle") or wall > a.max_cycles_seconds:
             break
         samples *= 2
-    cyc = [r for r in rows if r["engine"] == "cycles"]
-    summary = []
-    for r in (r for r in rows if r["engine"] == "raybundle"):
-        c_err = loglog_at([c["seconds"] for c in cyc], [c["error"] for c in cyc], r["seconds"])
-        c_time = loglog_at([c["error"] for c in cyc][::-1], [c["seconds"] for c in cyc][::-1], r["error"])
-        summary.append(dict(raybundle_seconds=r["seconds"], raybundle_error=r["error"], cycles_error_same_time=c_err,
-                            cycles_seconds_same_error=c_time))
-        print(f"at {r['seconds']:.1f} s: raybundle {r['error']:.4f}, Cycles "
-              f"{'n/a' if c_err is None else f'{c_err:.4f}'}; Cycles reaches {r['error']:.4f} in "
-              f"{'n/a' if c_time is None else f'{c_time:.1f} s'}")
+    summary = side_by_side(rows)
     targets = time_to_errors(rows, goals=(0.05, 0.02, 0.015, 0.01))
     _, _, wall, out = raybundle_bake(blend, a.lightmap_seconds, seed=3, lightmap_size=a.lightmap_size,
                                      directory=os.path.abspath(os.path.join(a.out, "lightmaps")))

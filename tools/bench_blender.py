@@ -118,6 +118,27 @@ def loglog_at(xs, ys, x):
     return float(np.exp(np.interp(lx, xs[o], ys[o])))
 
 
+def side_by_side(rows):
+    """For every raybundle run (rows with ``engine``, ``seconds``, ``error``): Cycles' error
+    at the same time and Cycles' time for the same error, by log-log interpolation between
+    the Cycles runs (Cycles' error is monotone in time up to noise); printed, and returned
+    as a list of dicts."""
+    cyc = [r for r in rows if r["engine"] == "cycles"]
+    summary = []
+    for r in (r for r in rows if r["engine"] == "raybundle"):
+        c_err = loglog_at([c["seconds"] for c in cyc], [c["error"] for c in cyc], r["seconds"])
+        c_time = loglog_at([c["error"] for c in cyc][::-1], [c["seconds"] for c in cyc][::-1], r["error"])
+        d = dict(raybundle_seconds=r["seconds"], raybundle_error=r["error"], cycles_error_same_time=c_err,
+                 cycles_seconds_same_error=c_time)
+        if "error_all_pixels" in r:
+            d["raybundle_error_all_pixels"] = r["error_all_pixels"]
+        summary.append(d)
+        print(f"at {r['seconds']:.1f} s: raybundle {r['error']:.4f}, Cycles "
+              f"{'n/a' if c_err is None else f'{c_err:.4f}'}; Cycles reaches {r['error']:.4f} in "
+              f"{'n/a' if c_time is None else f'{c_time:.1f} s'}")
+    return summary
+
+
 def time_to_errors(rows, goals):
     """{engine: {"5%": "12.3 s", ...}}: when each engine's error curve (rows with ``engine``,
     ``seconds``, ``error``) first reaches each goal, by log-log interpolation between its
@@ -188,18 +209,7 @@ def main(argv=None):
         if e < min(r["error"] for r in ours) or wall > min(8 * max(r["seconds"] for r in ours), a.max_cycles_seconds):
             break
         samples *= 2
-    cyc = [r for r in rows if r["engine"] == "cycles"]
-    summary = []
-    for r in (r for r in rows if r["engine"] == "raybundle"):
-        # Cycles' error is monotone in time up to noise: interpolate its curve
-        c_err = loglog_at([c["seconds"] for c in cyc], [c["error"] for c in cyc], r["seconds"])
-        c_time = loglog_at([c["error"] for c in cyc][::-1], [c["seconds"] for c in cyc][::-1], r["error"])
-        summary.append(dict(raybundle_seconds=r["seconds"], raybundle_error=r["error"],
-                            raybundle_error_all_pixels=r["error_all_pixels"], cycles_error_same_time=c_err,
-                            cycles_seconds_same_error=c_time))
-        print(f"at {r['seconds']:.1f} s: raybundle {r['error']:.4f}, Cycles "
-              f"{'n/a' if c_err is None else f'{c_err:.4f}'}; Cycles reaches {r['error']:.4f} in "
-              f"{'n/a' if c_time is None else f'{c_time:.1f} s'}")
+    summary = side_by_side(rows)
     targets = time_to_errors(rows, goals=(0.05, 0.02, 0.015, 0.01))
     with open(os.path.join(a.out, "bench.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
