@@ -319,15 +319,22 @@ def polygon_irradiance(points, normals, polygons):
     count = valid.sum(axis=1)
     last = np.take_along_axis(cand, np.maximum(count - 1, 0)[:, None, None], axis=1)
     cand = np.where((np.arange(2 * m)[None, :] < count[:, None])[..., None], cand, last)
-    v = cand - pts[:, None]
-    v /= np.maximum(np.linalg.norm(v, axis=2, keepdims=True), 1e-300)
-    w = np.roll(v, -1, axis=1)
+    v = _unit(cand - pts[:, None])
+    return np.where(count >= 3, _lambert(v, np.roll(v, -1, axis=1), normals), 0.0)
+
+
+def _unit(x):
+    return x / np.maximum(np.sqrt(np.einsum("...k,...k->...", x, x)), 1e-300)[..., None]
+
+
+def _lambert(v, w, normals):
+    """Lambert's edge sum ``|sum_e theta_e n . g_e| / 2`` (N,) over edges from unit
+    directions ``v`` to ``w`` (N, B, 3) seen from points with unit ``normals`` (N, 3)."""
     c = np.cross(v, w)
-    sin = np.linalg.norm(c, axis=2)
-    theta = np.arctan2(sin, np.einsum("nmk,nmk->nm", v, w))
-    g = np.einsum("nmk,nk->nm", c, normals) / np.maximum(sin, 1e-300)
-    total = np.abs((theta * g).sum(axis=1)) / 2
-    return np.where(count >= 3, total, 0.0)
+    sin = np.sqrt(np.einsum("nbk,nbk->nb", c, c))
+    theta = np.arctan2(sin, np.einsum("nbk,nbk->nb", v, w))
+    g = np.einsum("nbk,nk->nb", c, normals) / np.maximum(sin, 1e-300)
+    return np.abs((theta * g).sum(axis=1)) / 2
 
 
 def boundary_edge_irradiance(points, normals, edges, chunk=16384):
@@ -338,15 +345,7 @@ def boundary_edge_irradiance(points, normals, edges, chunk=16384):
     out = np.zeros(len(points))
     for lo in range(0, len(points), chunk):
         p, n = points[lo:lo + chunk], normals[lo:lo + chunk]
-        v = edges[None, :, 0] - p[:, None]
-        w = edges[None, :, 1] - p[:, None]
-        v /= np.maximum(np.sqrt(np.einsum("nbk,nbk->nb", v, v)), 1e-300)[..., None]
-        w /= np.maximum(np.sqrt(np.einsum("nbk,nbk->nb", w, w)), 1e-300)[..., None]
-        c = np.cross(v, w)
-        sin = np.sqrt(np.einsum("nbk,nbk->nb", c, c))
-        theta = np.arctan2(sin, np.einsum("nbk,nbk->nb", v, w))
-        g = np.einsum("nbk,nk->nb", c, n) / np.maximum(sin, 1e-300)
-        out[lo:lo + chunk] = np.abs((theta * g).sum(axis=1)) / 2
+        out[lo:lo + chunk] = _lambert(_unit(edges[None, :, 0] - p[:, None]), _unit(edges[None, :, 1] - p[:, None]), n)
     return out
 
 
