@@ -153,7 +153,8 @@ def _ray_visible(ob, warn):
 
 def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, warn):
     """For an object whose materials have albedo textures (``converter.textures``):
-    ((T, 3, 2) corner UVs, (T,) image index into ``images``, -1 untextured), or None.
+    ((T, 3, 2) corner UVs, (T,) image index into ``images`` (-1 untextured, -2 the
+    corner colors), (T, 3, 3) corner colors of a color attribute), or None.
     ``images`` (image name -> (index, bpy Image)) grows as new images are met."""
     for m in slots:
         converter.convert(m)                  # (cached) fills converter.textures
@@ -163,16 +164,21 @@ def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, wa
     slot = np.clip(poly_mat[tri_poly], 0, len(tex) - 1)
     uv = np.zeros((len(loops), 3, 2))
     img = np.full(len(loops), -1, np.int64)
+    colors = np.zeros((len(loops), 3, 3))
     layers = {}
     for k, got in enumerate(tex):
         sel = np.nonzero(slot == k)[0]
         if got is None or len(sel) == 0:
             continue
-        image, name = got
+        if got.attribute is not None:
+            colors[sel] = _corner_colors(me, got.attribute, ob, slots[k], warn)[loops[sel]]
+            img[sel] = -2
+            continue
+        name = got.uv
         layer = (me.uv_layers.get(name) if name else
                  next((l for l in me.uv_layers if l.active_render), me.uv_layers.active))
         if layer is None:
-            warn(f"object {ob.name!r}: material {slots[k].name!r} has the image texture {image.name!r} but the "
+            warn(f"object {ob.name!r}: material {slots[k].name!r} has the image texture {got.image.name!r} but the "
                  f"mesh has no UV map{' ' + repr(name) if name else ''}: its mean color is used")
             continue
         if layer.name not in layers:
@@ -180,8 +186,31 @@ def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, wa
             layer.uv.foreach_get("vector", a)
             layers[layer.name] = a.reshape(-1, 2)
         uv[sel] = layers[layer.name][loops[sel]]
-        img[sel] = images.setdefault(image.name_full, (len(images), image))[0]
-    return (uv, img) if np.any(img >= 0) else None
+        img[sel] = images.setdefault(got.image.name_full, (len(images), got.image))[0]
+    return (uv, img, colors) if np.any(img != -1) else None
+
+
+def _corner_colors(me, name, ob, mat, warn):
+    """(corners, 3) linear RGB of color attribute ``name`` ("" = the active render one) of
+    mesh ``me`` per face corner; black, warned, when the mesh does not have it (as Cycles)."""
+    ca = me.color_attributes
+    attr = ca.get(name) if name else (ca[ca.render_color_index] if len(ca) and ca.render_color_index >= 0 else None)
+    if attr is None or attr.domain not in ("POINT", "CORNER"):
+        warn(f"object {ob.name!r}: material {mat.name!r} reads the color attribute {name or '(active)'!r}, which "
+             "the mesh does not have: black, as in Cycles")
+        return np.zeros((len(me.loops), 3))
+    vals = np.empty(4 * len(attr.data), np.float32)
+    attr.data.foreach_get("color", vals)             # linear for byte and float colors alike
+    vals = vals.reshape(-1, 4)[:, :3].astype(float)
+    if attr.domain == "CORNER":
+        return vals
+    cv = np.empty(len(me.loops), np.int32)
+    corner_vert = me.attributes.get(".corner_vert")
+    if corner_vert is not None:
+        corner_vert.data.foreach_get("value", cv)
+    else:
+        me.loops.foreach_get("vertex_index", cv)
+    return vals[cv]
 
 
 # -------------------------------------------------------------------- lights
@@ -330,7 +359,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
 
     cache = {}
     verts, tris, tmats, tobj, tpoly, tloops = [], [], [], [], [], []
-    tuv, timg, images = [], [], {}          # albedo textures: corner UVs, image index per triangle
+    tuv, timg, tcol, images = [], [], [], {}    # albedo textures: corner UVs, image per triangle, corner colors
     objects = []
     lights = {"point": [], "sun": [], "area": []}
     n_vert = n_tri = 0
@@ -386,6 +415,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
         tloops.append(loops)
         tuv.append(textured[0] if textured else np.zeros((len(tri), 3, 2)))
         timg.append(textured[1] if textured else np.full(len(tri), -1, np.int64))
+        tcol.append(textured[2] if textured else np.zeros((len(tri), 3, 3)))
         objects.append(info)
         n_vert += len(pos)
         n_tri += len(tri)
@@ -416,11 +446,12 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
         return cls(**{k: np.array([r[k] for r in rows]) for k in rows[0]})
 
     texture = None
-    if images:
+    face_image = np.concatenate(timg)
+    if np.any(face_image != -1):
         from raybundle.textures import SurfaceTexture, modulation_map
 
         maps = [modulation_map(converter.image_pixels(im))[0] for _, im in sorted(images.values(), key=lambda x: x[0])]
-        texture = SurfaceTexture(maps, np.concatenate(timg), v[t], np.concatenate(tuv))
+        texture = SurfaceTexture(maps, face_image, v[t], np.concatenate(tuv), np.concatenate(tcol))
     with _warnings.catch_warnings(record=True) as caught:
         _warnings.simplefilter("always")
         sc = build_scene(v, t, m, mats, point_lights=group(PointLights, lights["point"]),

@@ -21,7 +21,9 @@ model.  A material's node tree is read from its Cycles output node:
   looked up through a UV map (the Vector input unlinked, or from a UV Map node or
   Texture Coordinate's UV), is an albedo texture (:attr:`MaterialConverter.textures`,
   :mod:`raybundle.textures`): the material holds the image's mean linear color, each
-  patch its mean over the patch, and images and bakes its detail.  On any other
+  patch its mean over the patch, and images and bakes its detail.  A **Color Attribute**
+  node there is the albedo per point the same way (the material white, times the
+  attribute's color interpolated over each face).  On any other
   color input an image texture is its mean color (warned); an **RGB** / **Value** node
   gives its value; any other link uses the socket's own value, with a warning.
 * Anything else (Glass, Translucent, Transparent, Subsurface, groups...) makes the
@@ -71,6 +73,21 @@ def _lum(c):
     return float(np.dot(np.asarray(c, float)[:3], (0.2126, 0.7152, 0.0722)))
 
 
+@dataclass(frozen=True)
+class AlbedoTexture:
+    """What drives a material's diffuse albedo point by point: an image through a UV map
+    (``uv`` the map's name, "" for the active render UV map) or a color attribute
+    (``attribute`` its name, "" for the active render one)."""
+
+    image: object = None
+    uv: str = ""
+    attribute: str | None = None
+
+    @property
+    def key(self):
+        return ("attribute", self.attribute) if self.attribute is not None else (self.image.name_full, self.uv)
+
+
 class MaterialConverter:
     """Converts Blender materials to :meth:`MaterialTable.from_list` specs.
 
@@ -81,8 +98,7 @@ class MaterialConverter:
         self.warn = warn
         self._cache = {}
         self._image_pixels = {}
-        #: material name -> (bpy Image, UV map name or "" for the active render UV map)
-        #: of its albedo texture
+        #: material name -> its :class:`AlbedoTexture`
         self.textures = {}
         self._albedo = []               # albedo textures met while converting one material
 
@@ -113,11 +129,12 @@ class MaterialConverter:
         except Unsupported as e:
             self.warn(f"material {name!r}: {e}; using its viewport color")
             return self._viewport(mat)
-        found = list(dict.fromkeys((im.name_full, uv) for im, uv in self._albedo))
+        found = list(dict.fromkeys(t.key for t in self._albedo))
         if len(found) == 1:
             self.textures[name] = self._albedo[0]
         elif len(found) > 1:
-            notes.append(f"{len(found)} different image textures on its albedo: each is replaced by its mean color")
+            notes.append(f"{len(found)} different textures or color attributes on its albedo: images are replaced "
+                         "by their mean color, attributes by white")
         for n in dict.fromkeys(notes):        # once each, in order
             self.warn(f"material {name!r}: {n}")
         return self._flatten(name, acc)
@@ -198,10 +215,9 @@ class MaterialConverter:
                 mean = self.image_mean(node.image)
                 if mean is not None:
                     uv = _uv_source(node) if node.type == "TEX_IMAGE" else None
-                    albedo = sock.name in ("Color", "Base Color") and sock.node.type in ("BSDF_DIFFUSE",
-                                                                                         "BSDF_PRINCIPLED")
+                    albedo = _is_albedo(sock)
                     if albedo and uv is not None:
-                        self._albedo.append((node.image, uv))
+                        self._albedo.append(AlbedoTexture(node.image, uv))
                         if node.extension != "REPEAT":
                             notes.append(f"image texture {node.image.name!r}: {node.extension.lower()} extension "
                                          "is treated as repeat")
@@ -212,6 +228,10 @@ class MaterialConverter:
                                  f"{tuple(np.round(mean, 3))} ({why})")
                     return mean
                 notes.append(f"image texture on {sock.name!r} has no image data: using the socket's value")
+            elif node is not None and node.type == "VERTEX_COLOR" and _is_albedo(sock):
+                # the attribute's color is the albedo itself: white here, times the color per point
+                self._albedo.append(AlbedoTexture(attribute=node.layer_name))
+                return np.ones(3)
             elif node is not None:
                 notes.append(f"{sock.name!r} is driven by a {node.bl_label} node: using the socket's own value")
         return np.array(sock.default_value[:3], float)
@@ -353,6 +373,11 @@ def _follow_reroutes(node):
             return None
         node = sock.links[0].from_node
     return None
+
+
+def _is_albedo(sock):
+    """A Diffuse BSDF's Color or a Principled BSDF's Base Color input."""
+    return sock.name in ("Color", "Base Color") and sock.node.type in ("BSDF_DIFFUSE", "BSDF_PRINCIPLED")
 
 
 def _uv_source(tex_node):

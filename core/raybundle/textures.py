@@ -14,6 +14,10 @@ up to :data:`MAX_SAMPLES` per triangle); images and bakes multiply the diffuse
 light at each pixel or texel by ``kd_m * M(uv)`` (:meth:`SurfaceTexture.at`), so the
 texture stays sharp while the light is interpolated smoothly.
 
+A **color attribute** drives the albedo the same way, its color interpolated linearly
+over each input face from its corners (``face_image`` -2; the material's reflectance
+then holds white, so the color is the factor itself).
+
 UVs live on the *input* faces (the exported triangles, before subdivision): a
 point's UV is the input face's corner UVs weighted by the point's barycentrics on
 that face, whatever patch triangle it lies on.
@@ -33,19 +37,24 @@ class SurfaceTexture:
     """Modulation maps of the textured input faces.
 
     ``images``: list of (H, W, 3) float32 modulation maps (linear image / its mean);
-    ``face_image`` (F,) int: the map of each input face (-1: untextured), indexed by
-    :attr:`~raybundle.scene.PatchScene.triangle_source`; ``face_corners`` (F, 3, 3) [m]
-    and ``face_uv`` (F, 3, 2): the input faces and their corner UVs."""
+    ``face_image`` (F,) int: the map of each input face (-1: untextured; -2: the face's
+    corner colors, interpolated linearly: a color attribute, whose color is the albedo
+    factor itself), indexed by :attr:`~raybundle.scene.PatchScene.triangle_source`;
+    ``face_corners`` (F, 3, 3) [m] and ``face_uv`` (F, 3, 2): the input faces and their
+    corner UVs; ``face_color`` (F, 3, 3) or None: their corner colors."""
 
     images: list
     face_image: np.ndarray
     face_corners: np.ndarray
     face_uv: np.ndarray
+    face_color: np.ndarray | None = None
 
     def __post_init__(self):
         self.face_image = np.asarray(self.face_image, np.int64)
         self.face_corners = np.asarray(self.face_corners, float)
         self.face_uv = np.asarray(self.face_uv, float)
+        if self.face_color is not None:
+            self.face_color = np.asarray(self.face_color, float)
         self.images = [np.ascontiguousarray(im, np.float32) for im in self.images]
 
     def lookup(self, image, uv):
@@ -63,6 +72,10 @@ class SurfaceTexture:
 
     def uv_at(self, face, points):
         """UV (N, 2) of ``points`` (N, 3) on input faces ``face`` (N,)."""
+        return np.einsum("nk,nkc->nc", self.bary_at(face, points), self.face_uv[face])
+
+    def bary_at(self, face, points):
+        """Barycentrics (N, 3) of ``points`` (N, 3) on input faces ``face`` (N,)."""
         c = self.face_corners[face]
         e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
         d = points - c[:, 0]
@@ -70,8 +83,7 @@ class SurfaceTexture:
         p1, p2 = np.einsum("ij,ij->i", d, e1), np.einsum("ij,ij->i", d, e2)
         det = np.maximum(d11 * d22 - d12 * d12, 1e-300)
         b1, b2 = (d22 * p1 - d12 * p2) / det, (d11 * p2 - d12 * p1) / det
-        uv = self.face_uv[face]
-        return uv[:, 0] + b1[:, None] * (uv[:, 1] - uv[:, 0]) + b2[:, None] * (uv[:, 2] - uv[:, 0])
+        return np.stack([1 - b1 - b2, b1, b2], axis=1)
 
     def at(self, face, points):
         """Modulation M (N, 3) at ``points`` (N, 3) on input faces ``face`` (N,) (1 where untextured)."""
@@ -80,6 +92,9 @@ class SurfaceTexture:
         ok = (face >= 0) & (face < len(self.face_image))
         img = np.full(len(face), -1, np.int64)
         img[ok] = self.face_image[face[ok]]
+        col = np.nonzero(img == -2)[0]
+        if len(col):
+            out[col] = np.einsum("nk,nkc->nc", self.bary_at(face[col], points[col]), self.face_color[face[col]])
         for k in np.unique(img[img >= 0]):
             sel = np.nonzero(img == k)[0]
             out[sel] = self.lookup(int(k), self.uv_at(face[sel], points[sel]))
@@ -94,6 +109,9 @@ class SurfaceTexture:
         tri_face = scene.triangle_source
         img = self.face_image[tri_face]
         mod = np.ones((len(scene.triangles), 3))
+        col = np.nonzero(img == -2)[0]
+        if len(col):          # linear over the face: the mean over a triangle is at its centroid
+            mod[col] = self.at(tri_face[col], scene.triangle_corners[col].mean(axis=1))
         textured = np.nonzero(img >= 0)[0]
         if len(textured):
             uv = self.face_uv[tri_face[textured]]
