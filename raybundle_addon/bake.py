@@ -51,7 +51,7 @@ import bpy
 import numpy as np
 
 from .engine import JobSettings
-from .export import export_scene
+from .export import corner_vertices, export_scene
 from .props import LAST_BAKE
 
 ATTRIBUTE = "RayBundle"
@@ -411,12 +411,7 @@ class BakeJob:
         if me is None:
             return None
         if self.bake.domain == "POINT":
-            cv = np.empty(len(me.loops), np.int32)
-            attr = me.attributes.get(".corner_vert")
-            if attr is not None:
-                attr.data.foreach_get("value", cv)
-            else:
-                me.loops.foreach_get("vertex_index", cv)
+            cv = corner_vertices(me)
             w = found.astype(float)
             num = np.stack([np.bincount(cv, w * values[:, c], minlength=len(me.vertices)) for c in range(3)], axis=1)
             den = np.bincount(cv, w, minlength=len(me.vertices))

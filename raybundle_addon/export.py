@@ -204,13 +204,19 @@ def _corner_colors(me, name, ob, mat, warn):
     vals = vals.reshape(-1, 4)[:, :3].astype(float)
     if attr.domain == "CORNER":
         return vals
+    return vals[corner_vertices(me)]
+
+
+def corner_vertices(me):
+    """(corners,) int32: the vertex of each face corner of mesh ``me`` (the fast hidden
+    ``.corner_vert`` attribute, else the loops)."""
     cv = np.empty(len(me.loops), np.int32)
-    corner_vert = me.attributes.get(".corner_vert")
-    if corner_vert is not None:
-        corner_vert.data.foreach_get("value", cv)
+    attr = me.attributes.get(".corner_vert")
+    if attr is not None:
+        attr.data.foreach_get("value", cv)
     else:
         me.loops.foreach_get("vertex_index", cv)
-    return vals[cv]
+    return cv
 
 
 # -------------------------------------------------------------------- lights
