@@ -99,9 +99,9 @@ def _unique_points(input_scene, face, bary):
     """Representatives of the bake points (input face ids ``face`` (N,), barycentrics
     (N, 3)) that share a position and a face normal: ``(rep (M,), back (N,))`` with point
     i baked as point ``rep[back[i]]``."""
-    row = np.full(int(max(input_scene.triangle_source.max(initial=-1), face.max(initial=-1))) + 1, -1, np.int64)
-    row[input_scene.triangle_source] = np.arange(len(input_scene.triangle_source))
-    r = np.where(face >= 0, row[np.maximum(face, 0)], -1)
+    from raybundle.baking import input_rows
+
+    r = input_rows(input_scene, face)
     ok = r >= 0
     p = np.zeros((len(face), 3))
     nrm = np.zeros((len(face), 3))

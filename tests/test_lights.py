@@ -142,7 +142,7 @@ def test_a_lamp_cut_into_a_grid_integrates_by_its_outline_like_the_whole_lamp():
     """A mesh lamp of 2 x 5 x 5 triangles: its plane's outline is merged to 4 edges, and the
     analytic irradiance (outline where the lamp is above the horizon, clipped triangles
     where the horizon cuts it) equals the two-triangle lamp's at random points."""
-    from raybundle.lights import MeshLight, _light_planes, light_polygon_irradiance
+    from raybundle.lights import MeshLight, light_polygon_irradiance
 
     def lamp_scene(n):
         g = np.linspace(-0.5, 0.5, n + 1)
@@ -162,7 +162,7 @@ def test_a_lamp_cut_into_a_grid_integrates_by_its_outline_like_the_whole_lamp():
                          float(sc.triangle_area[tri].sum()), np.full(3, 5.0), np.zeros(len(tri), bool), sc)
 
     grid, whole = lamp_scene(5), lamp_scene(1)
-    planes = _light_planes(grid)
+    planes = grid.planes
     assert len(planes) == 1 and len(planes[0][5]) == 4
     rng = np.random.default_rng(3)
     p = rng.uniform([-1, -1, 0], [1, 1, 0.99], (500, 3))

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .sampling import frames_from_normals, kronecker_alpha, triangle_barycentrics
+
 #: how far a bake point is pulled from a face's corner or edge towards its centroid
 #: (relative), so that it lies inside one patch and shadow rays do not start on a
 #: neighbouring face's plane
@@ -50,16 +52,14 @@ class SurfacePoints:
         return self.triangle >= 0
 
 
-def _barycentric(corners, p):
-    """Barycentrics (N, 3) of points ``p`` (N, 3) in the planes of triangles ``corners`` (N, 3, 3)."""
-    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-    d = p - corners[:, 0]
-    d11, d12, d22 = (np.einsum("ij,ij->i", a, b) for a, b in ((e1, e1), (e1, e2), (e2, e2)))
-    dp1, dp2 = np.einsum("ij,ij->i", d, e1), np.einsum("ij,ij->i", d, e2)
-    det = np.maximum(d11 * d22 - d12 * d12, 1e-300)
-    b1 = (d22 * dp1 - d12 * dp2) / det
-    b2 = (d11 * dp2 - d12 * dp1) / det
-    return np.stack([1 - b1 - b2, b1, b2], axis=1)
+def input_rows(input_scene, face):
+    """(N,) the rows of ``input_scene`` holding input faces ``face`` (N,) (the values of
+    its ``triangle_source``), -1 for faces it does not hold (degenerate, dropped) or bad ids."""
+    face = np.asarray(face, np.int64)
+    src = input_scene.triangle_source
+    row = np.full(int(max(src.max(initial=-1), face.max(initial=-1))) + 1, -1, np.int64)
+    row[src] = np.arange(len(src))
+    return np.where(face >= 0, row[np.maximum(face, 0)], -1)
 
 
 def locate_points(input_scene, scene, tracer, face, bary, chunk=1 << 22):
@@ -75,9 +75,7 @@ def locate_points(input_scene, scene, tracer, face, bary, chunk=1 << 22):
     face = np.asarray(face, np.int64)
     bary = np.asarray(bary, float)
     n = len(face)
-    row = np.full(int(max(input_scene.triangle_source.max(initial=-1), face.max(initial=-1))) + 1, -1, np.int64)
-    row[input_scene.triangle_source] = np.arange(len(input_scene.triangle_source))
-    r = np.where((face >= 0) & (face < len(row)), row[np.clip(face, 0, len(row) - 1)], -1)
+    r = input_rows(input_scene, face)
     ok = np.nonzero(r >= 0)[0]
     corners = input_scene.triangle_corners[r[ok]]
     p = np.einsum("nk,nkc->nc", bary[ok], corners)
@@ -100,7 +98,7 @@ def locate_points(input_scene, scene, tracer, face, bary, chunk=1 << 22):
         tri[todo[good]] = t_hit[good]
         todo = todo[~good]
     hit = np.nonzero(tri >= 0)[0]          # barycentrics in double precision (Embree's are float32)
-    fb[hit] = _barycentric(scene.triangle_corners[tri[hit]], point[hit])
+    fb[hit] = triangle_barycentrics(scene.triangle_corners[tri[hit]], point[hit])
     if len(todo):
         _locate_by_search(scene, face, point, todo, tri, fb, chunk)
     ts = np.full(n, -1, np.int64)
@@ -126,7 +124,7 @@ def _locate_by_search(scene, face, point, todo, tri, fb, chunk):
         c = count[lo:hi]
         pt = np.repeat(np.arange(lo, hi), c)
         cand = order[np.repeat(start[lo:hi] - bounds[lo:hi], c) + np.arange(int(c.sum())) + bounds[lo]]
-        b = _barycentric(scene.triangle_corners[cand], point[todo[pt]])
+        b = triangle_barycentrics(scene.triangle_corners[cand], point[todo[pt]])
         score = b.min(axis=1)
         # best candidate per point: sort by (point, score) and take each point's last
         best = np.lexsort((score, pt))
@@ -143,7 +141,9 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, ga
 
     ``solver``: a :class:`~raybundle.solvers.StochasticIterationSolver` (its running
     average and its :class:`~raybundle.lights.DirectLighting`); ``light_samples``:
-    shadow rays per area light per point; ``rng``: a Generator (default: seeded 0).
+    shadow rays per area light per point; ``rng``: a Generator (default: seeded 0);
+    ``gather_rays``: 0 = the indirect light interpolated from the patches, else gathered by
+    that many rays per point (:func:`gathered_irradiance`).
     """
     sc = solver.scene
     rng = np.random.default_rng(0) if rng is None else rng
@@ -159,10 +159,10 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, ga
     out[idx] = mats.emitted_radiance(m, ones)
     rec = solver.reconstruction
     e_bar = solver.indirect_incoming()
-    sharp = solver.caustic.E if solver.caustic is not None else None
     if gather_rays:
         e = gathered_irradiance(solver, points, idx, int(gather_rays), rng)
     elif np.any(e_bar):
+        sharp = solver.caustic.E if solver.caustic is not None else None
         vert = rec.projected(e_bar if sharp is None else e_bar - sharp)
         if sharp is not None:
             vert += rec.averaged(sharp)
@@ -274,7 +274,7 @@ def dilate(image, filled, margin):
     return img, ok
 
 
-def gathered_irradiance(solver, points: SurfacePoints, idx, rays, rng, vert=None):
+def gathered_irradiance(solver, points: SurfacePoints, idx, rays, rng):
     """Indirect irradiance (len(idx), 3) [W/m^2] at points ``idx`` by a final gather:
     ``rays`` cosine-distributed rays per point (a shifted Kronecker set each), each
     reading the outgoing radiance of the surface it meets from the solution (its diffuse
@@ -284,20 +284,16 @@ def gathered_irradiance(solver, points: SurfacePoints, idx, rays, rng, vert=None
     reconstruction then enters one bounce later, averaged over the hemisphere: next to
     a concave edge or a contact, where a patch value cannot follow the fall-off, the
     gather is right where the reconstruction is not."""
-    from .sampling import frames_from_normals, kronecker_alpha
-
     sc = solver.scene
-    e = solver.indirect_incoming() + solver.first_shot.E.sum(axis=1)
-    if vert is None:
-        vert = solver.reconstruction.averaged(e)
+    vert = solver.reconstruction.averaged(solver.indirect_incoming() + solver.first_shot.E.sum(axis=1))
     p = np.repeat(points.point[idx], rays, axis=0)
     n = np.repeat(sc.tside_normal[points.tside[idx]], rays, axis=0)
     alpha = kronecker_alpha(2)
     u = (np.repeat(rng.random((len(idx), 2)), rays, axis=0) + np.tile(np.arange(rays), len(idx))[:, None] * alpha) % 1
     r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
     t, b = frames_from_normals(n)
-    w = (r * np.cos(phi))[:, None] * t + (r * np.sin(phi))[:, None] * b + np.sqrt(1 - u[:, :1])[:, :1] * n
-    tri, dist, bu, bv = solver.tracer.first_hit(p + n * solver.tracer.eps, w)
+    w = (r * np.cos(phi))[:, None] * t + (r * np.sin(phi))[:, None] * b + np.sqrt(1 - u[:, :1]) * n
+    tri, _, bu, bv = solver.tracer.first_hit(p + n * solver.tracer.eps, w)
     L = np.zeros((len(p), 3))
     hit = np.nonzero(tri >= 0)[0]
     if len(hit):

@@ -58,7 +58,7 @@ class MeshLight:
         c = self.scene.triangle_corners[self.triangles]
         self._centroid = c.mean(axis=1)
         self._radius = np.linalg.norm(c - self._centroid[:, None], axis=2).max(axis=1)
-        self._planes = None
+        self.planes = _light_planes(self)
         self._fans = _plane_fans(self)
 
     def sample(self, points, u):
@@ -381,14 +381,17 @@ def _merge_collinear(vertices, directed):
     return np.concatenate(out) if out else vertices[directed]
 
 
+#: mesh lights with more planar parts than this (a tessellated sphere) are sampled and
+#: integrated triangle by triangle
+MAX_PLANES = 64
+
+
 def _light_planes(light):
-    """The planar parts of a mesh light (cached on it): a list of (triangle rows into
-    ``light.triangles``, unit normal, a point of the plane, two-sided, bounding-box
-    corners (8, 3), directed boundary edges (B, 2, 3) or None when the triangles do not
-    form a consistently oriented, T-junction-free surface, whose outline cannot stand
-    for them)."""
-    if getattr(light, "_planes", None) is not None:
-        return light._planes
+    """The planar parts of a mesh light: a list of (triangle rows into ``light.triangles``,
+    unit normal, a point of the plane, two-sided, bounding-box corners (8, 3), directed
+    boundary edges (B, 2, 3) or None when the triangles do not form a consistently
+    oriented, T-junction-free surface, whose outline cannot stand for them); None for a
+    light of more than :data:`MAX_PLANES` parts."""
     sc = light.scene
     tri = light.triangles
     nrm = sc.triangle_normal[tri]
@@ -397,8 +400,11 @@ def _light_planes(light):
     key = np.concatenate([np.round(nrm * 1e5), np.round((nrm * p0).sum(axis=1) / max(r * 1e-7, 1e-12))[:, None],
                           light.two_sided[:, None]], axis=1).astype(np.int64)
     _, label = np.unique(key, axis=0, return_inverse=True)
+    n_planes = int(label.max()) + 1 if len(label) else 0
+    if n_planes > MAX_PLANES:
+        return None
     planes = []
-    for g in range(int(label.max()) + 1 if len(label) else 0):
+    for g in range(n_planes):
         rows = np.nonzero(label.reshape(-1) == g)[0]
         ids = sc.triangles[tri[rows]]
         corners = sc.triangle_corners[tri[rows]]
@@ -423,19 +429,18 @@ def _light_planes(light):
                 if abs(area_vec @ nrm[rows[0]] - total) > 1e-6 * total:
                     edges = None
         planes.append((rows, nrm[rows[0]], p0[rows[0]], bool(light.two_sided[rows[0]]), box, edges))
-    light._planes = planes
     return planes
 
 
-def _plane_fans(light, max_planes=64):
-    """Sampling tables of a mesh light whose planar parts (:func:`_light_planes`) each
+def _plane_fans(light):
+    """Sampling tables of a mesh light whose planar parts (``light.planes``) each
     have one convex outline: per part its area, probability ``A_g / A`` and CDF, normal,
     sidedness, bounding sphere, and the fan triangles of its outline (``fan`` (F, 3, 3),
     ``fan_group``, ``fan_key`` = group + area CDF within it); ``tri_group`` maps the
     light's triangles to parts.  None when a part's outline is not one convex loop (or
-    there are more than ``max_planes`` parts): the light is then sampled triangle by triangle."""
-    planes = _light_planes(light)
-    if not planes or len(planes) > max_planes:
+    there are more than :data:`MAX_PLANES` parts): the light is then sampled triangle by triangle."""
+    planes = light.planes
+    if not planes:
         return None
     sc = light.scene
     fans, fan_group, areas, normals, two, cents, radii = [], [], [], [], [], [], []
@@ -479,18 +484,18 @@ def _plane_fans(light, max_planes=64):
 
 def light_polygon_irradiance(light, points, normals):
     """``I(x)`` (N,) of :func:`polygon_irradiance` for a polygonal light seen from its
-    emitting side (a :class:`MeshLight`, a rectangular :class:`ShapeLight`), and (N,)
-    bool: where it is exact.  ``None`` for other lights.
+    emitting side (a :class:`MeshLight` of at most :data:`MAX_PLANES` planar parts, a
+    rectangular :class:`ShapeLight`), and (N,) bool: where it is exact.  ``None`` for other lights.
 
     A mesh light is integrated plane by plane: a plane wholly above a point's horizon by
     its outline (:func:`boundary_edge_irradiance`); a plane that the horizon cuts by its
     triangles, each clipped, when it has at most :data:`ANALYTIC_MAX_TRIANGLES` of them
     (otherwise such points are not exact, and the caller samples them instead)."""
-    if isinstance(light, MeshLight):
+    if isinstance(light, MeshLight) and light.planes is not None:
         sc = light.scene
         out = np.zeros(len(points))
         exact = np.ones(len(points), bool)
-        for rows, nrm, p0, two, box, edges in _light_planes(light):
+        for rows, nrm, p0, two, box, edges in light.planes:
             front = (points - p0) @ nrm
             lit = np.nonzero(front != 0 if two else front > 0)[0]
             if len(lit) == 0:

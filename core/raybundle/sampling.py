@@ -83,6 +83,19 @@ def points_on_triangles(corners, u1, u2):
     return np.einsum("nk,nkj->nj", uniform_triangle(u1, u2), corners)
 
 
+def triangle_barycentrics(corners, points):
+    """Barycentrics (N, 3) of ``points`` (N, 3) projected into the planes of triangles
+    ``corners`` (N, 3, 3) (least squares; exact for points in the plane)."""
+    c = np.asarray(corners, float)
+    e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
+    d = np.asarray(points, float) - c[:, 0]
+    d11, d12, d22 = (np.einsum("ij,ij->i", a, b) for a, b in ((e1, e1), (e1, e2), (e2, e2)))
+    p1, p2 = np.einsum("ij,ij->i", d, e1), np.einsum("ij,ij->i", d, e2)
+    det = np.maximum(d11 * d22 - d12 * d12, 1e-300)
+    b1, b2 = (d22 * p1 - d12 * p2) / det, (d11 * p2 - d12 * p1) / det
+    return np.stack([1 - b1 - b2, b1, b2], axis=1)
+
+
 def triangle_solid_angle(a, b, c):
     """Solid angle [sr] (N,) of triangles seen from the origin, corners ``a, b, c``
     (N, 3) relative to the viewpoint (Van Oosterom & Strackee 1983):

@@ -76,14 +76,9 @@ class SurfaceTexture:
 
     def bary_at(self, face, points):
         """Barycentrics (N, 3) of ``points`` (N, 3) on input faces ``face`` (N,)."""
-        c = self.face_corners[face]
-        e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
-        d = points - c[:, 0]
-        d11, d12, d22 = (np.einsum("ij,ij->i", a, b) for a, b in ((e1, e1), (e1, e2), (e2, e2)))
-        p1, p2 = np.einsum("ij,ij->i", d, e1), np.einsum("ij,ij->i", d, e2)
-        det = np.maximum(d11 * d22 - d12 * d12, 1e-300)
-        b1, b2 = (d22 * p1 - d12 * p2) / det, (d11 * p2 - d12 * p1) / det
-        return np.stack([1 - b1 - b2, b1, b2], axis=1)
+        from .sampling import triangle_barycentrics
+
+        return triangle_barycentrics(self.face_corners[face], points)
 
     def at(self, face, points):
         """Modulation M (N, 3) at ``points`` (N, 3) on input faces ``face`` (N,) (1 where untextured)."""
