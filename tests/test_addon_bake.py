@@ -264,3 +264,25 @@ def test_color_attribute_on_the_albedo_follows_the_mesh_like_cycles(fresh, tmp_p
     rel = ours / ref - 1
     # measured: mean 0.03%, 95th percentile 0.55%, largest 2.3% (the socket's own value: -50 .. +500%)
     assert abs(rel.mean()) < 0.01 and np.percentile(np.abs(rel), 95) < 0.04 and np.abs(rel).max() < 0.1
+
+
+def test_camera_view_bake_is_the_render_of_the_same_iterations(fresh, tmp_path):
+    """Camera View writes <scene>.camera.exr and an Image: the engine's image for the same
+    seed and iteration count (the same solver and image passes), read back from the EXR."""
+    from addon_helpers import render_raybundle
+    from raybundle.io import read_exr
+
+    from raybundle_addon.bake import BakeJob
+
+    textured_plane()
+    bake_settings(fresh, iterations=20, bake_color_attribute=False, bake_camera=True, bake_directory=str(tmp_path))
+    fresh.raybundle.patches = 600
+    out = BakeJob(bpy.context.evaluated_depsgraph_get()).run()
+    assert out.camera == os.path.join(str(tmp_path), f"{fresh.name}.camera.exr")
+    baked = read_exr(out.camera)
+    rendered = render_raybundle(tmp_path / "render.exr", iterations=20, seed=1, patches=600)
+    assert baked.shape == rendered.shape == (32, 32, 3)
+    assert np.allclose(baked, rendered, rtol=1e-4, atol=1e-7), np.abs(baked / rendered - 1).max()
+    px = np.empty(32 * 32 * 4, np.float32)
+    bpy.data.images[f"{fresh.name}.camera"].pixels.foreach_get(px)
+    assert np.allclose(px.reshape(32, 32, 4)[::-1, :, :3], baked, rtol=1e-4, atol=1e-7)
