@@ -69,7 +69,7 @@ class BakeSettings:
     lightmap_margin: int = 16
     camera: bool = False
     directory: str = "//raybundle_bake/"
-    light_samples: int = 16
+    light_samples: int = 32
     single_user: bool = False
     gather_rays: int = 1024
 

@@ -81,9 +81,10 @@ class RAYBUNDLE_PG_settings(bpy.types.PropertyGroup):
         name="Output", subtype="DIR_PATH", default="//raybundle_bake/",
         description="Folder of the lightmap and camera EXRs ('//' = next to the .blend file)")
     bake_light_samples: IntProperty(
-        name="Light Samples", default=16, min=1, max=4096,
-        description="Shadow rays per light per baked point (vertex, corner or texel) for the direct light; "
-        "polygonal lights are integrated exactly and the rays only find their shadows")
+        name="Light Samples", default=32, min=1, max=4096,
+        description="Shadow rays per light per baked point (vertex, corner or texel) for the direct light, "
+        "16 times as many where they find a penumbra; polygonal lights are integrated exactly and the rays "
+        "only find their shadows")
     bake_gather_rays: IntProperty(
         name="Gather Rays", default=1024, min=0, max=65536,
         description="Color attributes: rays per vertex or corner that gather the indirect light from the "

@@ -337,15 +337,42 @@ def _lambert(v, w, normals):
     return np.abs((theta * g).sum(axis=1)) / 2
 
 
-def boundary_edge_irradiance(points, normals, edges, chunk=16384):
-    """``I`` (N,) of a planar polygon given by its directed boundary edges ``edges``
-    (B, 2, 3) [m], wholly above the points' horizons: Lambert's formula is a sum over the
-    boundary, so a polygon meshed into many triangles costs its outline only
-    (``|sum_e theta_e n . g_e| / 2``, :func:`polygon_irradiance`)."""
+def clipped_edge_irradiance(points, normals, edges, plane_normal, chunk=4096):
+    """``I`` (N,) of a planar polygon (any outline: concave, with holes) given by its
+    directed boundary edges ``edges`` (B, 2, 3) [m] in the plane of unit normal
+    ``plane_normal``, clipped to the points' upper hemispheres.
+
+    Lambert's sum over the boundary of the clipped polygon: each edge clipped to the
+    half-space ``n . (y - x) >= 0``, plus the new boundary along the horizon line, whose
+    pieces run from where an edge leaves the half-space to where one enters it.  Those
+    lie in the tangent plane, so each adds its signed angle about ``n``, and together
+    they add ``sum_entries psi - sum_exits psi`` (``psi`` the angle about ``n`` from a
+    fixed direction in the tangent plane), however the exits and entries pair up.  So a
+    light cut into many triangles costs its outline even where the horizon cuts it."""
     out = np.zeros(len(points))
+    m = np.asarray(plane_normal, float)
     for lo in range(0, len(points), chunk):
-        p, n = points[lo:lo + chunk], normals[lo:lo + chunk]
-        out[lo:lo + chunk] = _lambert(_unit(edges[None, :, 0] - p[:, None]), _unit(edges[None, :, 1] - p[:, None]), n)
+        x, n = points[lo:lo + chunk], normals[lo:lo + chunk]
+        a, b = edges[None, :, 0] - x[:, None], edges[None, :, 1] - x[:, None]     # (N, B, 3)
+        da, db = np.einsum("nbk,nk->nb", a, n), np.einsum("nbk,nk->nb", b, n)
+        t = np.where(da != db, da / np.where(da != db, da - db, 1.0), 0.0)[..., None]
+        cross = a + t * (b - a)
+        exits, entries = (da >= 0) & (db < 0), (da < 0) & (db >= 0)
+        v = np.where(entries[..., None], cross, a)
+        w = np.where(exits[..., None], cross, b)
+        keep = (da >= 0) | (db >= 0)
+        c = np.cross(_unit(v), _unit(w))
+        sin = np.sqrt(np.einsum("nbk,nbk->nb", c, c))
+        theta = np.arctan2(sin, np.einsum("nbk,nbk->nb", _unit(v), _unit(w)))
+        g = np.einsum("nbk,nk->nb", c, n) / np.maximum(sin, 1e-300)
+        total = np.where(keep, theta * g, 0.0).sum(axis=1)
+        # psi about n from r, the direction to the horizon line's nearest point
+        ell = _unit(np.cross(n, m))
+        wdir = np.cross(ell, n)
+        r = wdir * np.where((edges[0, 0] - x) @ m * (wdir @ m) < 0, -1.0, 1.0)[:, None]
+        psi = np.arctan2(np.einsum("nbk,nk->nb", np.cross(r[:, None], cross), n), np.einsum("nbk,nk->nb", cross, r))
+        total += np.where(entries, psi, 0.0).sum(axis=1) - np.where(exits, psi, 0.0).sum(axis=1)
+        out[lo:lo + chunk] = np.abs(total) / 2
     return out
 
 
@@ -487,10 +514,11 @@ def light_polygon_irradiance(light, points, normals):
     emitting side (a :class:`MeshLight` of at most :data:`MAX_PLANES` planar parts, a
     rectangular :class:`ShapeLight`), and (N,) bool: where it is exact.  ``None`` for other lights.
 
-    A mesh light is integrated plane by plane: a plane wholly above a point's horizon by
-    its outline (:func:`boundary_edge_irradiance`); a plane that the horizon cuts by its
-    triangles, each clipped, when it has at most :data:`ANALYTIC_MAX_TRIANGLES` of them
-    (otherwise such points are not exact, and the caller samples them instead)."""
+    A mesh light is integrated plane by plane: by its outline
+    (:func:`clipped_edge_irradiance`, exact wherever the horizon cuts it too); a plane
+    whose triangles have no consistent outline, by its triangles, each clipped, when it
+    has at most :data:`ANALYTIC_MAX_TRIANGLES` of them (otherwise the points whose horizon
+    cuts it are not exact, and the caller samples them instead)."""
     if isinstance(light, MeshLight) and light.planes is not None:
         sc = light.scene
         out = np.zeros(len(points))
@@ -501,17 +529,16 @@ def light_polygon_irradiance(light, points, normals):
             if len(lit) == 0:
                 continue
             d = np.einsum("nk,nck->nc", normals[lit], box[None] - points[lit, None])
-            above, below = np.all(d >= 0, axis=1), np.all(d <= 0, axis=1)
-            whole = lit[above] if edges is not None else lit[:0]
-            if len(whole):
-                out[whole] += boundary_edge_irradiance(points[whole], normals[whole], edges)
-            cut = lit[~below & ~np.isin(lit, whole)]
-            if len(cut) and len(rows) <= ANALYTIC_MAX_TRIANGLES:
+            lit = lit[~np.all(d <= 0, axis=1)]                 # not wholly below the horizon
+            if edges is not None:
+                out[lit] += clipped_edge_irradiance(points[lit], normals[lit], edges, nrm)
+                continue
+            if len(rows) <= ANALYTIC_MAX_TRIANGLES:
                 for k in rows:
                     c = sc.triangle_corners[light.triangles[k]]
-                    out[cut] += polygon_irradiance(points[cut], normals[cut], np.broadcast_to(c, (len(cut), 3, 3)))
-            elif len(cut):
-                exact[cut] = False
+                    out[lit] += polygon_irradiance(points[lit], normals[lit], np.broadcast_to(c, (len(lit), 3, 3)))
+            else:
+                exact[lit] = False
         return out, exact
     if isinstance(light, ShapeLight) and not light.ellipse:
         corners = np.array([light.center + a * light.axis_u + b * light.axis_v
@@ -651,7 +678,7 @@ class DirectLighting:
                     out[live] += e[live] * f / n_s
         return out
 
-    def irradiance(self, points, normals, rng, samples_per_light=16):
+    def irradiance(self, points, normals, rng, samples_per_light=16, penumbra_samples=None):
         """Direct irradiance (N, 3) [W/m^2] of the first-shot lights at surface points
         with unit ``normals`` (N, 3), for bakes, where a point's value is final.
 
@@ -664,9 +691,13 @@ class DirectLighting:
         0 where all are, and consistent in between (its bias in a penumbra falls as
         1 / samples).  Other lights: the mean of the samples.  ``samples_per_light``
         shadow rays per light with an extent, one per point light of radius 0 and
-        per sun of angle 0 (exact with one).  A point's samples are a randomly
-        shifted Kronecker (R_3) set, stratified over the light's triangles and
-        their areas.  ``rng``: a Generator."""
+        per sun of angle 0 (exact with one).  Points in a penumbra (some of their
+        samples blocked, some not) get ``penumbra_samples`` in all (default 16 times
+        ``samples_per_light``): there the shadow
+        ratio is a binomial proportion whose error (up to 1 / (2 sqrt(n))) dominated
+        the bake's error (Cornell bake: 2.3% -> 1.5% at 10 s), and few points are
+        in a penumbra.  A point's samples are a randomly shifted Kronecker (R_3) set,
+        stratified over the light's triangles and their areas.  ``rng``: a Generator."""
         from .sampling import kronecker_alpha
 
         out = np.zeros((len(points), 3))
@@ -679,16 +710,31 @@ class DirectLighting:
             analytic = None if sharp else light_polygon_irradiance(light, points, normals)
             seen = np.zeros((len(points), 3))
             total = np.zeros((len(points), 3))
+            n_pts = np.full(len(points), n_s)
+            lit = np.zeros(len(points), bool)
+            shade = np.zeros(len(points), bool)
             for s in range(n_s):
                 e, _, _, free = self._light_samples(points, normals, light, (shift + s * alpha) % 1.0, unshadowed=True)
                 seen += e
                 total += free
+                lit |= e.any(axis=1)
+                shade |= free.any(axis=1) & ~e.any(axis=1)
+            more = np.nonzero(lit & shade)[0]
+            n_more = 16 * n_s if penumbra_samples is None else int(penumbra_samples)
+            if len(more) and n_more > n_s:
+                n_pts[more] = n_more
+                for s in range(n_s, n_more):
+                    e, _, _, free = self._light_samples(points[more], normals[more], light,
+                                                        (shift[more] + s * alpha) % 1.0, unshadowed=True)
+                    seen[more] += e
+                    total[more] += free
             if analytic is None:
-                out += seen / n_s
+                out += seen / n_pts[:, None]
             else:
                 exact_i, ok = analytic
                 ratio = np.where(total > 0, seen / np.maximum(total, 1e-300), 0.0)
-                out += np.where(ok[:, None], exact_i[:, None] * np.asarray(light.radiance, float) * ratio, seen / n_s)
+                out += np.where(ok[:, None], exact_i[:, None] * np.asarray(light.radiance, float) * ratio,
+                                seen / n_pts[:, None])
         return out
 
     @staticmethod
