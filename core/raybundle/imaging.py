@@ -416,10 +416,8 @@ class Renderer:
         ``resolve_samples``) stratified sub-pixel samples.
 
         ``e_bar`` (S, 3) defaults to the solver's :meth:`~raybundle.solvers.StochasticIterationSolver.indirect_incoming`.
-        With ``smooth``, the bundles' running average is interpolated by
-        :meth:`~raybundle.reconstruction.LinearReconstruction.projected`, the caustic first
-        shot (sharp-edged and noisier, which a projection would ring on: 5.9% -> 7.6% on
-        ``cornell-glossy``) by :meth:`~raybundle.reconstruction.LinearReconstruction.averaged`.
+        With ``smooth``, the bundles' running average and the caustic first shot are
+        interpolated by :meth:`~raybundle.reconstruction.LinearReconstruction.smooth_and_sharp`.
         """
         sc, solver = self.scene, self.solver
         n = len(self._pixel)
@@ -430,12 +428,7 @@ class Renderer:
             sharp = solver.caustic.E if solver.caustic is not None else None
         if not np.any(e_bar):
             return out
-        vert = None
-        if self.settings.smooth:
-            rec = solver.reconstruction
-            vert = rec.projected(e_bar if sharp is None else e_bar - sharp)
-            if sharp is not None:
-                vert += rec.averaged(sharp)
+        vert = solver.reconstruction.smooth_and_sharp(e_bar, sharp) if self.settings.smooth else None
         kd = sc.materials.diffuse_reflectance
         k = max(1, int(samples or self.settings.resolve_samples))
         offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve

@@ -18,8 +18,8 @@ Two maps, both linear in the side values and exact on constants:
   whose patch means match, which slopes on into an edge where averaging flattens
   (``tests/test_reconstruction.py``).
 
-The image reads the diffuse indirect light through :meth:`projected` (the caustic first
-shot, sharp-edged, through :meth:`averaged`).  Tried and dropped: sending each diffuse
+The image and the bakes read the diffuse indirect light through :meth:`projected` (the
+caustic first shot, sharp-edged, through :meth:`averaged`: :meth:`smooth_and_sharp`).  Tried and dropped: sending each diffuse
 side's first shot into the bundles from its projection at the point a bundle line leaves
 it (no change of the Cornell error at 600 iterations, 1.81% both ways; 40% more solver
 time): a patch-wide linear fit of a steep fall-off is no closer near the edge than the
@@ -70,6 +70,14 @@ class LinearReconstruction:
         if self.empty.any():
             x[self.empty] = self.averaged(side_values)[self.empty]
         return x
+
+    def smooth_and_sharp(self, side_values, sharp=None):
+        """Side values (S, C) -> (V, C): :meth:`projected` of ``side_values - sharp`` plus
+        :meth:`averaged` of ``sharp`` (S, C) (the caustic first shot: sharp-edged and
+        noisy, which a projection would ring on: 5.9% -> 7.6% on ``cornell-glossy``)."""
+        if sharp is None:
+            return self.projected(side_values)
+        return self.projected(side_values - sharp) + self.averaged(sharp)
 
     def at(self, vertex_values, tside, bary):
         """Values (N, C) at points of triangle sides ``tside`` (N,) with barycentrics
