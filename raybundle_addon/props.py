@@ -82,9 +82,9 @@ class RAYBUNDLE_PG_settings(bpy.types.PropertyGroup):
         description="Folder of the lightmap and camera EXRs ('//' = next to the .blend file)")
     bake_light_samples: IntProperty(
         name="Light Samples", default=32, min=1, max=4096,
-        description="Shadow rays per light per baked point (vertex, corner or texel) for the direct light, "
-        "16 times as many where they find a penumbra; polygonal lights are integrated exactly and the rays "
-        "only find their shadows")
+        description="Shadow rays per light per vertex or corner for the direct light, 16 times as many where "
+        "they find a penumbra (lightmap texels: a quarter, and 4 times as many in a penumbra); polygonal "
+        "lights are integrated exactly and the rays only find their shadows")
     bake_gather_rays: IntProperty(
         name="Gather Rays", default=1024, min=0, max=65536,
         description="Color attributes: rays per vertex or corner that gather the indirect light from the "

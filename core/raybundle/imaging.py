@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .gather import FinalGather, near_edge_tsides
 from .sampling import DEFAULT_SEQUENCE, ShiftedKronecker, stratified_2d
 
 
@@ -81,7 +82,9 @@ class RenderSettings:
     glossy lobe reflects are estimated by light samples and by the lobe's ray together
     (multiple importance sampling, power heuristic) instead of by light samples alone;
     ``glossy_send_rays``: lobe-sampled rays per glossy side and bundle direction that gather
-    what the side's glossy lobe sends (:meth:`~raybundle.solvers.StochasticIterationSolver.glossy_sent_radiance`).
+    what the side's glossy lobe sends (:meth:`~raybundle.solvers.StochasticIterationSolver.glossy_sent_radiance`);
+    ``gather_rays``: final-gather rays per pixel where the patch values are not to be trusted
+    (next to concave edges and contacts, :mod:`raybundle.gather`), 0 = none.
     """
 
     bundle_resolution: int = 0
@@ -99,6 +102,7 @@ class RenderSettings:
     caustics: bool = True
     glossy_mis: bool = True
     glossy_send_rays: int = 2
+    gather_rays: int = 256
     threads: int | None = None
 
 
@@ -118,6 +122,8 @@ class RenderSettings:
             raise ValueError("directions_per_step must lie in [1, 1024]")
         if not 1 <= int(self.glossy_send_rays) <= 64:
             raise ValueError("glossy_send_rays must lie in [1, 64]")
+        if not 0 <= int(self.gather_rays) <= 65536:
+            raise ValueError("gather_rays must lie in [0, 65536] (0 = no final gather)")
 
 
 @dataclass
@@ -165,6 +171,8 @@ class Renderer:
         self._light_mis = bool(settings.glossy_gather and settings.glossy_mis)
         py, px = np.divmod(np.arange(n), camera.width)
         self._pixel = np.stack([px, py], axis=1).astype(float)
+        self._gather_tsides = None                        # near_edge_tsides, at the first resolve
+        self.gathered_points = 0
 
     # --------------------------------------------------------------- passes
     def trace_gbuffer(self, jitter, pixels=None):
@@ -410,7 +418,7 @@ class Renderer:
             self.glossy_sum[gl] += solver.caustic.E[patch] * f
 
     # -------------------------------------------------------------- resolve
-    def diffuse_indirect(self, e_bar=None, samples=None):
+    def diffuse_indirect(self, e_bar=None, samples=None, gather=True):
         """(N, 3) W_d kd/pi * E_bar at the pixels (W_d: the diffuse weight under a
         Principled layer, 1 without), box-filtered with ``samples`` (default
         ``resolve_samples``) stratified sub-pixel samples.
@@ -418,24 +426,42 @@ class Renderer:
         ``e_bar`` (S, 3) defaults to the solver's :meth:`~raybundle.solvers.StochasticIterationSolver.indirect_incoming`.
         With ``smooth``, the bundles' running average and the caustic first shot are
         interpolated by :meth:`~raybundle.reconstruction.LinearReconstruction.smooth_and_sharp`.
+        With ``gather`` (and ``e_bar`` the solver's own), points on the sides
+        :func:`~raybundle.gather.near_edge_tsides` flags gather their indirect light
+        instead (:class:`~raybundle.gather.FinalGather`): ``gather_rays`` rays per pixel,
+        spread over its sub-pixel samples as one stratified set.
         """
         sc, solver = self.scene, self.solver
         n = len(self._pixel)
         out = np.zeros((n, 3))
         sharp = None
+        final = None
         if e_bar is None:
             e_bar = solver.indirect_incoming()
             sharp = solver.caustic.E if solver.caustic is not None else None
-        if not np.any(e_bar):
+            if gather and self.settings.gather_rays > 0 and self.scene.n_patches:
+                final = FinalGather(solver)
+        if not np.any(e_bar) and final is None:
             return out
         vert = solver.reconstruction.smooth_and_sharp(e_bar, sharp) if self.settings.smooth else None
         kd = sc.materials.diffuse_reflectance
         k = max(1, int(samples or self.settings.resolve_samples))
         offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve
+        if final is not None:
+            if self._gather_tsides is None:
+                self._gather_tsides = near_edge_tsides(sc, self.tracer, np.random.default_rng([self.settings.seed, 3]))
+            per_sample = -(-int(self.settings.gather_rays) // k)
+            shift = self._resolve_rng.random((n, 2))
         for j in range(k):
             g = self.trace_gbuffer(np.broadcast_to(offsets[j], (n, 2)))
             h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
             e = self.surface_values(e_bar, vert, g.tside[h], g.bary[h])
+            if final is not None:
+                f = np.nonzero(self._gather_tsides[g.tside[h]])[0]
+                if len(f):
+                    e[f] = final.irradiance(g.point[h[f]], sc.tside_normal[g.tside[h[f]]], per_sample,
+                                            self._resolve_rng, shift=shift[h[f]], first=j * per_sample)
+                    self.gathered_points += len(f)
             m = g.material[h]
             w_d = sc.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]))
             scale = self.albedo_scale(g.triangle[h], g.point[h])
@@ -449,7 +475,7 @@ class Renderer:
         if self.glossy_iterations:
             img = img + self.glossy_sum / self.glossy_iterations
         if diffuse is None:
-            diffuse = self.diffuse_indirect(samples=1 if preview else None)
+            diffuse = self.diffuse_indirect(samples=1 if preview else None, gather=not preview)
         img = img + diffuse
         return img.reshape(self.camera.height, self.camera.width, 3).astype(np.float32)
 

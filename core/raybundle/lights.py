@@ -723,11 +723,14 @@ class DirectLighting:
             n_more = 16 * n_s if penumbra_samples is None else int(penumbra_samples)
             if len(more) and n_more > n_s:
                 n_pts[more] = n_more
+                p_more, n_more_, s_more = points[more], normals[more], shift[more]
+                seen_more, total_more = seen[more], total[more]
                 for s in range(n_s, n_more):
-                    e, _, _, free = self._light_samples(points[more], normals[more], light,
-                                                        (shift[more] + s * alpha) % 1.0, unshadowed=True)
-                    seen[more] += e
-                    total[more] += free
+                    e, _, _, free = self._light_samples(p_more, n_more_, light, (s_more + s * alpha) % 1.0,
+                                                        unshadowed=True)
+                    seen_more += e
+                    total_more += free
+                seen[more], total[more] = seen_more, total_more
             if analytic is None:
                 out += seen / n_pts[:, None]
             else:
