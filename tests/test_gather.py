@@ -89,3 +89,20 @@ def test_the_image_gathers_only_next_to_edges():
     assert not flag[front & ~lamp & ~over_lamp & (edge_distance > 4 * size)].any()
     assert flag[front & over_lamp].any()
     solver.tracer.close()
+
+
+def test_a_furnace_image_with_the_gather_stays_exact():
+    """The furnace (radiance Le / (1 - a) everywhere) rendered with 256 gather rays per pixel
+    next to its edges and the block: the image mean stays within 0.4% of exact per channel
+    and the pixels' spread does not grow (measured, seeds 0 and 1, 150 iterations: means
+    within 0.12%, spread 0.36-0.38% gathered against 0.49-0.56% without)."""
+    from raybundle import scenes
+
+    sc = scenes.furnace(resolution=(24, 24))
+    r = pipeline.make_renderer(pipeline.prepare(sc, patches=400), RenderSettings(seed=0, resolve_samples=4,
+                                                                                 gather_rays=256))
+    rel = r.run(iterations=150).image.reshape(-1, 3) / sc.analytic_radiance - 1
+    assert r.gathered_points > 1000
+    assert np.all(np.abs(rel.mean(axis=0)) < 0.004), rel.mean(axis=0)
+    assert rel.std() < 0.0056, rel.std()
+    r.tracer.close()

@@ -102,7 +102,7 @@ class RenderSettings:
     caustics: bool = True
     glossy_mis: bool = True
     glossy_send_rays: int = 2
-    gather_rays: int = 256
+    gather_rays: int = 0
     threads: int | None = None
 
 
