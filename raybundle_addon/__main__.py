@@ -3,7 +3,7 @@
     python -m raybundle_addon SCENE.blend --out out.exr [--time S] [--iterations N] [--seed K]
                               [--patches N] [--resolution-percentage P] [--save-npz scene.npz]
     python -m raybundle_addon SCENE.blend --bake OUT.blend [--lightmaps DIR] [--lightmap-size N]
-                              [--domain point|corner] [--time S] [--iterations N] ...
+                              [--domain point|corner] [--subdivide LEVELS] [--time S] [--iterations N] ...
 
 Registers the add-on in the ``bpy`` module, opens the file, renders its scene
 with the ``RAYBUNDLE`` engine through ``bpy.ops.render.render`` (the same code
@@ -44,6 +44,8 @@ def build_parser():
     p.add_argument("--lightmap-size", type=_number(int, 16, 16384, "an integer in [16, 16384]"),
                    help="bake: lightmap width and height in texels (default: the file's)")
     p.add_argument("--domain", choices=("point", "corner"), help="bake: color attribute domain (default: the file's)")
+    p.add_argument("--subdivide", metavar="LEVELS", type=_number(int, 1, 6, "an integer in [1, 6]"),
+                   help="bake: into a copy of each mesh cut up to LEVELS times where the light needs it")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--time", type=SECONDS, help="seconds to iterate (default: the file's time limit)")
     g.add_argument("--iterations", type=_number(int, 1, what="a positive integer"),
@@ -72,8 +74,8 @@ def main(argv=None):
         return _fail(f"--out {args.out}: the output must be an .exr file")
     if args.bake is not None and not args.bake.endswith(".blend"):
         return _fail(f"--bake {args.bake}: the output must be a .blend file")
-    if args.bake is None and (args.lightmaps or args.lightmap_size or args.domain):
-        return _fail("--lightmaps, --lightmap-size and --domain go with --bake")
+    if args.bake is None and (args.lightmaps or args.lightmap_size or args.domain or args.subdivide):
+        return _fail("--lightmaps, --lightmap-size, --domain and --subdivide go with --bake")
 
     import bpy
 
@@ -162,6 +164,8 @@ def _bake(args, scene):
     rb.bake_color_attribute = True
     if args.domain:
         rb.bake_domain = args.domain.upper()
+    if args.subdivide:
+        rb.bake_subdivide, rb.bake_subdivide_levels = True, args.subdivide
     if args.lightmaps:
         rb.bake_lightmaps = True
         rb.bake_directory = os.path.abspath(args.lightmaps)

@@ -72,6 +72,8 @@ class BakeSettings:
     light_samples: int = 32
     single_user: bool = False
     gather_rays: int = 1024
+    subdivide: bool = False
+    subdivide_levels: int = 3
 
     @classmethod
     def from_scene(cls, scene):
@@ -80,7 +82,8 @@ class BakeSettings:
             return cls()
         return cls(bool(rb.bake_color_attribute), str(rb.bake_domain), bool(rb.bake_lightmaps),
                    int(rb.lightmap_size), int(rb.lightmap_margin), bool(rb.bake_camera), str(rb.bake_directory),
-                   int(rb.bake_light_samples), bool(rb.bake_single_user), int(rb.bake_gather_rays))
+                   int(rb.bake_light_samples), bool(rb.bake_single_user), int(rb.bake_gather_rays),
+                   bool(rb.bake_subdivide), int(rb.bake_subdivide_levels))
 
     def validate(self):
         if not (self.color_attribute or self.lightmaps or self.camera):
@@ -93,6 +96,8 @@ class BakeSettings:
             raise ValueError("light samples must be at least 1")
         if self.gather_rays < 0:
             raise ValueError("gather rays must be 0 (off) or more")
+        if self.subdivide and not 1 <= self.subdivide_levels <= 6:
+            raise ValueError("subdivision levels must lie in [1, 6]")
 
 
 def _unique_points(input_scene, face, bary):
@@ -123,6 +128,8 @@ class _Target:
     corner_face: np.ndarray
     corner_bary: np.ndarray
     copy: bool = False                  # bake into a new object made from the evaluated mesh
+    refine: bool = False                # ... cut where the lighting needs it (corners set in finish)
+    refined: object = None              # raybundle.baking.RefinedTriangles
     own_mesh: bool = False              # give the object its own copy of a shared mesh first
     sharing: list = field(default_factory=list)      # other objects that share the mesh
 
@@ -236,7 +243,9 @@ class BakeJob:
                         first.sharing.append(info.instancer if info.is_instance and info.instancer else info.name)
                     continue
             face, bary = self._corners(info)
-            by_mesh[key] = t = _Target(info, face, bary, copy=not same, own_mesh=own)
+            refine = self.bake.subdivide and info.n_triangles > 0
+            by_mesh[key] = t = _Target(info, face, bary, copy=not same or refine, own_mesh=own and not refine,
+                                       refine=refine)
             self.targets.append(t)
         for t in self.targets:
             if t.sharing:
@@ -330,6 +339,9 @@ class BakeJob:
         n = self.bake.light_samples
         attributes, lightmaps, camera_path = [], {}, None
         try:
+            for t in self.targets:
+                if t.refine:
+                    self._refine(t, rng)
             if self.targets:
                 face = np.concatenate([t.corner_face for t in self.targets])
                 bary = np.concatenate([t.corner_bary for t in self.targets])
@@ -384,9 +396,10 @@ class BakeJob:
                 ob.data = me = me.copy()
             return ob, me
         ev = ob.evaluated_get(self.depsgraph)
-        me = bpy.data.meshes.new_from_object(ev)
-        if len(me.loops) != t.info.n_loops:
-            bpy.data.meshes.remove(me)
+        me = self._refined_mesh(t, ev) if t.refine else bpy.data.meshes.new_from_object(ev)
+        if me is None or len(me.loops) != len(t.corner_face):
+            if me is not None:
+                bpy.data.meshes.remove(me)
             self.warn(f"object {ob.name!r}: its evaluated mesh changed during the bake; not written")
             return None, None
         name = ob.name + COPY_SUFFIX
@@ -404,6 +417,67 @@ class BakeJob:
         copy.matrix_world = ob.matrix_world.copy()
         copy.hide_render = True
         return copy, me
+
+    def _refine(self, t, rng):
+        """Cut target ``t``'s triangles where the lighting needs it
+        (:func:`raybundle.baking.refine_by_lighting`); its corners become the copy's."""
+        from raybundle.baking import refine_by_lighting
+
+        faces = np.arange(t.info.first_triangle, t.info.first_triangle + t.info.n_triangles)
+        t.refined = r = refine_by_lighting(self.solver, self.export.scene, faces, max_level=self.bake.subdivide_levels,
+                                           rng=rng)
+        t.corner_face = np.repeat(r.face, 3)
+        t.corner_bary = r.bary.reshape(-1, 3)
+
+    def _refined_mesh(self, t, ev):
+        """A new mesh of target ``t``'s refined triangles (object space of ``ev``, its evaluated
+        object): vertices welded by position, material indices and UV maps carried over
+        by interpolation.  None when ``ev``'s mesh no longer matches the export."""
+        src = ev.to_mesh()
+        try:
+            if len(src.loops) != t.info.n_loops:
+                return None
+            n_v, n_l, n_p = len(src.vertices), len(src.loops), len(src.polygons)
+            co = np.empty(3 * n_v)
+            src.vertices.foreach_get("co", co)
+            loop_vertex = corner_vertices(src)
+            start = np.empty(n_p, np.int64)
+            src.polygons.foreach_get("loop_start", start)
+            total = np.empty(n_p, np.int64)
+            src.polygons.foreach_get("loop_total", total)
+            loop_poly = np.repeat(np.arange(n_p), total)
+            mat_index = np.zeros(n_p, np.int64)
+            if n_p:
+                src.polygons.foreach_get("material_index", mat_index)
+            loops = self.export.triangle_loops[t.refined.face]                    # (K, 3) source loops
+            bary = t.refined.bary                                                  # (K, 3 corners, 3)
+            corner_xyz = np.einsum("kcj,kjx->kcx", bary, co.reshape(-1, 3)[loop_vertex[loops]]).reshape(-1, 3)
+            scale = max(float(np.abs(co).max()) if n_v else 1.0, 1e-9) * 1e-7
+            _, first, vert = np.unique(np.round(corner_xyz / scale).astype(np.int64), axis=0, return_index=True,
+                                       return_inverse=True)
+            vert = vert.reshape(-1)
+            me = bpy.data.meshes.new(ev.name + COPY_SUFFIX)
+            k = len(loops)
+            me.vertices.add(len(first))
+            me.vertices.foreach_set("co", corner_xyz[first].astype(np.float32).ravel())
+            me.loops.add(3 * k)
+            me.loops.foreach_set("vertex_index", vert.astype(np.int32))
+            me.polygons.add(k)
+            me.polygons.foreach_set("loop_start", (3 * np.arange(k)).astype(np.int32))
+            me.polygons.foreach_set("loop_total", np.full(k, 3, np.int32))
+            me.polygons.foreach_set("material_index", mat_index[loop_poly[loops[:, 0]]].astype(np.int32))
+            for uv in src.uv_layers:
+                data = np.empty(2 * n_l, np.float32)
+                uv.data.foreach_get("uv", data)
+                layer = me.uv_layers.new(name=uv.name)
+                layer.data.foreach_set("uv", np.einsum("kcj,kjx->kcx", bary, data.reshape(-1, 2)[loops])
+                                       .astype(np.float32).ravel())
+            for m in src.materials:
+                me.materials.append(m)
+            me.update(calc_edges=True)
+            return me
+        finally:
+            ev.to_mesh_clear()
 
     def _write_attribute(self, t, values, found):
         """Write corner ``values`` (n_loops, 3) of target ``t`` as the ``RayBundle`` attribute."""

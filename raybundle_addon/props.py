@@ -65,6 +65,14 @@ class RAYBUNDLE_PG_settings(bpy.types.PropertyGroup):
                ("CORNER", "Face Corner", "One value per face corner (each face keeps its own light: hard edges "
                 "between faces)")],
         description="Domain of the color attribute")
+    bake_subdivide: BoolProperty(
+        name="Into a Subdivided Copy", default=False,
+        description="Bake the color attribute into a new object '<name>.RayBundle' (hidden from renders) whose "
+        "triangles are cut into 4, again and again, where the light's linear interpolation along an edge misses "
+        "its midpoint by more than 5%: finer where shadows and corners need it. The original is not changed")
+    bake_subdivide_levels: IntProperty(
+        name="Max Subdivisions", default=3, min=1, max=6,
+        description="How many times a triangle may be cut into 4 (each level at most 4 times the triangles)")
     bake_lightmaps: BoolProperty(
         name="Lightmaps", default=False,
         description="For each selected mesh with a UV map: an image filled texel by texel with the "

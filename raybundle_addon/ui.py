@@ -88,6 +88,10 @@ class RAYBUNDLE_PT_bake(RaybundlePanel, bpy.types.Panel):
         sub.prop(rb, "bake_domain")
         sub.prop(rb, "bake_gather_rays")
         sub.prop(rb, "bake_single_user")
+        sub.prop(rb, "bake_subdivide")
+        row = sub.row()
+        row.active = rb.bake_subdivide
+        row.prop(rb, "bake_subdivide_levels")
         col = layout.column()
         col.prop(rb, "bake_lightmaps")
         sub = col.column()

@@ -87,6 +87,32 @@ def test_dropped_faces_and_bad_ids_are_not_found_and_bake_to_zero():
     r.tracer.close()
 
 
+def test_refinement_by_lighting_cuts_until_edges_interpolate():
+    """raybundle.baking.refine_by_lighting on the plane under a point light: the sub-triangles
+    tile each face exactly (areas add up), and every edge of a triangle that stopped before
+    the last level interpolates the closed form at its midpoint within the tolerance."""
+    from raybundle.baking import refine_by_lighting
+
+    coarse, r = plane_under_point_light()
+    out = refine_by_lighting(r.solver, coarse, np.arange(len(coarse.triangles)), max_level=4, tolerance=0.05)
+    corners = np.einsum("kcj,kjx->kcx", out.bary, coarse.triangle_corners[out.face])
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    assert np.isclose(area.sum(), coarse.triangle_area.sum(), rtol=1e-12)
+    level = np.round(np.log(coarse.triangle_area[out.face] / area) / np.log(4)).astype(int)
+    assert level.min() < level.max() < 4          # measured: levels 2 and 3; none needed the last
+
+    def exact(p):
+        d = np.array([0.3, -0.2, 1.5]) - p
+        r2 = (d * d).sum(axis=-1)
+        return 0.6 / np.pi * 100.0 * d[..., 2] / np.sqrt(r2) / r2
+
+    done = corners[level < 4]
+    ends = 0.5 * (exact(done) + exact(done[:, [1, 2, 0]]))
+    miss = np.abs(exact(0.5 * (done + done[:, [1, 2, 0]])) - ends) / (ends + 0.02 * exact(corners).mean())
+    assert miss.max() < 0.05 * 1.01, miss.max()
+    r.tracer.close()
+
+
 @pytest.mark.parametrize("gather", [0, 64])
 def test_furnace_bake_is_le_over_one_minus_albedo(gather, seed=0):
     """Points on every face of the furnace (corners included) bake to Le / (1 - a), with

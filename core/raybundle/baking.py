@@ -272,3 +272,58 @@ def dilate(image, filled, margin):
         img[grow] = total[grow] / num[grow][:, None]
         ok = ok | grow
     return img, ok
+
+
+# ------------------------------------------------------------- refinement
+@dataclass
+class RefinedTriangles:
+    """Input triangles cut where the lighting needs it: sub-triangle ``k`` lies on input
+    face ``face[k]`` with corner barycentrics ``bary[k]`` (3, 3) (row j: corner j)."""
+
+    face: np.ndarray
+    bary: np.ndarray
+
+
+def refine_by_lighting(solver, input_scene, faces, max_level=3, tolerance=0.05, light_samples=8, rng=None):
+    """Cut input ``faces`` (their ids, :attr:`~raybundle.scene.PatchScene.triangle_source`
+    values of the prepared scene) into 4 at their edge midpoints, again and again (at most
+    ``max_level`` times), wherever the bake's linear interpolation along an edge misses
+    the value at its midpoint: ``|L(m) - (L(a) + L(b)) / 2| > tolerance * (Lbar(a, b) + L0)``,
+    with ``L`` the view-independent radiance (:func:`baked_radiance`, the indirect part
+    interpolated from the patches, ``light_samples`` shadow rays), ``Lbar`` the mean of
+    the two ends' luminance and ``L0`` 2% of the mean over the faces' corners.  A
+    triangle whose edges all interpolate is kept.  Returns :class:`RefinedTriangles`.
+
+    Neighbours may end at different levels (a T-junction: the finer side's extra vertex
+    lies on the coarser edge, whose interpolation missed it by less than the tolerance)."""
+    rng = np.random.default_rng(0) if rng is None else rng
+    faces = np.asarray(faces, np.int64)
+    face = faces.copy()
+    bary = np.broadcast_to(np.eye(3), (len(faces), 3, 3)).copy()
+    done_face, done_bary = [], []
+
+    def luminance(f, b):
+        pts = locate_points(input_scene, solver.scene, solver.tracer, f, b)
+        return baked_radiance(solver, pts, light_samples, rng) @ np.array([0.2126, 0.7152, 0.0722])
+
+    floor = None
+    for level in range(max_level + 1):
+        if len(face) == 0:
+            break
+        mid = 0.5 * (bary + bary[:, [1, 2, 0]])                              # edge j: corners j, j+1
+        pts_b = np.concatenate([bary, mid], axis=1).reshape(-1, 3)
+        lum = luminance(np.repeat(face, 6), pts_b).reshape(-1, 6)
+        if floor is None:
+            floor = 0.02 * max(float(lum[:, :3].mean()), 1e-12)
+        ends = 0.5 * (lum[:, :3] + lum[:, [1, 2, 0]])
+        miss = np.abs(lum[:, 3:] - ends) > tolerance * (ends + floor)
+        split = miss.any(axis=1) if level < max_level else np.zeros(len(face), bool)
+        done_face.append(face[~split])
+        done_bary.append(bary[~split])
+        f, b, m = face[split], bary[split], mid[split]
+        # the four children: corner j with the midpoints of its two edges, and the middle one
+        kids = np.stack([np.stack([b[:, 0], m[:, 0], m[:, 2]], 1), np.stack([m[:, 0], b[:, 1], m[:, 1]], 1),
+                         np.stack([m[:, 2], m[:, 1], b[:, 2]], 1), np.stack([m[:, 0], m[:, 1], m[:, 2]], 1)], 1)
+        face, bary = np.repeat(f, 4), kids.reshape(-1, 3, 3)
+    return RefinedTriangles(np.concatenate(done_face) if done_face else faces[:0],
+                            np.concatenate(done_bary) if done_bary else np.zeros((0, 3, 3)))
