@@ -113,6 +113,28 @@ def test_refinement_by_lighting_cuts_until_edges_interpolate():
     r.tracer.close()
 
 
+def test_textures_survive_the_npz_round_trip(tmp_path):
+    """A textured scene written to .npz and read back keeps its maps and faces, and renders
+    the same image (same seed and iterations); corner colors (a color attribute) too."""
+    from raybundle.scene import load_npz
+    from raybundle.textures import SurfaceTexture
+
+    coarse, _, tex = textured_plane(patches=100, res=8)
+    coarse.save_npz(tmp_path / "textured.npz")
+    back = load_npz(tmp_path / "textured.npz").texture
+    assert back is not None and len(back.images) == 1 and np.array_equal(back.images[0], tex.images[0])
+    for name in ("face_image", "face_corners", "face_uv"):
+        assert np.array_equal(getattr(back, name), getattr(tex, name))
+    assert back.face_color is None
+    images = [pipeline.make_renderer(pipeline.prepare(sc, patches=100), RenderSettings(seed=3)).run(iterations=4).image
+              for sc in (coarse, load_npz(tmp_path / "textured.npz"))]
+    assert np.array_equal(images[0], images[1])
+    colors = SurfaceTexture([], [-2, -1], tex.face_corners, tex.face_uv, np.random.default_rng(0).random((2, 3, 3)))
+    again = SurfaceTexture.from_arrays(colors.to_arrays())
+    assert again.images == [] and np.array_equal(again.face_color, colors.face_color)
+    assert np.array_equal(again.face_image, [-2, -1])
+
+
 @pytest.mark.parametrize("gather", [0, 64])
 def test_furnace_bake_is_le_over_one_minus_albedo(gather, seed=0):
     """Points on every face of the furnace (corners included) bake to Le / (1 - a), with

@@ -71,9 +71,9 @@ def test_gather_next_to_a_concave_edge_matches_a_brute_force_integral():
 
 
 def test_the_image_gathers_only_next_to_edges():
-    """near_edge_tsides flags the sides within two patch sizes of the ceiling-wall edge
-    (and the lamp, 2 cm under the ceiling) and no side farther than four patch sizes from
-    both; the lamp's own sides reflect nothing and are never flagged."""
+    """near_edge_tsides flags the sides within half a patch size of the ceiling-wall edge
+    (and some over the lamp, 2 cm under the ceiling) and no side farther than four patch
+    sizes from both; the lamp's own sides reflect nothing and are never flagged."""
     coarse, solver = ceiling_and_wall()
     sc = solver.scene
     flag = near_edge_tsides(sc, solver.tracer, np.random.default_rng(0))

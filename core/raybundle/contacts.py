@@ -244,7 +244,18 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
         step = max(1, 4_000_000 // max(len(seg), 1))
         for s in range(0, len(group), step):
             touch[s:s + step] = _touching(c2[s:s + step], seg, eps) | _corner_on(c2[s:s + step], seg, eps)
-        for f in np.nonzero(touch.any(axis=1))[0]:
+        touched = np.nonzero(touch.any(axis=1))[0]
+        # triangles no touching line cuts (every corner on one side of each): only their corners' tags
+        step = max(1, 1_000_000 // max(len(seg), 1))
+        whole = np.zeros(len(touched), bool)
+        for s in range(0, len(touched), step):
+            f = touched[s:s + step]
+            whole[s:s + step] = _uncut(c2[f], seg, touch[f], eps)
+        fast = touched[whole]
+        for s in range(0, len(fast), step):
+            f = fast[s:s + step]
+            corner_tag[group[f]] = _corner_tags_uncut(c2[f], seg, touch[f], seg_base, eps, tag_ids)
+        for f in touched[~whole]:
             tri = group[f]
             segs = np.nonzero(touch[f])[0]
             polys = [c2[f]]
@@ -320,6 +331,42 @@ def _corner_on(tri2d, seg, eps):
     off = np.abs(_cross2(d, p - a)) / length
     along = np.einsum("...i,...i->...", p - a, d) / length
     return ((off <= 1e3 * eps) & (along >= -1e3 * eps) & (along <= length + 1e3 * eps)).any(axis=1)
+
+
+def _uncut(tri2d, seg, touch, eps):
+    """(F,) bool: no line of a touching segment (``touch`` (F, K)) has corners of triangle f
+    (``tri2d`` (F, 3, 2)) strictly on both of its sides, so :func:`_split` leaves it whole."""
+    a, d = seg[:, 0], seg[:, 1] - seg[:, 0]
+    u = d / np.hypot(d[:, 0], d[:, 1])[:, None]
+    s = u[None, None, :, 0] * (tri2d[:, :, None, 1] - a[None, None, :, 1]) \
+        - u[None, None, :, 1] * (tri2d[:, :, None, 0] - a[None, None, :, 0])           # (F, 3, K)
+    both = (s > eps).any(axis=1) & (s < -eps).any(axis=1)
+    return ~(both & touch).any(axis=1)
+
+
+def _corner_tags_uncut(tri2d, seg, touch, seg_base, eps, tag_ids):
+    """:func:`_corner_tags` of whole triangles ``tri2d`` (F, 3, 2), vectorised: (F, 3) tags
+    in corner order, from the same keys (so equal lines weld with the cut pieces)."""
+    a, d = seg[:, 0], seg[:, 1] - seg[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    q = tri2d[:, :, None, :] - a[None, None]                                           # (F, 3, K, 2)
+    off = np.abs(_cross2(d[None, None], q)) / length
+    along = np.einsum("fckx,kx->fck", q, d) / length
+    on = (off <= 1e3 * eps) & (along >= -1e3 * eps) & (along <= length + 1e3 * eps) & touch[:, None, :]
+    u = d / length[:, None]
+    flip = (u[:, 0] < -1e-9) | ((np.abs(u[:, 0]) <= 1e-9) & (u[:, 1] < 0))             # one direction per line
+    u[flip] = -u[flip]
+    ur = np.round(u * 1e6).astype(np.int64)
+    offset = np.round((u[:, 0] * a[:, 1] - u[:, 1] * a[:, 0]) / (1e3 * eps)).astype(np.int64)
+    centroid = tri2d.mean(axis=1)
+    side = (u[None, :, 0] * (centroid[:, None, 1] - a[None, :, 1])
+            - u[None, :, 1] * (centroid[:, None, 0] - a[None, :, 0])) > 0               # (F, K)
+    out = np.zeros(tri2d.shape[:2], np.int64)
+    for f, c in zip(*np.nonzero(on.any(axis=2))):
+        key = {((seg_base, int(ur[k, 0]), int(ur[k, 1]), int(offset[k])), bool(side[f, k]))
+               for k in np.nonzero(on[f, c])[0]}
+        out[f, c] = tag_ids.setdefault(tuple(sorted(key)), len(tag_ids) + 1)
+    return out
 
 
 def _tags_in_order(tags, poly, tri2d, eps):

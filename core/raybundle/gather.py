@@ -91,12 +91,13 @@ class FinalGather:
         return out
 
 
-def near_edge_tsides(scene, tracer, rng, probes=32, reach=2.0):
+def near_edge_tsides(scene, tracer, rng, probes=32, reach=1.0):
     """(TS,) bool: triangle sides where the patch values are not to be trusted, because
     something else lies within ``reach`` patch sizes above them (a concave edge, a
     contact, an object close by): any of ``probes`` cosine-distributed rays from
     uniformly random points of the side meets a surface within that distance.  Sides
-    that reflect no diffuse light are never flagged."""
+    that reflect no diffuse light are never flagged.  (On ``cornell`` one patch size flags
+    22% of the sides, two 31%, for the same image error: 1.45% and 1.43% with 1,024 rays.)"""
     kd = scene.materials.diffuse_reflectance[scene.triangle_material[scene.tside_triangle]]
     todo = np.nonzero(np.any(kd > 0, axis=1))[0]
     flag = np.zeros(len(scene.tside_triangle), bool)

@@ -412,6 +412,8 @@ class PatchScene:
             d.update(self.camera.to_arrays())
         if self.analytic_radiance is not None:
             d["analytic_radiance"] = np.asarray(self.analytic_radiance, float)
+        if self.texture is not None:
+            d.update(self.texture.to_arrays())
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
                 np.savez_compressed(f, **d)
@@ -424,8 +426,11 @@ def load_npz(path) -> PatchScene:
     and the ``material_*`` table; ``triangle_patch``, ``triangle_source``,
     ``triangle_two_sided`` (T,) bool (absent: one-sided, as files of format 1),
     ``point_light_*``, ``sun_light_*``, ``area_light_*``, ``environment`` (3,),
-    ``camera_*`` and ``analytic_radiance`` are optional.
+    ``camera_*``, ``analytic_radiance`` and the ``texture_*`` arrays
+    (:meth:`~raybundle.textures.SurfaceTexture.to_arrays`) are optional.
     """
+    from .textures import SurfaceTexture
+
     try:
         with np.load(path, allow_pickle=False) as z:
             d = {k: z[k] for k in z.files}
@@ -446,7 +451,8 @@ def load_npz(path) -> PatchScene:
                        camera=Camera.from_arrays(d), triangle_patch=d.get("triangle_patch"),
                        triangle_source=d.get("triangle_source"), triangle_solid=d.get("triangle_solid"),
                        two_sided=d.get("triangle_two_sided", False),
-                       analytic_radiance=d.get("analytic_radiance"), name=str(d.get("name", "")))
+                       analytic_radiance=d.get("analytic_radiance"), name=str(d.get("name", "")),
+                       texture=SurfaceTexture.from_arrays(d))
 
 
 def build_scene(vertices, triangles, triangle_material, materials, point_lights=None, camera=None,

@@ -57,6 +57,29 @@ class SurfaceTexture:
             self.face_color = np.asarray(self.face_color, float)
         self.images = [np.ascontiguousarray(im, np.float32) for im in self.images]
 
+    def to_arrays(self):
+        """Flat arrays for a scene's ``.npz`` (``texture_*``): the maps one after another."""
+        d = {"texture_face_image": self.face_image, "texture_face_corners": self.face_corners,
+             "texture_face_uv": self.face_uv,
+             "texture_image_shapes": np.array([im.shape[:2] for im in self.images], np.int64).reshape(-1, 2),
+             "texture_pixels": (np.concatenate([im.reshape(-1, 3) for im in self.images]) if self.images
+                                else np.zeros((0, 3), np.float32))}
+        if self.face_color is not None:
+            d["texture_face_color"] = self.face_color
+        return d
+
+    @classmethod
+    def from_arrays(cls, d):
+        """The texture of :meth:`to_arrays`' arrays in ``d``, or None when there are none."""
+        if "texture_face_image" not in d:
+            return None
+        images, k = [], 0
+        for h, w in np.asarray(d["texture_image_shapes"], np.int64).reshape(-1, 2):
+            images.append(np.asarray(d["texture_pixels"][k:k + h * w]).reshape(h, w, 3))
+            k += h * w
+        return cls(images, d["texture_face_image"], d["texture_face_corners"], d["texture_face_uv"],
+                   d.get("texture_face_color"))
+
     def lookup(self, image, uv):
         """Bilinear, repeating lookup (N, 3) of map ``image`` at ``uv`` (N, 2)."""
         im = self.images[image]
