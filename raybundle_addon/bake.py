@@ -426,6 +426,9 @@ class BakeJob:
         faces = np.arange(t.info.first_triangle, t.info.first_triangle + t.info.n_triangles)
         t.refined = r = refine_by_lighting(self.solver, self.export.scene, faces, max_level=self.bake.subdivide_levels,
                                            rng=rng)
+        if r.capped:
+            self.warn(f"object {t.info.original!r}: the subdivided copy stops at {len(r.face)} triangles "
+                      "(cutting further would pass 2 million); lower Max Subdivisions or bake parts separately")
         t.corner_face = np.repeat(r.face, 3)
         t.corner_bary = r.bary.reshape(-1, 3)
 

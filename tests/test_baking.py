@@ -110,6 +110,10 @@ def test_refinement_by_lighting_cuts_until_edges_interpolate():
     ends = 0.5 * (exact(done) + exact(done[:, [1, 2, 0]]))
     miss = np.abs(exact(0.5 * (done + done[:, [1, 2, 0]])) - ends) / (ends + 0.02 * exact(corners).mean())
     assert miss.max() < 0.05 * 1.01, miss.max()
+    assert not out.capped
+    # a cap on the triangle count stops the cutting before it is passed, and says so
+    few = refine_by_lighting(r.solver, coarse, np.arange(len(coarse.triangles)), max_level=4, max_triangles=40)
+    assert few.capped and len(few.face) <= 40
     r.tracer.close()
 
 

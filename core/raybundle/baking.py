@@ -282,9 +282,11 @@ class RefinedTriangles:
 
     face: np.ndarray
     bary: np.ndarray
+    capped: bool = False        # stopped early: one more level would pass ``max_triangles``
 
 
-def refine_by_lighting(solver, input_scene, faces, max_level=3, tolerance=0.05, light_samples=8, rng=None):
+def refine_by_lighting(solver, input_scene, faces, max_level=3, tolerance=0.05, light_samples=8, rng=None,
+                       max_triangles=2_000_000):
     """Cut input ``faces`` (their ids, :attr:`~raybundle.scene.PatchScene.triangle_source`
     values of the prepared scene) into 4 at their edge midpoints, again and again (at most
     ``max_level`` times), wherever the bake's linear interpolation along an edge misses
@@ -295,12 +297,14 @@ def refine_by_lighting(solver, input_scene, faces, max_level=3, tolerance=0.05, 
     triangle whose edges all interpolate is kept.  Returns :class:`RefinedTriangles`.
 
     Neighbours may end at different levels (a T-junction: the finer side's extra vertex
-    lies on the coarser edge, whose interpolation missed it by less than the tolerance)."""
+    lies on the coarser edge, whose interpolation missed it by less than the tolerance).
+    A level that would make more than ``max_triangles`` in all is not cut (``capped``)."""
     rng = np.random.default_rng(0) if rng is None else rng
     faces = np.asarray(faces, np.int64)
     face = faces.copy()
     bary = np.broadcast_to(np.eye(3), (len(faces), 3, 3)).copy()
     done_face, done_bary = [], []
+    capped = False
 
     def luminance(f, b):
         pts = locate_points(input_scene, solver.scene, solver.tracer, f, b)
@@ -318,6 +322,8 @@ def refine_by_lighting(solver, input_scene, faces, max_level=3, tolerance=0.05, 
         ends = 0.5 * (lum[:, :3] + lum[:, [1, 2, 0]])
         miss = np.abs(lum[:, 3:] - ends) > tolerance * (ends + floor)
         split = miss.any(axis=1) if level < max_level else np.zeros(len(face), bool)
+        if sum(map(len, done_face)) + len(face) + 3 * int(split.sum()) > max_triangles:
+            capped, split = bool(split.any()), np.zeros(len(face), bool)
         done_face.append(face[~split])
         done_bary.append(bary[~split])
         f, b, m = face[split], bary[split], mid[split]
@@ -326,4 +332,4 @@ def refine_by_lighting(solver, input_scene, faces, max_level=3, tolerance=0.05, 
                          np.stack([m[:, 2], m[:, 1], b[:, 2]], 1), np.stack([m[:, 0], m[:, 1], m[:, 2]], 1)], 1)
         face, bary = np.repeat(f, 4), kids.reshape(-1, 3, 3)
     return RefinedTriangles(np.concatenate(done_face) if done_face else faces[:0],
-                            np.concatenate(done_bary) if done_bary else np.zeros((0, 3, 3)))
+                            np.concatenate(done_bary) if done_bary else np.zeros((0, 3, 3)), capped)
