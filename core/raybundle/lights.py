@@ -720,13 +720,13 @@ class DirectLighting:
                 lit |= e.any(axis=1)
                 shade |= free.any(axis=1) & ~e.any(axis=1)
             more = np.nonzero(lit & shade)[0]
-            n_more = 16 * n_s if penumbra_samples is None else int(penumbra_samples)
-            if len(more) and n_more > n_s:
-                n_pts[more] = n_more
-                p_more, n_more_, s_more = points[more], normals[more], shift[more]
+            n_penumbra = 16 * n_s if penumbra_samples is None else int(penumbra_samples)
+            if len(more) and n_penumbra > n_s:
+                n_pts[more] = n_penumbra
+                p_more, nrm_more, s_more = points[more], normals[more], shift[more]
                 seen_more, total_more = seen[more], total[more]
-                for s in range(n_s, n_more):
-                    e, _, _, free = self._light_samples(p_more, n_more_, light, (s_more + s * alpha) % 1.0,
+                for s in range(n_s, n_penumbra):
+                    e, _, _, free = self._light_samples(p_more, nrm_more, light, (s_more + s * alpha) % 1.0,
                                                         unshadowed=True)
                     seen_more += e
                     total_more += free
