@@ -374,9 +374,9 @@ class Renderer:
                 gone = live[~hit]
                 np.add.at(out, pix[gone], throughput[gone] * sc.environment)
             live, tri, t = live[hit], tri[hit], t[hit]
-            if bounce == 0 and light_mis is not None and len(live):
-                m0, wo0 = light_mis
-                le = self.direct.lobe_hits_light(pts[live], m0[live], n[live], wo0[live], w_i[live], tri,
+            if light_mis is not None and len(live):      # the lobe's ray meets a mesh light (MIS)
+                m_from, wo_from = (light_mis[0], light_mis[1]) if bounce == 0 else (m, wo)
+                le = self.direct.lobe_hits_light(pts[live], m_from[live], n[live], wo_from[live], w_i[live], tri,
                                                  pts[live] + t[:, None] * w_i[live], self.settings.light_samples)
                 out[live] += throughput[live] * le
             bary = np.stack([1 - bu - bv, bu, bv], axis=1)[hit]
@@ -389,12 +389,20 @@ class Renderer:
             go_on = (mats.is_glossy[hit_m] & (np.einsum("ij,ij->i", hit_n, w_back) > 0)
                      if bounce + 1 < depth else np.zeros(len(live), bool))
             L = solver.radiance(patch, w_back, diffuse_incoming=e_hit, first_shot_emission=False,
-                                glossy_iterate=False)
+                                glossy_iterate=False, first_shot_glossy=light_mis is None)
+            gi = np.nonzero(go_on)[0]
+            if light_mis is not None and len(gi):
+                # the lamps in the glossy lobe of a hit the path goes on from: light samples, MIS-weighted
+                # against the next ray (E1 f(w_mean, w) spiked where a sharp lobe lined up with w_mean)
+                hp = pts[live[gi]] + t[gi, None] * w_i[live[gi]]
+                L[gi] += self.direct.reflected_radiance(hp, hit_n[gi], hit_m[gi], w_back[gi], self.rng,
+                                                        self.settings.light_samples, mis=np.ones(len(gi), bool),
+                                                        diffuse_scale=np.zeros((len(gi), 3)))
             stop = ~go_on
-            if stop.any():   # paths that end here use the iterate for the hit's own glossy lobe
-                s_idx = np.nonzero(stop)[0]
+            if stop.any():   # paths that end here use the iterate for the hit's own glossy lobe,
+                s_idx = np.nonzero(stop)[0]      # spread evenly once a lobe has been followed
                 L[s_idx] = solver.radiance(patch[s_idx], w_back[s_idx], diffuse_incoming=e_hit[s_idx],
-                                           first_shot_emission=False)
+                                           first_shot_emission=False, glossy_as_diffuse=bounce > 0)
             np.add.at(out, pix[live], throughput[live] * L)
             pts = pts[live] + t[:, None] * w_i[live]
             keep = np.nonzero(go_on)[0]

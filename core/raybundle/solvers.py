@@ -259,7 +259,7 @@ class StochasticIterationSolver:
 
     # ------------------------------------------------------------- estimates
     def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True, glossy_iterate=True,
-                 first_shot_glossy=True):
+                 first_shot_glossy=True, glossy_as_diffuse=False):
         """Outgoing radiance (N, 3) of the sides ``patch`` (N,) towards ``w_out`` (N, 3):
 
         ``Le + W_d(w_out) kd/pi (E + E1 + Ec) + E f_g(t, w_out) + sum_l E1_l f_g(w_l, w_out)
@@ -272,6 +272,12 @@ class StochasticIterationSolver:
         (for estimators that already count direct light); ``glossy_iterate=False``
         leaves out ``E f_g(t, w_out)`` and ``Ec f_g`` (for estimators that trace that lobe further);
         ``first_shot_glossy=False`` leaves out ``E1_l f_g`` (carried by the caustic shot).
+        ``glossy_as_diffuse``: the glossy terms as if the lobe spread its incoming light
+        evenly, ``rho_g(w_out) / pi (E + sum_l E1_l + Ec)`` (E over all of this iterate's
+        directions) with ``rho_g`` the lobe's
+        directional albedo: the end of an eye path that has already followed glossy lobes,
+        where ``E f_g(t, w_out)`` for one direction ``t`` is heavy-tailed (a near-mirror lobe
+        lined up with ``t``: single pixels 60 times too bright on ``cornell-glossy``).
         """
         mats = self.scene.materials
         # the whole-scene call (every iteration) uses views, not fancy-indexed copies
@@ -292,7 +298,13 @@ class StochasticIterationSolver:
             e = diffuse_incoming
         L += self._diffuse_weighted(self.kd_over_pi[sel] * e, pm, cos)
         g = np.nonzero(self.glossy_mask[sel])[0]
-        if len(g):
+        if len(g) and glossy_as_diffuse:
+            pg = patch[g]
+            e = self.incoming[pg] + fs.E[pg].sum(axis=1)       # this iterate's mean over its directions
+            if cs is not None:
+                e = e + cs.E[pg]
+            L[g] += mats.albedo(pm[g], cos[g], diffuse=False) / np.pi * e
+        elif len(g):
             m, ng, w, pg = pm[g], n[g], w_out[g], patch[g]
             if self.direction is not None and glossy_iterate:
                 L[g] += self.glossy_incoming[pg] * mats.brdf(m, ng, self.receive_direction[pg], w, diffuse=False)
