@@ -444,8 +444,6 @@ class BakeJob:
             co = np.empty(3 * n_v)
             src.vertices.foreach_get("co", co)
             loop_vertex = corner_vertices(src)
-            start = np.empty(n_p, np.int64)
-            src.polygons.foreach_get("loop_start", start)
             total = np.empty(n_p, np.int64)
             src.polygons.foreach_get("loop_total", total)
             loop_poly = np.repeat(np.arange(n_p), total)

@@ -310,15 +310,13 @@ def refine_by_lighting(solver, input_scene, faces, max_level=3, tolerance=0.05, 
         pts = locate_points(input_scene, solver.scene, solver.tracer, f, b)
         return baked_radiance(solver, pts, light_samples, rng) @ np.array([0.2126, 0.7152, 0.0722])
 
-    floor = None
+    corner = luminance(np.repeat(face, 3), bary.reshape(-1, 3)).reshape(-1, 3)
+    floor = 0.02 * max(float(corner.mean()), 1e-12) if len(face) else 0.0
     for level in range(max_level + 1):
         if len(face) == 0:
             break
         mid = 0.5 * (bary + bary[:, [1, 2, 0]])                              # edge j: corners j, j+1
-        pts_b = np.concatenate([bary, mid], axis=1).reshape(-1, 3)
-        lum = luminance(np.repeat(face, 6), pts_b).reshape(-1, 6)
-        if floor is None:
-            floor = 0.02 * max(float(lum[:, :3].mean()), 1e-12)
+        lum = np.concatenate([corner, luminance(np.repeat(face, 3), mid.reshape(-1, 3)).reshape(-1, 3)], axis=1)
         ends = 0.5 * (lum[:, :3] + lum[:, [1, 2, 0]])
         miss = np.abs(lum[:, 3:] - ends) > tolerance * (ends + floor)
         split = miss.any(axis=1) if level < max_level else np.zeros(len(face), bool)
@@ -331,5 +329,7 @@ def refine_by_lighting(solver, input_scene, faces, max_level=3, tolerance=0.05, 
         kids = np.stack([np.stack([b[:, 0], m[:, 0], m[:, 2]], 1), np.stack([m[:, 0], b[:, 1], m[:, 1]], 1),
                          np.stack([m[:, 2], m[:, 1], b[:, 2]], 1), np.stack([m[:, 0], m[:, 1], m[:, 2]], 1)], 1)
         face, bary = np.repeat(f, 4), kids.reshape(-1, 3, 3)
+        # the children's corners are the parent's corners and midpoints, already evaluated
+        corner = lum[split][:, [0, 3, 5, 3, 1, 4, 5, 4, 2, 3, 4, 5]].reshape(-1, 3)
     return RefinedTriangles(np.concatenate(done_face) if done_face else faces[:0],
                             np.concatenate(done_bary) if done_bary else np.zeros((0, 3, 3)), capped)

@@ -90,16 +90,13 @@ class MeshLight:
         r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
         cos_l = -np.einsum("ij,ij->i", normal, v) / np.sqrt(r2)
         e = cos_l * f["area"][g] / r2
-        gap = np.maximum(np.linalg.norm(f["centroid"][g] - points, axis=1) - f["radius"][g], 0.0)
-        near = f["area"][g] >= self.MIN_SOLID_ANGLE * gap * gap
+        near = self._part_near(g, points)
         for gi in np.unique(g[near]):
             idx = np.nonzero(near & (g == gi))[0]
-            fans = np.nonzero(f["fan_group"] == gi)[0]
-            rel = f["fan"][fans][None] - points[idx, None, None, :]                 # (n, F, 3, 3)
-            omega = triangle_solid_angle(rel[..., 0, :], rel[..., 1, :], rel[..., 2, :])   # (n, F)
+            rel, omega = self._fan_solid_angles(gi, points[idx])
             total = omega.sum(axis=1)
             cdf = np.cumsum(omega, axis=1) / np.maximum(total, 1e-300)[:, None]
-            k = np.minimum((cdf <= u0[idx, None]).sum(axis=1), len(fans) - 1)
+            k = np.minimum((cdf <= u0[idx, None]).sum(axis=1), omega.shape[1] - 1)
             lo_k = np.where(k > 0, cdf[np.arange(len(idx)), np.maximum(k - 1, 0)], 0.0)
             w_k = np.maximum(cdf[np.arange(len(idx)), k] - lo_k, 1e-300)
             u1 = np.clip((u0[idx] - lo_k) / w_k, 0.0, 1.0)
@@ -112,6 +109,19 @@ class MeshLight:
             e[idx] = total
         lit = np.where(f["two_sided"][g], cos_l != 0, cos_l > 0)
         return y, (np.abs(e) * lit / f["p"][g])[:, None] * self.radiance
+
+    def _part_near(self, g, points):
+        """(N,) bool: planar part ``g`` (N,) may look large from ``points`` (its solid angle
+        is not surely below :attr:`MIN_SOLID_ANGLE`): it is then sampled by solid angle."""
+        f = self._fans
+        gap = np.maximum(np.linalg.norm(f["centroid"][g] - points, axis=1) - f["radius"][g], 0.0)
+        return f["area"][g] >= self.MIN_SOLID_ANGLE * gap * gap
+
+    def _fan_solid_angles(self, gi, points):
+        """Part ``gi``'s fan triangles relative to ``points`` (n, F, 3, 3) and their solid angles (n, F)."""
+        f = self._fans
+        rel = f["fan"][f["fan_group"] == gi][None] - points[:, None, None, :]
+        return rel, triangle_solid_angle(rel[..., 0, :], rel[..., 1, :], rel[..., 2, :])
 
     def _sample_triangles(self, points, u):
         """:meth:`sample` triangle by triangle.  A triangle k is picked with probability p_k = A_k / A.  If it looks
@@ -163,14 +173,10 @@ class MeshLight:
             r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
             cos_l = np.abs(np.einsum("ij,ij->i", f["normal"][g], v)) / np.sqrt(r2)
             pdf = r2 / (np.maximum(cos_l, 1e-300) * self.area)
-            gap = np.maximum(np.linalg.norm(f["centroid"][g] - points, axis=1) - f["radius"][g], 0.0)
-            near = f["area"][g] >= self.MIN_SOLID_ANGLE * gap * gap
+            near = self._part_near(g, points)
             for gi in np.unique(g[near]):
                 idx = np.nonzero(near & (g == gi))[0]
-                fans = f["fan"][f["fan_group"] == gi]
-                rel = fans[None] - points[idx, None, None, :]
-                omega = triangle_solid_angle(rel[..., 0, :], rel[..., 1, :], rel[..., 2, :]).sum(axis=1)
-                pdf[idx] = f["p"][gi] / np.maximum(omega, 1e-300)
+                pdf[idx] = f["p"][gi] / np.maximum(self._fan_solid_angles(gi, points[idx])[1].sum(axis=1), 1e-300)
             return pdf
         tri = self.triangles[k]
         area_k = sc.triangle_area[tri]
@@ -320,21 +326,20 @@ def polygon_irradiance(points, normals, polygons):
     last = np.take_along_axis(cand, np.maximum(count - 1, 0)[:, None, None], axis=1)
     cand = np.where((np.arange(2 * m)[None, :] < count[:, None])[..., None], cand, last)
     v = _unit(cand - pts[:, None])
-    return np.where(count >= 3, _lambert(v, np.roll(v, -1, axis=1), normals), 0.0)
+    return np.where(count >= 3, np.abs(_edge_terms(v, np.roll(v, -1, axis=1), normals).sum(axis=1)) / 2, 0.0)
 
 
 def _unit(x):
     return x / np.maximum(np.sqrt(np.einsum("...k,...k->...", x, x)), 1e-300)[..., None]
 
 
-def _lambert(v, w, normals):
-    """Lambert's edge sum ``|sum_e theta_e n . g_e| / 2`` (N,) over edges from unit
-    directions ``v`` to ``w`` (N, B, 3) seen from points with unit ``normals`` (N, 3)."""
+def _edge_terms(v, w, normals):
+    """Lambert's per-edge terms ``theta_e n . g_e`` (N, B) of edges from unit directions
+    ``v`` to ``w`` (N, B, 3) seen from points with unit ``normals`` (N, 3)."""
     c = np.cross(v, w)
     sin = np.sqrt(np.einsum("nbk,nbk->nb", c, c))
     theta = np.arctan2(sin, np.einsum("nbk,nbk->nb", v, w))
-    g = np.einsum("nbk,nk->nb", c, normals) / np.maximum(sin, 1e-300)
-    return np.abs((theta * g).sum(axis=1)) / 2
+    return theta * np.einsum("nbk,nk->nb", c, normals) / np.maximum(sin, 1e-300)
 
 
 def clipped_edge_irradiance(points, normals, edges, plane_normal, chunk=4096):
@@ -358,14 +363,9 @@ def clipped_edge_irradiance(points, normals, edges, plane_normal, chunk=4096):
         t = np.where(da != db, da / np.where(da != db, da - db, 1.0), 0.0)[..., None]
         cross = a + t * (b - a)
         exits, entries = (da >= 0) & (db < 0), (da < 0) & (db >= 0)
-        v = np.where(entries[..., None], cross, a)
-        w = np.where(exits[..., None], cross, b)
-        keep = (da >= 0) | (db >= 0)
-        c = np.cross(_unit(v), _unit(w))
-        sin = np.sqrt(np.einsum("nbk,nbk->nb", c, c))
-        theta = np.arctan2(sin, np.einsum("nbk,nbk->nb", _unit(v), _unit(w)))
-        g = np.einsum("nbk,nk->nb", c, n) / np.maximum(sin, 1e-300)
-        total = np.where(keep, theta * g, 0.0).sum(axis=1)
+        v = _unit(np.where(entries[..., None], cross, a))
+        w = _unit(np.where(exits[..., None], cross, b))
+        total = np.where((da >= 0) | (db >= 0), _edge_terms(v, w, n), 0.0).sum(axis=1)
         # psi about n from r, the direction to the horizon line's nearest point
         ell = _unit(np.cross(n, m))
         wdir = np.cross(ell, n)
@@ -708,29 +708,29 @@ class DirectLighting:
             n_s = 1 if sharp else max(1, int(samples_per_light))
             shift = rng.random((len(points), 3))
             analytic = None if sharp else light_polygon_irradiance(light, points, normals)
-            seen = np.zeros((len(points), 3))
-            total = np.zeros((len(points), 3))
+
+            def shadow_sums(p, nrm, sh, first, last):
+                """Sums of the shadowed and unshadowed estimates of samples first..last-1,
+                and whether some sample was seen and some blocked."""
+                seen, total = np.zeros((len(p), 3)), np.zeros((len(p), 3))
+                lit, shade = np.zeros(len(p), bool), np.zeros(len(p), bool)
+                for s in range(first, last):
+                    e, _, _, free = self._light_samples(p, nrm, light, (sh + s * alpha) % 1.0, unshadowed=True)
+                    seen += e
+                    total += free
+                    lit |= e.any(axis=1)
+                    shade |= free.any(axis=1) & ~e.any(axis=1)
+                return seen, total, lit & shade
+
+            seen, total, penumbra = shadow_sums(points, normals, shift, 0, n_s)
             n_pts = np.full(len(points), n_s)
-            lit = np.zeros(len(points), bool)
-            shade = np.zeros(len(points), bool)
-            for s in range(n_s):
-                e, _, _, free = self._light_samples(points, normals, light, (shift + s * alpha) % 1.0, unshadowed=True)
-                seen += e
-                total += free
-                lit |= e.any(axis=1)
-                shade |= free.any(axis=1) & ~e.any(axis=1)
-            more = np.nonzero(lit & shade)[0]
+            more = np.nonzero(penumbra)[0]
             n_penumbra = 16 * n_s if penumbra_samples is None else int(penumbra_samples)
             if len(more) and n_penumbra > n_s:
                 n_pts[more] = n_penumbra
-                p_more, nrm_more, s_more = points[more], normals[more], shift[more]
-                seen_more, total_more = seen[more], total[more]
-                for s in range(n_s, n_penumbra):
-                    e, _, _, free = self._light_samples(p_more, nrm_more, light, (s_more + s * alpha) % 1.0,
-                                                        unshadowed=True)
-                    seen_more += e
-                    total_more += free
-                seen[more], total[more] = seen_more, total_more
+                s_more, t_more, _ = shadow_sums(points[more], normals[more], shift[more], n_s, n_penumbra)
+                seen[more] += s_more
+                total[more] += t_more
             if analytic is None:
                 out += seen / n_pts[:, None]
             else:
