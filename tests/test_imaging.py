@@ -135,3 +135,47 @@ def test_png_preview_is_srgb(tmp_path):
     import zlib
     raw = zlib.decompress(data[data.index(b"IDAT") + 4:data.index(b"IEND") - 8])
     assert raw[1] == round(255 * (1.055 * 0.214 ** (1 / 2.4) - 0.055))    # ~128: sRGB mid grey
+
+
+def test_penumbra_pixels_get_more_shadow_rays():
+    """Floor under a 0.4 m lamp 1 m up, a wall 0.6 m high at x = 0.3 shading it: an
+    orthographic camera looks down on x in [0.31, 1.31], umbra, penumbra and open floor.
+    Direct light of the image passes (pass_sum) against a per-pixel reference (4 x 4
+    points per pixel, 512 shadow rays each, ratio estimator): after 24 passes the
+    penumbra pixels, which get 8 shadow rays per pass once an
+    earlier pass saw the lamp both reach and miss them, have under 0.75 of the RMS error of
+    1 ray per pass (measured 0.61; the pixel jitter adds the same to both), with the mean
+    error within 4.5 standard errors."""
+    s, h = 0.4, 1.0
+    v = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0],
+                  [-s / 2, -s / 2, h], [-s / 2, s / 2, h], [s / 2, s / 2, h], [s / 2, -s / 2, h],
+                  [0.3, -2, 0], [0.3, 2, 0], [0.3, 2, 0.6], [0.3, -2, 0.6]], float)
+    t = [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7], [8, 9, 10], [8, 10, 11]]
+    mats = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.5, 0.5)), dict(name="lamp", emission=(1, 1, 1))])
+    m = np.eye(4)
+    m[0, 3], m[2, 3] = 0.81, 2.0
+    cam = Camera(16, 16, 16.0, 16.0, 8.0, 8.0, m, orthographic=True)
+    sc = pipeline.prepare(build_scene(v, t, [0, 0, 1, 1, 0, 0], mats, camera=cam), patches=200)
+    images = {}
+    for n_pen in (1, 8):
+        r = pipeline.make_renderer(sc, RenderSettings(seed=5, penumbra_samples=n_pen))
+        for _ in range(24):
+            r.image_pass()
+        images[n_pen] = (r.pass_sum / r.passes)[:, 0].reshape(16, 16)
+        pen_flags = r._shadow_flags.all(axis=1).reshape(16, 16)
+    ref = np.zeros((16, 16))
+    for a in (0.125, 0.375, 0.625, 0.875):
+        for b in (0.125, 0.375, 0.625, 0.875):
+            px, py = np.meshgrid(np.arange(16) + a, np.arange(16) + b)
+            x = 0.81 + (px.ravel() - 8) / 16
+            y = (8 - py.ravel()) / 16
+            pts = np.stack([x, y, np.zeros_like(x)], axis=1)
+            ref += r.direct.irradiance(pts, np.tile([0, 0, 1.0], (len(pts), 1)), np.random.default_rng(1),
+                                       512, 512)[:, 0].reshape(16, 16) * 0.5 / np.pi / 16
+    pen = pen_flags & (ref > 0)
+    assert pen.sum() >= 64
+    err = {k: images[k][pen] - ref[pen] for k in images}
+    rms = {k: np.sqrt((e ** 2).mean()) for k, e in err.items()}
+    assert rms[8] < 0.75 * rms[1], rms
+    assert abs(err[8].mean()) < 4.5 * err[8].std(ddof=1) / np.sqrt(pen.sum())
+    r.tracer.close()

@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .gather import FinalGather, near_edge_tsides
-from .sampling import DEFAULT_SEQUENCE, ShiftedKronecker, stratified_2d
+from .sampling import DEFAULT_SEQUENCE, ShiftedKronecker, kronecker_alpha, stratified_2d
 
 
 @dataclass
@@ -84,7 +84,9 @@ class RenderSettings:
     ``glossy_send_rays``: lobe-sampled rays per glossy side and bundle direction that gather
     what the side's glossy lobe sends (:meth:`~raybundle.solvers.StochasticIterationSolver.glossy_sent_radiance`);
     ``gather_rays``: final-gather rays per pixel where the patch values are not to be trusted
-    (next to concave edges and contacts, :mod:`raybundle.gather`), 0 = none.
+    (next to concave edges and contacts, :mod:`raybundle.gather`), 0 = none;
+    ``penumbra_samples``: shadow rays per light per pass for the pixels whose earlier
+    samples found a light both seen and blocked (:meth:`Renderer._shade`).
     """
 
     bundle_resolution: int = 0
@@ -103,6 +105,7 @@ class RenderSettings:
     glossy_mis: bool = True
     glossy_send_rays: int = 2
     gather_rays: int = 0
+    penumbra_samples: int = 8
     threads: int | None = None
 
 
@@ -122,6 +125,8 @@ class RenderSettings:
             raise ValueError("directions_per_step must lie in [1, 1024]")
         if not 1 <= int(self.glossy_send_rays) <= 64:
             raise ValueError("glossy_send_rays must lie in [1, 64]")
+        if not 1 <= int(self.penumbra_samples) <= 4096:
+            raise ValueError("penumbra_samples must lie in [1, 4096]")
         if not 0 <= int(self.gather_rays) <= 65536:
             raise ValueError("gather_rays must lie in [0, 65536] (0 = no final gather)")
 
@@ -159,7 +164,7 @@ class Renderer:
         self._setup_rays = 0                              # one-time rays of the first pass
         self.glossy_iterations = 0
         self.image_rays = 0
-        self._every = None                                # image pass every k iterations (step)
+        self._since_pass = 0                              # iterations since the last image pass (step)
         self.gbuffer = None
         self._glossy_pixels = np.zeros(0, np.int64)   # pixels for accumulate_glossy
         self.emission_sum = np.zeros((n, 3))             # emission seen: sum and count per pixel
@@ -173,6 +178,8 @@ class Renderer:
         self._pixel = np.stack([px, py], axis=1).astype(float)
         self._gather_tsides = None                        # near_edge_tsides, at the first resolve
         self.gathered_points = 0
+        # per pixel: some earlier shadow ray reached a light / was blocked (both: a penumbra)
+        self._shadow_flags = np.zeros((n, 2), bool)
 
     # --------------------------------------------------------------- passes
     def trace_gbuffer(self, jitter, pixels=None):
@@ -237,7 +244,7 @@ class Renderer:
         lo, hi = self._emission_range
         extra_pix = np.union1d(np.nonzero(lo < hi)[0], self._noisy_pixels())
         self._add_emission(np.arange(n), emitted)
-        value, gl = self._shade(g, u[:, 2:4], u[:, 4:])
+        value, gl = self._shade(g, u[:, 2:4], u[:, 4:], np.arange(n))
         k = self.settings.emission_edge_samples
         if len(extra_pix) and k > 0:
             pix, jitter = self._jittered_grid(extra_pix, k)
@@ -245,7 +252,7 @@ class Renderer:
             le, _ = self.seen_radiance(gx)
             self._add_emission(pix, le)
             extra, _ = self._shade(gx, self.rng.random((len(pix), 2)),
-                                   self.rng.random((len(pix), 3 * self.kronecker_light_samples)))
+                                   self.rng.random((len(pix), 3 * self.kronecker_light_samples)), pix)
             k = len(pix) // len(extra_pix)
             value[extra_pix] = (value[extra_pix] + extra.reshape(len(extra_pix), k, 3).sum(axis=1)) / (k + 1)
         self.pass_sum += value
@@ -254,10 +261,20 @@ class Renderer:
         self.passes += 1
         self._glossy_pixels = gl
 
-    def _shade(self, g, u_lobe, u_light):
-        """Per-pass radiance (N, 3) of the samples in G-buffer ``g``: direct light of the
-        first-shot lights and, with ``glossy_gather``, the glossy lobe; and the pixels
-        left for :meth:`accumulate_glossy`.  ``u_lobe`` (N, 2), ``u_light`` (N, 3K) uniforms."""
+    def _shade(self, g, u_lobe, u_light, pixels):
+        """Per-pass radiance (N, 3) of the samples in G-buffer ``g`` taken in ``pixels``
+        (N,): direct light of the first-shot lights and, with ``glossy_gather``, the
+        glossy lobe; and the pixels left for :meth:`accumulate_glossy`.  ``u_lobe`` (N, 2),
+        ``u_light`` (N, 3K) uniforms.
+
+        The diffuse lobe of polygonal lights takes their exact unoccluded irradiance
+        as a control variate (:meth:`~raybundle.lights.DirectLighting.reflected_radiance`
+        with ``analytic``), so only the shadow rays' outcome is random: in pixels where an
+        earlier shadow ray reached a light (elsewhere, in an umbra or on the first pass,
+        the plain estimate is exact or never negative).  Pixels whose earlier shadow rays both reached and missed a light (a
+        penumbra, where then most of the noise is: the floor behind the Cornell blocks)
+        get ``penumbra_samples`` shadow rays per light, a randomly shifted Kronecker set.
+        Both choices use earlier passes only, so every pass stays unbiased."""
         out = np.zeros((len(g.triangle), 3))
         h = np.nonzero(g.hit)[0]
         front = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]) > 0
@@ -265,9 +282,26 @@ class Renderer:
         if self.direct.n_lights and len(hf):
             before = self.direct.rays
             mis = self.glossy_material[g.material[hf]] if self._light_mis else None
-            out[hf] += self.direct.reflected_radiance(
-                g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], self._light_uniforms(u_light[hf]),
-                self.settings.light_samples, mis=mis, diffuse_scale=self.albedo_scale(g.triangle[hf], g.point[hf]))
+            flags = self._shadow_flags[pixels[hf]]
+            pen = flags.all(axis=1)
+            if mis is not None:       # the lobe's MIS weight assumes light_samples light samples
+                pen &= ~mis
+            n_pen = max(int(self.settings.penumbra_samples), int(self.settings.light_samples))
+            for sel, n_s in ((~pen, self.settings.light_samples), (pen, n_pen)):
+                i = hf[sel]
+                if not len(i):
+                    continue
+                if n_s == self.settings.light_samples:
+                    u = self._light_uniforms(u_light[i])
+                else:
+                    n_u = self.direct.samples_per_pass(n_s)
+                    u = (self.rng.random((len(i), 1, 3)) + np.arange(n_u)[:, None] * kronecker_alpha(3)) % 1.0
+                f = flags[sel]
+                out[i] += self.direct.reflected_radiance(
+                    g.point[i], g.normal[i], g.material[i], g.w_eye[i], u, n_s,
+                    mis=None if mis is None else mis[sel], diffuse_scale=self.albedo_scale(g.triangle[i], g.point[i]),
+                    shadow_flags=f, analytic=f[:, 0])
+                np.logical_or.at(self._shadow_flags, pixels[i], f)
             self.image_rays += self.direct.rays - before
         gl = hf[self.glossy_material[g.material[hf]]]
         if self.settings.glossy_gather:
@@ -543,21 +577,23 @@ class Renderer:
 
     def step(self):
         """One solver iteration, this iterate's glossy lobe per pixel, and an image pass
-        every k-th iteration, k chosen after the first so that image passes take
-        ``image_ray_share`` of the rays (the first call also makes the first pass)."""
+        once the iterations since the last one have traced (1 - s) / s times the rays
+        an image pass traces on average, s = ``image_ray_share`` (the first call also
+        makes the first pass; passes grow when penumbrae are found, so the ratio is
+        re-read every time)."""
         solver = self.solver
         if self.passes == 0:
             self.image_pass()
         solver.step()
-        if self._every is None:
-            share = self.settings.image_ray_share
-            per_pass = (self.image_rays - self._setup_rays) / max(self.passes, 1)
-            per_iter = solver.stats.rays / max(solver.stats.iterations, 1)
-            self._every = max(1, int(round(per_pass * (1 - share) / (share * max(per_iter, 1)))))
         if not solver.diffuse_only:
             self.accumulate_glossy()
-        if solver.stats.iterations % self._every == 0:
+        self._since_pass += 1
+        share = self.settings.image_ray_share
+        per_pass = (self.image_rays - self._setup_rays) / max(self.passes, 1)
+        per_iter = solver.stats.rays / max(solver.stats.iterations, 1)
+        if self._since_pass * share * max(per_iter, 1) >= per_pass * (1 - share):
             self.image_pass()
+            self._since_pass = 0
 
     def stats(self, total_seconds, resolve_seconds=0.0, cancelled=False):
         """The run's figures as a plain dict (what the CLI, the add-on and the bench report)."""

@@ -336,10 +336,13 @@ def _unit(x):
 def _edge_terms(v, w, normals):
     """Lambert's per-edge terms ``theta_e n . g_e`` (N, B) of edges from unit directions
     ``v`` to ``w`` (N, B, 3) seen from points with unit ``normals`` (N, 3)."""
-    c = np.cross(v, w)
-    sin = np.sqrt(np.einsum("nbk,nbk->nb", c, c))
-    theta = np.arctan2(sin, np.einsum("nbk,nbk->nb", v, w))
-    return theta * np.einsum("nbk,nk->nb", c, normals) / np.maximum(sin, 1e-300)
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    wx, wy, wz = w[..., 0], w[..., 1], w[..., 2]
+    cx, cy, cz = vy * wz - vz * wy, vz * wx - vx * wz, vx * wy - vy * wx       # v x w
+    sin = np.sqrt(cx * cx + cy * cy + cz * cz)
+    theta = np.arctan2(sin, vx * wx + vy * wy + vz * wz)
+    n = normals[:, None]
+    return theta * (cx * n[..., 0] + cy * n[..., 1] + cz * n[..., 2]) / np.maximum(sin, 1e-300)
 
 
 def clipped_edge_irradiance(points, normals, edges, plane_normal, chunk=4096):
@@ -353,27 +356,44 @@ def clipped_edge_irradiance(points, normals, edges, plane_normal, chunk=4096):
     lie in the tangent plane, so each adds its signed angle about ``n``, and together
     they add ``sum_entries psi - sum_exits psi`` (``psi`` the angle about ``n`` from a
     fixed direction in the tangent plane), however the exits and entries pair up.  So a
-    light cut into many triangles costs its outline even where the horizon cuts it."""
+    light cut into many triangles costs its outline even where the horizon cuts it.
+    Points that see the whole outline above their horizon (most) take Lambert's sum
+    over the outline's vertices' directions, computed once per vertex."""
     out = np.zeros(len(points))
     m = np.asarray(plane_normal, float)
-    for lo in range(0, len(points), chunk):
-        x, n = points[lo:lo + chunk], normals[lo:lo + chunk]
-        a, b = edges[None, :, 0] - x[:, None], edges[None, :, 1] - x[:, None]     # (N, B, 3)
-        da, db = np.einsum("nbk,nk->nb", a, n), np.einsum("nbk,nk->nb", b, n)
-        t = np.where(da != db, da / np.where(da != db, da - db, 1.0), 0.0)[..., None]
-        cross = a + t * (b - a)
-        exits, entries = (da >= 0) & (db < 0), (da < 0) & (db >= 0)
-        v = _unit(np.where(entries[..., None], cross, a))
-        w = _unit(np.where(exits[..., None], cross, b))
-        total = np.where((da >= 0) | (db >= 0), _edge_terms(v, w, n), 0.0).sum(axis=1)
-        # psi about n from r, the direction to the horizon line's nearest point
-        ell = _unit(np.cross(n, m))
-        wdir = np.cross(ell, n)
-        r = wdir * np.where((edges[0, 0] - x) @ m * (wdir @ m) < 0, -1.0, 1.0)[:, None]
-        psi = np.arctan2(np.einsum("nbk,nk->nb", np.cross(r[:, None], cross), n), np.einsum("nbk,nk->nb", cross, r))
-        total += np.where(entries, psi, 0.0).sum(axis=1) - np.where(exits, psi, 0.0).sum(axis=1)
-        out[lo:lo + chunk] = np.abs(total) / 2
+    verts, ends = np.unique(edges.reshape(-1, 3), axis=0, return_inverse=True)
+    ends = ends.reshape(-1, 2)
+    height = normals @ verts.T - np.einsum("ij,ij->i", normals, points)[:, None]     # (N, V)
+    whole = np.all(height >= 0, axis=1)
+    for idx in (np.nonzero(whole)[0], np.nonzero(~whole)[0]):
+        for lo in range(0, len(idx), chunk):
+            i = idx[lo:lo + chunk]
+            if whole[i[0]]:
+                dirs = _unit(verts[None] - points[i, None])                          # (n, V, 3)
+                total = _edge_terms(dirs[:, ends[:, 0]], dirs[:, ends[:, 1]], normals[i]).sum(axis=1)
+                out[i] = np.abs(total) / 2
+            else:
+                out[i] = _cut_outline_irradiance(points[i], normals[i], edges, m)
     return out
+
+
+def _cut_outline_irradiance(x, n, edges, m):
+    """:func:`clipped_edge_irradiance` for points whose horizon cuts the outline."""
+    a, b = edges[None, :, 0] - x[:, None], edges[None, :, 1] - x[:, None]     # (N, B, 3)
+    da, db = np.einsum("nbk,nk->nb", a, n), np.einsum("nbk,nk->nb", b, n)
+    t = np.where(da != db, da / np.where(da != db, da - db, 1.0), 0.0)[..., None]
+    cross = a + t * (b - a)
+    exits, entries = (da >= 0) & (db < 0), (da < 0) & (db >= 0)
+    v = _unit(np.where(entries[..., None], cross, a))
+    w = _unit(np.where(exits[..., None], cross, b))
+    total = np.where((da >= 0) | (db >= 0), _edge_terms(v, w, n), 0.0).sum(axis=1)
+    # psi about n from r, the direction to the horizon line's nearest point
+    ell = _unit(np.cross(n, m))
+    wdir = np.cross(ell, n)
+    r = wdir * np.where((edges[0, 0] - x) @ m * (wdir @ m) < 0, -1.0, 1.0)[:, None]
+    psi = np.arctan2(np.einsum("nbk,nk->nb", np.cross(r[:, None], cross), n), np.einsum("nbk,nk->nb", cross, r))
+    total += np.where(entries, psi, 0.0).sum(axis=1) - np.where(exits, psi, 0.0).sum(axis=1)
+    return np.abs(total) / 2
 
 
 def _merge_collinear(vertices, directed):
@@ -528,7 +548,7 @@ def light_polygon_irradiance(light, points, normals):
             lit = np.nonzero(front != 0 if two else front > 0)[0]
             if len(lit) == 0:
                 continue
-            d = np.einsum("nk,nck->nc", normals[lit], box[None] - points[lit, None])
+            d = normals[lit] @ box.T - np.einsum("nk,nk->n", normals[lit], points[lit])[:, None]
             lit = lit[~np.all(d <= 0, axis=1)]                 # not wholly below the horizon
             if edges is not None:
                 out[lit] += clipped_edge_irradiance(points[lit], normals[lit], edges, nrm)
@@ -636,7 +656,8 @@ class DirectLighting:
         """How many light samples :meth:`reflected_radiance` draws per point."""
         return samples_per_light * len(self.area_lights) + len(self.point_lights)
 
-    def reflected_radiance(self, points, normals, mats, w_out, u, samples_per_light=1, mis=None, diffuse_scale=None):
+    def reflected_radiance(self, points, normals, mats, w_out, u, samples_per_light=1, mis=None, diffuse_scale=None,
+                           shadow_flags=None, analytic=False):
         """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
 
         Unbiased estimate with ``samples_per_light`` shadow rays per area light
@@ -649,21 +670,49 @@ class DirectLighting:
         densities of the sampled direction), so a sharp lobe reflecting a lamp is found by
         the lobe's ray, not by rare light samples with a huge BRDF value.
         ``diffuse_scale`` (N, 3): texture modulation of the diffuse reflectance.
+        ``shadow_flags`` (N, 2) bool, updated in place: column 0 set where a sample
+        reached its light, column 1 where one facing the point was blocked.
+
+        ``analytic`` (bool or (N,) bool): the diffuse lobe of polygonal lights
+        (:func:`light_polygon_irradiance`) with the exact unoccluded irradiance as a control variate,
+        ``f_d (Le I(x) - mean_s (e_s - e_s V_s))``, ``e_s`` the sample's unshadowed
+        estimate: still unbiased, and exact wherever the light is wholly seen or wholly
+        hidden from the point's upper side (only which samples are blocked is random,
+        not where on the light they land: the Cornell back wall's per-pass noise).  In
+        an umbra the plain estimate is exact (0) and the control variate is not, so a
+        caller that knows where earlier samples were all blocked passes a mask.
         """
         out = np.zeros((len(points), 3))
         if isinstance(u, np.random.Generator):
             u = u.random((len(points), self.samples_per_pass(samples_per_light), 3))
+        mt = self.scene.materials
         k = 0
         for light in self.light_list():
             n_s = samples_per_light if isinstance(light, (MeshLight, ShapeLight)) else 1
+            exact = light_polygon_irradiance(light, points, normals) if np.any(analytic) else None
+            if exact is not None:
+                # f_d does not depend on the incoming direction (any w_in gives it)
+                f_d = mt.brdf(mats, normals, -normals, w_out, glossy=False, diffuse_scale=diffuse_scale)
+                f_d *= (exact[1] & analytic)[:, None]
+                out += f_d * exact[0][:, None] * np.asarray(light.radiance, float)
             for _ in range(n_s):
-                e, travel, cos_x = self._light_samples(points, normals, light, u[:, k])
+                if shadow_flags is None and exact is None:
+                    e, travel, cos_x = self._light_samples(points, normals, light, u[:, k])
+                    live = np.any(e > 0, axis=1)
+                else:
+                    e, travel, cos_x, free = self._light_samples(points, normals, light, u[:, k], unshadowed=True)
+                    live = np.any(e > 0, axis=1)
+                    if shadow_flags is not None:
+                        shadow_flags[:, 0] |= live
+                        shadow_flags[:, 1] |= np.any(free > 0, axis=1) & ~live
+                    if exact is not None:
+                        out -= f_d * (free - e) / n_s
                 k += 1
-                live = np.any(e > 0, axis=1)
                 if live.any():
-                    mt = self.scene.materials
                     f = mt.brdf(mats[live], normals[live], travel[live], w_out[live],
                                 diffuse_scale=None if diffuse_scale is None else diffuse_scale[live])
+                    if exact is not None:                # the control variate took the diffuse part
+                        f -= f_d[live]
                     if mis is not None and isinstance(light, MeshLight):
                         sel = np.nonzero(mis[live])[0]
                         if len(sel):
