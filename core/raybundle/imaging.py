@@ -286,22 +286,30 @@ class Renderer:
             pen = flags.all(axis=1)
             if mis is not None:       # the lobe's MIS weight assumes light_samples light samples
                 pen &= ~mis
-            n_pen = max(int(self.settings.penumbra_samples), int(self.settings.light_samples))
-            for sel, n_s in ((~pen, self.settings.light_samples), (pen, n_pen)):
-                i = hf[sel]
-                if not len(i):
-                    continue
-                if n_s == self.settings.light_samples:
-                    u = self._light_uniforms(u_light[i])
-                else:
-                    n_u = self.direct.samples_per_pass(n_s)
-                    u = (self.rng.random((len(i), 1, 3)) + np.arange(n_u)[:, None] * kronecker_alpha(3)) % 1.0
-                f = flags[sel]
-                out[i] += self.direct.reflected_radiance(
-                    g.point[i], g.normal[i], g.material[i], g.w_eye[i], u, n_s,
-                    mis=None if mis is None else mis[sel], diffuse_scale=self.albedo_scale(g.triangle[i], g.point[i]),
-                    shadow_flags=f, analytic=f[:, 0])
-                np.logical_or.at(self._shadow_flags, pixels[i], f)
+            # one call for all points (a light's sampler costs per call): penumbra points as
+            # ceil(penumbra_samples / light_samples) copies, on one shifted Kronecker sequence each
+            n_s = int(self.settings.light_samples)
+            reps = np.where(pen, -(-int(self.settings.penumbra_samples) // n_s), 1)
+            rep = np.repeat(np.arange(len(hf)), reps)
+            u = np.empty((len(rep), self.n_light_samples, 3))
+            first = np.cumsum(reps) - reps
+            u[first[~pen]] = self._light_uniforms(u_light[hf[~pen]])
+            if pen.any():
+                copy = np.arange(len(rep)) - first[rep]                    # which copy of its point
+                sel = np.nonzero(pen[rep])[0]
+                seq = (copy[sel, None] * self.n_light_samples + np.arange(self.n_light_samples))[..., None]
+                shift = self.rng.random((len(hf), 1, 3))
+                u[sel] = (shift[rep[sel]] + seq * kronecker_alpha(3)) % 1.0
+            f = flags[rep]
+            i = hf[rep]
+            value = self.direct.reflected_radiance(
+                g.point[i], g.normal[i], g.material[i], g.w_eye[i], u, n_s, mis=None if mis is None else mis[rep],
+                diffuse_scale=self.albedo_scale(g.triangle[i], g.point[i]), shadow_flags=f, analytic=f[:, 0].copy())
+            for c in range(3):
+                out[hf, c] += np.bincount(rep, value[:, c], minlength=len(hf)) / reps
+            seen = np.bincount(rep, f[:, 0], minlength=len(hf)) > 0
+            blocked = np.bincount(rep, f[:, 1], minlength=len(hf)) > 0
+            np.logical_or.at(self._shadow_flags, pixels[hf], np.stack([seen, blocked], axis=1))
             self.image_rays += self.direct.rays - before
         gl = hf[self.glossy_material[g.material[hf]]]
         if self.settings.glossy_gather:
