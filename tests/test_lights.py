@@ -183,6 +183,12 @@ def plate_scene():
     return build_scene(v, t, [0, 0, 1, 1, 0, 0], LAMP)
 
 
+def floor_line(x):
+    """Points (x, 0, 0) and their upward normals."""
+    p = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
+    return p, np.tile([0, 0, 1.0], (len(p), 1))
+
+
 def test_control_variate_direct_light_is_exact_where_the_lamp_is_seen_and_unbiased_in_a_penumbra():
     """reflected_radiance(analytic=...) on a floor line from the open floor through the
     plate's penumbra into its umbra, one light sample per estimate.  Where the lamp is
@@ -194,8 +200,7 @@ def test_control_variate_direct_light_is_exact_where_the_lamp_is_seen_and_unbias
     tr = RayTracer(sc)
     dl = DirectLighting(sc, tr)
     x = np.linspace(-0.6, 0.6, 61)
-    p = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
-    up = np.tile([0, 0, 1.0], (len(p), 1))
+    p, up = floor_line(x)
     ref = dl.irradiance(p, up, np.random.default_rng(1), 2048, 2048) * 0.5 / np.pi
     exact = np.array([rect_irradiance(q[0], 0.0, -0.2, 0.2, -0.2, 0.2, 0.5, [1, 2, 3]) for q in p]) * 0.5 / np.pi
     lit, umbra = x < -0.2 - 1e-9, x > 0.2 + 1e-9
@@ -225,8 +230,7 @@ def test_bake_direct_light_spends_more_shadow_rays_in_a_penumbra():
     tr = RayTracer(sc)
     dl = DirectLighting(sc, tr)
     x = np.linspace(-0.6, 0.0, 200)
-    p = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
-    up = np.tile([0, 0, 1.0], (len(p), 1))
+    p, up = floor_line(x)
     ref = dl.irradiance(p, up, np.random.default_rng(1), 2048, 2048)
     fixed = dl.irradiance(p, up, np.random.default_rng(2), 16, 16)
     adaptive = dl.irradiance(p, up, np.random.default_rng(2), 16, 256)

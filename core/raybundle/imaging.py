@@ -269,12 +269,13 @@ class Renderer:
 
         The diffuse lobe of polygonal lights takes their exact unoccluded irradiance
         as a control variate (:meth:`~raybundle.lights.DirectLighting.reflected_radiance`
-        with ``analytic``), so only the shadow rays' outcome is random: in pixels where an
+        with ``analytic``), so only the shadow rays' outcome is random, in pixels where an
         earlier shadow ray reached a light (elsewhere, in an umbra or on the first pass,
-        the plain estimate is exact or never negative).  Pixels whose earlier shadow rays both reached and missed a light (a
-        penumbra, where then most of the noise is: the floor behind the Cornell blocks)
-        get ``penumbra_samples`` shadow rays per light, a randomly shifted Kronecker set.
-        Both choices use earlier passes only, so every pass stays unbiased."""
+        the plain estimate is exact or at least never negative).  Pixels whose earlier
+        shadow rays both reached and missed a light (a penumbra, where then most of the
+        noise is: the floor behind the Cornell blocks) get ``penumbra_samples`` shadow rays
+        per light, a randomly shifted Kronecker set.  Both choices use earlier passes only,
+        so every pass stays unbiased."""
         out = np.zeros((len(g.triangle), 3))
         h = np.nonzero(g.hit)[0]
         front = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]) > 0

@@ -345,7 +345,7 @@ def _edge_terms(v, w, normals):
     return theta * (cx * n[..., 0] + cy * n[..., 1] + cz * n[..., 2]) / np.maximum(sin, 1e-300)
 
 
-def clipped_edge_irradiance(points, normals, edges, plane_normal, chunk=4096):
+def clipped_edge_irradiance(points, normals, edges, plane_normal, chunk=16384):
     """``I`` (N,) of a planar polygon (any outline: concave, with holes) given by its
     directed boundary edges ``edges`` (B, 2, 3) [m] in the plane of unit normal
     ``plane_normal``, clipped to the points' upper hemispheres.
@@ -365,7 +365,8 @@ def clipped_edge_irradiance(points, normals, edges, plane_normal, chunk=4096):
     ends = ends.reshape(-1, 2)
     height = normals @ verts.T - np.einsum("ij,ij->i", normals, points)[:, None]     # (N, V)
     whole = np.all(height >= 0, axis=1)
-    for idx in (np.nonzero(whole)[0], np.nonzero(~whole)[0]):
+    cut = ~whole & np.any(height > 0, axis=1)              # the rest lies wholly below the horizon
+    for idx in (np.nonzero(whole)[0], np.nonzero(cut)[0]):
         for lo in range(0, len(idx), chunk):
             i = idx[lo:lo + chunk]
             if whole[i[0]]:
@@ -548,11 +549,11 @@ def light_polygon_irradiance(light, points, normals):
             lit = np.nonzero(front != 0 if two else front > 0)[0]
             if len(lit) == 0:
                 continue
-            d = normals[lit] @ box.T - np.einsum("nk,nk->n", normals[lit], points[lit])[:, None]
-            lit = lit[~np.all(d <= 0, axis=1)]                 # not wholly below the horizon
-            if edges is not None:
+            if edges is not None:             # (which also drops the points it lies wholly below)
                 out[lit] += clipped_edge_irradiance(points[lit], normals[lit], edges, nrm)
                 continue
+            d = normals[lit] @ box.T - np.einsum("nk,nk->n", normals[lit], points[lit])[:, None]
+            lit = lit[~np.all(d <= 0, axis=1)]                 # not wholly below the horizon
             if len(rows) <= ANALYTIC_MAX_TRIANGLES:
                 for k in rows:
                     c = sc.triangle_corners[light.triangles[k]]
