@@ -306,11 +306,8 @@ class Renderer:
             value = self.direct.reflected_radiance(
                 g.point[i], g.normal[i], g.material[i], g.w_eye[i], u, n_s, mis=None if mis is None else mis[rep],
                 diffuse_scale=self.albedo_scale(g.triangle[i], g.point[i]), shadow_flags=f, analytic=f[:, 0].copy())
-            for c in range(3):
-                out[hf, c] += np.bincount(rep, value[:, c], minlength=len(hf)) / reps
-            seen = np.bincount(rep, f[:, 0], minlength=len(hf)) > 0
-            blocked = np.bincount(rep, f[:, 1], minlength=len(hf)) > 0
-            np.logical_or.at(self._shadow_flags, pixels[hf], np.stack([seen, blocked], axis=1))
+            out[hf] += np.add.reduceat(value, first, axis=0) / reps[:, None]      # copies are contiguous
+            np.logical_or.at(self._shadow_flags, pixels[hf], np.logical_or.reduceat(f, first, axis=0))
             self.image_rays += self.direct.rays - before
         gl = hf[self.glossy_material[g.material[hf]]]
         if self.settings.glossy_gather:

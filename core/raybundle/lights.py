@@ -653,6 +653,13 @@ class DirectLighting:
     def light_list(self):
         return self.area_lights + self.point_lights
 
+    @staticmethod
+    def _seen_blocked(e, free):
+        """(N,) bool each: the sample reached its light (``e`` (N, 3), shadowed estimate);
+        it faced the light but was blocked (``free``, the unshadowed estimate)."""
+        seen = np.any(e > 0, axis=1)
+        return seen, np.any(free > 0, axis=1) & ~seen
+
     def samples_per_pass(self, samples_per_light=1):
         """How many light samples :meth:`reflected_radiance` draws per point."""
         return samples_per_light * len(self.area_lights) + len(self.point_lights)
@@ -690,22 +697,25 @@ class DirectLighting:
         k = 0
         for light in self.light_list():
             n_s = samples_per_light if isinstance(light, (MeshLight, ShapeLight)) else 1
-            exact = light_polygon_irradiance(light, points, normals) if np.any(analytic) else None
+            cv = np.nonzero(np.broadcast_to(analytic, len(points)))[0]
+            exact = light_polygon_irradiance(light, points[cv], normals[cv]) if len(cv) else None
             if exact is not None:
                 # f_d does not depend on the incoming direction (any w_in gives it)
-                f_d = mt.brdf(mats, normals, -normals, w_out, glossy=False, diffuse_scale=diffuse_scale)
-                f_d *= (exact[1] & analytic)[:, None]
-                out += f_d * exact[0][:, None] * np.asarray(light.radiance, float)
+                f_d = np.zeros((len(points), 3))
+                f_d[cv] = mt.brdf(mats[cv], normals[cv], -normals[cv], w_out[cv], glossy=False,
+                                  diffuse_scale=None if diffuse_scale is None else diffuse_scale[cv])
+                f_d[cv] *= exact[1][:, None]
+                out[cv] += f_d[cv] * exact[0][:, None] * np.asarray(light.radiance, float)
             for _ in range(n_s):
                 if shadow_flags is None and exact is None:
                     e, travel, cos_x = self._light_samples(points, normals, light, u[:, k])
                     live = np.any(e > 0, axis=1)
                 else:
                     e, travel, cos_x, free = self._light_samples(points, normals, light, u[:, k], unshadowed=True)
-                    live = np.any(e > 0, axis=1)
+                    live, blocked = self._seen_blocked(e, free)
                     if shadow_flags is not None:
                         shadow_flags[:, 0] |= live
-                        shadow_flags[:, 1] |= np.any(free > 0, axis=1) & ~live
+                        shadow_flags[:, 1] |= blocked
                     if exact is not None:
                         out -= f_d * (free - e) / n_s
                 k += 1
@@ -768,8 +778,9 @@ class DirectLighting:
                     e, _, _, free = self._light_samples(p, nrm, light, (sh + s * alpha) % 1.0, unshadowed=True)
                     seen += e
                     total += free
-                    lit |= e.any(axis=1)
-                    shade |= free.any(axis=1) & ~e.any(axis=1)
+                    reached, blocked = self._seen_blocked(e, free)
+                    lit |= reached
+                    shade |= blocked
                 return seen, total, lit & shade
 
             seen, total, penumbra = shadow_sums(points, normals, shift, 0, n_s)
