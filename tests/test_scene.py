@@ -95,13 +95,15 @@ def test_point_light_alone_is_a_light():
     assert sc.n_patches == 2
 
 
-def test_patches_must_be_planar_and_of_one_material():
+def test_patches_must_be_of_one_material_and_face_one_way():
     v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1]], float)
     two = MaterialTable.from_list([dict(name="a", diffuse=(0.5,) * 3, emission=(1,) * 3), dict(name="b", diffuse=(0.2,) * 3)])
     with pytest.raises(SceneError, match="mixes materials"):
         build_scene(v, QUAD_T, [0, 1], two, triangle_patch=[0, 0])
-    with pytest.raises(SceneError, match="face different ways"):
-        build_scene(v, [[0, 1, 2], [0, 4, 1]], [0, 0], two, triangle_patch=[0, 0])
+    with pytest.raises(SceneError, match="60 degrees"):          # a sheet folded flat back on itself
+        build_scene(v, [[0, 1, 2], [0, 3, 2]], [0, 0], two, triangle_patch=[0, 0])
+    # a curved patch (a cluster, 90 degrees folded: 45 degrees from its mean normal) is allowed
+    assert build_scene(v, [[0, 1, 2], [0, 4, 1]], [0, 0], two, triangle_patch=[0, 0]).n_patches == 1
     with pytest.raises(SceneError, match="entries for 2 triangles"):
         build_scene(v, QUAD_T, [0, 0], two, triangle_patch=[0, 0, 1])
     with pytest.raises(SceneError, match="point lights"):

@@ -867,8 +867,10 @@ class PatchFirstShot:
         origin = sc.triangle_corners[sc.tside_triangle, 0]
         self.receiving_tsides = np.nonzero(np.any([light.in_front(origin, sc.tside_normal) for light in self.lights],
                                             axis=0))[0] if n_l else np.zeros(0, np.int64)
-        for _ in range(initial_samples if len(self.receiving_tsides) else 0):
-            self._add(self.receiving_tsides)
+        # initial_samples per side, shared out over a cluster's triangles by area
+        counts = sc.tside_samples(initial_samples)[self.receiving_tsides]
+        for r in range(initial_samples if len(self.receiving_tsides) else 0):
+            self._add(self.receiving_tsides[counts > r])
 
     @property
     def n_lights(self):

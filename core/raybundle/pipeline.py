@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import warnings
 
+from .clusters import make_patches
 from .imaging import Renderer, RenderSettings
 from .lights import DirectLighting
 from .sampling import make_sequence
@@ -18,11 +19,13 @@ DEFAULT_PATCHES = 4000
 
 
 def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None):
-    """Subdivide ``scene`` into about ``patches`` patches (or edges <= ``max_edge`` m)."""
+    """The patch layout of ``scene``: about ``patches`` patches, large faces cut and
+    triangles much smaller than a patch grouped (:func:`~raybundle.clusters.make_patches`),
+    or every face cut to edges <= ``max_edge`` m; ``patches`` = 0: one patch per triangle."""
     if max_edge is not None:
         return subdivide(scene, max_edge=max_edge)
     if patches:
-        return subdivide(scene, patches=patches)
+        return make_patches(scene, patches=patches)
     return scene
 
 

@@ -142,6 +142,14 @@ def stratified_2d(n, rng):
     return (np.stack([cells % k, cells // k], axis=1) + rng.random((n, 2))) / k
 
 
+def stratified_2d_sets(sets, n, rng):
+    """``sets`` independent :func:`stratified_2d` sets of n points each, (sets, n, 2),
+    drawn together (one sort instead of one permutation per set)."""
+    k = int(math.ceil(math.sqrt(n)))
+    cells = np.argsort(rng.random((sets, k * k)), axis=1)[:, :n]
+    return (np.stack([cells % k, cells // k], axis=2) + rng.random((sets, n, 2))) / k
+
+
 def kronecker_alpha(dim):
     """Generators of the R_d Kronecker sequence: alpha_j = phi_d^-j, j = 1..dim, where
     phi_d is the positive root of x^(d+1) = x + 1 (Roberts' generalized golden ratio)."""

@@ -295,14 +295,16 @@ class PatchScene:
 
     @cached_property
     def smooth_vertex_ids(self):
-        """(TS, 3) int: tside corners welded by position *and* side normal (and
+        """(TS, 3) int: tside corners welded by position *and* their side's normal (and
         contact weld tag), for interpolating side values across a smooth surface
         without bleeding over creases, from one side of a surface to the other,
         or across a contact line."""
         _, r = self.bounding_sphere
         corners = self.triangle_corners[self.tside_triangle]
         q = np.round(corners.reshape(-1, 3) / max(r * 1e-6, 1e-12)).astype(np.int64)
-        nq = np.repeat(np.round(self.tside_normal * 1e3).astype(np.int64), 3, axis=0)
+        # the side's normal, not the triangle's: a cluster of triangles (:mod:`raybundle.clusters`)
+        # welds over its own folds
+        nq = np.repeat(np.round(self.side_normal[self.tside_side] * 1e3).astype(np.int64), 3, axis=0)
         key = [q, nq]
         if self.triangle_corner_tag is not None:
             key.append(self.triangle_corner_tag[self.tside_triangle].reshape(-1, 1))
@@ -367,6 +369,14 @@ class PatchScene:
         t = self.tside_triangle
         p = self.triangle_patch[t]
         return np.where(np.arange(len(t)) < len(self.triangles), p, self.patch_back_side[p])
+
+    def tside_samples(self, k):
+        """(TS,) sample counts per tside that give each side about ``k`` in all, shared by
+        area: ``clip(ceil(k A_t / A_side), 1, k)`` (``k`` each for one-triangle patches; one
+        each for the small triangles of a cluster, :mod:`raybundle.clusters`)."""
+        a = self.triangle_area[self.tside_triangle]
+        side_area = np.bincount(self.tside_side, a, minlength=self.n_sides)[self.tside_side]
+        return np.clip(np.ceil(k * a / side_area - 1e-9), 1, k).astype(np.int64)
 
     def tside_facing(self, triangle, direction):
         """(N,) tside ids of ``triangle`` (N,) whose normal has a positive dot product
@@ -555,8 +565,9 @@ def _check_lights(point, sun, area):
 
 
 def _check_patches(v, t, m, patch, two_sided):
-    """A patch must be planar, face one way, have one material and one sidedness
-    (one variable per side)."""
+    """A patch must have one material and one sidedness (one variable per side), and
+    its triangles must face within 60 degrees of its mean normal (a cluster,
+    :mod:`raybundle.clusters`; a patch whose sides face opposite ways has no side)."""
     n_p = int(patch.max()) + 1
     first = np.full(n_p, -1)
     first[patch[::-1]] = np.arange(len(patch))[::-1]
@@ -565,10 +576,13 @@ def _check_patches(v, t, m, patch, two_sided):
     if np.any(two_sided != two_sided[first[patch]]):
         raise SceneError("a patch mixes one-sided and two-sided triangles")
     c = v[t]
-    n = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    if np.any(np.einsum("ij,ij->i", n, n[first[patch]]) < 0.999):
-        raise SceneError("a patch mixes triangles that face different ways: patches must be planar")
+    cross = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    mean = np.stack([np.bincount(patch, cross[:, k], minlength=n_p) for k in range(3)], axis=1)
+    mean /= np.maximum(np.linalg.norm(mean, axis=1, keepdims=True), 1e-300)
+    n = cross / np.linalg.norm(cross, axis=1, keepdims=True)
+    if np.any(np.einsum("ij,ij->i", n, mean[patch]) < 0.5):
+        raise SceneError("a patch mixes triangles that face more than 60 degrees from its mean normal: "
+                         "split it (patches may be curved, not folded)")
 
 
 #: scenes with at most this many reflecting patch triangles have every one cut at contacts,
@@ -589,27 +603,53 @@ def subdivide(scene: PatchScene, max_edge=None, patches=None, contacts=True) -> 
     every reflecting face, up to :data:`CONTACT_ALL_MAX` triangles) are then cut along the
     lines where other surfaces touch or cross them, gaps narrower than 5% of
     ``max_edge`` counting as contact (:mod:`raybundle.contacts`).
+    (:func:`raybundle.clusters.make_patches` also groups triangles much smaller than a patch.)
     """
     if (max_edge is None) == (patches is None):
         raise ValueError("give exactly one of max_edge and patches")
-    corners = scene.triangle_corners
-    edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
-    whole = ~scene.materials.reflects[scene.triangle_material]
-    split_edge = np.where(whole, 0.0, edge)
     if patches is not None:
-        if patches < len(scene.triangles) or not split_edge.any():
-            max_edge = float(edge.max()) * 1.0001
-        else:
-            # bisection on the edge length for sum(k^2) ~ patches
-            lo, hi = 1e-9 * split_edge.max(), split_edge.max() * 1.0001
-            for _ in range(60):
-                mid = np.sqrt(lo * hi)
-                n = (np.maximum(1, np.ceil(split_edge / mid)) ** 2).sum()
-                lo, hi = (mid, hi) if n > patches else (lo, mid)
-            max_edge = hi
+        max_edge = edge_for_patches(scene, patches)
     if not max_edge > 0:
         raise ValueError("max_edge must be positive")
-    k_all = np.maximum(1, np.ceil(split_edge / max_edge - 1e-9)).astype(np.int64)
+    fine, k, _ = split_triangles(scene, max_edge)
+    if not contacts:
+        return fine
+    return cut_at_contacts(fine, np.nonzero(k > 1)[0], max_edge)
+
+
+def _split_edge(scene, whole=None):
+    """(T,) longest edge of each triangle [m], 0 for triangles kept whole: those that reflect
+    nothing and those in ``whole`` (T,) bool."""
+    corners = scene.triangle_corners
+    edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    split = scene.materials.reflects[scene.triangle_material]
+    if whole is not None:
+        split = split & ~whole
+    return np.where(split, edge, 0.0)
+
+
+def edge_for_patches(scene, patches):
+    """The ``max_edge`` [m] for which :func:`split_triangles` makes about ``patches`` patches
+    (the longest edge when there are more triangles than that: nothing is split)."""
+    split_edge = _split_edge(scene)
+    if patches < len(scene.triangles) or not split_edge.any():
+        corners = scene.triangle_corners
+        return float(np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max()) * 1.0001
+    # bisection on the edge length for sum(k^2) ~ patches
+    lo, hi = 1e-9 * split_edge.max(), split_edge.max() * 1.0001
+    for _ in range(60):
+        mid = np.sqrt(lo * hi)
+        n = (np.maximum(1, np.ceil(split_edge / mid)) ** 2).sum()
+        lo, hi = (mid, hi) if n > patches else (lo, mid)
+    return hi
+
+
+def split_triangles(scene: PatchScene, max_edge, whole=None):
+    """Every reflecting triangle (but those in ``whole`` (T,) bool) cut into k^2 similar
+    ones, ``k = ceil(longest edge / max_edge)``, each its own patch (:func:`subdivide` without contacts).  Returns ``(scene, k, row)`` with
+    ``k`` (T',) the k of the triangle each new triangle came from and ``row`` (T',) its index."""
+    corners = scene.triangle_corners
+    k_all = np.maximum(1, np.ceil(_split_edge(scene, whole) / max_edge - 1e-9)).astype(np.int64)
     verts, tris, mats, srcs = [], [], [], []
     base = 0
     for k in np.unique(k_all):
@@ -639,23 +679,31 @@ def subdivide(scene: PatchScene, max_edge=None, patches=None, contacts=True) -> 
     _, first, inv = np.unique(q, axis=0, return_index=True, return_inverse=True)
     v, t = v[first], inv.reshape(-1)[t]
     per_tri = [np.concatenate([np.repeat(a[np.nonzero(k_all == k)[0]], k * k) for k in np.unique(k_all)])
-               for a in (scene.triangle_solid, scene.triangle_two_sided, k_all)]
+               for a in (scene.triangle_solid, scene.triangle_two_sided, k_all, np.arange(len(k_all)))]
     fine = PatchScene(v, t, np.concatenate(mats), np.arange(len(t)), np.concatenate(srcs),
                       scene.materials, scene.point_lights, scene.camera, scene.analytic_radiance,
                       scene.name, scene.dropped_triangles, *per_tri[:2], scene.sun_lights, scene.area_lights,
                       scene.environment, texture=scene.texture)
-    if not contacts:
-        return fine
+    return fine, per_tri[2], per_tri[3]
+
+
+def cut_at_contacts(scene: PatchScene, cut, max_edge, exclude=None) -> PatchScene:
+    """The patches of triangles ``cut`` (the pieces of subdivided faces) cut along contact
+    lines (:mod:`raybundle.contacts`, gaps under 5% of ``max_edge`` count as contact); every
+    reflecting triangle but those in ``exclude`` (T,) bool when there are at most
+    :data:`CONTACT_ALL_MAX` of them."""
     from .contacts import split_at_contacts
     # subdivided faces are cut; so are faces the user meshed finer than the patches (a ceiling
     # cut into a grid over a lamp hanging under it must still trap the lamp's upper light:
     # +16% on a bake of such a box otherwise) while there are at most CONTACT_ALL_MAX of them
     # (the cut is a per-triangle loop: ~0.5 ms a triangle)
-    cut = np.nonzero(per_tri[2] > 1)[0]
-    reflecting = np.nonzero(scene.materials.reflects[fine.triangle_material])[0]
+    ok = scene.materials.reflects[scene.triangle_material]
+    if exclude is not None:
+        ok &= ~exclude
+    reflecting = np.nonzero(ok)[0]
     if len(reflecting) <= CONTACT_ALL_MAX:
         cut = reflecting
-    return split_at_contacts(fine, cut, tol=0.05 * max_edge)[0]
+    return split_at_contacts(scene, cut, tol=0.05 * max_edge)[0]
 
 
 def closed_solid_triangles(vertices, triangles, tol=1e-7):

@@ -119,13 +119,17 @@ class StochasticIterationSolver:
         # incoming first shot, refined by a few shadow rays every iteration
         self.first_shot = PatchFirstShot(direct, np.random.default_rng([seed, 7]), receiving_area=self.area)
         self.grid_rng = np.random.default_rng([seed, 3])   # bundle grid offset and rotation
-        self.first_shot_refine = max(64, len(self.first_shot.receiving_tsides) // 16) if direct.n_lights else 0
+        # a sixteenth of the lit sides' worth of shadow rays per iteration (per side, not per
+        # triangle: a cluster's many small triangles share one estimate)
+        lit_sides = len(np.unique(scene.tside_side[self.first_shot.receiving_tsides]))
+        self.first_shot_refine = max(64, lit_sides // 16) if direct.n_lights else 0
         # the first shot's glossy reflection goes by lobe-sampled rays, not by bundles
         self.caustic = CausticShot(scene, tracer, self.first_shot, self.area, np.random.default_rng([seed, 11]),
                                    self.glossy_patches) if caustics else None
         if self.caustic is not None and not self.caustic.active:
             self.caustic = None
-        self.caustic_refine = max(1024, len(self.caustic.tsides)) if self.caustic is not None else 0
+        self.caustic_refine = (max(1024, len(np.unique(scene.tside_side[self.caustic.tsides])))
+                               if self.caustic is not None else 0)
         self.environment = np.asarray(scene.environment, float)
         n = scene.n_sides
         self._all_patches = np.arange(n)
@@ -171,7 +175,7 @@ class StochasticIterationSolver:
         ts = self._glossy_tsides[np.minimum(np.searchsorted(self._glossy_tside_cdf, gp_m + u[:, 0], side="right"),
                                             len(self._glossy_tsides) - 1)]
         pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[ts]], u[:, 1], u[:, 2])
-        n = self.normal[gp_m]
+        n = sc.tside_normal[ts]            # the triangle's own normal (a cluster may be curved)
         w_i, weight = sc.materials.sample_glossy(self.patch_material[gp_m], n, send_m, u[:, 3:])
         live = np.nonzero(np.any(weight > 0, axis=1))[0]
         tri, _, _, _ = self.tracer.first_hit(pts[live] + n[live] * self.tracer.eps, w_i[live])

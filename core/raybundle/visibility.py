@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import frames_from_normals
+from .sampling import frames_from_normals, points_on_triangles, stratified_2d_sets
 
 _MAX_LAYERS = 10000
 #: sender id of light that comes from the environment (world) in a :class:`Bundle`
@@ -149,46 +149,64 @@ class RayTracer:
         the floor under it; a one-sided shelf buries nothing).  Such area never
         receives light, so side averages must not be divided by it (an FE error
         otherwise: the visible rest of the patch comes out too dark).  Estimated
-        from ``points_per_triangle`` stratified points; triangle sides found
+        from ``points_per_triangle`` stratified points per side, shared out over its triangles
+        by area (:meth:`~raybundle.scene.PatchScene.tside_samples`); triangle sides found
         partly or wholly buried (patches cut at a solid's footprint by
         :mod:`raybundle.contacts` are often wholly buried) get ``refine_points``
-        more (the receiving area divides E, so its error matters); the result is
-        floored at half a sample.  A scene
+        more (the receiving area divides E, so its error matters).  A side found wholly
+        buried keeps half a sample's area (its E is then never divided by zero).  A scene
         without solids needs no rays: everything is open.
         """
         rng = np.random.default_rng([seed, 11])
-        n_t = len(self.scene.tside_triangle)
-        if not self.scene.triangle_solid.any():
+        sc = self.scene
+        n_t = len(sc.tside_triangle)
+        if not sc.triangle_solid.any():
             return np.ones(n_t)
-        frac = self._open_fraction(np.arange(n_t), points_per_triangle, rng)
+        k = sc.tside_samples(points_per_triangle)
+        frac = self._open_fraction(np.arange(n_t), k, rng)
         part = np.nonzero(frac < 1)[0]
         if len(part) and refine_points:
-            frac[part] = self._open_fraction(part, refine_points, rng)
-        k = np.where(np.isin(np.arange(n_t), part), refine_points, points_per_triangle)
-        return np.maximum(frac, 0.5 / k)
+            k[part] = sc.tside_samples(refine_points)[part]
+            frac[part] = self._open_fraction(part, k[part], rng)
+        a = sc.triangle_area[sc.tside_triangle]
+        shut = np.bincount(sc.tside_side, a * frac, minlength=sc.n_sides)[sc.tside_side] <= 0
+        return np.where(shut, np.maximum(frac, 0.5 / k), frac)
 
-    def _open_fraction(self, tsides, k, rng):
-        from .sampling import points_on_triangles, stratified_2d
+    def _open_fraction(self, tsides, k, rng, chunk=1 << 20):
+        """Open fractions (N,) of ``tsides`` (N,) from ``k`` (N,) stratified points each."""
+        out = np.zeros(len(tsides))
+        for kk in np.unique(k):
+            sel = np.nonzero(k == kk)[0]
+            step = max(1, chunk // int(kk))
+            for lo in range(0, len(sel), step):
+                s = sel[lo:lo + step]
+                out[s] = self._open_fraction_k(tsides[s], int(kk), rng)
+        return out
 
+    def _open_fraction_k(self, tsides, k, rng):
         sc = self.scene
         ts = np.repeat(tsides, k)
-        st = np.concatenate([stratified_2d(k, rng) for _ in range(len(tsides))])
+        st = stratified_2d_sets(len(tsides), k, rng).reshape(-1, 2)
         pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[ts]], st[:, 0], st[:, 1])
         n = sc.tside_normal[ts]
         t, b = frames_from_normals(n)
         buried = np.ones(len(ts), bool)
         s60, c60 = np.sin(np.pi / 3), np.cos(np.pi / 3)
         phi0 = rng.random(len(ts)) * 2 * np.pi
-        dirs = [n] + [c60 * n + s60 * (np.cos(phi0 + a)[:, None] * t + np.sin(phi0 + a)[:, None] * b)
-                      for a in (0, 2 * np.pi / 3, 4 * np.pi / 3)]
-        for d in dirs:
+        for a in (None, 0, 2 * np.pi / 3, 4 * np.pi / 3):
             live = np.nonzero(buried)[0]
             if len(live) == 0:
                 break
-            hit, _, _, _ = self.first_hit(pts[live] + n[live] * self.eps, d[live])
+            nl = n[live]
+            if a is None:
+                d = nl
+            else:
+                phi = phi0[live] + a
+                d = c60 * nl + s60 * (np.cos(phi)[:, None] * t[live] + np.sin(phi)[:, None] * b[live])
+            hit, _, _, _ = self.first_hit(pts[live] + nl * self.eps, d)
             safe = np.maximum(hit, 0)
             back = ((hit >= 0) & sc.triangle_solid[safe]
-                    & (np.einsum("ij,ij->i", sc.triangle_normal[safe], d[live]) > 0))
+                    & (np.einsum("ij,ij->i", sc.triangle_normal[safe], d) > 0))
             buried[live[~back]] = False
         return 1.0 - buried.reshape(-1, k).mean(axis=1)
 

@@ -1,0 +1,177 @@
+"""Patches as clusters of triangles: the unknowns follow the lighting, not the mesh.
+
+Real meshes carry far more triangles than the lighting needs (tessellated curved
+surfaces, subdivided floors, sculpted detail).  A patch may hold any number of
+triangles of one material and one sidedness, planar or not, sharing one radiance
+variable per side.  The bundle transfer stays the Galerkin projection onto a constant
+per cluster: a bundle line picks the side of the triangle it meets by *that
+triangle's* normal, and its weight delta^2 is that triangle's projected area, so
+
+    E_i = (2 pi / A_i) sum_j S_j sum_{t in i} A(t, j, d) cos_t          [W/m^2]
+
+is the area mean over the cluster of each triangle's irradiance, whatever their
+orientation (``tests/test_clusters.py``: a furnace holding a tessellated sphere stays
+exact).  The first shot, the open area and the image work per triangle as before.
+What is approximated: inside the iteration a cluster's glossy lobe is evaluated
+about the cluster's mean normal (the normals of a cluster lie within the cell of a
+cube map with :data:`NORMAL_CELLS` x :data:`NORMAL_CELLS` cells per face, at most
+about 15 degrees from their mean); the image evaluates every lobe at the pixel's
+own triangle.
+
+:func:`make_patches` chooses the layout for a target patch count.  With a patch size
+h: triangles with an edge longer than h are cut (:func:`~raybundle.scene.split_triangles`,
+then along contact lines), triangles smaller than h^2 / :data:`SMALL` (however long) are grouped
+into the cells of a grid h wide, split by normal direction (the cube-map cell),
+by offset along the normal (half-h slabs: a shelf does not share a patch with the floor under it),
+by material and by sidedness; the rest stay patches of their own.  It is a sort
+over the triangles: O(T log T), no per-triangle Python.
+
+:func:`tessellate` makes the stand-in for a finely meshed Blender scene the tests and
+the scale bench use: every reflecting face cut into many small triangles, each its
+own input face.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .scene import PatchScene, cut_at_contacts, edge_for_patches, split_triangles
+
+#: cube-map cells per face edge for the normal direction of a cluster (150 directions; odd, so
+#: that axis-aligned normals lie mid-cell, never on a border rounding could flip)
+NORMAL_CELLS = 5
+#: triangles with an area under h^2 / SMALL are grouped (h = the patch size)
+SMALL = 2.0
+
+
+def tessellate(scene: PatchScene, triangles) -> PatchScene:
+    """``scene`` with its reflecting faces cut into about ``triangles`` triangles in all,
+    each its own input face and patch (lamps made of emitting faces stay whole)."""
+    if scene.texture is not None:
+        raise ValueError("tessellate: scenes with textures are not supported")
+    fine, _, _ = split_triangles(scene, edge_for_patches(scene, triangles))
+    fine.triangle_source = np.arange(len(fine.triangles))
+    return fine
+
+
+def normal_cells(normals, cells=NORMAL_CELLS):
+    """Cube-map cell of unit ``normals`` (N, 3): ``(cell (N,) int in [0, 6 cells^2),
+    centre (N, 3))``, the unit direction through the middle of the cell."""
+    n = np.asarray(normals, float)
+    axis = np.argmax(np.abs(n), axis=1)
+    major = np.take_along_axis(n, axis[:, None], 1)[:, 0]
+    others = np.array([(1, 2), (0, 2), (0, 1)])[axis]
+    uv = np.take_along_axis(n, others, 1) / np.maximum(np.abs(major), 1e-300)[:, None]   # in [-1, 1]
+    iuv = np.clip(((uv + 1.0) * 0.5 * cells).astype(np.int64), 0, cells - 1)
+    cell = ((axis * 2 + (major > 0)) * cells + iuv[:, 0]) * cells + iuv[:, 1]
+    centre = np.zeros_like(n)
+    np.put_along_axis(centre, axis[:, None], np.where(major > 0, 1.0, -1.0)[:, None], 1)
+    np.put_along_axis(centre, others, (iuv + 0.5) / cells * 2.0 - 1.0, 1)
+    return cell, centre / np.linalg.norm(centre, axis=1, keepdims=True)
+
+
+def _group_ids(columns):
+    """Dense ids (N,) of the distinct rows of integer ``columns`` (list of (N,) arrays)."""
+    cols = [np.asarray(c, np.int64) - np.min(c) for c in columns]
+    spans = [int(c.max()) + 1 for c in cols]
+    if np.prod([float(s) for s in spans]) < 2.0 ** 62:
+        key = np.zeros(len(cols[0]), np.int64)
+        for c, s in zip(cols, spans):
+            key = key * s + c
+        return np.unique(key, return_inverse=True)[1].reshape(-1)
+    return np.unique(np.stack(cols, axis=1), axis=0, return_inverse=True)[1].reshape(-1)
+
+
+class _Grouping:
+    """What the cluster keys need of a scene's triangles, computed once."""
+
+    def __init__(self, scene: PatchScene):
+        self.scene = scene
+        corners = scene.triangle_corners
+        self.area = scene.triangle_area
+        self.centroid = corners.mean(axis=1)
+        self.lo = scene.vertices.min(axis=0)
+        self.edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+        self.cell, _ = normal_cells(scene.triangle_normal)
+        # offset along the triangle's own normal: constant over a plane
+        self.offset = np.einsum("ij,ij->i", scene.triangle_normal, self.centroid - self.lo)
+
+    def small(self, h):
+        """(T,) bool: triangles to group at patch size ``h``."""
+        return self.area < h * h / SMALL
+
+    def clusters(self, h, small):
+        """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``."""
+        sc, idx = self.scene, np.nonzero(small)[0]
+        cell = np.floor((self.centroid[idx] - self.lo) / h).astype(np.int64)
+        slab = np.floor(self.offset[idx] / (0.5 * h)).astype(np.int64)
+        return _group_ids([cell[:, 0], cell[:, 1], cell[:, 2], self.cell[idx], slab,
+                           sc.triangle_material[idx], sc.triangle_two_sided[idx]])
+
+    def count(self, h):
+        """Patches at size ``h``: k^2 per triangle cut, one per cluster, one per other triangle."""
+        small = self.small(h)
+        reflects = self.scene.materials.reflects[self.scene.triangle_material]
+        k = np.where(reflects & ~small, np.maximum(1, np.ceil(self.edge / h - 1e-9)), 1.0)
+        n_clusters = int(self.clusters(h, small).max()) + 1 if small.any() else 0
+        return int((k[~small] ** 2).sum()) + n_clusters
+
+
+def patch_size(scene: PatchScene, patches, grouping=None, steps=8):
+    """The patch size h [m] for about ``patches`` patches (within ~10%): h scaled by
+    sqrt(count / patches) until the count is close (a patch count falls as 1 / h^2)."""
+    grouping = grouping or _Grouping(scene)
+    h = np.sqrt(scene.triangle_area.sum() / patches)
+    best = (np.inf, h)
+    for _ in range(steps):
+        n = grouping.count(h)
+        best = min(best, (abs(np.log(n / patches)), h))
+        if abs(n - patches) <= 0.1 * patches:
+            break
+        h *= np.sqrt(n / patches)
+    return best[1]
+
+
+def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> PatchScene:
+    """The patch layout of ``scene`` for about ``patches`` patches (or patch size ``size`` [m]):
+    large triangles cut, small ones grouped (module docstring).  A scene without triangles
+    smaller than a patch gets exactly :func:`~raybundle.scene.subdivide`'s layout."""
+    if (patches is None) == (size is None):
+        raise ValueError("give exactly one of patches and size")
+    grouping = _Grouping(scene)
+    if size is not None:
+        h = float(size)
+    elif patches < len(scene.triangles):     # more triangles than patches: group
+        h = patch_size(scene, patches, grouping)
+    else:                                     # fewer: cut (subdivide's layout)
+        h = edge_for_patches(scene, patches)
+        grouping = None
+    if not h > 0:
+        raise ValueError("the patch size must be positive")
+    small = grouping.small(h) if grouping is not None else np.zeros(len(scene.triangles), bool)
+    if not small.any():
+        from .scene import subdivide
+
+        return subdivide(scene, max_edge=h, contacts=contacts)
+    fine, k, row = split_triangles(scene, h, whole=small)
+    fine_small = small[row]
+    patch = np.empty(len(fine.triangles), np.int64)
+    ids = grouping.clusters(h, small)          # in the order of the small rows, as row[fine_small]
+    n_clusters = int(ids.max()) + 1
+    cluster_of = np.full(len(scene.triangles), -1, np.int64)
+    cluster_of[small] = ids
+    patch[fine_small] = cluster_of[row[fine_small]]
+    others = np.nonzero(~fine_small)[0]
+    patch[others] = n_clusters + np.arange(len(others))
+    out = _with_patches(fine, patch)
+    if not contacts:
+        return out
+    return cut_at_contacts(out, np.nonzero((k > 1) & ~fine_small)[0], h, exclude=fine_small)
+
+
+def _with_patches(scene: PatchScene, patch) -> PatchScene:
+    """A copy of ``scene`` (same arrays) with ``triangle_patch`` = ``patch``."""
+    return PatchScene(scene.vertices, scene.triangles, scene.triangle_material, np.asarray(patch, np.int64),
+                      scene.triangle_source, scene.materials, scene.point_lights, scene.camera,
+                      scene.analytic_radiance, scene.name, scene.dropped_triangles, scene.triangle_solid,
+                      scene.triangle_two_sided, scene.sun_lights, scene.area_lights, scene.environment,
+                      scene.triangle_corner_tag, texture=scene.texture)

@@ -1,0 +1,140 @@
+"""Patches as clusters of triangles (:mod:`raybundle.clusters`): the layout, and the
+solution on curved clusters against the furnace's exact answer.
+
+Statistical checks follow ``test_solver``: batch means after a burn-in batch, |mean -
+exact| < 4.5 SE and SE itself small."""
+import numpy as np
+import pytest
+
+from raybundle import pipeline, scenes
+from raybundle.clusters import NORMAL_CELLS, make_patches, normal_cells, tessellate
+from raybundle.imaging import RenderSettings
+from raybundle.materials import MaterialTable
+from raybundle.scene import build_scene, subdivide
+from test_solver import assert_converged
+
+
+def uv_sphere(centre, radius, rings, segments):
+    """A closed, outward-facing UV sphere: (vertices (V, 3), triangles (T, 3))."""
+    theta = np.linspace(0, np.pi, rings + 1)[1:-1]
+    phi = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    ring = np.stack([np.sin(theta)[:, None] * np.cos(phi), np.sin(theta)[:, None] * np.sin(phi),
+                     np.cos(theta)[:, None] + 0 * phi], axis=2).reshape(-1, 3)
+    v = np.vstack([[0, 0, 1], ring, [0, 0, -1]]) * radius + centre
+    tris = []
+    idx = lambda r, s: 1 + r * segments + s % segments        # noqa: E731
+    for s in range(segments):
+        tris.append([0, idx(0, s), idx(0, s + 1)])
+        tris.append([len(v) - 1, idx(rings - 2, s + 1), idx(rings - 2, s)])
+        for r in range(rings - 2):
+            tris += [[idx(r, s), idx(r + 1, s), idx(r + 1, s + 1)], [idx(r, s), idx(r + 1, s + 1), idx(r, s + 1)]]
+    return v, np.array(tris)
+
+
+def furnace_with_sphere(rings=24, segments=48):
+    """The diffuse furnace's room with a floating tessellated sphere instead of the block:
+    every surface emits Le with albedo a, so L = Le / (1 - a) everywhere."""
+    room = scenes.furnace()
+    walls = np.nonzero(room.triangle_material == 0)[0]
+    sv, st = uv_sphere(np.array([1.0, 1.0, 0.7]), 0.45, rings, segments)
+    v = np.vstack([room.vertices, sv])
+    t = np.vstack([room.triangles[walls], st + len(room.vertices)])
+    m = np.concatenate([np.zeros(len(walls), int), np.ones(len(st), int)])
+    return build_scene(v, t, m, room.materials, camera=room.camera, analytic_radiance=room.analytic_radiance)
+
+
+def test_without_small_triangles_the_layout_is_subdivides():
+    sc = scenes.cornell()
+    for target in (300, 4000):
+        assert np.array_equal(make_patches(sc, patches=target).triangle_patch,
+                              subdivide(sc, patches=target).triangle_patch)
+
+
+def test_tessellated_box_is_grouped_to_the_target():
+    sc = scenes.cornell()
+    fine = tessellate(sc, 20000)
+    assert len(fine.triangles) > 19000 and np.array_equal(fine.triangle_source, np.arange(len(fine.triangles)))
+    assert np.isclose(fine.triangle_area.sum(), sc.triangle_area.sum(), rtol=1e-12)
+    for target in (500, 2000):
+        p = make_patches(fine, patches=target)
+        assert 0.85 * target < p.n_patches < 1.15 * target, p.n_patches
+        assert np.isclose(p.triangle_area.sum(), sc.triangle_area.sum(), rtol=1e-12)
+        first = np.zeros(p.n_patches, np.int64)
+        first[p.triangle_patch[::-1]] = np.arange(len(p.triangles))[::-1]
+        assert np.all(p.triangle_material == p.triangle_material[first[p.triangle_patch]])
+        # walls of a box: every cluster lies on one wall (the measured red wall's two triangles
+        # are 0.3 degrees apart: one cluster may hold both)
+        assert np.all(np.einsum("ij,ij->i", p.triangle_normal, p.patch_normal[p.triangle_patch]) > np.cos(0.01))
+
+
+def test_a_sphere_is_grouped_within_one_normal_cell_per_cluster():
+    v, t = uv_sphere(np.zeros(3), 1.0, 64, 128)
+    mats = MaterialTable.from_list([dict(name="white", diffuse=(0.5, 0.5, 0.5), emission=(1, 1, 1))])
+    sc = build_scene(v, t, np.zeros(len(t), int), mats)
+    p = make_patches(sc, patches=300)
+    assert 200 < p.n_patches < 400 and len(p.triangles) == len(t)
+    cell, _ = normal_cells(p.triangle_normal)
+    per_patch = np.zeros(p.n_patches, np.int64)
+    per_patch[p.triangle_patch] = cell
+    assert np.all(cell == per_patch[p.triangle_patch])
+    # a cell of the cube map spans at most ~15 degrees from its middle
+    cos = np.einsum("ij,ij->i", p.triangle_normal, p.patch_normal[p.triangle_patch])
+    assert cos.min() > np.cos(np.radians(20)), np.degrees(np.arccos(cos.min()))
+    assert NORMAL_CELLS == 5
+
+
+def test_a_shelf_over_a_floor_is_not_its_patch():
+    """Parallel surfaces closer than a patch but more than half a patch apart keep their own clusters."""
+    floor = tessellate(build_scene([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]], [0, 0],
+                                   MaterialTable.from_list([dict(name="w", diffuse=(0.5,) * 3, emission=(1,) * 3)])),
+                       4000)
+    shelf_v = floor.vertices + [0, 0, 0.08]
+    v = np.vstack([floor.vertices, shelf_v])
+    t = np.vstack([floor.triangles, floor.triangles + len(floor.vertices)])
+    sc = build_scene(v, t, np.zeros(len(t), int), floor.materials)
+    p = make_patches(sc, patches=400)                 # patch size ~ sqrt(2 m^2 / 400) = 0.07 m
+    z = p.triangle_corners[:, :, 2].mean(axis=1)
+    for patch in range(p.n_patches):
+        zs = z[p.triangle_patch == patch]
+        assert np.ptp(zs) < 1e-9
+
+
+def test_furnace_with_curved_clusters_stays_exact():
+    """A tessellated sphere grouped into curved clusters (each triangle's side and cosine
+    taken at each bundle line) converges to the furnace's L on the sphere's own sides."""
+    sc = pipeline.prepare(furnace_with_sphere(), patches=400)
+    sphere = np.unique(sc.triangle_patch[sc.triangle_material == 1])
+    cos = np.einsum("ij,ij->i", sc.triangle_normal, sc.patch_normal[sc.triangle_patch])
+    assert cos[sc.triangle_material == 1].min() < 0.99          # the clusters are curved
+    assert np.bincount(sc.triangle_patch)[sphere].mean() > 4
+    r = pipeline.make_renderer(sc, RenderSettings(seed=1, directions_per_step=4))
+    s = r.solver
+    w = s.area[sphere, None] / s.area[sphere].sum()
+    batches = []
+    for b in range(13):
+        acc = np.zeros(3)
+        for _ in range(60):
+            s.step()
+            acc += (s.iterate_radiance(s.normal)[sphere] * w).sum(axis=0)
+        if b:
+            batches.append(acc / 60)
+    assert_converged(np.array(batches), sc.analytic_radiance, max_se=0.01)
+    r.tracer.close()
+
+
+@pytest.mark.parametrize("target", [600])
+def test_tessellated_box_renders_like_the_box(target):
+    """Grouped triangles give the image of the same box cut into patches directly: the
+    two images' difference is no larger than two seeds' difference of either."""
+    settings = dict(resolve_samples=2)
+    plain = pipeline.prepare(scenes.cornell(resolution=(32, 32)), patches=target)
+    fine = pipeline.prepare(tessellate(scenes.cornell(resolution=(32, 32)), 12000), patches=target)
+    imgs = {}
+    for name, sc in (("plain", plain), ("fine", fine)):
+        for seed in (1, 2):
+            imgs[name, seed] = pipeline.render(sc, RenderSettings(seed=seed, **settings), iterations=150).image
+    mean = imgs["plain", 1].mean()
+    rms = lambda a, b: np.sqrt(((a - b) ** 2).mean()) / mean       # noqa: E731
+    noise = max(rms(imgs["plain", 1], imgs["plain", 2]), rms(imgs["fine", 1], imgs["fine", 2]))
+    between = rms(0.5 * (imgs["plain", 1] + imgs["plain", 2]), 0.5 * (imgs["fine", 1] + imgs["fine", 2]))
+    assert between < noise, (between, noise)
