@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import PatchScene, cut_at_contacts, edge_for_patches, split_triangles
+from .scene import PatchScene, cut_at_contacts, edge_for_patches, group_ids, split_triangles
 
 #: cube-map cells per face edge for the normal direction of a cluster (150 directions; odd, so
 #: that axis-aligned normals lie mid-cell, never on a border rounding could flip)
@@ -69,18 +69,6 @@ def normal_cells(normals, cells=NORMAL_CELLS):
     return cell, centre / np.linalg.norm(centre, axis=1, keepdims=True)
 
 
-def _group_ids(columns):
-    """Dense ids (N,) of the distinct rows of integer ``columns`` (list of (N,) arrays)."""
-    cols = [np.asarray(c, np.int64) - np.min(c) for c in columns]
-    spans = [int(c.max()) + 1 for c in cols]
-    if np.prod([float(s) for s in spans]) < 2.0 ** 62:
-        key = np.zeros(len(cols[0]), np.int64)
-        for c, s in zip(cols, spans):
-            key = key * s + c
-        return np.unique(key, return_inverse=True)[1].reshape(-1)
-    return np.unique(np.stack(cols, axis=1), axis=0, return_inverse=True)[1].reshape(-1)
-
-
 class _Grouping:
     """What the cluster keys need of a scene's triangles, computed once."""
 
@@ -104,7 +92,7 @@ class _Grouping:
         sc, idx = self.scene, np.nonzero(small)[0]
         cell = np.floor((self.centroid[idx] - self.lo) / h).astype(np.int64)
         slab = np.floor(self.offset[idx] / (0.5 * h)).astype(np.int64)
-        return _group_ids([cell[:, 0], cell[:, 1], cell[:, 2], self.cell[idx], slab,
+        return group_ids([cell[:, 0], cell[:, 1], cell[:, 2], self.cell[idx], slab,
                            sc.triangle_material[idx], sc.triangle_two_sided[idx]])
 
     def count(self, h):

@@ -220,7 +220,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
     patches cut.  The new scene carries ``triangle_corner_tag`` (T, 3) int64
     (0 = no contact at that corner).
     """
-    from .scene import PatchScene
+    from .scene import PatchScene, unique_rows
 
     groups = contact_segments(scene, np.asarray(faces, np.int64), tol)
     if not groups:
@@ -305,8 +305,8 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
     patch = np.concatenate([old_patch.reshape(-1), n_old + np.asarray(new_patch_local, np.int64)]).astype(np.int64)
     # weld the new corners that coincide
     q = np.round(v / max(r * 1e-7, 1e-12)).astype(np.int64)
-    _, first, inv = np.unique(q, axis=0, return_index=True, return_inverse=True)
-    v, t = v[first], inv.reshape(-1)[t]
+    first, inv = unique_rows(q)
+    v, t = v[first], inv[t]
     # pieces that welding or a sliver cut flattened to zero area carry nothing (their
     # normal would be NaN): drop them, and renumber the patches densely
     c = v[t]

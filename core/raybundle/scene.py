@@ -31,6 +31,36 @@ from .materials import MaterialTable
 NPZ_FORMAT_VERSION = 2
 
 
+def unique_rows(a):
+    """``np.unique(a, axis=0, return_index=True, return_inverse=True)[1:]`` for an integer
+    array (N, K), by one lexsort (np.unique sorts the rows as opaque bytes: ~10 times
+    slower on millions of rows).  Returns ``(first, inverse)``: the first row of each
+    distinct value (in the lexicographic order of the values) and each row's value id."""
+    a = np.asarray(a)
+    if len(a) == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    order = np.lexsort(a.T[::-1])
+    s = a[order]
+    new = np.ones(len(a), bool)
+    new[1:] = np.any(s[1:] != s[:-1], axis=1)
+    inverse = np.empty(len(a), np.int64)
+    inverse[order] = np.cumsum(new) - 1
+    return order[new], inverse
+
+
+def group_ids(columns):
+    """Dense ids (N,) of the distinct rows of integer ``columns`` (a list of (N,) arrays):
+    one 1-D sort of a mixed-radix key when it fits in 63 bits, else :func:`unique_rows`."""
+    cols = [np.asarray(c, np.int64) - np.min(c) for c in columns]
+    spans = [int(c.max()) + 1 for c in cols]
+    if np.prod([float(s) for s in spans]) < 2.0 ** 62:
+        key = np.zeros(len(cols[0]), np.int64)
+        for c, s in zip(cols, spans):
+            key = key * s + c
+        return np.unique(key, return_inverse=True)[1].reshape(-1)
+    return unique_rows(np.stack(cols, axis=1))[1]
+
+
 class SceneError(ValueError):
     """A scene that cannot be rendered; the message says why and what to do."""
 
@@ -300,16 +330,14 @@ class PatchScene:
         without bleeding over creases, from one side of a surface to the other,
         or across a contact line."""
         _, r = self.bounding_sphere
-        corners = self.triangle_corners[self.tside_triangle]
-        q = np.round(corners.reshape(-1, 3) / max(r * 1e-6, 1e-12)).astype(np.int64)
+        _, position = unique_rows(np.round(self.vertices / max(r * 1e-6, 1e-12)).astype(np.int64))
         # the side's normal, not the triangle's: a cluster of triangles (:mod:`raybundle.clusters`)
         # welds over its own folds
-        nq = np.repeat(np.round(self.side_normal[self.tside_side] * 1e3).astype(np.int64), 3, axis=0)
-        key = [q, nq]
+        _, normal = unique_rows(np.round(self.side_normal * 1e3).astype(np.int64))
+        key = [position[self.triangles[self.tside_triangle]].ravel(), np.repeat(normal[self.tside_side], 3)]
         if self.triangle_corner_tag is not None:
-            key.append(self.triangle_corner_tag[self.tside_triangle].reshape(-1, 1))
-        _, ids = np.unique(np.concatenate(key, axis=1), axis=0, return_inverse=True)
-        return ids.reshape(-1, 3)
+            key.append(self.triangle_corner_tag[self.tside_triangle].ravel())
+        return group_ids(key).reshape(-1, 3)
 
     # ---------------------------------------------------------------- sides
     @cached_property
@@ -646,14 +674,20 @@ def edge_for_patches(scene, patches):
 
 def split_triangles(scene: PatchScene, max_edge, whole=None):
     """Every reflecting triangle (but those in ``whole`` (T,) bool) cut into k^2 similar
-    ones, ``k = ceil(longest edge / max_edge)``, each its own patch (:func:`subdivide` without contacts).  Returns ``(scene, k, row)`` with
-    ``k`` (T',) the k of the triangle each new triangle came from and ``row`` (T',) its index."""
+    ones, ``k = ceil(longest edge / max_edge)``, each its own patch (:func:`subdivide`
+    without contacts).  Returns ``(scene, k, row)``: ``k`` (T',) the k of the triangle
+    each new triangle came from and ``row`` (T',) that triangle's index."""
     corners = scene.triangle_corners
     k_all = np.maximum(1, np.ceil(_split_edge(scene, whole) / max_edge - 1e-9)).astype(np.int64)
-    verts, tris, mats, srcs = [], [], [], []
-    base = 0
+    verts, tris, mats, srcs = [scene.vertices], [], [], []
+    base = len(scene.vertices)
     for k in np.unique(k_all):
         sel = np.nonzero(k_all == k)[0]
+        mats.append(np.repeat(scene.triangle_material[sel], k * k))
+        srcs.append(np.repeat(scene.triangle_source[sel], k * k))
+        if k == 1:                  # whole triangles keep their corners
+            tris.append(scene.triangles[sel])
+            continue
         # barycentric lattice points (i, j) with i + j <= k
         ij = np.array([(i, j) for i in range(k + 1) for j in range(k + 1 - i)])
         index = {tuple(p): n for n, p in enumerate(ij)}
@@ -668,16 +702,15 @@ def split_triangles(scene: PatchScene, max_edge, whole=None):
         verts.append(pts.reshape(-1, 3))
         offs = base + np.arange(len(sel))[:, None, None] * len(ij)
         tris.append((local[None] + offs).reshape(-1, 3))
-        mats.append(np.repeat(scene.triangle_material[sel], len(local)))
-        srcs.append(np.repeat(scene.triangle_source[sel], len(local)))
         base += len(sel) * len(ij)
     v = np.concatenate(verts)
     t = np.concatenate(tris)
     # weld coincident vertices so that triangles of one face share corners
     _, r = scene.bounding_sphere
     q = np.round(v / max(r * 1e-7, 1e-12)).astype(np.int64)
-    _, first, inv = np.unique(q, axis=0, return_index=True, return_inverse=True)
-    v, t = v[first], inv.reshape(-1)[t]
+    first, inv = unique_rows(q)
+    used, t = np.unique(inv[t], return_inverse=True)     # only the corners in use (not a NaN left unused)
+    v, t = v[first[used]], t.reshape(-1, 3)
     per_tri = [np.concatenate([np.repeat(a[np.nonzero(k_all == k)[0]], k * k) for k in np.unique(k_all)])
                for a in (scene.triangle_solid, scene.triangle_two_sided, k_all, np.arange(len(k_all)))]
     fine = PatchScene(v, t, np.concatenate(mats), np.arange(len(t)), np.concatenate(srcs),
@@ -718,7 +751,7 @@ def closed_solid_triangles(vertices, triangles, tol=1e-7):
         return np.zeros(0, bool)
     v = np.asarray(vertices, float)
     scale = max(float(np.abs(v).max()), 1e-12) * tol
-    _, weld = np.unique(np.round(v / scale).astype(np.int64), axis=0, return_inverse=True)
+    _, weld = unique_rows(np.round(v / scale).astype(np.int64))
     t = weld.reshape(-1)[t]
     nv = int(t.max()) + 1
     a, b = t.ravel(), np.roll(t, -1, axis=1).ravel()        # directed edges a->b, 3 per triangle

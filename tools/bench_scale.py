@@ -1,0 +1,157 @@
+"""Scale bench: the Cornell box meshed with 4k to 1M triangles, its patches chosen by the code.
+
+Usage (about 3 minutes per triangle count on 2 cores)::
+
+    python tools/bench_scale.py --out out/bench-scale [--triangles 4000 16000 64000 256000 1000000]
+        [--time 20] [--one-patch-per-triangle 4000 16000 64000]
+
+For each triangle count: the built-in ``cornell`` tessellated
+(:func:`raybundle.clusters.tessellate`: every reflecting face cut into small triangles, each
+its own input face, the stand-in for a finely meshed Blender scene), laid out by
+``pipeline.prepare`` with the default patch target, then rendered for ``--time`` seconds.
+Each row runs in two fresh processes, one after the other:
+
+1. *memory*: set-up, 4 iterations and one image pass under ``tracemalloc`` (which
+   sees every NumPy array but not Embree's BVH): the peak of traced memory, per triangle;
+2. *render*: set-up (``prepare``; tracer, first shot and solver) and the render, timed,
+   with the process's peak RSS; its error against the cached Cycles reference of the
+   same box (``out/bench-cornell/reference-{1,2}.exr``, written by
+   ``tools/bench_blender.py cornell``), by :func:`raybundle.metrics.image_error`: the
+   lamp excluded, the reference's own noise subtracted.
+
+``--one-patch-per-triangle`` adds rows of the old layout (``--patches 0``: every triangle
+its own patch) of the same tessellations, for comparison.  Writes ``scale.csv``,
+``summary.json`` and ``scale.png`` (error, set-up time and memory against triangles) into
+``--out`` and prints one line per row.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+
+_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+REFERENCE = os.path.join(_ROOT, "out", "bench-cornell")
+
+
+def one(triangles, seconds, patches, mode):
+    """Run one row in this process; returns a dict (see the module docstring)."""
+    import resource
+    import time
+    import tracemalloc
+
+    import numpy as np
+
+    from raybundle.clusters import tessellate
+    from raybundle.imaging import RenderSettings
+    from raybundle.pipeline import make_renderer, prepare
+    from raybundle.scenes import load_scene
+
+    scene = tessellate(load_scene("cornell"), triangles)
+    if mode == "memory":
+        tracemalloc.start()
+        base = tracemalloc.get_traced_memory()[0]
+    t0 = time.perf_counter()
+    laid = prepare(scene, patches)
+    t1 = time.perf_counter()
+    renderer = make_renderer(laid, RenderSettings(seed=3))
+    t2 = time.perf_counter()
+    row = dict(triangles=len(scene.triangles), patches=laid.n_patches, patch_triangles=len(laid.triangles))
+    if mode == "memory":
+        for _ in range(4):
+            renderer.solver.step()
+        renderer.image_pass()
+        peak = tracemalloc.get_traced_memory()[1] - base
+        tracemalloc.stop()
+        return dict(row, traced_peak_mb=peak / 1e6, traced_bytes_per_triangle=peak / len(scene.triangles))
+    result = renderer.run(seconds=seconds)
+    t3 = time.perf_counter()
+    from raybundle.io import read_exr
+    from raybundle.metrics import image_error, light_source_mask
+
+    halves = [read_exr(os.path.join(REFERENCE, f"reference-{k}.exr")) for k in (1, 2)]
+    reference = 0.5 * (halves[0] + halves[1])
+    error = image_error(result.image, reference, reference_halves=halves,
+                        exclude=light_source_mask(load_scene("cornell")))["error"]
+    st = renderer.solver.stats
+    return dict(row, prepare_s=t1 - t0, solver_setup_s=t2 - t1, render_s=t3 - t2, iterations=st.iterations,
+                ms_per_iteration=1e3 * st.seconds / max(st.iterations, 1), error=error,
+                peak_rss_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
+
+
+def run_row(triangles, seconds, patches):
+    row = {}
+    for mode in ("memory", "render"):
+        out = subprocess.run([sys.executable, __file__, "--one", str(triangles), str(seconds), str(patches), mode],
+                             check=True, capture_output=True, text=True).stdout
+        row.update(json.loads(out.strip().splitlines()[-1]))
+    return dict(row, layout="clusters" if patches else "one patch per triangle")
+
+
+def chart(path, rows):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4))
+    for layout, style in (("clusters", "o-"), ("one patch per triangle", "s--")):
+        rs = [r for r in rows if r["layout"] == layout]
+        if not rs:
+            continue
+        x = [r["triangles"] for r in rs]
+        axes[0].loglog(x, [100 * r["error"] for r in rs], style, label=layout)
+        axes[1].loglog(x, [r["prepare_s"] + r["solver_setup_s"] for r in rs], style, label=layout)
+        axes[2].loglog(x, [r["traced_bytes_per_triangle"] for r in rs], style, label=layout)
+    for ax, label in zip(axes, ("error after the render [%]", "set-up [s]", "traced peak bytes per triangle")):
+        ax.set_xlabel("triangles")
+        ax.set_ylabel(label)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+    axes[2].axhline(1000, color="gray", lw=0.8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--out", default="out/bench-scale")
+    p.add_argument("--triangles", type=int, nargs="+", default=[4000, 16000, 64000, 256000, 1000000])
+    p.add_argument("--time", type=float, default=20.0)
+    p.add_argument("--patches", type=int, default=4000, help="target patch count (the default of render)")
+    p.add_argument("--one-patch-per-triangle", type=int, nargs="*", default=[])
+    p.add_argument("--one", nargs=4, help=argparse.SUPPRESS)
+    a = p.parse_args(argv)
+    if a.one:
+        print(json.dumps(one(int(a.one[0]), float(a.one[1]), int(a.one[2]), a.one[3])))
+        return 0
+    if not all(os.path.exists(os.path.join(REFERENCE, f"reference-{k}.exr")) for k in (1, 2)):
+        print(f"no Cycles reference in {REFERENCE}: run tools/bench_blender.py cornell --out {REFERENCE} first",
+              file=sys.stderr)
+        return 2
+    os.makedirs(a.out, exist_ok=True)
+    rows = []
+    plan = [(n, a.patches) for n in a.triangles] + [(n, 0) for n in a.one_patch_per_triangle]
+    for n, patches in plan:
+        row = run_row(n, a.time, patches)
+        rows.append(row)
+        print(f"{row['triangles']:>8} triangles, {row['layout']}: {row['patches']} patches, set-up "
+              f"{row['prepare_s']:.1f} + {row['solver_setup_s']:.1f} s, {row['ms_per_iteration']:.1f} ms/iteration, "
+              f"{row['iterations']} iterations, error {100 * row['error']:.2f}%, peak RSS {row['peak_rss_gb']:.2f} GB, "
+              f"traced {row['traced_bytes_per_triangle']:.0f} B/triangle", flush=True)
+    with open(os.path.join(a.out, "scale.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    with open(os.path.join(a.out, "summary.json"), "w") as f:
+        json.dump(dict(seconds=a.time, rows=rows), f, indent=1)
+    chart(os.path.join(a.out, "scale.png"), rows)
+    print(f"wrote {a.out}/scale.csv, summary.json, scale.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
