@@ -18,6 +18,14 @@ Two maps, both linear in the side values and exact on constants:
   whose patch means match, which slopes on into an edge where averaging flattens
   (``tests/test_reconstruction.py``).
 
+A patch that is a cluster of many small triangles (:mod:`raybundle.clusters`) has hat
+functions on its own fine triangles, so the projection would only round its step over
+one of them.  Its welded vertices (those on cluster sides only) take instead the mean of
+the linear fits ``v_s + g_s . (x - c_s)`` of the clusters around them, with ``c_s`` the
+cluster's centroid and ``g_s`` the least-squares gradient in its tangent plane over the
+sides it shares a welded vertex with (weights 1 / distance^2): exact on linear
+functions, and, as ``c_s`` is the centroid, each fit keeps the cluster's mean.
+
 The image and the bakes read the diffuse indirect light through :meth:`projected` (the
 caustic first shot, sharp-edged, through :meth:`averaged`: :meth:`smooth_and_sharp`).  Tried and dropped: sending each diffuse
 side's first shot into the bundles from its projection at the point a bundle line leaves
@@ -28,6 +36,12 @@ patch mean.
 from __future__ import annotations
 
 import numpy as np
+
+from .scene import group_ids
+
+#: sides of at least this many triangles are clusters, read through their linear fits
+#: (module docstring)
+CLUSTER_TRIANGLES = 8
 
 
 class LinearReconstruction:
@@ -45,6 +59,8 @@ class LinearReconstruction:
         self._weight = np.repeat(self.area, 3)
         self.lumped = np.bincount(self._flat, self._weight / 3, minlength=self.n_vertices)
         self.empty = self.lumped <= 0                          # vertices without receiving area
+        many = np.bincount(scene.tside_side, minlength=scene.n_sides) >= CLUSTER_TRIANGLES
+        self._fit = ClusterFit(scene, self.area, self.ids, many) if many.any() else None
 
     def _gather(self, per_corner):
         """Sum (V, C) of per-corner values (TS, 3, C) onto the welded vertices."""
@@ -69,6 +85,8 @@ class LinearReconstruction:
         x = np.maximum(self._solve_mass(b), 0.0)
         if self.empty.any():
             x[self.empty] = self.averaged(side_values)[self.empty]
+        if self._fit is not None:
+            x[self._fit.vertices] = np.maximum(self._fit.vertex_values(np.asarray(side_values, float)), 0.0)
         return x
 
     def smooth_and_sharp(self, side_values, sharp=None):
@@ -119,3 +137,81 @@ class LinearReconstruction:
             p = z + (rz_new / np.maximum(rz, 1e-300)) * p
             rz = rz_new
         return x
+
+
+class ClusterFit:
+    """The linear fits of cluster sides and the welded vertices read from them (module docstring).
+
+    ``scene``, ``tside_area`` (TS,) [m^2] and welded vertex ``ids`` (TS, 3) as in
+    :class:`LinearReconstruction`; ``cluster`` (S,) bool marks the cluster sides."""
+
+    def __init__(self, scene, tside_area, ids, cluster):
+        side = scene.tside_side
+        n_sides = scene.n_sides
+        a = np.where(np.bincount(side, tside_area, minlength=n_sides)[side] > 0, tside_area,
+                     scene.triangle_area[scene.tside_triangle])
+        corners = scene.triangle_corners[scene.tside_triangle]
+        side_area = np.bincount(side, a, minlength=n_sides)
+        self.centroid = np.stack([np.bincount(side, a * corners[:, :, k].mean(axis=1), minlength=n_sides)
+                                  for k in range(3)], axis=1) / np.maximum(side_area, 1e-300)[:, None]
+        # sides that share a welded vertex: distinct (vertex, side) pairs, neighbours within a vertex
+        cv, cs = ids.ravel(), np.repeat(side, 3)
+        _, first = np.unique(group_ids([cv, cs]), return_index=True)
+        order = first[np.argsort(cv[first], kind="stable")]
+        v, s = cv[order], cs[order]
+        start = np.flatnonzero(np.r_[True, v[1:] != v[:-1]])
+        size = np.diff(np.r_[start, len(v)])
+        left = np.repeat(size, size) - (np.arange(len(v)) - np.repeat(start, size)) - 1
+        s1, s2 = [], []
+        for off in range(1, int(size.max(initial=1))):
+            i = np.nonzero(left >= off)[0]
+            s1 += [s[i], s[i + off]]
+            s2 += [s[i + off], s[i]]
+        s1 = np.concatenate(s1) if s1 else np.zeros(0, np.int64)
+        s2 = np.concatenate(s2) if s2 else np.zeros(0, np.int64)
+        pair = np.unique(group_ids([s1, s2]) if len(s1) else np.zeros(0, np.int64), return_index=True)[1]
+        keep = pair[cluster[s1[pair]]]
+        self.s1, self.s2 = s1[keep], s2[keep]
+        d = self.centroid[self.s2] - self.centroid[self.s1]
+        self.wd = d / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)[:, None]            # w d, w = 1 / |d|^2
+        self.sides = np.nonzero(cluster)[0]
+        row = np.full(n_sides, -1, np.int64)
+        row[self.sides] = np.arange(len(self.sides))
+        self.row = row
+        r1 = row[self.s1]
+        m = np.zeros((len(self.sides), 3, 3))
+        for i in range(3):
+            for j in range(3):
+                m[:, i, j] = np.bincount(r1, self.wd[:, i] * d[:, j], minlength=len(self.sides))
+        # only the tangent plane: the normal direction gets a stiff weight, so g . n = 0
+        n = scene.side_normal[self.sides]
+        scale = np.trace(m, axis1=1, axis2=2)[:, None, None] / 3 + 1e-12
+        m += scale * (n[:, :, None] * n[:, None, :]) + 1e-9 * scale * np.eye(3)
+        self.inverse = np.linalg.inv(m)
+        # welded vertices all of whose corners lie on cluster sides, and those corners
+        n_vertices = int(ids.max()) + 1
+        on_other = np.bincount(cv, ~cluster[cs], minlength=n_vertices) > 0
+        used = np.zeros(n_vertices, bool)
+        used[cv] = True
+        self.vertices = np.nonzero(used & ~on_other)[0]
+        vrow = np.full(n_vertices, -1, np.int64)
+        vrow[self.vertices] = np.arange(len(self.vertices))
+        c = np.nonzero(vrow[cv] >= 0)[0]
+        self._corner_vertex = vrow[cv[c]]
+        self._corner_row = row[cs[c]]
+        self._corner_offset = corners.reshape(-1, 3)[c] - self.centroid[cs[c]]
+        self._corner_weight = np.repeat(a, 3)[c]
+
+    def vertex_values(self, side_values):
+        """Values (len(vertices), C) of :attr:`vertices` from side values (S, C)."""
+        v = side_values
+        dv = v[self.s2] - v[self.s1]                                                    # (K, C)
+        r1 = self.row[self.s1]
+        rhs = np.stack([np.stack([np.bincount(r1, self.wd[:, i] * dv[:, c], minlength=len(self.sides))
+                                  for c in range(v.shape[1])], axis=1) for i in range(3)], axis=1)   # (Sc, 3, C)
+        g = np.einsum("sij,sjc->sic", self.inverse, rhs)
+        pred = v[self.sides][self._corner_row] + np.einsum("nk,nkc->nc", self._corner_offset, g[self._corner_row])
+        w = self._corner_weight
+        num = np.stack([np.bincount(self._corner_vertex, w * pred[:, c], minlength=len(self.vertices))
+                        for c in range(v.shape[1])], axis=1)
+        return num / np.maximum(np.bincount(self._corner_vertex, w, minlength=len(self.vertices)), 1e-300)[:, None]

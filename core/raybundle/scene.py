@@ -29,6 +29,9 @@ from .camera import Camera
 from .materials import MaterialTable
 
 NPZ_FORMAT_VERSION = 2
+#: corners of triangles whose normals differ by less than this weld (:attr:`PatchScene.smooth_vertex_ids`;
+#: Blender's default Auto Smooth angle)
+SMOOTH_ANGLE = np.radians(30.0)
 
 
 def unique_rows(a):
@@ -59,6 +62,28 @@ def group_ids(columns):
             key = key * s + c
         return np.unique(key, return_inverse=True)[1].reshape(-1)
     return unique_rows(np.stack(cols, axis=1))[1]
+
+
+def _components(n, links):
+    """Dense component ids (n,) of n nodes joined by ``links`` (K, 2): min-label propagation
+    with pointer jumping (targets sorted once; each round one reduceat)."""
+    label = np.arange(n)
+    if len(links) == 0:
+        return label
+    src = np.concatenate([links[:, 0], links[:, 1]])
+    dst = np.concatenate([links[:, 1], links[:, 0]])
+    order = np.argsort(dst, kind="stable")
+    src, dst = src[order], dst[order]
+    start = np.flatnonzero(np.r_[True, dst[1:] != dst[:-1]])
+    target = dst[start]
+    while True:
+        new = label.copy()
+        new[target] = np.minimum(new[target], np.minimum.reduceat(label[src], start))
+        new = new[new]
+        if np.array_equal(new, label):
+            break
+        label = new
+    return np.unique(label, return_inverse=True)[1].reshape(-1)
 
 
 class SceneError(ValueError):
@@ -325,19 +350,44 @@ class PatchScene:
 
     @cached_property
     def smooth_vertex_ids(self):
-        """(TS, 3) int: tside corners welded by position *and* their side's normal (and
-        contact weld tag), for interpolating side values across a smooth surface
-        without bleeding over creases, from one side of a surface to the other,
-        or across a contact line."""
+        """(TS, 3) int: tside corners welded where the surface is smooth, for interpolating
+        side values across it without bleeding over a crease, from one side of a surface to
+        the other, or across a contact line.  Corners at one position weld when their tsides
+        have the same normal and contact weld tag (a plane, T-junctions included), and when
+        their tsides share an edge across which the normal turns by less than
+        :data:`SMOOTH_ANGLE` (tags agreeing): a tessellated sphere (or the clusters of its
+        triangles, :mod:`raybundle.clusters`) is one smooth surface, a box's edges are creases."""
         _, r = self.bounding_sphere
         _, position = unique_rows(np.round(self.vertices / max(r * 1e-6, 1e-12)).astype(np.int64))
-        # the side's normal, not the triangle's: a cluster of triangles (:mod:`raybundle.clusters`)
-        # welds over its own folds
-        _, normal = unique_rows(np.round(self.side_normal * 1e3).astype(np.int64))
-        key = [position[self.triangles[self.tside_triangle]].ravel(), np.repeat(normal[self.tside_side], 3)]
-        if self.triangle_corner_tag is not None:
-            key.append(self.triangle_corner_tag[self.tside_triangle].ravel())
-        return group_ids(key).reshape(-1, 3)
+        pos = position[self.triangles[self.tside_triangle]]                    # (TS, 3)
+        _, normal = unique_rows(np.round(self.tside_normal * 1e3).astype(np.int64))
+        tag = (self.triangle_corner_tag[self.tside_triangle] if self.triangle_corner_tag is not None
+               else np.zeros(pos.shape, np.int64))
+        cls = group_ids([pos.ravel(), np.repeat(normal, 3), tag.ravel()]).reshape(-1, 3)
+        # tsides sharing an edge: its two end positions (sorted) as one key per tside edge
+        # (flat index 3 t + k: tside t's edge from corner k to corner k + 1); consecutive
+        # entries of one key are neighbours across it
+        n_pos = int(position.max(initial=0)) + 1
+        key = np.empty(pos.size, np.int64)
+        for k in range(3):
+            a, b = pos[:, k], pos[:, (k + 1) % 3]
+            key[k::3] = np.minimum(a, b) * n_pos + np.maximum(a, b)
+        order = np.argsort(key, kind="stable")
+        same = key[order[1:]] == key[order[:-1]]
+        t1, k1 = np.divmod(order[:-1][same], 3)
+        t2, k2 = np.divmod(order[1:][same], 3)
+        del key, order, same
+        smooth = np.einsum("ij,ij->i", self.tside_normal[t1], self.tside_normal[t2]) > np.cos(SMOOTH_ANGLE)
+        t1, k1, t2, k2 = t1[smooth], k1[smooth], t2[smooth], k2[smooth]
+        # the corner of t2 at the position of t1's corner k1, and the other end
+        flip = pos[t2, k2] != pos[t1, k1]
+        c2a = np.where(flip, (k2 + 1) % 3, k2)
+        c2b = np.where(flip, k2, (k2 + 1) % 3)
+        links = []
+        for c1, c2 in ((k1, c2a), ((k1 + 1) % 3, c2b)):
+            ok = tag[t1, c1] == tag[t2, c2]
+            links.append(np.stack([cls[t1[ok], c1[ok]], cls[t2[ok], c2[ok]]], axis=1))
+        return _components(int(cls.max(initial=-1)) + 1, np.concatenate(links))[cls]
 
     # ---------------------------------------------------------------- sides
     @cached_property
