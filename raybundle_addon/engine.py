@@ -173,10 +173,11 @@ class RenderJob:
             self._notify("export")
             if self.stats_cb is not None:
                 self.stats_cb(f"Ray Bundle GI | Preparing {self.export.counts['triangles']} triangles")
-            scene = pipeline.prepare(self.export.scene, patches=s.patches)
+            stage = None if self.stats_cb is None else (lambda text: self.stats_cb(f"Ray Bundle GI | {text}"))
+            scene = pipeline.prepare(self.export.scene, patches=s.patches, stage=stage)
             settings = RenderSettings(seed=s.seed, bundle_resolution=s.bundle_resolution,
                                       first_shot="auto" if s.first_shot else "none")
-            self.renderer = pipeline.make_renderer(scene, settings, solver=s.method)
+            self.renderer = pipeline.make_renderer(scene, settings, solver=s.method, stage=stage)
             t_prepared = time.perf_counter() - self.t_start
             try:
                 result = self.renderer.run(iterations=s.iterations or None,

@@ -32,6 +32,9 @@ def test_render_furnace_writes_exr_png_and_stats(tmp_path):
     assert np.allclose(s["image_mean"], img.reshape(-1, 3).mean(axis=0), rtol=1e-5)
     assert max(abs(e) for e in s["mean_relative_error"]) < 0.1
     assert "error vs analytic" in p.stderr
+    # set-up reports its steps, in order, before the iterations
+    steps = [p.stderr.find(t) for t in ("laying out the patches", "building the ray tracer", "first shot and solver")]
+    assert -1 not in steps and steps == sorted(steps), p.stderr
 
 
 def test_ctrl_c_stops_and_still_writes_the_image(tmp_path):

@@ -147,11 +147,11 @@ def test_tessellated_box_renders_like_the_box(target):
     two images' difference is no larger than two seeds' difference of either."""
     settings = dict(resolve_samples=2)
     plain = pipeline.prepare(scenes.cornell(resolution=(32, 32)), patches=target)
-    fine = pipeline.prepare(tessellate(scenes.cornell(resolution=(32, 32)), 12000), patches=target)
+    fine = pipeline.prepare(tessellate(scenes.cornell(resolution=(32, 32)), 8000), patches=target)
     imgs = {}
     for name, sc in (("plain", plain), ("fine", fine)):
         for seed in (1, 2):
-            imgs[name, seed] = pipeline.render(sc, RenderSettings(seed=seed, **settings), iterations=150).image
+            imgs[name, seed] = pipeline.render(sc, RenderSettings(seed=seed, **settings), iterations=100).image
     mean = imgs["plain", 1].mean()
     rms = lambda a, b: np.sqrt(((a - b) ** 2).mean()) / mean       # noqa: E731
     noise = max(rms(imgs["plain", 1], imgs["plain", 2]), rms(imgs["fine", 1], imgs["fine", 2]))

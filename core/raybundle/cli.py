@@ -63,13 +63,18 @@ def cmd_render(args):
 
     if args.time is None and args.iterations is None:
         args.time = 30.0
+    t_start = time.perf_counter()
+
+    def stage(text):
+        print(f"raybundle: {text} ({time.perf_counter() - t_start:.1f} s)", file=sys.stderr, flush=True)
+
     try:
         scene = load_scene(args.scene)
         if args.resolution:
             if scene.camera is None:
                 raise SceneError("the scene has no camera")
             scene.camera = scene.camera.with_resolution(*args.resolution)
-        scene = prepare(scene, patches=args.patches)
+        scene = prepare(scene, patches=args.patches, stage=stage)
     except (SceneError, ValueError) as e:
         print(f"raybundle: error: {e}", file=sys.stderr)
         return 2
@@ -79,7 +84,8 @@ def cmd_render(args):
     old = signal.signal(signal.SIGINT, lambda *_: stop.set())   # Ctrl-C: finish the iteration, write
     bar = ProgressBar()
     try:
-        result = render(scene, settings, iterations=args.iterations, seconds=args.time, progress=bar, stop=stop)
+        result = render(scene, settings, iterations=args.iterations, seconds=args.time, progress=bar, stop=stop,
+                        stage=stage)
     finally:
         signal.signal(signal.SIGINT, old)
         bar.close()
