@@ -109,7 +109,7 @@ def test_clusters_are_read_through_linear_fits_exact_on_a_linear_function():
     p = make_patches(tessellate(plane, 20000), patches=100)
     rec = LinearReconstruction(p, p.triangle_area[p.tside_triangle])
     f = lambda x: 1 + 2 * x[..., 0] + 3 * x[..., 1]                   # noqa: E731
-    values = f(rec._fit.centroid)[:, None]                           # a linear function's mean is its value at the centroid
+    values = f(rec._fit.centroid)[:, None]          # a linear function's mean: its value at the centroid
     position = np.zeros((rec.n_vertices, 3))
     position[rec.ids.ravel()] = p.triangle_corners[p.tside_triangle].reshape(-1, 3)
     assert len(rec._fit.vertices) == rec.n_vertices

@@ -80,6 +80,8 @@ def cmd_render(args):
         return 2
     settings = RenderSettings(seed=args.seed, sequence=args.sequence, bundle_resolution=args.bundle_resolution,
                               threads=args.threads)
+    if args.workers or args.scheduler:
+        return _render_chains(args, scene, settings, stage)
     stop = threading.Event()
     old = signal.signal(signal.SIGINT, lambda *_: stop.set())   # Ctrl-C: finish the iteration, write
     bar = ProgressBar()
@@ -104,6 +106,30 @@ def cmd_render(args):
         print(f"error vs analytic: mean {np.round(stats['mean_relative_error'], 5).tolist()}, "
               f"pixel rel. RMSE {stats['pixel_relative_rmse']:.4f}", file=sys.stderr)
     return 130 if stop.is_set() else 0
+
+
+def _render_chains(args, scene, settings, stage):
+    """``render --workers N`` / ``--scheduler ADDRESS``: independent chains on Dask, merged."""
+    from .distributed import render_chains
+    from .io import write_exr, write_json, write_png
+
+    try:
+        image, merged, its = render_chains(scene, settings, seconds=args.time, iterations=args.iterations,
+                                           scheduler=args.scheduler, workers=args.workers, progress=stage)
+    except (RuntimeError, ValueError, OSError) as e:
+        print(f"raybundle: error: {e}", file=sys.stderr)
+        return 2
+    stats = dict(merged.stats, chains=merged.chains, chain_iterations=its, patches=int(scene.n_patches),
+                 version=__version__)
+    if scene.analytic_radiance is not None:
+        stats.update(analytic_error(image, scene.analytic_radiance))
+    write_exr(args.out, image, {"raybundle_" + k: v for k, v in stats.items() if isinstance(v, (int, float, str))})
+    write_png(os.path.splitext(args.out)[0] + ".png", image)
+    if args.stats:
+        write_json(args.stats, stats)
+    print(f"done: {merged.chains} chains, {stats['iterations']} iterations ({its}), {scene.n_patches} patches "
+          f"-> {args.out}", file=sys.stderr)
+    return 0
 
 
 def _number(kind, low, high=None, what="a number"):
@@ -149,6 +175,10 @@ def build_parser():
     r.add_argument("--bundle-resolution", type=_number(int, 0, 4096, "an integer in [0, 4096]"), default=0,
                    help="rays per bundle side (0 = auto)")
     r.add_argument("--threads", type=POSITIVE_INT, default=None)
+    d = r.add_mutually_exclusive_group()
+    d.add_argument("--workers", type=POSITIVE_INT, help="run that many independent chains on a local Dask "
+                   "cluster and merge them (needs raybundle[distributed])")
+    d.add_argument("--scheduler", help="run one chain per worker of the Dask cluster at this address and merge them")
     r.add_argument("--out", default="out/render.exr")
     r.add_argument("--stats", help="write statistics as JSON")
     b = sub.add_parser("bench", help="speed and accuracy benchmark (writes CSV and PNG charts)")

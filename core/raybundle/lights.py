@@ -900,6 +900,21 @@ class PatchFirstShot:
         norm = np.linalg.norm(self._d_patch[p], axis=2, keepdims=True)
         self.direction[p] = np.where(norm > 0, self._d_patch[p] / np.maximum(norm, 1e-300), 0.0)
 
+    def set_sums(self, e_sum, d_sum, count):
+        """Replace the per-tside sums and counts (e.g. those of several chains pooled,
+        :mod:`raybundle.chains`) and recompute ``E`` and ``direction`` from them."""
+        sc = self.scene
+        self._e_sum, self._d_sum, self._count = e_sum.copy(), d_sum.copy(), count.copy()
+        c = np.maximum(self._count, 1)[:, None, None]
+        a = sc.triangle_area[sc.tside_triangle]
+        w = (a / np.maximum(self.receiving_area[sc.tside_side], 1e-300))[:, None, None]
+        self.E = np.zeros_like(self.E)
+        self._d_patch = np.zeros_like(self._d_patch)
+        np.add.at(self.E, sc.tside_side, w * self._e_sum / c)
+        np.add.at(self._d_patch, sc.tside_side, w * self._d_sum / c)
+        norm = np.linalg.norm(self._d_patch, axis=2, keepdims=True)
+        self.direction = np.where(norm > 0, self._d_patch / np.maximum(norm, 1e-300), 0.0)
+
     def refine(self, n_triangles):
         """One more sample on the next ``n_triangles`` receiving tsides (round robin)."""
         n_t = len(self.receiving_tsides)

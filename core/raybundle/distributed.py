@@ -1,0 +1,143 @@
+"""Chains on Dask: one prepared scene, one chain per worker, merged exactly.
+
+    python -m raybundle render SCENE --workers N            # a local cluster of N processes
+    python -m raybundle render SCENE --scheduler ADDRESS    # an existing dask.distributed cluster
+
+(``pip install raybundle[distributed]``; not part of the Blender extension.)  The prepared
+scene is scattered once to every worker.  Chain k runs with seed ``seed + k`` until the
+shared deadline (or for ``iterations``), and every ``report_seconds`` publishes its
+:class:`~raybundle.chains.ChainState` in a ``distributed.Variable``.  The client polls
+those, reports per-chain progress, and when every chain has finished (or the deadline and
+a grace period have passed) merges the newest state of each (:func:`raybundle.chains.merge`)
+into a renderer of its own, which resolves the image.  A worker lost mid-run loses only
+what its chain did since its last report: the chain is not restarted elsewhere (its seed
+would repeat), its last report counts.
+
+Over ``c`` chains the pooled image has the error of one chain run ``c`` times as long, less
+each chain's own start (burn-in, first image pass) and the client's resolve; on one machine
+the chains share its cores, so ``--workers`` pays off only across machines (or with more
+cores than one chain's threads use).
+"""
+from __future__ import annotations
+
+import time
+import uuid
+
+from . import chains
+
+
+def _run_chain(scene, settings_dict, seed, deadline, iterations, report_seconds, name):
+    """On a worker: one chain.  Every ``report_seconds`` its state goes to the Variable
+    ``name`` and its iteration count to the scheduler's metadata ``[name, "iterations"]``
+    (small, polled by the client for progress); returns the final state."""
+    from distributed import Variable, get_client
+
+    from .imaging import RenderSettings
+    from .pipeline import make_renderer
+
+    settings = RenderSettings(**dict(settings_dict, seed=seed))
+    renderer = make_renderer(scene, settings)
+    var, client = Variable(name), get_client()
+
+    def report():
+        var.set(chains.state(renderer))
+        client.set_metadata([name, "iterations"], int(renderer.solver.stats.iterations))
+
+    try:
+        last = time.time()
+        while not (renderer.solver.stats.iterations >= iterations if iterations is not None
+                   else time.time() >= deadline):
+            renderer.step()
+            if time.time() - last >= report_seconds:
+                report()
+                last = time.time()
+        report()
+        return chains.state(renderer)
+    finally:
+        renderer.tracer.close()
+
+
+def render_chains(scene, settings, chains_count=None, seconds=None, iterations=None, scheduler=None,
+                  workers=None, report_seconds=2.0, grace_seconds=30.0, progress=None, client=None):
+    """Render ``scene`` (prepared) as independent chains on Dask; returns
+    ``(image, merged ChainState, per-chain iteration counts)``.
+
+    ``client``: a ``distributed.Client`` to use; else one for ``scheduler`` (an address)
+    or for a new local cluster of ``workers`` processes (closed afterwards).  One chain per
+    worker unless ``chains_count`` says otherwise.  ``progress(text)`` gets a line per
+    poll: each chain's iterations (``-`` before its first report, ``lost`` once its worker
+    is gone)."""
+    try:
+        from distributed import Client, LocalCluster, Variable, wait
+    except ImportError as e:           # pragma: no cover - depends on the extra being installed
+        raise RuntimeError("chains on Dask need the distributed extra: pip install raybundle[distributed]") from e
+    if (seconds is None) == (iterations is None):
+        raise ValueError("give seconds or iterations")
+    from dataclasses import asdict
+
+    from .pipeline import make_renderer
+
+    own = client is None
+    cluster = None
+    if own:
+        if scheduler:
+            client = Client(scheduler)
+        else:
+            cluster = LocalCluster(n_workers=int(workers or 2), threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
+            client = Client(cluster)
+    try:
+        addresses = sorted(client.scheduler_info()["workers"])
+        n = int(chains_count or len(addresses))
+        if n < 1 or not addresses:
+            raise ValueError("no workers to run chains on")
+        scene_future = client.scatter(scene, broadcast=True)
+        base = asdict(settings)
+        deadline = time.time() + seconds if seconds is not None else None
+        names = [f"raybundle-chain-{uuid.uuid4().hex}-{k}" for k in range(n)]
+        futures = [client.submit(_run_chain, scene_future, base, settings.seed + k, deadline, iterations,
+                                 report_seconds, names[k], workers=[addresses[k % len(addresses)]],
+                                 allow_other_workers=False, pure=False, key=f"chain-{names[k]}")
+                   for k in range(n)]
+        end = None if deadline is None else deadline + grace_seconds
+        while True:
+            status = [f.status for f in futures]
+            alive = set(client.scheduler_info()["workers"])
+            lost = [st == "pending" and addresses[k % len(addresses)] not in alive for k, st in enumerate(status)]
+            reported = [client.get_metadata([name, "iterations"], None) for name in names]
+            if progress is not None:
+                progress("chains: " + ", ".join("lost" if lost[k] else "-" if reported[k] is None
+                                                else str(reported[k]) for k in range(n)))
+            running = any(st == "pending" and not lost[k] for k, st in enumerate(status))
+            if not running or (end is not None and time.time() > end):
+                break
+            try:
+                wait(futures, timeout=min(report_seconds, 1.0), return_when="ALL_COMPLETED")
+            except TimeoutError:
+                pass
+        latest = []
+        for k, f in enumerate(futures):
+            if f.status == "finished":
+                latest.append(f.result())
+            elif f.status == "error" and not lost[k]:
+                raise RuntimeError(f"chain {k} failed: {f.exception()!r}")
+            else:                        # lost (or past the deadline): its last report, if any
+                f.cancel()
+                got = client.get_metadata([names[k], "iterations"], None)
+                latest.append(Variable(names[k], client=client).get(timeout=30) if got is not None else None)
+        states = [s for s in latest if s is not None]
+        if not states:
+            raise RuntimeError("no chain reported any state (every worker was lost)")
+        merged = chains.merge(states)
+        renderer = make_renderer(scene, settings)
+        try:
+            chains.apply(merged, renderer)
+            image = renderer.image()
+        finally:
+            renderer.tracer.close()
+        return image, merged, [None if s is None else s.stats["iterations"] for s in latest]
+    finally:
+        if own:
+            client.close()
+            if cluster is not None:
+                cluster.close()
