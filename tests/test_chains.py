@@ -51,6 +51,28 @@ def test_merged_chains_pool_their_sums_and_counts():
         chains.apply(merged, pipeline.make_solver(pipeline.prepare(scenes.cornell(), patches=100)))
 
 
+def test_merged_solver_chains_bake_their_weighted_average():
+    """Patch values (what bakes and color attributes read) pool by iterations averaged:
+    chains of 30 and 60 iterations weigh 22 : 52 (after the 8 burn-in iterations each)."""
+    sc = pipeline.prepare(scenes.furnace(), patches=150)
+    solvers = []
+    for seed, its in ((1, 30), (2, 60)):
+        s = pipeline.make_solver(sc, RenderSettings(seed=seed))
+        for _ in range(its):
+            s.step()
+        solvers.append(s)
+    merged = chains.merge([chains.state(s) for s in solvers])
+    fresh = chains.apply(merged, pipeline.make_solver(sc, RenderSettings(seed=1)))
+    w = np.array([22, 52]) / 74
+    assert [s.averaged for s in solvers] == [22, 52] and fresh.averaged == 74
+    assert np.allclose(fresh.mean_incoming, w[0] * solvers[0].mean_incoming + w[1] * solvers[1].mean_incoming)
+    assert fresh.stats.iterations == 90
+    # the first shot pools per-tside sample counts (different here: 30 and 60 refinements)
+    fs = [s.first_shot for s in solvers]
+    assert np.array_equal(fresh.first_shot._count, fs[0]._count + fs[1]._count)
+    assert np.all(np.isfinite(fresh.patch_radiance()))
+
+
 distributed = pytest.importorskip("distributed")
 
 
