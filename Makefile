@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench bench-blender bench-boxes bench-bake extension cycles-reference clean
+.PHONY: demo test bench bench-blender bench-boxes bench-bake bench-scale extension cycles-reference clean
 
 $(STAMP): core/pyproject.toml requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -35,6 +35,11 @@ bench-boxes: $(STAMP)
 # (about 25 minutes on 2 cores the first time: the Cycles reference is cached in out/bench-bake)
 bench-bake: $(STAMP)
 	$(PY) tools/bench_bake.py --out out/bench-bake
+
+# The Cornell box meshed with 4k to 1M triangles: error, set-up time and memory against triangle count
+# (about 8 minutes on 2 cores; needs out/bench-cornell's Cycles reference from bench-boxes)
+bench-scale: $(STAMP)
+	$(PY) tools/bench_scale.py --out out/bench-scale --one-patch-per-triangle 4000 16000 64000
 
 # The installable Blender extension: dist/raybundle-<version>-<platform>.zip for every platform in
 # blender_manifest.toml, built without a Blender binary (Blender's blender_ext.py from the bpy module).

@@ -11,7 +11,7 @@ its own input face, the stand-in for a finely meshed Blender scene), laid out by
 ``pipeline.prepare`` with the default patch target, then rendered for ``--time`` seconds.
 Each row runs in two fresh processes, one after the other:
 
-1. *memory*: set-up, 4 iterations and one image pass under ``tracemalloc`` (which
+1. *memory*: set-up, 4 iterations, one image pass and the image under ``tracemalloc`` (which
    sees every NumPy array but not Embree's BVH): the peak of traced memory, per triangle;
 2. *render*: set-up (``prepare``; tracer, first shot and solver) and the render, timed,
    with the process's peak RSS; its error against the cached Cycles reference of the
@@ -64,6 +64,7 @@ def one(triangles, seconds, patches, mode):
         for _ in range(4):
             renderer.solver.step()
         renderer.image_pass()
+        renderer.image()
         peak = tracemalloc.get_traced_memory()[1] - base
         tracemalloc.stop()
         return dict(row, traced_peak_mb=peak / 1e6, traced_bytes_per_triangle=peak / len(scene.triangles))

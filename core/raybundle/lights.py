@@ -870,7 +870,10 @@ class PatchFirstShot:
         # initial_samples per side, shared out over a cluster's triangles by area
         counts = sc.tside_samples(initial_samples)[self.receiving_tsides]
         for r in range(initial_samples if len(self.receiving_tsides) else 0):
-            self._add(self.receiving_tsides[counts > r])
+            todo = self.receiving_tsides[counts > r]
+            step = 1 << 18                                # bounded temporaries on big scenes
+            for lo in range(0, len(todo), step):
+                self._add(todo[lo:lo + step])
 
     @property
     def n_lights(self):

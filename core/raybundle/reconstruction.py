@@ -61,10 +61,18 @@ class LinearReconstruction:
         self.empty = self.lumped <= 0                          # vertices without receiving area
         many = np.bincount(scene.tside_side, minlength=scene.n_sides) >= CLUSTER_TRIANGLES
         self._fit = ClusterFit(scene, self.area, self.ids, many) if many.any() else None
+        # the projection's mesh: the tsides of sides that are not clusters (all without any)
+        self._p = np.nonzero(~many[scene.tside_side])[0] if self._fit is not None else slice(None)
+        self._p_ids, self._p_area = self.ids[self._p], self.area[self._p]
+        self._p_flat = self._p_ids.ravel()
+        self._p_lumped = np.bincount(self._p_flat, np.repeat(self._p_area, 3) / 3, minlength=self.n_vertices)
+        self._p_empty = self._p_lumped <= 0
 
-    def _gather(self, per_corner):
-        """Sum (V, C) of per-corner values (TS, 3, C) onto the welded vertices."""
-        return np.stack([np.bincount(self._flat, per_corner[..., c].ravel(), minlength=self.n_vertices)
+    def _gather(self, per_corner, flat=None):
+        """Sum (V, C) of per-corner values (TS, 3, C) onto the welded vertices (``flat``:
+        the corners' vertex ids, default all tsides')."""
+        flat = self._flat if flat is None else flat
+        return np.stack([np.bincount(flat, per_corner[..., c].ravel(), minlength=self.n_vertices)
                          for c in range(per_corner.shape[-1])], axis=1)
 
     def averaged(self, side_values):
@@ -80,8 +88,9 @@ class LinearReconstruction:
         """Side values (S, C) -> (V, C): the L2 projection onto the hat functions,
         clamped at zero (the fit may overshoot below zero next to a jump, and the
         values are radiances).  Vertices without receiving area take :meth:`averaged`."""
-        tri = np.asarray(side_values, float)[self.scene.tside_side]
-        b = self._gather((self.area[:, None] * tri / 3)[:, None, :].repeat(3, axis=1))
+        side_values = np.asarray(side_values, float)
+        tri = side_values[self.scene.tside_side[self._p]]
+        b = self._gather((self._p_area[:, None] * tri / 3)[:, None, :].repeat(3, axis=1), self._p_flat)
         x = np.maximum(self._solve_mass(b), 0.0)
         if self.empty.any():
             x[self.empty] = self.averaged(side_values)[self.empty]
@@ -105,20 +114,20 @@ class LinearReconstruction:
     def _mass(self, v):
         """M v for v (V, C): ``M_uv = sum_T A_T (1 + [u = v]) / 12`` over the triangles
         holding u and v; rows of vertices without area are the identity."""
-        vi = v[self.ids]                                          # (TS, 3, C)
+        vi = v[self._p_ids]                                       # (TS, 3, C)
         s = vi.sum(axis=1)
         # (A/12) (2 v_a + v_b + v_c) = (A/12) (v_a + sum)
-        r = self._gather((self.area[:, None, None] / 12) * (vi + s[:, None, :]))
-        r[self.empty] = v[self.empty]
+        r = self._gather((self._p_area[:, None, None] / 12) * (vi + s[:, None, :]), self._p_flat)
+        r[self._p_empty] = v[self._p_empty]
         return r
 
     def _solve_mass(self, b, iterations=100, tol=1e-10):
         """x (V, C) with M x = b by Jacobi-preconditioned conjugate gradients (the lumped
         mass as preconditioner keeps the condition number below 4 on any mesh: a few
         tens of iterations; ``tol`` on the preconditioned residual, relative to b's)."""
-        diag = np.where(self.empty, 1.0, self.lumped)[:, None]
+        diag = np.where(self._p_empty, 1.0, self._p_lumped)[:, None]
         b = b.copy()
-        b[self.empty] = 0.0
+        b[self._p_empty] = 0.0
         x = b / diag
         r = b - self._mass(x)
         z = r / diag
@@ -196,11 +205,10 @@ class ClusterFit:
         self.vertices = np.nonzero(used & ~on_other)[0]
         vrow = np.full(n_vertices, -1, np.int64)
         vrow[self.vertices] = np.arange(len(self.vertices))
-        c = np.nonzero(vrow[cv] >= 0)[0]
-        self._corner_vertex = vrow[cv[c]]
-        self._corner_row = row[cs[c]]
-        self._corner_offset = corners.reshape(-1, 3)[c] - self.centroid[cs[c]]
-        self._corner_weight = np.repeat(a, 3)[c]
+        self._scene = scene
+        self._corner = np.nonzero(vrow[cv] >= 0)[0]              # flat tside corners 3 t + k
+        self._corner_vertex = vrow[cv[self._corner]]
+        self._weight = a                                          # per tside
 
     def vertex_values(self, side_values):
         """Values (len(vertices), C) of :attr:`vertices` from side values (S, C)."""
@@ -210,8 +218,17 @@ class ClusterFit:
         rhs = np.stack([np.stack([np.bincount(r1, self.wd[:, i] * dv[:, c], minlength=len(self.sides))
                                   for c in range(v.shape[1])], axis=1) for i in range(3)], axis=1)   # (Sc, 3, C)
         g = np.einsum("sij,sjc->sic", self.inverse, rhs)
-        pred = v[self.sides][self._corner_row] + np.einsum("nk,nkc->nc", self._corner_offset, g[self._corner_row])
-        w = self._corner_weight
-        num = np.stack([np.bincount(self._corner_vertex, w * pred[:, c], minlength=len(self.vertices))
-                        for c in range(v.shape[1])], axis=1)
-        return num / np.maximum(np.bincount(self._corner_vertex, w, minlength=len(self.vertices)), 1e-300)[:, None]
+        sc, nv, n_c = self._scene, len(self.vertices), v.shape[1]
+        num, den = np.zeros((nv, n_c)), np.zeros(nv)
+        step = 1 << 18                          # corners per chunk: bounded temporaries on big scenes
+        for lo in range(0, len(self._corner), step):
+            c = self._corner[lo:lo + step]
+            ts, k = np.divmod(c, 3)
+            side = sc.tside_side[ts]
+            x = sc.triangle_corners[sc.tside_triangle[ts], k] - self.centroid[side]
+            row, vert, w = self.row[side], self._corner_vertex[lo:lo + step], self._weight[ts]
+            for ch in range(n_c):
+                pred = v[side, ch] + np.einsum("nk,nk->n", x, g[row, :, ch])
+                num[:, ch] += np.bincount(vert, w * pred, minlength=nv)
+            den += np.bincount(vert, w, minlength=nv)
+        return num / np.maximum(den, 1e-300)[:, None]

@@ -361,9 +361,8 @@ class PatchScene:
         _, position = unique_rows(np.round(self.vertices / max(r * 1e-6, 1e-12)).astype(np.int64))
         pos = position[self.triangles[self.tside_triangle]]                    # (TS, 3)
         _, normal = unique_rows(np.round(self.tside_normal * 1e3).astype(np.int64))
-        tag = (self.triangle_corner_tag[self.tside_triangle] if self.triangle_corner_tag is not None
-               else np.zeros(pos.shape, np.int64))
-        cls = group_ids([pos.ravel(), np.repeat(normal, 3), tag.ravel()]).reshape(-1, 3)
+        tag = self.triangle_corner_tag[self.tside_triangle] if self.triangle_corner_tag is not None else None
+        cls = group_ids([pos.ravel(), np.repeat(normal, 3)] + ([] if tag is None else [tag.ravel()])).reshape(-1, 3)
         # tsides sharing an edge: its two end positions (sorted) as one key per tside edge
         # (flat index 3 t + k: tside t's edge from corner k to corner k + 1); consecutive
         # entries of one key are neighbours across it
@@ -373,10 +372,16 @@ class PatchScene:
             a, b = pos[:, k], pos[:, (k + 1) % 3]
             key[k::3] = np.minimum(a, b) * n_pos + np.maximum(a, b)
         order = np.argsort(key, kind="stable")
-        same = key[order[1:]] == key[order[:-1]]
-        t1, k1 = np.divmod(order[:-1][same], 3)
-        t2, k2 = np.divmod(order[1:][same], 3)
-        del key, order, same
+        key = key[order]
+        same = np.flatnonzero(key[1:] == key[:-1])
+        del key
+        e1, e2 = order[same], order[same + 1]
+        del order, same
+        # tsides of one normal are welded already (same class at each shared position)
+        turn = normal[e1 // 3] != normal[e2 // 3]
+        e1, e2 = e1[turn], e2[turn]
+        t1, k1 = np.divmod(e1, 3)
+        t2, k2 = np.divmod(e2, 3)
         smooth = np.einsum("ij,ij->i", self.tside_normal[t1], self.tside_normal[t2]) > np.cos(SMOOTH_ANGLE)
         t1, k1, t2, k2 = t1[smooth], k1[smooth], t2[smooth], k2[smooth]
         # the corner of t2 at the position of t1's corner k1, and the other end
@@ -385,7 +390,7 @@ class PatchScene:
         c2b = np.where(flip, k2, (k2 + 1) % 3)
         links = []
         for c1, c2 in ((k1, c2a), ((k1 + 1) % 3, c2b)):
-            ok = tag[t1, c1] == tag[t2, c2]
+            ok = np.ones(len(t1), bool) if tag is None else tag[t1, c1] == tag[t2, c2]
             links.append(np.stack([cls[t1[ok], c1[ok]], cls[t2[ok], c2[ok]]], axis=1))
         return _components(int(cls.max(initial=-1)) + 1, np.concatenate(links))[cls]
 

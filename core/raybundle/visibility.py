@@ -172,7 +172,7 @@ class RayTracer:
         shut = np.bincount(sc.tside_side, a * frac, minlength=sc.n_sides)[sc.tside_side] <= 0
         return np.where(shut, np.maximum(frac, 0.5 / k), frac)
 
-    def _open_fraction(self, tsides, k, rng, chunk=1 << 20):
+    def _open_fraction(self, tsides, k, rng, chunk=1 << 18):
         """Open fractions (N,) of ``tsides`` (N,) from ``k`` (N,) stratified points each."""
         out = np.zeros(len(tsides))
         for kk in np.unique(k):
