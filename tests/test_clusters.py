@@ -74,7 +74,7 @@ def test_a_sphere_is_grouped_within_one_normal_cell_per_cluster():
     sc = build_scene(v, t, np.zeros(len(t), int), mats)
     p = make_patches(sc, patches=300)
     assert 200 < p.n_patches < 400 and len(p.triangles) == len(t)
-    cell, _ = normal_cells(p.triangle_normal)
+    cell = normal_cells(p.triangle_normal)
     per_patch = np.zeros(p.n_patches, np.int64)
     per_patch[p.triangle_patch] = cell
     assert np.all(cell == per_patch[p.triangle_patch])

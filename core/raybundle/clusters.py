@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import PatchScene, cut_at_contacts, edge_for_patches, group_ids, split_triangles
+from .scene import PatchScene, cut_at_contacts, edge_for_patches, group_ids, split_triangles, subdivide
 
 #: cube-map cells per face edge for the normal direction of a cluster (150 directions; odd, so
 #: that axis-aligned normals lie mid-cell, never on a border rounding could flip)
@@ -54,19 +54,15 @@ def tessellate(scene: PatchScene, triangles) -> PatchScene:
 
 
 def normal_cells(normals, cells=NORMAL_CELLS):
-    """Cube-map cell of unit ``normals`` (N, 3): ``(cell (N,) int in [0, 6 cells^2),
-    centre (N, 3))``, the unit direction through the middle of the cell."""
+    """Cube-map cell (N,) int in [0, 6 cells^2) of unit ``normals`` (N, 3): the major axis
+    and its sign, then a cells x cells grid over the other two components divided by it."""
     n = np.asarray(normals, float)
     axis = np.argmax(np.abs(n), axis=1)
     major = np.take_along_axis(n, axis[:, None], 1)[:, 0]
     others = np.array([(1, 2), (0, 2), (0, 1)])[axis]
     uv = np.take_along_axis(n, others, 1) / np.maximum(np.abs(major), 1e-300)[:, None]   # in [-1, 1]
     iuv = np.clip(((uv + 1.0) * 0.5 * cells).astype(np.int64), 0, cells - 1)
-    cell = ((axis * 2 + (major > 0)) * cells + iuv[:, 0]) * cells + iuv[:, 1]
-    centre = np.zeros_like(n)
-    np.put_along_axis(centre, axis[:, None], np.where(major > 0, 1.0, -1.0)[:, None], 1)
-    np.put_along_axis(centre, others, (iuv + 0.5) / cells * 2.0 - 1.0, 1)
-    return cell, centre / np.linalg.norm(centre, axis=1, keepdims=True)
+    return ((axis * 2 + (major > 0)) * cells + iuv[:, 0]) * cells + iuv[:, 1]
 
 
 class _Grouping:
@@ -79,7 +75,7 @@ class _Grouping:
         self.centroid = corners.mean(axis=1)
         self.lo = scene.vertices.min(axis=0)
         self.edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
-        self.cell, _ = normal_cells(scene.triangle_normal)
+        self.cell = normal_cells(scene.triangle_normal)
         # offset along the triangle's own normal: constant over a plane
         self.offset = np.einsum("ij,ij->i", scene.triangle_normal, self.centroid - self.lo)
 
@@ -125,20 +121,14 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     smaller than a patch gets exactly :func:`~raybundle.scene.subdivide`'s layout."""
     if (patches is None) == (size is None):
         raise ValueError("give exactly one of patches and size")
+    if patches is not None and patches >= len(scene.triangles):     # fewer triangles than patches: cut
+        return subdivide(scene, patches=patches, contacts=contacts)
     grouping = _Grouping(scene)
-    if size is not None:
-        h = float(size)
-    elif patches < len(scene.triangles):     # more triangles than patches: group
-        h = patch_size(scene, patches, grouping)
-    else:                                     # fewer: cut (subdivide's layout)
-        h = edge_for_patches(scene, patches)
-        grouping = None
+    h = float(size) if size is not None else patch_size(scene, patches, grouping)
     if not h > 0:
         raise ValueError("the patch size must be positive")
-    small = grouping.small(h) if grouping is not None else np.zeros(len(scene.triangles), bool)
+    small = grouping.small(h)
     if not small.any():
-        from .scene import subdivide
-
         return subdivide(scene, max_edge=h, contacts=contacts)
     fine, k, row = split_triangles(scene, h, whole=small)
     fine_small = small[row]

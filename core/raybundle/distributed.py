@@ -30,7 +30,10 @@ def _run_chain(scene, settings_dict, seed, deadline, iterations, report_seconds,
     """On a worker: one chain.  Every ``report_seconds`` its state goes to the Variable
     ``name`` and its iteration count to the scheduler's metadata ``[name, "iterations"]``
     (small, polled by the client for progress); returns the final state."""
-    from distributed import Variable, get_client
+    try:
+        from distributed import Variable, get_client
+    except ImportError as e:           # pragma: no cover - only ever called on a Dask worker
+        raise RuntimeError("a chain runs on a Dask worker: pip install raybundle[distributed]") from e
 
     from .imaging import RenderSettings
     from .pipeline import make_renderer
