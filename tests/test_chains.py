@@ -108,8 +108,9 @@ def test_cli_workers_writes_the_merged_image(tmp_path):
     from raybundle.io import read_exr
 
     out, stats = tmp_path / "f.exr", tmp_path / "f.json"
-    p = subprocess.run([sys.executable, "-m", "raybundle", "render", "furnace", "--iterations", "10", "--patches", "100",
-                        "--resolution", "12", "12", "--workers", "2", "--out", str(out), "--stats", str(stats)],
+    p = subprocess.run([sys.executable, "-m", "raybundle", "render", "furnace", "--iterations", "10",
+                        "--patches", "100", "--resolution", "12", "12", "--workers", "2", "--out", str(out),
+                        "--stats", str(stats)],
                        capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     s = json.loads(stats.read_text())

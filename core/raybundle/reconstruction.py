@@ -20,7 +20,8 @@ Two maps, both linear in the side values and exact on constants:
 
 A patch that is a cluster of many small triangles (:mod:`raybundle.clusters`) has hat
 functions on its own fine triangles, so the projection would only round its step over
-one of them.  Its welded vertices (those on cluster sides only) take instead the mean of
+one of them.  The projection therefore runs over the other sides only, and the welded
+vertices of cluster sides alone take instead the mean of
 the linear fits ``v_s + g_s . (x - c_s)`` of the clusters around them, with ``c_s`` the
 cluster's centroid and ``g_s`` the least-squares gradient in its tangent plane over the
 sides it shares a welded vertex with (weights 1 / distance^2): exact on linear
@@ -67,6 +68,10 @@ class LinearReconstruction:
         self._p_flat = self._p_ids.ravel()
         self._p_lumped = np.bincount(self._p_flat, np.repeat(self._p_area, 3) / 3, minlength=self.n_vertices)
         self._p_empty = self._p_lumped <= 0
+        # vertices neither the projection nor a fit gives a value: the sides' mean around them
+        self._fallback = self._p_empty.copy()
+        if self._fit is not None:
+            self._fallback[self._fit.vertices] = False
 
     def _gather(self, per_corner, flat=None):
         """Sum (V, C) of per-corner values (TS, 3, C) onto the welded vertices (``flat``:
@@ -92,8 +97,8 @@ class LinearReconstruction:
         tri = side_values[self.scene.tside_side[self._p]]
         b = self._gather((self._p_area[:, None] * tri / 3)[:, None, :].repeat(3, axis=1), self._p_flat)
         x = np.maximum(self._solve_mass(b), 0.0)
-        if self.empty.any():
-            x[self.empty] = self.averaged(side_values)[self.empty]
+        if self._fallback.any():
+            x[self._fallback] = self.averaged(side_values)[self._fallback]
         if self._fit is not None:
             x[self._fit.vertices] = np.maximum(self._fit.vertex_values(np.asarray(side_values, float)), 0.0)
         return x

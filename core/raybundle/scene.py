@@ -762,9 +762,10 @@ def split_triangles(scene: PatchScene, max_edge, whole=None):
     t = np.concatenate(tris)
     # weld coincident vertices so that triangles of one face share corners
     _, r = scene.bounding_sphere
-    q = np.round(v / max(r * 1e-7, 1e-12)).astype(np.int64)
+    # (a vertex no triangle uses may be NaN: build_scene checks only those in use)
+    q = np.round(np.where(np.isfinite(v), v, 0.0) / max(r * 1e-7, 1e-12)).astype(np.int64)
     first, inv = unique_rows(q)
-    used, t = np.unique(inv[t], return_inverse=True)     # only the corners in use (not a NaN left unused)
+    used, t = np.unique(inv[t], return_inverse=True)     # only the corners in use
     v, t = v[first[used]], t.reshape(-1, 3)
     per_tri = [np.concatenate([np.repeat(a[np.nonzero(k_all == k)[0]], k * k) for k in np.unique(k_all)])
                for a in (scene.triangle_solid, scene.triangle_two_sided, k_all, np.arange(len(k_all)))]
