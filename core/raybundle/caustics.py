@@ -115,6 +115,11 @@ class CausticShot:
                 self._dsum[:, k] += np.bincount(rec, luminance(c) * d[:, k], minlength=sc.n_sides)
         self._update()
 
+    def set_sums(self, total, dtotal, samples):
+        """Replace the running sums and sample count (chains pooled, :mod:`raybundle.chains`)."""
+        self._sum, self._dsum, self.samples = total.copy(), dtotal.copy(), samples
+        self._update()
+
     def _update(self):
         self.E = self._sum / max(self.samples, 1)
         norm = np.linalg.norm(self._dsum, axis=1, keepdims=True)

@@ -47,10 +47,16 @@ class ChainState:
     chains: int = 1
 
 
+def _renderer_and_solver(renderer_or_solver):
+    """(renderer or None, solver) of a renderer or a solver."""
+    if hasattr(renderer_or_solver, "solver"):
+        return renderer_or_solver, renderer_or_solver.solver
+    return None, renderer_or_solver
+
+
 def state(renderer_or_solver) -> ChainState:
     """The :class:`ChainState` of a renderer (image included) or a solver (copies)."""
-    renderer = renderer_or_solver if hasattr(renderer_or_solver, "solver") else None
-    solver = renderer.solver if renderer is not None else renderer_or_solver
+    renderer, solver = _renderer_and_solver(renderer_or_solver)
     fs, cs = solver.first_shot, solver.caustic
     image = None
     if renderer is not None:
@@ -88,17 +94,14 @@ def merge(states) -> ChainState:
 def apply(merged: ChainState, renderer_or_solver):
     """Make a renderer (or solver) built on the same prepared scene hold ``merged``: its
     image (:meth:`~raybundle.imaging.Renderer.image`) or bake is then the pooled one."""
-    renderer = renderer_or_solver if hasattr(renderer_or_solver, "solver") else None
-    solver = renderer.solver if renderer is not None else renderer_or_solver
+    renderer, solver = _renderer_and_solver(renderer_or_solver)
     if merged.mean_incoming.shape != solver.mean_incoming.shape:
         raise ValueError("the state comes from another scene or patch layout")
     solver.averaged = merged.averaged
     solver.mean_incoming = merged.mean_incoming.copy()
     solver.first_shot.set_sums(*merged.first_shot)
     if solver.caustic is not None and merged.caustic is not None:
-        cs = solver.caustic
-        cs._sum, cs._dsum, cs.samples = merged.caustic[0].copy(), merged.caustic[1].copy(), merged.caustic[2]
-        cs._update()
+        solver.caustic.set_sums(*merged.caustic)
     for k, v in merged.stats.items():
         setattr(solver.stats, k, v)
     if renderer is not None and merged.image is not None:

@@ -54,9 +54,23 @@ def analytic_error(image, exact):
             "pixel_relative_rmse": float(np.sqrt((((img - exact) / exact) ** 2).mean()))}
 
 
+def _write_outputs(args, scene, image, stats):
+    """The EXR (stats in its header), the PNG beside it and ``--stats``; returns the stats
+    with the version and, for scenes with an analytic answer, the error against it."""
+    from .io import write_exr, write_json, write_png
+
+    stats = dict(stats, version=__version__)
+    if scene.analytic_radiance is not None:
+        stats.update(analytic_error(image, scene.analytic_radiance))
+    write_exr(args.out, image, {"raybundle_" + k: v for k, v in stats.items() if isinstance(v, (int, float, str))})
+    write_png(os.path.splitext(args.out)[0] + ".png", image)
+    if args.stats:
+        write_json(args.stats, stats)
+    return stats
+
+
 def cmd_render(args):
     from .imaging import RenderSettings
-    from .io import write_exr, write_json, write_png
     from .pipeline import prepare, render
     from .scene import SceneError
     from .scenes import load_scene
@@ -91,14 +105,7 @@ def cmd_render(args):
     finally:
         signal.signal(signal.SIGINT, old)
         bar.close()
-    stats = dict(result.stats, version=__version__)
-    if scene.analytic_radiance is not None:
-        stats.update(analytic_error(result.image, scene.analytic_radiance))
-    header = {"raybundle_" + k: v for k, v in stats.items() if isinstance(v, (int, float, str))}
-    write_exr(args.out, result.image, header)
-    write_png(os.path.splitext(args.out)[0] + ".png", result.image)
-    if args.stats:
-        write_json(args.stats, stats)
+    stats = _write_outputs(args, scene, result.image, result.stats)
     state = "stopped early" if result.cancelled else "done"
     print(f"{state}: {stats['iterations']} iterations in {stats['seconds']:.1f} s, {scene.n_patches} patches, "
           f"{stats['rays_traced'] / 1e6:.1f} M rays -> {args.out}", file=sys.stderr)
@@ -111,7 +118,6 @@ def cmd_render(args):
 def _render_chains(args, scene, settings, stage):
     """``render --workers N`` / ``--scheduler ADDRESS``: independent chains on Dask, merged."""
     from .distributed import render_chains
-    from .io import write_exr, write_json, write_png
 
     try:
         image, merged, its = render_chains(scene, settings, seconds=args.time, iterations=args.iterations,
@@ -119,14 +125,8 @@ def _render_chains(args, scene, settings, stage):
     except (RuntimeError, ValueError, OSError) as e:
         print(f"raybundle: error: {e}", file=sys.stderr)
         return 2
-    stats = dict(merged.stats, chains=merged.chains, chain_iterations=its, patches=int(scene.n_patches),
-                 version=__version__)
-    if scene.analytic_radiance is not None:
-        stats.update(analytic_error(image, scene.analytic_radiance))
-    write_exr(args.out, image, {"raybundle_" + k: v for k, v in stats.items() if isinstance(v, (int, float, str))})
-    write_png(os.path.splitext(args.out)[0] + ".png", image)
-    if args.stats:
-        write_json(args.stats, stats)
+    stats = _write_outputs(args, scene, image, dict(merged.stats, chains=merged.chains, chain_iterations=its,
+                                                    patches=int(scene.n_patches)))
     print(f"done: {merged.chains} chains, {stats['iterations']} iterations ({its}), {scene.n_patches} patches "
           f"-> {args.out}", file=sys.stderr)
     return 0

@@ -32,6 +32,8 @@ own input face.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from .scene import PatchScene, cut_at_contacts, edge_for_patches, group_ids, split_triangles, subdivide
@@ -49,8 +51,7 @@ def tessellate(scene: PatchScene, triangles) -> PatchScene:
     if scene.texture is not None:
         raise ValueError("tessellate: scenes with textures are not supported")
     fine, _, _ = split_triangles(scene, edge_for_patches(scene, triangles))
-    fine.triangle_source = np.arange(len(fine.triangles))
-    return fine
+    return replace(fine, triangle_source=np.arange(len(fine.triangles)))
 
 
 def normal_cells(normals, cells=NORMAL_CELLS):
@@ -140,16 +141,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     patch[fine_small] = cluster_of[row[fine_small]]
     others = np.nonzero(~fine_small)[0]
     patch[others] = n_clusters + np.arange(len(others))
-    out = _with_patches(fine, patch)
+    out = replace(fine, triangle_patch=patch)
     if not contacts:
         return out
     return cut_at_contacts(out, np.nonzero((k > 1) & ~fine_small)[0], h, exclude=fine_small)
-
-
-def _with_patches(scene: PatchScene, patch) -> PatchScene:
-    """A copy of ``scene`` (same arrays) with ``triangle_patch`` = ``patch``."""
-    return PatchScene(scene.vertices, scene.triangles, scene.triangle_material, np.asarray(patch, np.int64),
-                      scene.triangle_source, scene.materials, scene.point_lights, scene.camera,
-                      scene.analytic_radiance, scene.name, scene.dropped_triangles, scene.triangle_solid,
-                      scene.triangle_two_sided, scene.sun_lights, scene.area_lights, scene.environment,
-                      scene.triangle_corner_tag, texture=scene.texture)

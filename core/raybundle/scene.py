@@ -817,20 +817,10 @@ def closed_solid_triangles(vertices, triangles, tol=1e-7):
     twin = (uniq[pos] == rev)
     ok_edge = (count[inv.reshape(-1)] == 1) & twin & (count[pos] == 1)
     tri_ok = ok_edge.reshape(-1, 3).all(axis=1)
-    # connected components over shared (undirected) edges, by min-label propagation
+    # connected components over shared (undirected) edges
     und = np.minimum(a, b) * nv + np.maximum(a, b)
     order = np.argsort(und, kind="stable")
     same = und[order][1:] == und[order][:-1]
-    e1, e2 = order[:-1][same] // 3, order[1:][same] // 3
-    label = np.arange(len(t))
-    while True:
-        m = np.minimum(label[e1], label[e2])
-        new = label.copy()
-        np.minimum.at(new, e1, m)
-        np.minimum.at(new, e2, m)
-        new = new[new]
-        if np.array_equal(new, label):
-            break
-        label = new
+    label = _components(len(t), np.stack([order[:-1][same] // 3, order[1:][same] // 3], axis=1))
     bad = np.bincount(label, ~tri_ok, minlength=len(t)) > 0
     return ~bad[label]
