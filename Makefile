@@ -36,8 +36,8 @@ bench-boxes: $(STAMP)
 bench-bake: $(STAMP)
 	$(PY) tools/bench_bake.py --out out/bench-bake
 
-# The Cornell box meshed with 4k to 1M triangles: error, set-up time and memory against triangle count
-# (about 8 minutes on 2 cores; needs out/bench-cornell's Cycles reference from bench-boxes)
+# The Cornell box meshed with 4k to 4M triangles: error, set-up time and memory against triangle count
+# (about 15 minutes on 2 cores and 5 GB of memory; needs out/bench-cornell's Cycles reference from bench-boxes)
 bench-scale: $(STAMP)
 	$(PY) tools/bench_scale.py --out out/bench-scale --one-patch-per-triangle 4000 16000 64000
 

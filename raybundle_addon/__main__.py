@@ -134,6 +134,9 @@ def main(argv=None):
         signal.signal(signal.SIGINT, old)
     bar.close()
     job = state["job"]
+    if job is not None and job.last_image is None and job.stop.is_set():
+        print("stopped during set-up: nothing written", file=sys.stderr)
+        return 130
     if job is None or job.last_image is None:
         return _fail("the render produced no image", 1)
     from .props import LAST_RUN
@@ -156,6 +159,7 @@ def _bake(args, scene):
     import bpy
 
     from raybundle.cli import ProgressBar
+    from raybundle.pipeline import Cancelled
     from raybundle.scene import SceneError
 
     from .bake import BakeJob
@@ -186,6 +190,10 @@ def _bake(args, scene):
     except (SceneError, ValueError) as e:
         bar.close()
         return _fail(str(e))
+    except Cancelled as e:
+        bar.close()
+        print(f"{e}: nothing written", file=sys.stderr)
+        return 130
     finally:
         signal.signal(signal.SIGINT, old)
     for w in out.warnings:

@@ -169,7 +169,8 @@ class BakeJob:
     # ----------------------------------------------------------------- start
     def start(self):
         """Export, choose the targets, prepare the solver.  Raises SceneError/ValueError
-        (one-line reasons) for what cannot be baked."""
+        (one-line reasons) for what cannot be baked, :class:`raybundle.pipeline.Cancelled`
+        when ``stop`` is set during set-up (nothing is written)."""
         from raybundle import pipeline
         from raybundle.imaging import RenderSettings
         from raybundle.solvers import SOLVERS
@@ -190,14 +191,14 @@ class BakeJob:
             if not self.lightmap_targets and not b.color_attribute and not b.camera:
                 raise ValueError("nothing to bake: no selected mesh has a UV map for a lightmap")
         self.timings["export_seconds"] = time.perf_counter() - self.t_start
-        scene = pipeline.prepare(self.export.scene, patches=s.patches)
+        scene = pipeline.prepare(self.export.scene, patches=s.patches, stop=self.stop)
         rs = RenderSettings(seed=s.seed, bundle_resolution=s.bundle_resolution,
                             first_shot="auto" if s.first_shot else "none")
         if b.camera:
-            self.renderer = pipeline.make_renderer(scene, rs, solver=s.method)
+            self.renderer = pipeline.make_renderer(scene, rs, solver=s.method, stop=self.stop)
             self.solver = self.renderer.solver
         else:
-            self.solver = pipeline.make_solver(scene, rs, solver=s.method)
+            self.solver = pipeline.make_solver(scene, rs, solver=s.method, stop=self.stop)
         self.timings["prepare_seconds"] = time.perf_counter() - self.t_start - self.timings["export_seconds"]
         self._t_iter = time.perf_counter()
         return self

@@ -8,7 +8,9 @@ every few hundred milliseconds (at most ~1/5 of the time goes to previews), and
 the fully resolved image at the end.  It stops at the time limit, the iteration
 count, or when its ``stop`` event is set; the engine sets that event when
 Blender's ``test_break()`` says so (Esc), tests and the command line set it
-directly.  The image so far is kept either way.
+directly.  The image so far is kept either way; a stop during set-up (export,
+patch layout, tracer, first shot) ends the job at the next set-up step with
+:class:`raybundle.pipeline.Cancelled` and no image.
 
 The engine pushes images with ``RenderPass.rect.foreach_set`` (rows bottom-up,
 RGBA float32, alpha 1) into one result per view layer; the pixels are linear
@@ -124,11 +126,15 @@ class RenderJob:
             self.first_image_seconds = time.perf_counter() - self.t_start
         self._notify("image")
 
-    def _poll(self):
-        """Between iterations: Esc, previews.  Returns True to stop."""
+    def _stopped(self):
+        """Esc (``user_break``) or ``stop``: True once either asked to stop."""
         if self.user_break is not None and self.user_break():
             self.stop.set()
-        if self.stop.is_set():
+        return self.stop.is_set()
+
+    def _poll(self):
+        """Between iterations: Esc, previews.  Returns True to stop."""
+        if self._stopped():
             return True
         now = time.perf_counter()
         if self.images == 0 or now - self._last_push >= self._interval:
@@ -154,7 +160,8 @@ class RenderJob:
     # ------------------------------------------------------------------ run
     def run(self):
         """Export, prepare and iterate; returns :class:`RenderOutcome`.  Raises
-        SceneError/ValueError for scenes and settings that cannot be rendered."""
+        SceneError/ValueError for scenes and settings that cannot be rendered, and
+        :class:`raybundle.pipeline.Cancelled` when stopped during set-up (no image yet)."""
         from raybundle import pipeline
         from raybundle.imaging import RenderSettings
         from raybundle.solvers import SOLVERS
@@ -174,10 +181,11 @@ class RenderJob:
             if self.stats_cb is not None:
                 self.stats_cb(f"Ray Bundle GI | Preparing {self.export.counts['triangles']} triangles")
             stage = None if self.stats_cb is None else (lambda text: self.stats_cb(f"Ray Bundle GI | {text}"))
-            scene = pipeline.prepare(self.export.scene, patches=s.patches, stage=stage)
+            scene = pipeline.prepare(self.export.scene, patches=s.patches, stage=stage, stop=self._stopped)
             settings = RenderSettings(seed=s.seed, bundle_resolution=s.bundle_resolution,
                                       first_shot="auto" if s.first_shot else "none")
-            self.renderer = pipeline.make_renderer(scene, settings, solver=s.method, stage=stage)
+            self.renderer = pipeline.make_renderer(scene, settings, solver=s.method, stage=stage,
+                                                   stop=self._stopped)
             t_prepared = time.perf_counter() - self.t_start
             try:
                 result = self.renderer.run(iterations=s.iterations or None,
@@ -215,6 +223,7 @@ def _record(scene_name, outcome=None, error=None):
 def render_with_engine(engine, depsgraph):
     """The body of ``RAYBUNDLE.render``: a :class:`RenderJob` whose images go to the
     engine's render result.  Never raises: errors become reports."""
+    from raybundle.pipeline import Cancelled
     from raybundle.scene import SceneError
 
     scene = depsgraph.scene
@@ -258,6 +267,9 @@ def render_with_engine(engine, depsgraph):
     except (SceneError, ValueError) as e:
         _record(scene.name, error=str(e))
         engine.report({"ERROR"}, f"Ray Bundle GI: {e}")
+    except Cancelled as e:          # Esc during set-up: nothing rendered, nothing to report as an error
+        LAST_RUN[scene.name] = {"status": str(e), "warnings": []}
+        engine.update_stats("", "Ray Bundle GI | Stopped during set-up")
     except Exception as e:   # a bug: keep Blender alive, say what happened, keep the trace in the console
         traceback.print_exc()
         _record(scene.name, error=f"{type(e).__name__}: {e}")

@@ -67,6 +67,7 @@ class RAYBUNDLE_OT_bake(bpy.types.Operator):
         return {"CANCELLED"}
 
     def execute(self, context):
+        from raybundle.pipeline import Cancelled
         from raybundle.scene import SceneError
 
         job = _make_job(context)
@@ -74,6 +75,10 @@ class RAYBUNDLE_OT_bake(bpy.types.Operator):
             outcome = job.run()
         except (SceneError, ValueError) as e:
             return self._fail(context, str(e), job)
+        except Cancelled as e:
+            LAST_BAKE[context.scene.name] = {"status": str(e), "warnings": [], "stats": {}}
+            self.report({"INFO"}, f"Ray Bundle GI bake: {e}; nothing written")
+            return {"CANCELLED"}
         except Exception as e:      # a bug: keep Blender alive, keep the trace in the console
             traceback.print_exc()
             return self._fail(context, f"internal error ({type(e).__name__}: {e}); please report it", job)

@@ -225,6 +225,14 @@ def test_cancel_keeps_a_valid_partial_bake_and_errors_are_one_line(fresh):
     assert out.cancelled and out.stats["iterations"] < 1000
     _, rgba = attribute(room)
     assert np.all(np.isfinite(rgba)) and rgba[:, :3].min() > 0
+    # stopped before set-up is done: pipeline.Cancelled, no solver, the attribute left as it was
+    from raybundle.pipeline import Cancelled
+
+    early = BakeJob(bpy.context.evaluated_depsgraph_get())
+    early.stop.set()
+    with pytest.raises(Cancelled, match="during set-up"):
+        early.start()
+    assert early.solver is None and np.array_equal(attribute(room)[1], rgba)
     # nothing asked for: a one-line error through the operator
     bake_settings(fresh, iterations=5, bake_color_attribute=False)
     with pytest.raises(RuntimeError, match="nothing to bake"):

@@ -214,6 +214,39 @@ def test_cancel_during_bpy_render_writes_the_partial_image(fresh, tmp_path):
     assert img.shape == (24, 24, 3) and np.isfinite(img).all() and img.mean() > 0
 
 
+def test_esc_during_set_up_stops_before_the_iteration_without_an_image(fresh):
+    """Esc (``test_break``) while the scene is being laid out: the next set-up step raises
+    pipeline.Cancelled, no image is shown; through bpy.ops.render.render the engine records
+    it as stopped, not as an error."""
+    from raybundle.pipeline import Cancelled
+    from raybundle_addon import engine
+    from raybundle_addon.engine import JobSettings, RenderJob
+
+    small_lit_scene()
+    steps, shown = [], []
+
+    def stats(text):
+        steps.append(text)
+
+    job = RenderJob(bpy.context.evaluated_depsgraph_get(), JobSettings(time_limit=60.0, patches=500), stats=stats,
+                    display=lambda image, final: shown.append(final),
+                    user_break=lambda: any("building the ray tracer" in t for t in steps))
+    with pytest.raises(Cancelled, match="before first shot"):
+        job.run()
+    assert job.stop.is_set() and not shown and job.renderer is None and job not in engine.active_jobs
+
+    def cancel(job, event):
+        if event == "export":
+            engine.cancel_all()
+    engine.observers.append(cancel)
+    try:
+        bpy.context.scene.render.engine = "RAYBUNDLE"
+        bpy.ops.render.render(write_still=False)
+    finally:
+        engine.observers.remove(cancel)
+    assert last_run()["status"].startswith("stopped during set-up, before laying out"), last_run()
+
+
 # ---------------------------------------------------------- errors, settings
 @pytest.mark.parametrize("case,message", [("no lights", "no lights"), ("no meshes", "no visible mesh"),
                                           ("no camera", "no camera"), ("zero time", "time limit")])

@@ -56,6 +56,26 @@ def test_ctrl_c_stops_and_still_writes_the_image(tmp_path):
     assert np.isfinite(img).all() and img.mean() > 0.01
 
 
+def test_ctrl_c_during_set_up_writes_nothing(tmp_path):
+    """Ctrl-C while a 256k-triangle scene is laid out (about 2 s of set-up on 2 cores): the next
+    set-up step stops the run, exit 130, no image and no half-written file."""
+    from raybundle.clusters import tessellate
+    from raybundle.scenes import load_scene
+
+    big = tmp_path / "big.npz"
+    tessellate(load_scene("cornell"), 256_000).save_npz(big)
+    out = tmp_path / "c.exr"
+    proc = subprocess.Popen([sys.executable, "-m", "raybundle", "render", str(big), "--time", "60",
+                             "--resolution", "16", "16", "--out", str(out)], stderr=subprocess.PIPE, text=True)
+    buf, t0 = "", time.time()
+    while "laying out the patches" not in buf and time.time() - t0 < 120 and proc.poll() is None:
+        buf += proc.stderr.read(1)
+    proc.send_signal(signal.SIGINT)
+    rest = proc.communicate(timeout=120)[1]
+    assert proc.returncode == 130 and "stopped during set-up" in rest and "nothing written" in rest, buf + rest
+    assert "Traceback" not in rest and sorted(os.listdir(tmp_path)) == ["big.npz"]
+
+
 def test_bad_scene_names_and_files_give_errors(tmp_path):
     p = run_cli("render", "no-such-scene", "--iterations", "1", "--out", str(tmp_path / "x.exr"))
     assert p.returncode == 2 and "unknown scene" in p.stderr and "Traceback" not in p.stderr

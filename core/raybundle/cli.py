@@ -71,7 +71,7 @@ def _write_outputs(args, scene, image, stats):
 
 def cmd_render(args):
     from .imaging import RenderSettings
-    from .pipeline import prepare, render
+    from .pipeline import Cancelled, prepare, render
     from .scene import SceneError
     from .scenes import load_scene
 
@@ -82,26 +82,29 @@ def cmd_render(args):
     def stage(text):
         print(f"raybundle: {text} ({time.perf_counter() - t_start:.1f} s)", file=sys.stderr, flush=True)
 
+    stop = threading.Event()
+    old = signal.signal(signal.SIGINT, lambda *_: stop.set())   # Ctrl-C: set-up stops, the iteration writes
+    bar = ProgressBar()
     try:
         scene = load_scene(args.scene)
         if args.resolution:
             if scene.camera is None:
                 raise SceneError("the scene has no camera")
             scene.camera = scene.camera.with_resolution(*args.resolution)
-        scene = prepare(scene, patches=args.patches, stage=stage)
+        scene = prepare(scene, patches=args.patches, stage=stage, stop=stop)
+        settings = RenderSettings(seed=args.seed, sequence=args.sequence, bundle_resolution=args.bundle_resolution,
+                                  threads=args.threads)
+        if args.workers or args.scheduler:
+            signal.signal(signal.SIGINT, old)
+            return _render_chains(args, scene, settings, stage)
+        result = render(scene, settings, iterations=args.iterations, seconds=args.time, progress=bar, stop=stop,
+                        stage=stage)
     except (SceneError, ValueError) as e:
         print(f"raybundle: error: {e}", file=sys.stderr)
         return 2
-    settings = RenderSettings(seed=args.seed, sequence=args.sequence, bundle_resolution=args.bundle_resolution,
-                              threads=args.threads)
-    if args.workers or args.scheduler:
-        return _render_chains(args, scene, settings, stage)
-    stop = threading.Event()
-    old = signal.signal(signal.SIGINT, lambda *_: stop.set())   # Ctrl-C: finish the iteration, write
-    bar = ProgressBar()
-    try:
-        result = render(scene, settings, iterations=args.iterations, seconds=args.time, progress=bar, stop=stop,
-                        stage=stage)
+    except Cancelled as e:
+        print(f"raybundle: {e}: nothing written", file=sys.stderr)
+        return 130
     finally:
         signal.signal(signal.SIGINT, old)
         bar.close()

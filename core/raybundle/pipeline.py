@@ -18,13 +18,28 @@ from .visibility import RayTracer
 DEFAULT_PATCHES = 4000
 
 
-def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None, stage=None):
+class Cancelled(Exception):
+    """Set-up was stopped (the caller's ``stop``) before the first iteration: there is no image yet."""
+
+
+def _step(stage, stop, text):
+    """Start a set-up step: raise :class:`Cancelled` if ``stop`` (a callable or an
+    object with ``is_set()``, as for :meth:`~raybundle.imaging.Renderer.run`) says so,
+    else tell ``stage(text)``."""
+    if stop is not None and (stop.is_set() if hasattr(stop, "is_set") else stop()):
+        raise Cancelled(f"stopped during set-up, before {text}")
+    if stage is not None:
+        stage(text)
+
+
+def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None, stage=None, stop=None):
     """The patch layout of ``scene``: about ``patches`` patches, large faces cut and
     triangles much smaller than a patch grouped (:func:`~raybundle.clusters.make_patches`),
     or every face cut to edges <= ``max_edge`` m; ``patches`` = 0: one patch per triangle.
-    ``stage(text)`` is told what set-up step starts (progress for large scenes)."""
-    if stage is not None and (patches or max_edge is not None):
-        stage(f"laying out the patches of {len(scene.triangles):,} triangles")
+    ``stage(text)`` is told what set-up step starts (progress for large scenes); a
+    ``stop`` that is set when a step starts raises :class:`Cancelled`."""
+    if patches or max_edge is not None:
+        _step(stage, stop, f"laying out the patches of {len(scene.triangles):,} triangles")
     if max_edge is not None:
         return subdivide(scene, max_edge=max_edge)
     if patches:
@@ -32,39 +47,49 @@ def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None, stage=None):
     return scene
 
 
-def make_solver(scene, settings: RenderSettings | None = None, solver=StochasticIterationSolver.name, stage=None):
+def make_solver(scene, settings: RenderSettings | None = None, solver=StochasticIterationSolver.name, stage=None,
+                stop=None):
     """Tracer + first shot + solver for a prepared scene (no camera needed: bakes);
     the solver holds them as ``solver.tracer`` and ``solver.direct``.  ``stage(text)``
-    as in :func:`prepare`."""
+    and ``stop`` as in :func:`prepare`."""
     settings = settings or RenderSettings()
     settings.validate()
     if settings.sequence == "halton":
         warnings.warn("the Halton sequence is not completely uniformly distributed: stochastic iteration "
                       "driven by it converges to a wrong image (thesis 1.2); use 'prng' or 'pi-powers'",
                       stacklevel=3)
-    if stage is not None:
-        stage(f"building the ray tracer over {len(scene.triangles):,} triangles")
+    _step(stage, stop, f"building the ray tracer over {len(scene.triangles):,} triangles")
     tracer = RayTracer(scene, threads=settings.threads)
-    if stage is not None:
-        stage(f"first shot and solver set-up for {scene.n_patches:,} patches")
-    direct = DirectLighting(scene, tracer, first_shot=settings.first_shot)
-    sequence = make_sequence(settings.sequence, settings.seed)
-    return SOLVERS[solver](scene, tracer, direct, sequence, bundle_resolution=settings.bundle_resolution,
-                           seed=settings.seed, directions_per_step=settings.directions_per_step,
-                           caustics=settings.caustics, glossy_send_rays=settings.glossy_send_rays)
+    try:
+        _step(stage, stop, f"first shot and solver set-up for {scene.n_patches:,} patches")
+        direct = DirectLighting(scene, tracer, first_shot=settings.first_shot)
+        sequence = make_sequence(settings.sequence, settings.seed)
+        return SOLVERS[solver](scene, tracer, direct, sequence, bundle_resolution=settings.bundle_resolution,
+                               seed=settings.seed, directions_per_step=settings.directions_per_step,
+                               caustics=settings.caustics, glossy_send_rays=settings.glossy_send_rays)
+    except BaseException:           # Cancelled, bad input, Ctrl-C: the tracer's threads end now
+        tracer.close()
+        raise
 
 
 def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
-                  solver=StochasticIterationSolver.name, stage=None):
+                  solver=StochasticIterationSolver.name, stage=None, stop=None):
     """Tracer + first shot + solver + image accumulator for a prepared scene."""
     settings = settings or RenderSettings()
-    solver_obj = make_solver(scene, settings, solver, stage=stage)
-    return Renderer(scene, camera if camera is not None else scene.camera, solver_obj, solver_obj.direct, settings)
+    solver_obj = make_solver(scene, settings, solver, stage=stage, stop=stop)
+    try:
+        return Renderer(scene, camera if camera is not None else scene.camera, solver_obj, solver_obj.direct,
+                        settings)
+    except BaseException:
+        solver_obj.tracer.close()
+        raise
 
 
 def render(scene, settings=None, iterations=None, seconds=None, progress=None, stop=None, camera=None, stage=None):
-    """Render a prepared scene; returns :class:`~raybundle.imaging.RenderResult`."""
-    renderer = make_renderer(scene, settings, camera, stage=stage)
+    """Render a prepared scene; returns :class:`~raybundle.imaging.RenderResult`.
+    ``stop`` set during set-up raises :class:`Cancelled`; during the iteration it
+    ends the run with the image so far."""
+    renderer = make_renderer(scene, settings, camera, stage=stage, stop=stop)
     try:
         return renderer.run(iterations=iterations, seconds=seconds, progress=progress, stop=stop)
     finally:
