@@ -181,6 +181,9 @@ class BakeJob:
         b.validate()
         if s.method not in SOLVERS:
             raise ValueError(f"unknown method {s.method!r}: the core has {sorted(SOLVERS)}")
+        if getattr(SOLVERS[s.method], "image_only", False):
+            raise ValueError(f"{s.method} renders images only, it has no patch solution to bake; choose "
+                             "another method")
         self.export = export_scene(self.depsgraph, require_camera=b.camera)
         for w in self.export.warnings:
             self.warn(w)

@@ -181,7 +181,9 @@ class RenderJob:
             if self.stats_cb is not None:
                 self.stats_cb(f"Ray Bundle GI | Preparing {self.export.counts['triangles']} triangles")
             stage = None if self.stats_cb is None else (lambda text: self.stats_cb(f"Ray Bundle GI | {text}"))
-            scene = pipeline.prepare(self.export.scene, patches=s.patches, stage=stage, stop=self._stopped)
+            scene = self.export.scene
+            if not getattr(SOLVERS[s.method], "image_only", False):       # a path tracer needs no patches
+                scene = pipeline.prepare(scene, patches=s.patches, stage=stage, stop=self._stopped)
             settings = RenderSettings(seed=s.seed, bundle_resolution=s.bundle_resolution,
                                       first_shot="auto" if s.first_shot else "none")
             self.renderer = pipeline.make_renderer(scene, settings, solver=s.method, stage=stage,

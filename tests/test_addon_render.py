@@ -247,6 +247,25 @@ def test_esc_during_set_up_stops_before_the_iteration_without_an_image(fresh):
     assert last_run()["status"].startswith("stopped during set-up, before laying out"), last_run()
 
 
+def test_path_tracing_method_renders_without_patches_and_refuses_to_bake(fresh):
+    """The method list holds the core's path tracer: the engine renders with it (no patch
+    layout step), the bake refuses it in one line (it has no patch solution)."""
+    from raybundle_addon.bake import BakeJob
+    from raybundle_addon.engine import JobSettings, RenderJob
+
+    small_lit_scene()
+    steps = []
+    out = RenderJob(bpy.context.evaluated_depsgraph_get(), JobSettings(iterations=6, time_limit=0.0,
+                                                                       method="path-tracing"),
+                    stats=steps.append).run()
+    assert out.stats["solver"] == "path-tracing" and out.stats["samples_per_pixel"] == 6
+    assert out.image.shape == (24, 24, 3) and np.isfinite(out.image).all() and out.image.mean() > 0
+    assert not any("laying out" in t for t in steps) and any("ray tracer" in t for t in steps)
+    bpy.context.scene.raybundle.method = "path-tracing"
+    with pytest.raises(ValueError, match="renders images only"):
+        BakeJob(bpy.context.evaluated_depsgraph_get()).start()
+
+
 # ---------------------------------------------------------- errors, settings
 @pytest.mark.parametrize("case,message", [("no lights", "no lights"), ("no meshes", "no visible mesh"),
                                           ("no camera", "no camera"), ("zero time", "time limit")])

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python tools/cycles_reference.py cornell --samples 1024 --out out/bench/cycles-cornell.exr
+    python tools/cycles_reference.py cornell --samples 1024 --seed 1 --out out/reference/cornell-256x256-1.exr
 
 Builds the scene in Blender with the node set-up that :mod:`raybundle.materials`
 models (Mix Shader(Diffuse BSDF, Glossy BSDF GGX) + one-sided Emission), the

@@ -1,38 +1,49 @@
-"""Benchmark: speed and accuracy, side by side in one run (``python -m raybundle bench``).
+"""Benchmark: the methods' error against time, side by side in one run (``python -m raybundle bench``).
 
-Prints and writes to ``--out`` (default ``out/bench``):
+``python -m raybundle bench --scenes cornell furnace-glossy --methods all --time 60 [--out DIR]``
+runs every method (:data:`METHODS`) on every scene for the same wall-clock budget, one after
+the other on this machine, and records the image error at roughly doubling times.  Time counts
+from loading the scene (patch layout, tracer, first shot included) to each image.  The error is
+the project's one image error (:func:`raybundle.metrics.image_error`: RMSE / mean(reference)
+over pixels at least 2 px from a directly seen light source, the reference's own noise
+subtracted).  References: the analytic radiance for the furnaces (no noise); elsewhere two
+independent halves ``DIR_REF/<scene>-<W>x<H>-{1,2}.exr`` (default ``out/reference``), made once by
+the path tracer (``--reference-time`` seconds each, seeds 1001 and 1002) and reused; Cycles
+halves (``tools/bench_blender.py``'s ``reference-{1,2}.exr``) may be copied there instead.
 
-* ``visibility.csv``: bundle visibility throughput (Embree queries per second
-  inside :meth:`RayTracer.bundle`, pairing included) next to raw first-hit
-  queries per second on the same rays, and their ratio;
-* ``iterations.csv``: seconds per solver iteration for each built-in scene;
-* ``convergence.csv`` and ``convergence.png``: relative RMSE against a
-  reference over time (log-log), the project's one image error
-  (:func:`raybundle.metrics.image_error`: RMSE / mean(reference) over pixels at
-  least 2 px from a directly seen light source).  References: the analytic radiance
-  for the furnaces; for the Cornell boxes a long run of the same method
-  (``reference-<scene>.exr``, reused when present), which measures noise, and,
-  when ``cycles-<scene>.exr`` exists in the output folder (made by
-  ``tools/cycles_reference.py``), Cycles, which also measures the method's
-  bias (finite elements, first-shot discretisation).
+Writes into ``--out`` (default ``out/bench``): ``<scene>.csv`` (seconds, iterations, error per
+method), ``<scene>.png`` (log-log error against seconds, one curve per method, the reference's
+noise marked), ``summary.md`` (time to 5%, 2%, 1.5% and 1% per method and scene, and each
+curve's slope) and ``summary.json``.  ``--throughput`` adds the older figures: bundle
+visibility against raw Embree queries (``visibility.csv``) and milliseconds per iteration
+(``iterations.csv``).
 """
 from __future__ import annotations
 
 import csv
 import os
+import sys
 import time
 
 import numpy as np
 
 from .imaging import RenderSettings
 from .io import read_exr, write_exr, write_json
-from .pipeline import make_renderer, prepare
-from .sampling import uniform_sphere
-from .scenes import load_scene
 from .metrics import image_error, light_source_mask
+from .pipeline import make_renderer, prepare
+from .sampling import DEFAULT_SEQUENCE, uniform_sphere
+from .scenes import load_scene
+from .solvers import SOLVERS
 from .visibility import RayTracer, bundle_from_hits
 
-SNAPSHOTS = (0.5, 1, 2, 4, 8, 15)
+#: bench method name -> (solver name, random sequence)
+METHODS = {"stochastic-iteration": ("stochastic-iteration", DEFAULT_SEQUENCE),
+           "path-tracing": ("path-tracing", "prng"),
+           "path-tracing-qmc": ("path-tracing", "halton")}
+#: error levels whose first crossing ``summary.md`` reports
+LEVELS = (0.05, 0.02, 0.015, 0.01)
+#: seeds of the two reference halves; of the timed runs
+REFERENCE_SEEDS, SEED = (1001, 1002), 3
 
 
 def bench_visibility(scene_name="cornell", patches=4000, resolution=128, bundles=40, rounds=7, seed=0):
@@ -91,42 +102,106 @@ def bench_iterations(names=("furnace", "furnace-glossy", "cornell", "cornell-glo
     return rows
 
 
-def convergence(name, seconds, reference=None, seed=0, settings=None):
-    """Snapshots of one run: rows (seconds, iterations, rel. RMSE vs each reference)."""
-    sc = prepare(load_scene(name))
-    refs = dict(reference or {})
+def snapshot_times(seconds):
+    """Run-clock times of the snapshots: 0.5 s doubling up to ``seconds`` (the end is always one)."""
+    times, t = [], 0.5
+    while t < seconds:
+        times.append(t)
+        t *= 2
+    return times
+
+
+def load(name, resolution=None):
+    sc = load_scene(name)
+    if resolution:
+        sc.camera = sc.camera.with_resolution(*resolution)
+    return sc
+
+
+def setup(name, method, resolution=None, seed=SEED):
+    """Scene loaded, laid out (patch methods only) and its renderer built: (scene, renderer, seconds)."""
+    t0 = time.perf_counter()
+    solver, sequence = METHODS[method]
+    sc = load(name, resolution)
+    if not getattr(SOLVERS[solver], "image_only", False):
+        sc = prepare(sc)
+    r = make_renderer(sc, RenderSettings(seed=seed, sequence=sequence), solver=solver)
+    return sc, r, time.perf_counter() - t0
+
+
+def label(name):
+    """A scene's name in file names: the built-in name or the .npz file's stem."""
+    return os.path.splitext(os.path.basename(str(name)))[0]
+
+
+def reference_paths(name, sc, folder):
+    """The two reference halves of scene ``name`` (loaded: ``sc``) at its camera's resolution;
+    [] for a furnace."""
     if sc.analytic_radiance is not None:
-        refs["analytic"] = np.broadcast_to(sc.analytic_radiance, (sc.camera.height, sc.camera.width, 3))
-    rows = []
+        return []
+    return [os.path.join(folder, f"{label(name)}-{sc.camera.width}x{sc.camera.height}-{k}.exr") for k in (1, 2)]
+
+
+def reference(name, resolution, folder, seconds, log=print):
+    """(reference image, [half A, half B] or None): the analytic radiance of a furnace, else
+    two cached independent halves, rendered by the path tracer when missing."""
+    sc = load(name, resolution)
+    if sc.analytic_radiance is not None:
+        return np.broadcast_to(np.asarray(sc.analytic_radiance, float), (sc.camera.height, sc.camera.width, 3)), None
+    paths = reference_paths(name, sc, folder)
+    halves = []
+    for path, seed in zip(paths, REFERENCE_SEEDS):
+        if not os.path.exists(path):
+            log(f"reference half {path}: path tracing for {seconds:.0f} s (seed {seed}; cached)")
+            _, r, _ = setup(name, "path-tracing", resolution, seed)
+            res = r.run(seconds=seconds)
+            r.tracer.close()
+            write_exr(path, res.image, {"raybundle_samples_per_pixel": res.stats["iterations"],
+                                        "raybundle_seconds": res.stats["seconds"]})
+        halves.append(read_exr(path))
+    return 0.5 * (halves[0] + halves[1]), halves
+
+
+def run_method(name, method, seconds, ref, halves, resolution=None, log=print):
+    """One timed run: rows (scene, method, seconds from loading, iterations, error, reference noise)."""
+    sc, r, t_setup = setup(name, method, resolution)
     mask = light_source_mask(sc)
+    rows = []
 
     def snap(t, it, img):
-        row = {"scene": name, "seconds": round(t, 3), "iterations": it,
-               **{f"rel_rmse_vs_{k}": image_error(img, v, exclude=mask)["error"] for k, v in refs.items()}}
-        if sc.analytic_radiance is not None:      # error of the image mean (the furnace target)
-            row["mean_error_vs_analytic"] = float(np.abs(img.reshape(-1, 3).mean(axis=0)
-                                                         / sc.analytic_radiance - 1).max())
-        rows.append(row)
+        e = image_error(img, ref, reference_halves=halves, exclude=mask)
+        rows.append({"scene": name, "method": method, "seconds": round(t_setup + t, 3), "iterations": it,
+                     "error": e["error"], "raw_error": e["raw"], "reference_noise": e["reference_noise"]})
+        log(f"  {name} / {method}: {t_setup + t:6.1f} s, {it} iterations, error {100 * e['error']:.2f}%")
 
-    r = make_renderer(sc, settings or RenderSettings(seed=seed))
-    res = r.run(seconds=seconds, snapshots=[t for t in SNAPSHOTS if t < seconds], on_snapshot=snap)
+    res = r.run(seconds=max(seconds - t_setup, 0.0), snapshots=snapshot_times(seconds - t_setup),
+                on_snapshot=snap)
     r.tracer.close()
     snap(res.stats["seconds"], res.stats["iterations"], res.image)
     return rows, res
 
 
-def reference_image(name, out, seconds):
-    path = os.path.join(out, f"reference-{name}.exr")
-    if os.path.exists(path):
-        return read_exr(path)
-    print(f"  reference for {name}: {seconds:.0f} s run (cached in {path})", flush=True)
-    sc = prepare(load_scene(name))
-    r = make_renderer(sc, RenderSettings(seed=1000))
-    res = r.run(seconds=seconds)
-    r.tracer.close()
-    write_exr(path, res.image, {"raybundle_seconds": res.stats["seconds"],
-                                "raybundle_iterations": res.stats["iterations"]})
-    return res.image
+def time_to(rows, level):
+    """First time [s] the error falls to ``level``, interpolated log-log between snapshots; None if never."""
+    prev = None
+    for row in rows:
+        if row["error"] <= level:
+            if prev is None or prev["error"] <= 0 or row["error"] <= 0:
+                return row["seconds"]
+            f = np.log(prev["error"] / level) / np.log(prev["error"] / row["error"])
+            return float(np.exp(np.log(prev["seconds"]) + f * np.log(row["seconds"] / prev["seconds"])))
+        prev = row
+    return None
+
+
+def slope(rows, from_seconds=2.0):
+    """Least-squares slope of log(error) against log(seconds) over snapshots after ``from_seconds``
+    (-0.5 for unbiased Monte Carlo noise; towards 0 where a bias takes over)."""
+    pts = [(r["seconds"], r["error"]) for r in rows if r["seconds"] >= from_seconds and r["error"] > 0]
+    if len(pts) < 2:
+        return None
+    t, e = np.log(np.array(pts)).T
+    return float(np.polyfit(t, e, 1)[0])
 
 
 def write_csv(path, rows):
@@ -139,7 +214,8 @@ def write_csv(path, rows):
         w.writerows(rows)
 
 
-def chart(path, rows):
+def chart(path, name, rows):
+    """Log-log error against seconds, one curve per method, the reference's noise dotted."""
     try:
         import matplotlib
 
@@ -149,60 +225,98 @@ def chart(path, rows):
         print("  (matplotlib is not installed: no chart)")
         return
     fig, ax = plt.subplots(figsize=(7, 5))
-    series = {}
-    for row in rows:
-        for k, v in row.items():
-            if k.startswith("rel_rmse_vs_"):
-                series.setdefault((row["scene"], k[len("rel_rmse_vs_"):]), []).append((row["seconds"], v))
-    for (scene, ref), pts in sorted(series.items()):
-        t, e = zip(*sorted(pts))
-        ax.loglog(t, e, "o-", label=f"{scene} vs {ref}")
-    ax.axhline(0.02, color="grey", ls=":", lw=1)
-    ax.set_xlabel("seconds (2 cores)")
+    for method in dict.fromkeys(r["method"] for r in rows):
+        pts = [(r["seconds"], r["error"]) for r in rows if r["method"] == method and r["error"] > 0]
+        if pts:
+            ax.loglog(*zip(*pts), "o-", label=method)
+    noise = max(r["reference_noise"] for r in rows)
+    if noise > 0:
+        ax.axhline(noise, color="grey", ls=":", lw=1, label=f"reference noise {100 * noise:.2f}% (subtracted)")
+    for level in LEVELS:
+        ax.axhline(level, color="lightgrey", lw=0.6)
+    ax.set_xlabel("seconds from loading the scene (this machine)")
     ax.set_ylabel("relative RMSE")
-    ax.set_title("raybundle: stochastic iteration with ray bundles")
+    ax.set_title(name)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def summary_table(results):
+    """``summary.md``'s text: per scene and method, the time to each level, the final error, the slope."""
+    head = " | ".join(f"to {100 * lv:g}%" for lv in LEVELS)
+    lines = ["| scene | method | " + head + " | final error (at s) | slope |",
+             "|---|---|" + "---|" * len(LEVELS) + "---|---|"]
+    for name, by_method in results.items():
+        for method, rows in by_method.items():
+            times = " | ".join("–" if (t := time_to(rows, lv)) is None else f"{t:.1f} s" for lv in LEVELS)
+            s = slope(rows)
+            lines.append(f"| {name} | {method} | {times} | {100 * rows[-1]['error']:.2f}% ({rows[-1]['seconds']:.0f})"
+                         f" | {'–' if s is None else f'{s:.2f}'} |")
+    return "\n".join(lines) + "\n"
+
+
+def run_throughput(out):
+    """The per-iteration figures: bundle visibility throughput and ms per iteration."""
+    v = bench_visibility()
+    print(f"bundle visibility: {v['bundle_queries_per_s'] / 1e6:.2f} M queries/s; raw first hit "
+          f"{v['raw_first_hit_queries_per_s'] / 1e6:.2f} M/s; ratio {v['ratio']:.2f}", flush=True)
+    write_csv(os.path.join(out, "visibility.csv"), [v])
+    its = bench_iterations()
+    for row in its:
+        print(f"  {row['scene']:15s} {row['patches']:5d} patches: {row['ms_per_iteration']:.2f} ms/iteration", flush=True)
+    write_csv(os.path.join(out, "iterations.csv"), its)
+    return {"visibility": v, "iterations": its}
 
 
 def run_bench(args):
     out = args.out
     os.makedirs(out, exist_ok=True)
-    print("visibility throughput (cornell, 4000 patches, 128x128 bundles):", flush=True)
-    vis = [bench_visibility()]
-    v = vis[0]
-    print(f"  bundle: {v['bundle_queries_per_s'] / 1e6:.2f} M queries/s ({v['grid_rays_per_s'] / 1e6:.2f} M grid "
-          f"rays/s, {v['queries_per_grid_ray']:.2f} queries per ray); raw first hit: "
-          f"{v['raw_first_hit_queries_per_s'] / 1e6:.2f} M/s; ratio {v['ratio']:.2f} "
-          f"(median of {v['rounds']} alternating rounds, range {v['ratio_min']:.2f}-{v['ratio_max']:.2f})", flush=True)
-    write_csv(os.path.join(out, "visibility.csv"), vis)
-    print("time per iteration (default settings):", flush=True)
-    its = bench_iterations()
-    for row in its:
-        print(f"  {row['scene']:15s} {row['patches']:5d} patches, grid {row['bundle_resolution']:3d}: "
-              f"{row['ms_per_iteration']:.2f} ms/iteration", flush=True)
-    write_csv(os.path.join(out, "iterations.csv"), its)
-    rows, summary = [], {}
-    for name in ("furnace", "furnace-glossy", "cornell", "cornell-glossy"):
-        refs = {}
-        if name.startswith("cornell"):
-            refs["long-run"] = reference_image(name, out, args.reference_seconds)
-            cyc = os.path.join(out, f"cycles-{name}.exr")
-            if os.path.exists(cyc):
-                refs["cycles"] = read_exr(cyc)
-        r, res = convergence(name, args.seconds, refs)
-        rows += r
-        write_exr(os.path.join(out, f"{name}.exr"), res.image)
-        summary[name] = r[-1]
-        errs = ", ".join(f"{k[len('rel_rmse_vs_'):]} {v:.4f}" for k, v in r[-1].items() if k.startswith("rel_rmse"))
-        if "mean_error_vs_analytic" in r[-1]:
-            errs += f"; image mean off by {r[-1]['mean_error_vs_analytic']:.4f}"
-        print(f"{name}: {r[-1]['iterations']} iterations in {r[-1]['seconds']:.1f} s; relative RMSE: {errs}",
-              flush=True)
-    write_csv(os.path.join(out, "convergence.csv"), rows)
-    chart(os.path.join(out, "convergence.png"), rows)
-    write_json(os.path.join(out, "summary.json"), {"visibility": vis, "iterations": its, "final": summary})
-    print(f"wrote {out}/visibility.csv, iterations.csv, convergence.csv, convergence.png, summary.json")
+    methods = list(METHODS) if "all" in args.methods else list(dict.fromkeys(args.methods))
+    bad = [m for m in methods if m not in METHODS]
+    if bad:
+        print(f"raybundle bench: unknown method {bad[0]!r}; choose from {sorted(METHODS)} or all", file=sys.stderr)
+        return 2
+    try:
+        scenes = {name: load(name) for name in args.scenes}
+    except (ValueError, OSError) as e:
+        print(f"raybundle bench: {e}", file=sys.stderr)
+        return 2
+    for sc in scenes.values():
+        if args.resolution:
+            sc.camera = sc.camera.with_resolution(*args.resolution)
+    missing = sum(not os.path.exists(p) for name, sc in scenes.items()
+                  for p in reference_paths(name, sc, args.reference_dir))
+    total = len(scenes) * len(methods) * args.time + missing * args.reference_time
+    t_start = time.perf_counter()
+
+    def log(text):
+        done = time.perf_counter() - t_start
+        print(f"[{done:5.0f} s, about {max(total - done, 0):.0f} s left] {text}", file=sys.stderr, flush=True)
+
+    results, summary = {}, {}
+    for name in scenes:
+        ref, halves = reference(name, args.resolution, args.reference_dir, args.reference_time, log)
+        rows_scene, results[name] = [], {}
+        for method in methods:
+            rows, res = run_method(name, method, args.time, ref, halves, args.resolution, log)
+            results[name][method] = rows
+            rows_scene += rows
+            write_exr(os.path.join(out, f"{label(name)}-{method}.exr"), res.image)
+        write_csv(os.path.join(out, f"{label(name)}.csv"), rows_scene)
+        chart(os.path.join(out, f"{label(name)}.png"), label(name), rows_scene)
+        summary[name] = {m: {"final_error": r[-1]["error"], "seconds": r[-1]["seconds"], "slope": slope(r),
+                             **{f"seconds_to_{lv:g}": time_to(r, lv) for lv in LEVELS}}
+                         for m, r in results[name].items()}
+    table = summary_table(results)
+    with open(os.path.join(out, "summary.md"), "w") as f:
+        f.write(f"Error (relative RMSE, reference noise subtracted) against seconds from loading the scene, "
+                f"{args.time:g} s per method, one run on this machine.\n\n{table}")
+    extra = run_throughput(out) if args.throughput else {}
+    write_json(os.path.join(out, "summary.json"), {"seconds": args.time, "methods": methods, "scenes": summary,
+                                                   **extra})
+    print(table)
+    print(f"wrote {out}/summary.md, summary.json and a CSV, a PNG and the final EXRs per scene")
     return 0

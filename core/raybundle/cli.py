@@ -17,7 +17,9 @@ import time
 import numpy as np
 
 from . import __version__
+from .bench import METHODS
 from .sampling import DEFAULT_SEQUENCE, SEQUENCES
+from .solvers import SOLVERS, StochasticIterationSolver
 
 
 class ProgressBar:
@@ -91,14 +93,18 @@ def cmd_render(args):
             if scene.camera is None:
                 raise SceneError("the scene has no camera")
             scene.camera = scene.camera.with_resolution(*args.resolution)
-        scene = prepare(scene, patches=args.patches, stage=stage, stop=stop)
+        image_only = getattr(SOLVERS[args.method], "image_only", False)
+        if image_only and (args.workers or args.scheduler):
+            raise ValueError(f"--workers and --scheduler merge patch solutions; {args.method} has none")
+        if not image_only:              # a path tracer needs no patches
+            scene = prepare(scene, patches=args.patches, stage=stage, stop=stop)
         settings = RenderSettings(seed=args.seed, sequence=args.sequence, bundle_resolution=args.bundle_resolution,
                                   threads=args.threads)
         if args.workers or args.scheduler:
             signal.signal(signal.SIGINT, old)
             return _render_chains(args, scene, settings, stage)
         result = render(scene, settings, iterations=args.iterations, seconds=args.time, progress=bar, stop=stop,
-                        stage=stage)
+                        stage=stage, solver=args.method)
     except (SceneError, ValueError) as e:
         print(f"raybundle: error: {e}", file=sys.stderr)
         return 2
@@ -168,13 +174,19 @@ def build_parser():
     r.add_argument("scene", help="cornell, cornell-glossy, furnace, furnace-glossy or FILE.npz")
     g = r.add_mutually_exclusive_group()
     g.add_argument("--time", type=SECONDS, help="seconds to iterate (default 30)")
-    g.add_argument("--iterations", type=COUNT, help="number of iterations (reproducible with --seed)")
+    g.add_argument("--iterations", type=COUNT, help="number of iterations, for path-tracing samples per pixel "
+                   "(reproducible with --seed)")
     r.add_argument("--seed", type=COUNT, default=0)
     r.add_argument("--patches", type=COUNT, default=4000, help="target patch count (default 4000; 0 = one "
                    "patch per input triangle)")
     r.add_argument("--resolution", type=_number(int, 1, 65536, "a resolution in [1, 65536]"), nargs=2,
                    metavar=("W", "H"))
-    r.add_argument("--sequence", default=DEFAULT_SEQUENCE, choices=sorted(SEQUENCES))
+    r.add_argument("--method", default=StochasticIterationSolver.name, choices=sorted(SOLVERS),
+                   help=f"{StochasticIterationSolver.name} (default; ray bundles) or path-tracing (the unbiased "
+                        "random walk, images only)")
+    r.add_argument("--sequence", default=DEFAULT_SEQUENCE, choices=sorted(SEQUENCES),
+                   help="random numbers: of the global directions (ray bundles); path-tracing takes halton as "
+                        "randomised quasi-Monte Carlo and any other name as the PRNG")
     r.add_argument("--bundle-resolution", type=_number(int, 0, 4096, "an integer in [0, 4096]"), default=0,
                    help="rays per bundle side (0 = auto)")
     r.add_argument("--threads", type=POSITIVE_INT, default=None)
@@ -184,10 +196,19 @@ def build_parser():
     d.add_argument("--scheduler", help="run one chain per worker of the Dask cluster at this address and merge them")
     r.add_argument("--out", default="out/render.exr")
     r.add_argument("--stats", help="write statistics as JSON")
-    b = sub.add_parser("bench", help="speed and accuracy benchmark (writes CSV and PNG charts)")
+    b = sub.add_parser("bench", help="the methods' error against time on each scene (CSV, PNG charts, summary.md)")
+    b.add_argument("--scenes", nargs="+", default=["cornell", "cornell-glossy", "furnace", "furnace-glossy"],
+                   help="built-in names or .npz files")
+    b.add_argument("--methods", nargs="+", default=["all"], help="all, or some of: " + ", ".join(METHODS))
+    b.add_argument("--time", type=SECONDS, default=60.0, help="seconds per method and scene, from loading the "
+                   "scene (default 60)")
+    b.add_argument("--resolution", type=_number(int, 1, 65536, "a resolution in [1, 65536]"), nargs=2,
+                   metavar=("W", "H"), help="image size (default: the scene's)")
+    b.add_argument("--reference-dir", default="out/reference", help="cached reference halves (default out/reference)")
+    b.add_argument("--reference-time", type=SECONDS, default=600.0,
+                   help="seconds of path tracing per reference half when one is missing (default 600)")
+    b.add_argument("--throughput", action="store_true", help="also bundle visibility and ms per iteration")
     b.add_argument("--out", default="out/bench")
-    b.add_argument("--seconds", type=SECONDS, default=30.0, help="time budget of each timed run")
-    b.add_argument("--reference-seconds", type=SECONDS, default=600.0, help="time of each reference run")
     return p
 
 

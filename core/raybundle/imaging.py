@@ -138,7 +138,66 @@ class RenderResult:
     cancelled: bool = False
 
 
-class Renderer:
+class ProgressiveImage:
+    """The progressive loop shared by image methods (:class:`Renderer`,
+    :class:`~raybundle.pathtracing.PathTracer`): they provide ``solver.stats.iterations``,
+    ``passes``, ``image_pass()``, ``step()``, ``image()`` and ``stats(...)``."""
+
+    def run(self, iterations=None, seconds=None, progress=None, stop=None, snapshots=(), on_snapshot=None):
+        """Iterate until ``iterations`` or ``seconds`` is reached or ``stop()`` is true.
+
+        ``progress(fraction, info)`` is called after every iteration; ``stop`` is
+        a callable or an object with ``is_set()`` (threading.Event), checked
+        between iterations.  KeyboardInterrupt ends the run like a stop; the
+        image so far is returned either way (``cancelled`` says which).
+        ``on_snapshot(seconds, iterations, image)`` is called when the run's clock
+        passes each of ``snapshots`` (seconds); the time it takes is not counted.
+        """
+        if iterations is None and seconds is None:
+            raise ValueError("give iterations or seconds")
+        if seconds is not None and not (np.isfinite(seconds) and seconds >= 0):
+            raise ValueError("seconds must be a finite, non-negative number")
+        if iterations is not None and int(iterations) < 0:
+            raise ValueError("iterations must be non-negative")
+        should_stop = (stop.is_set if hasattr(stop, "is_set") else stop) or (lambda: False)
+        solver = self.solver
+        t0 = time.perf_counter()
+        cancelled = False
+        pending = sorted(snapshots)
+        try:
+            if self.passes == 0:
+                self.image_pass()
+            while True:
+                elapsed = time.perf_counter() - t0
+                while pending and elapsed >= pending[0] and on_snapshot is not None:
+                    pending.pop(0)
+                    t_snap = time.perf_counter()
+                    on_snapshot(elapsed, solver.stats.iterations, self.image())
+                    t0 += time.perf_counter() - t_snap
+                it = solver.stats.iterations
+                if iterations is not None and it >= iterations:
+                    break
+                if seconds is not None and elapsed >= seconds:
+                    break
+                if should_stop():
+                    cancelled = True
+                    break
+                self.step()
+                if progress is not None:
+                    it = solver.stats.iterations
+                    frac = it / iterations if iterations else (time.perf_counter() - t0) / seconds
+                    progress(min(frac, 1.0), {"iterations": it, "seconds": time.perf_counter() - t0})
+        except KeyboardInterrupt:
+            cancelled = True
+        t_res = time.perf_counter()
+        img = self.image()
+        if not np.isfinite(img).all():
+            raise FloatingPointError("the image has non-finite values; this is a bug, please report it")
+        return RenderResult(img, self.stats(time.perf_counter() - t0, time.perf_counter() - t_res, cancelled),
+                            cancelled)
+
+
+class Renderer(ProgressiveImage):
     """Runs a solver and forms the image.  See the module docstring."""
 
     def __init__(self, scene, camera, solver, direct, settings: RenderSettings):
@@ -526,60 +585,6 @@ class Renderer:
             diffuse = self.diffuse_indirect(samples=1 if preview else None, gather=not preview)
         img = img + diffuse
         return img.reshape(self.camera.height, self.camera.width, 3).astype(np.float32)
-
-    # ------------------------------------------------------------------ run
-    def run(self, iterations=None, seconds=None, progress=None, stop=None, snapshots=(), on_snapshot=None):
-        """Iterate until ``iterations`` or ``seconds`` is reached or ``stop()`` is true.
-
-        ``progress(fraction, info)`` is called after every iteration; ``stop`` is
-        a callable or an object with ``is_set()`` (threading.Event), checked
-        between iterations.  KeyboardInterrupt ends the run like a stop; the
-        image so far is returned either way (``cancelled`` says which).
-        ``on_snapshot(seconds, iterations, image)`` is called when the run's clock
-        passes each of ``snapshots`` (seconds); the time it takes is not counted.
-        """
-        if iterations is None and seconds is None:
-            raise ValueError("give iterations or seconds")
-        if seconds is not None and not (np.isfinite(seconds) and seconds >= 0):
-            raise ValueError("seconds must be a finite, non-negative number")
-        if iterations is not None and int(iterations) < 0:
-            raise ValueError("iterations must be non-negative")
-        should_stop = (stop.is_set if hasattr(stop, "is_set") else stop) or (lambda: False)
-        solver = self.solver
-        t0 = time.perf_counter()
-        cancelled = False
-        pending = sorted(snapshots)
-        try:
-            if self.passes == 0:
-                self.image_pass()
-            while True:
-                elapsed = time.perf_counter() - t0
-                while pending and elapsed >= pending[0] and on_snapshot is not None:
-                    pending.pop(0)
-                    t_snap = time.perf_counter()
-                    on_snapshot(elapsed, solver.stats.iterations, self.image())
-                    t0 += time.perf_counter() - t_snap
-                it = solver.stats.iterations
-                if iterations is not None and it >= iterations:
-                    break
-                if seconds is not None and elapsed >= seconds:
-                    break
-                if should_stop():
-                    cancelled = True
-                    break
-                self.step()
-                if progress is not None:
-                    it = solver.stats.iterations
-                    frac = it / iterations if iterations else (time.perf_counter() - t0) / seconds
-                    progress(min(frac, 1.0), {"iterations": it, "seconds": time.perf_counter() - t0})
-        except KeyboardInterrupt:
-            cancelled = True
-        t_res = time.perf_counter()
-        img = self.image()
-        if not np.isfinite(img).all():
-            raise FloatingPointError("the image has non-finite values; this is a bug, please report it")
-        return RenderResult(img, self.stats(time.perf_counter() - t0, time.perf_counter() - t_res, cancelled),
-                            cancelled)
 
     def step(self):
         """One solver iteration, this iterate's glossy lobe per pixel, and an image pass

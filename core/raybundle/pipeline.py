@@ -54,6 +54,11 @@ def make_solver(scene, settings: RenderSettings | None = None, solver=Stochastic
     and ``stop`` as in :func:`prepare`."""
     settings = settings or RenderSettings()
     settings.validate()
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown method {solver!r}; choose one of {sorted(SOLVERS)}")
+    if getattr(SOLVERS[solver], "image_only", False):
+        raise ValueError(f"{solver} renders images only, it has no patch solution to bake; "
+                         f"bakes take {StochasticIterationSolver.name}")
     if settings.sequence == "halton":
         warnings.warn("the Halton sequence is not completely uniformly distributed: stochastic iteration "
                       "driven by it converges to a wrong image (thesis 1.2); use 'prng' or 'pi-powers'",
@@ -76,6 +81,8 @@ def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
                   solver=StochasticIterationSolver.name, stage=None, stop=None):
     """Tracer + first shot + solver + image accumulator for a prepared scene."""
     settings = settings or RenderSettings()
+    if getattr(SOLVERS.get(solver), "image_only", False):
+        return _make_image_method(scene, settings, camera, solver, stage, stop)
     solver_obj = make_solver(scene, settings, solver, stage=stage, stop=stop)
     try:
         return Renderer(scene, camera if camera is not None else scene.camera, solver_obj, solver_obj.direct,
@@ -85,11 +92,25 @@ def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
         raise
 
 
-def render(scene, settings=None, iterations=None, seconds=None, progress=None, stop=None, camera=None, stage=None):
-    """Render a prepared scene; returns :class:`~raybundle.imaging.RenderResult`.
-    ``stop`` set during set-up raises :class:`Cancelled`; during the iteration it
-    ends the run with the image so far."""
-    renderer = make_renderer(scene, settings, camera, stage=stage, stop=stop)
+def _make_image_method(scene, settings, camera, name, stage, stop):
+    """An image-only method (:class:`~raybundle.pathtracing.PathTracer`): tracer and lights, no patches."""
+    settings.validate()
+    _step(stage, stop, f"building the ray tracer over {len(scene.triangles):,} triangles")
+    tracer = RayTracer(scene, threads=settings.threads)
+    try:
+        direct = DirectLighting(scene, tracer, first_shot=settings.first_shot)
+        return SOLVERS[name](scene, camera if camera is not None else scene.camera, tracer, direct, settings)
+    except BaseException:
+        tracer.close()
+        raise
+
+
+def render(scene, settings=None, iterations=None, seconds=None, progress=None, stop=None, camera=None, stage=None,
+           solver=StochasticIterationSolver.name):
+    """Render a prepared scene with the method ``solver`` (a :data:`~raybundle.solvers.SOLVERS`
+    name); returns :class:`~raybundle.imaging.RenderResult`.  ``stop`` set during set-up
+    raises :class:`Cancelled`; during the iteration it ends the run with the image so far."""
+    renderer = make_renderer(scene, settings, camera, solver=solver, stage=stage, stop=stop)
     try:
         return renderer.run(iterations=iterations, seconds=seconds, progress=progress, stop=stop)
     finally:

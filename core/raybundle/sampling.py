@@ -320,7 +320,7 @@ class PiPowersSequence:
         return self._table[off:off + dim].copy()
 
 
-_PRIMES = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37)
+_PRIMES = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53, 59, 61, 67, 71, 73, 79, 83, 89)
 
 
 def radical_inverse(base, index):
@@ -331,6 +331,34 @@ def radical_inverse(base, index):
         inv += digit * f
         f /= base
     return inv
+
+
+def halton_points(index, dim, permutations=None):
+    """Halton point number ``index`` (dim,): coordinate k is the radical inverse in the
+    k-th prime (at most ``len(_PRIMES)`` = 24 dimensions).  With ``permutations`` (from
+    :func:`halton_permutations`) every digit of coordinate k goes through its own random
+    permutation of {0..b-1} (random digit scrambling), which removes the correlation between
+    coordinates of large prime bases (for n < b, plain coordinates in bases b and b' are
+    n/b and n/b': almost equal)."""
+    if dim > len(_PRIMES):
+        raise ValueError(f"Halton sequence supports at most {len(_PRIMES)} dimensions")
+    if permutations is None:
+        return np.array([radical_inverse(_PRIMES[k], int(index)) for k in range(dim)])
+    out = np.zeros(dim)
+    for k in range(dim):
+        base, perm, i, f = _PRIMES[k], permutations[k], int(index), 1.0 / _PRIMES[k]
+        for digit_perm in perm:                      # every digit, down to double precision
+            i, digit = divmod(i, base)
+            out[k] += digit_perm[digit] * f
+            f /= base
+    return np.minimum(out, 1.0 - 2.0 ** -53)
+
+
+def halton_permutations(dim, rng):
+    """Random digit permutations for :func:`halton_points`: for each of ``dim`` coordinates,
+    one permutation of {0..b-1} per digit of a double (b the coordinate's prime)."""
+    return [rng.permuted(np.tile(np.arange(b), (int(np.ceil(53 * np.log(2) / np.log(b))), 1)), axis=1)
+            for b in _PRIMES[:dim]]
 
 
 class HaltonSequence:
@@ -347,9 +375,7 @@ class HaltonSequence:
         self.index = int(start)
 
     def next(self, dim):
-        if dim > len(_PRIMES):
-            raise ValueError(f"Halton sequence supports at most {len(_PRIMES)} dimensions")
-        out = np.array([radical_inverse(_PRIMES[k], self.index) for k in range(dim)])
+        out = halton_points(self.index, dim)
         self.index += 1
         return out
 

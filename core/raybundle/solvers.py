@@ -357,4 +357,7 @@ def auto_bundle_resolution(scene, lo=32, hi=512):
     return int(np.clip(np.ceil(2 * r / np.sqrt(scene.patch_area.mean())), lo, hi))
 
 
-SOLVERS = {StochasticIterationSolver.name: StochasticIterationSolver}
+from .pathtracing import PathTracer  # noqa: E402  (an image method; it imports SolverStats from here)
+
+#: the methods by name: patch solvers (images and bakes) and image-only methods (``image_only``)
+SOLVERS = {StochasticIterationSolver.name: StochasticIterationSolver, PathTracer.name: PathTracer}

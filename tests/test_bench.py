@@ -1,0 +1,61 @@
+"""The methods bench (``python -m raybundle bench``): its figures and its files."""
+import csv
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from raybundle import bench
+
+
+def power_law(times, c=0.2, p=-0.5):
+    return [{"seconds": t, "error": c * t ** p} for t in times]
+
+
+def test_time_to_a_level_and_the_slope_are_exact_on_a_power_law():
+    """Snapshots on e = 0.2 t^-0.5 (unbiased noise): the slope is -0.5 and the log-log
+    interpolation between snapshots gives the exact crossing time t = (0.2 / level)^2."""
+    rows = power_law([0.5, 1, 2, 4, 8, 16, 32])
+    assert bench.slope(rows) == pytest.approx(-0.5, abs=1e-12)
+    for level in (0.1, 0.05, 0.045):
+        assert bench.time_to(rows, level) == pytest.approx((0.2 / level) ** 2, rel=1e-9)
+    assert bench.time_to(rows, 0.01) is None                    # never reached in 32 s
+    assert bench.time_to(rows, 0.5) == 0.5                      # already below at the first snapshot
+    flat = [{"seconds": t, "error": max(0.2 * t ** -0.5, 0.03)} for t in (2, 4, 8, 16, 32, 64, 128)]
+    assert bench.slope(flat) > -0.4                             # a floor flattens the curve
+
+
+def test_bench_writes_curves_charts_and_a_summary(tmp_path):
+    """A short bench of two methods on a furnace (analytic reference) and the Cornell box
+    (reference halves path-traced once, then reused): one CSV and PNG per scene, summary.md
+    with a row per scene and method, errors that fall with time on the furnace."""
+    ref, out = tmp_path / "ref", tmp_path / "bench"
+    cmd = [sys.executable, "-m", "raybundle", "bench", "--scenes", "furnace", "cornell", "--methods",
+           "stochastic-iteration", "path-tracing", "--time", "3", "--resolution", "24", "24", "--reference-time", "2",
+           "--reference-dir", str(ref), "--out", str(out)]
+    p = subprocess.run(cmd, capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    assert sorted(f.name for f in ref.iterdir()) == ["cornell-24x24-1.exr", "cornell-24x24-2.exr"]
+    assert p.stderr.count("path tracing for") == 2
+    for name in ("furnace", "cornell"):
+        assert (out / f"{name}.png").stat().st_size > 0
+        rows = list(csv.DictReader(open(out / f"{name}.csv")))
+        assert {r["method"] for r in rows} == {"stochastic-iteration", "path-tracing"}
+        for method in ("stochastic-iteration", "path-tracing"):
+            err = [float(r["error"]) for r in rows if r["method"] == method]
+            t = [float(r["seconds"]) for r in rows if r["method"] == method]
+            assert len(err) >= 2 and t == sorted(t) and np.isfinite(err).all()
+            if name == "furnace":
+                assert err[-1] < err[0]                          # no noise in the analytic reference
+    md = (out / "summary.md").read_text()
+    for name in ("furnace", "cornell"):
+        for method in ("stochastic-iteration", "path-tracing"):
+            assert f"| {name} | {method} |" in md
+    # the halves are reused: no path tracing the second time
+    p = subprocess.run(cmd[:-2] + ["--out", str(tmp_path / "again"), "--scenes", "cornell"], capture_output=True,
+                       text=True)
+    assert p.returncode == 0 and "path tracing for" not in p.stderr, p.stderr
+    p = subprocess.run([sys.executable, "-m", "raybundle", "bench", "--methods", "no-such-method", "--out", str(out)],
+                       capture_output=True, text=True)
+    assert p.returncode == 2 and "unknown method" in p.stderr
