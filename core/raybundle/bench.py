@@ -38,6 +38,7 @@ from .visibility import RayTracer, bundle_from_hits
 
 #: bench method name -> (solver name, random sequence)
 METHODS = {"stochastic-iteration": ("stochastic-iteration", DEFAULT_SEQUENCE),
+           "radiosity": ("radiosity", DEFAULT_SEQUENCE),
            "path-tracing": ("path-tracing", "prng"),
            "path-tracing-qmc": ("path-tracing", "halton")}
 #: error levels whose first crossing ``summary.md`` reports
@@ -244,8 +245,9 @@ def chart(path, name, rows):
     plt.close(fig)
 
 
-def summary_table(results):
-    """``summary.md``'s text: per scene and method, the time to each level, the final error, the slope."""
+def summary_table(results, skipped=None):
+    """``summary.md``'s text: per scene and method, the time to each level, the final error, the slope;
+    ``skipped`` {scene: {method: reason}} rows say why a method did not run."""
     head = " | ".join(f"to {100 * lv:g}%" for lv in LEVELS)
     lines = ["| scene | method | " + head + " | final error (at s) | slope |",
              "|---|---|" + "---|" * len(LEVELS) + "---|---|"]
@@ -255,6 +257,8 @@ def summary_table(results):
             s = slope(rows)
             lines.append(f"| {name} | {method} | {times} | {100 * rows[-1]['error']:.2f}% ({rows[-1]['seconds']:.0f})"
                          f" | {'–' if s is None else f'{s:.2f}'} |")
+        for method, reason in (skipped or {}).get(name, {}).items():
+            lines.append(f"| {name} | {method} | " + "n/a | " * len(LEVELS) + f"{reason.split(';')[0]} | |")
     return "\n".join(lines) + "\n"
 
 
@@ -296,12 +300,17 @@ def run_bench(args):
         done = time.perf_counter() - t_start
         print(f"[{done:5.0f} s, about {max(total - done, 0):.0f} s left] {text}", file=sys.stderr, flush=True)
 
-    results, summary = {}, {}
+    results, summary, skipped = {}, {}, {}
     for name in scenes:
         ref, halves = reference(name, args.resolution, args.reference_dir, args.reference_time, log)
         rows_scene, results[name] = [], {}
         for method in methods:
-            rows, res = run_method(name, method, args.time, ref, halves, args.resolution, log)
+            try:
+                rows, res = run_method(name, method, args.time, ref, halves, args.resolution, log)
+            except ValueError as e:          # a method that does not apply (radiosity on a glossy scene)
+                log(f"  {name} / {method}: not applicable: {e}")
+                skipped.setdefault(name, {})[method] = str(e)
+                continue
             results[name][method] = rows
             rows_scene += rows
             write_exr(os.path.join(out, f"{label(name)}-{method}.exr"), res.image)
@@ -310,13 +319,13 @@ def run_bench(args):
         summary[name] = {m: {"final_error": r[-1]["error"], "seconds": r[-1]["seconds"], "slope": slope(r),
                              **{f"seconds_to_{lv:g}": time_to(r, lv) for lv in LEVELS}}
                          for m, r in results[name].items()}
-    table = summary_table(results)
+    table = summary_table(results, skipped)
     with open(os.path.join(out, "summary.md"), "w") as f:
         f.write(f"Error (relative RMSE, reference noise subtracted) against seconds from loading the scene, "
                 f"{args.time:g} s per method, one run on this machine.\n\n{table}")
     extra = run_throughput(out) if args.throughput else {}
     write_json(os.path.join(out, "summary.json"), {"seconds": args.time, "methods": methods, "scenes": summary,
-                                                   **extra})
+                                                   "not_applicable": skipped, **extra})
     print(table)
     print(f"wrote {out}/summary.md, summary.json and a CSV, a PNG and the final EXRs per scene")
     return 0

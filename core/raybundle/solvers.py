@@ -357,7 +357,10 @@ def auto_bundle_resolution(scene, lo=32, hi=512):
     return int(np.clip(np.ceil(2 * r / np.sqrt(scene.patch_area.mean())), lo, hi))
 
 
-from .pathtracing import PathTracer  # noqa: E402  (an image method; it imports SolverStats from here)
+# the other methods import SolverStats and StochasticIterationSolver from here
+from .pathtracing import PathTracer  # noqa: E402
+from .radiosity import RadiositySolver  # noqa: E402
 
 #: the methods by name: patch solvers (images and bakes) and image-only methods (``image_only``)
-SOLVERS = {StochasticIterationSolver.name: StochasticIterationSolver, PathTracer.name: PathTracer}
+SOLVERS = {StochasticIterationSolver.name: StochasticIterationSolver, RadiositySolver.name: RadiositySolver,
+           PathTracer.name: PathTracer}
