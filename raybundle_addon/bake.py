@@ -173,7 +173,7 @@ class BakeJob:
         when ``stop`` is set during set-up (nothing is written)."""
         from raybundle import pipeline
         from raybundle.imaging import RenderSettings
-        from raybundle.solvers import SOLVERS
+        from raybundle.solvers import SOLVERS, image_only
 
         self.t_start = time.perf_counter()
         s, b = self.settings, self.bake
@@ -181,7 +181,7 @@ class BakeJob:
         b.validate()
         if s.method not in SOLVERS:
             raise ValueError(f"unknown method {s.method!r}: the core has {sorted(SOLVERS)}")
-        if getattr(SOLVERS[s.method], "image_only", False):
+        if image_only(s.method):
             raise ValueError(f"{s.method} renders images only, it has no patch solution to bake; choose "
                              "another method")
         self.export = export_scene(self.depsgraph, require_camera=b.camera)

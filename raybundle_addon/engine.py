@@ -164,7 +164,7 @@ class RenderJob:
         :class:`raybundle.pipeline.Cancelled` when stopped during set-up (no image yet)."""
         from raybundle import pipeline
         from raybundle.imaging import RenderSettings
-        from raybundle.solvers import SOLVERS
+        from raybundle.solvers import SOLVERS, image_only
 
         self.t_start = time.perf_counter()
         s = self.settings
@@ -182,7 +182,7 @@ class RenderJob:
                 self.stats_cb(f"Ray Bundle GI | Preparing {self.export.counts['triangles']} triangles")
             stage = None if self.stats_cb is None else (lambda text: self.stats_cb(f"Ray Bundle GI | {text}"))
             scene = self.export.scene
-            if not getattr(SOLVERS[s.method], "image_only", False):       # a path tracer needs no patches
+            if not image_only(s.method):       # a path tracer needs no patches
                 scene = pipeline.prepare(scene, patches=s.patches, stage=stage, stop=self._stopped)
             settings = RenderSettings(seed=s.seed, bundle_resolution=s.bundle_resolution,
                                       first_shot="auto" if s.first_shot else "none")

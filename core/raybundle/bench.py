@@ -33,7 +33,7 @@ from .metrics import image_error, light_source_mask
 from .pipeline import make_renderer, prepare
 from .sampling import DEFAULT_SEQUENCE, uniform_sphere
 from .scenes import load_scene
-from .solvers import SOLVERS
+from .solvers import image_only
 from .visibility import RayTracer, bundle_from_hits
 
 #: bench method name -> (solver name, random sequence)
@@ -124,7 +124,7 @@ def setup(name, method, resolution=None, seed=SEED):
     t0 = time.perf_counter()
     solver, sequence = METHODS[method]
     sc = load(name, resolution)
-    if not getattr(SOLVERS[solver], "image_only", False):
+    if not image_only(solver):
         sc = prepare(sc)
     r = make_renderer(sc, RenderSettings(seed=seed, sequence=sequence), solver=solver)
     return sc, r, time.perf_counter() - t0

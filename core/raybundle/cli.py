@@ -19,7 +19,7 @@ import numpy as np
 from . import __version__
 from .bench import METHODS
 from .sampling import DEFAULT_SEQUENCE, SEQUENCES
-from .solvers import SOLVERS, StochasticIterationSolver
+from .solvers import SOLVERS, StochasticIterationSolver, image_only
 
 
 class ProgressBar:
@@ -93,10 +93,9 @@ def cmd_render(args):
             if scene.camera is None:
                 raise SceneError("the scene has no camera")
             scene.camera = scene.camera.with_resolution(*args.resolution)
-        image_only = getattr(SOLVERS[args.method], "image_only", False)
-        if image_only and (args.workers or args.scheduler):
+        if image_only(args.method) and (args.workers or args.scheduler):
             raise ValueError(f"--workers and --scheduler merge patch solutions; {args.method} has none")
-        if not image_only:              # a path tracer needs no patches
+        if not image_only(args.method):     # a path tracer needs no patches
             scene = prepare(scene, patches=args.patches, stage=stage, stop=stop)
         settings = RenderSettings(seed=args.seed, sequence=args.sequence, bundle_resolution=args.bundle_resolution,
                                   threads=args.threads)

@@ -11,7 +11,7 @@ from .imaging import Renderer, RenderSettings
 from .lights import DirectLighting
 from .sampling import make_sequence
 from .scene import subdivide
-from .solvers import SOLVERS, StochasticIterationSolver
+from .solvers import SOLVERS, StochasticIterationSolver, image_only
 from .visibility import RayTracer
 
 #: default patch count for scenes rendered without an explicit one
@@ -56,7 +56,7 @@ def make_solver(scene, settings: RenderSettings | None = None, solver=Stochastic
     settings.validate()
     if solver not in SOLVERS:
         raise ValueError(f"unknown method {solver!r}; choose one of {sorted(SOLVERS)}")
-    if getattr(SOLVERS[solver], "image_only", False):
+    if image_only(solver):
         raise ValueError(f"{solver} renders images only, it has no patch solution to bake; "
                          f"bakes take {StochasticIterationSolver.name}")
     if settings.sequence == "halton":
@@ -81,7 +81,7 @@ def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
                   solver=StochasticIterationSolver.name, stage=None, stop=None):
     """Tracer + first shot + solver + image accumulator for a prepared scene."""
     settings = settings or RenderSettings()
-    if getattr(SOLVERS.get(solver), "image_only", False):
+    if image_only(solver):
         return _make_image_method(scene, settings, camera, solver, stage, stop)
     solver_obj = make_solver(scene, settings, solver, stage=stage, stop=stop)
     try:

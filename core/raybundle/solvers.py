@@ -364,3 +364,9 @@ from .radiosity import RadiositySolver  # noqa: E402
 #: the methods by name: patch solvers (images and bakes) and image-only methods (``image_only``)
 SOLVERS = {StochasticIterationSolver.name: StochasticIterationSolver, RadiositySolver.name: RadiositySolver,
            PathTracer.name: PathTracer}
+
+
+def image_only(method):
+    """True for a method without a patch solution (it renders images, it does not bake and needs
+    no patch layout): :class:`~raybundle.pathtracing.PathTracer`."""
+    return bool(getattr(SOLVERS.get(method), "image_only", False))
