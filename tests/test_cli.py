@@ -89,7 +89,7 @@ def test_bad_scene_names_and_files_give_errors(tmp_path):
 
 @pytest.mark.parametrize("args", [["--iterations", "-3"], ["--resolution", "0", "10"], ["--time", "nan"],
                                   ["--time", "-1"], ["--patches", "many"], ["--threads", "0"],
-                                  ["--bundle-resolution", "99999"], ["--sequence", "sobol"], ["--bogus"]])
+                                  ["--bundle-resolution", "99999"], ["--sequence", "niederreiter"], ["--bogus"]])
 def test_bad_arguments_get_one_line_and_exit_2(tmp_path, args):
     p = run_cli("render", "cornell", *args, "--out", str(tmp_path / "x.exr"))
     assert p.returncode == 2, p.stderr

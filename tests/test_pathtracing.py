@@ -89,3 +89,7 @@ def test_cli_method_path_tracing_writes_the_image_without_patches(tmp_path):
     assert p.returncode == 2 and "has none" in p.stderr and "Traceback" not in p.stderr
     with pytest.raises(ValueError, match="renders images only"):
         pipeline.make_solver(scenes.load_scene("furnace"), solver="path-tracing")
+    p = subprocess.run([sys.executable, "-m", "raybundle", "render", "furnace", "--method", "path-tracing",
+                        "--sequence", "sobol", "--iterations", "1", "--out", str(tmp_path / "y.exr")],
+                       capture_output=True, text=True)
+    assert p.returncode == 2 and "not 'sobol'" in p.stderr and "Traceback" not in p.stderr

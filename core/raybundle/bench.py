@@ -38,6 +38,7 @@ from .visibility import RayTracer, bundle_from_hits
 
 #: bench method name -> (solver name, random sequence)
 METHODS = {"stochastic-iteration": ("stochastic-iteration", DEFAULT_SEQUENCE),
+           "ray-bundle-walk": ("ray-bundle-walk", DEFAULT_SEQUENCE),
            "radiosity": ("radiosity", DEFAULT_SEQUENCE),
            "path-tracing": ("path-tracing", "prng"),
            "path-tracing-qmc": ("path-tracing", "halton")}

@@ -181,11 +181,13 @@ def build_parser():
     r.add_argument("--resolution", type=_number(int, 1, 65536, "a resolution in [1, 65536]"), nargs=2,
                    metavar=("W", "H"))
     r.add_argument("--method", default=StochasticIterationSolver.name, choices=sorted(SOLVERS),
-                   help=f"{StochasticIterationSolver.name} (default; ray bundles) or path-tracing (the unbiased "
-                        "random walk, images only)")
+                   help=f"{StochasticIterationSolver.name} (default; ray bundles), ray-bundle-walk (random walks "
+                        "of bundles), radiosity (diffuse scenes) or path-tracing (the unbiased random walk, images "
+                        "only)")
     r.add_argument("--sequence", default=DEFAULT_SEQUENCE, choices=sorted(SEQUENCES),
-                   help="random numbers: of the global directions (ray bundles); path-tracing takes halton as "
-                        "randomised quasi-Monte Carlo and any other name as the PRNG")
+                   help="random numbers of the global directions (ray bundles); halton and sobol bias the "
+                        "iterations (thesis 1.2, a warning says so); path-tracing takes halton as randomised "
+                        "quasi-Monte Carlo, prng or stratified as the PRNG")
     r.add_argument("--bundle-resolution", type=_number(int, 0, 4096, "an integer in [0, 4096]"), default=0,
                    help="rays per bundle side (0 = auto)")
     r.add_argument("--threads", type=POSITIVE_INT, default=None)

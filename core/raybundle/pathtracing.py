@@ -87,6 +87,9 @@ class PathTracer(ProgressiveImage):
     name = "path-tracing"
     #: renders images only: :func:`~raybundle.pipeline.make_solver` refuses it
     image_only = True
+    #: ``settings.sequence`` values: the PRNG (``stratified``, the default, means it too) or
+    #: randomised Halton points
+    SEQUENCES = ("prng", "stratified", "halton")
 
     def __init__(self, scene, camera, tracer, direct, settings):
         from .solvers import SolverStats
@@ -94,6 +97,9 @@ class PathTracer(ProgressiveImage):
         if camera is None:
             raise ValueError("the scene has no camera; give one (Camera.from_blender / Camera.look_at)")
         settings.validate()
+        if settings.sequence not in self.SEQUENCES:
+            raise ValueError(f"path tracing draws its paths from {' or '.join(self.SEQUENCES)}, not "
+                             f"{settings.sequence!r} (that one drives the iteration methods' directions)")
         self.scene, self.camera, self.tracer, self.direct, self.settings = scene, camera, tracer, direct, settings
         self.solver = _Passes(tracer, SolverStats())
         self.rng = np.random.default_rng([settings.seed, 11])

@@ -9,7 +9,7 @@ import warnings
 from .clusters import make_patches
 from .imaging import Renderer, RenderSettings
 from .lights import DirectLighting
-from .sampling import make_sequence
+from .sampling import NOT_CUD, make_sequence
 from .scene import subdivide
 from .solvers import SOLVERS, StochasticIterationSolver, image_only
 from .visibility import RayTracer
@@ -59,10 +59,10 @@ def make_solver(scene, settings: RenderSettings | None = None, solver=Stochastic
     if image_only(solver):
         raise ValueError(f"{solver} renders images only, it has no patch solution to bake; "
                          f"bakes take {StochasticIterationSolver.name}")
-    if settings.sequence == "halton":
-        warnings.warn("the Halton sequence is not completely uniformly distributed: stochastic iteration "
-                      "driven by it converges to a wrong image (thesis 1.2); use 'prng' or 'pi-powers'",
-                      stacklevel=3)
+    if settings.sequence in NOT_CUD and SOLVERS[solver].iterates:
+        warnings.warn(f"the {settings.sequence.capitalize()} sequence is not completely uniformly distributed: "
+                      f"{solver} driven by it converges to a wrong image (thesis 1.2); use 'prng', "
+                      "'stratified' or 'pi-powers'", stacklevel=3)
     _step(stage, stop, f"building the ray tracer over {len(scene.triangles):,} triangles")
     tracer = RayTracer(scene, threads=settings.threads)
     try:

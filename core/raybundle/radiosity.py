@@ -36,6 +36,8 @@ class RadiositySolver(StochasticIterationSolver):
     open area, the reconstruction and the image are the stochastic iteration's."""
 
     name = "radiosity"
+    #: the directions integrate form factors; no random operator is iterated
+    iterates = False
     #: the dense matrix's limit: 16,384 sides take 2 GB
     MAX_SIDES = 16384
     #: Jacobi sweeps per step
@@ -75,7 +77,7 @@ class RadiositySolver(StochasticIterationSolver):
         then ``SWEEPS`` Jacobi sweeps of the radiosity equation."""
         t0 = time.perf_counter()
         before = self.direct.rays
-        self.first_shot.refine(self.first_shot_refine)
+        self.refine_first_shot()
         k_dirs = self.directions_per_step
         d = np.array([uniform_sphere(*self.sequence.next(2)) for _ in range(k_dirs)])
         g = self.grid_rng.random((k_dirs, 3))

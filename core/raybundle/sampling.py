@@ -8,9 +8,10 @@ from all earlier ones, so the numbers consumed iteration after iteration must be
 * :class:`PiPowersSequence`, the fractional parts {pi^n}: works (the thesis'
   recommendation).  In doubles {pi^n} is exactly 0 from n ~ 33 on, so it is
   computed here in exact fixed-point integer arithmetic with enough bits.
-* :class:`HaltonSequence`: a low-discrepancy sequence whose consecutive points
-  are strongly correlated.  It is here so that the failure it causes (a
-  converged but *wrong* answer) can be shown; do not use it for rendering.
+* :class:`HaltonSequence` and :class:`SobolSequence`: low-discrepancy sequences whose
+  consecutive points are strongly correlated.  They are here so that the failure they
+  cause (a converged but *wrong* answer) can be shown; do not use them for iterations
+  (path tracing randomises Halton points per pixel, :mod:`raybundle.pathtracing`).
 
 All sequences share one interface: ``next(dim)`` returns the next point of the
 iteration as ``dim`` numbers in [0, 1).  Chosen by name via :data:`SEQUENCES`.
@@ -380,11 +381,69 @@ class HaltonSequence:
         return out
 
 
+def sobol_direction_numbers(bits=32):
+    """Direction numbers (2, bits) of the first two Sobol coordinates as ``bits``-bit
+    integers: coordinate 1 is the van der Corput sequence in base 2 (``v_k = 2^(bits-k)``),
+    coordinate 2 uses the primitive polynomial x + 1, ``m_k = 2 m_(k-1) xor m_(k-1)``,
+    ``m_1 = 1``, ``v_k = m_k 2^(bits-k)``.  Together they form a (0, 2)-sequence in base 2:
+    every block of 2^m consecutive points (aligned at multiples of 2^m) puts exactly one
+    point into every dyadic box of area 2^-m."""
+    v = np.zeros((2, bits), dtype=np.uint64)
+    m = 1
+    for k in range(1, bits + 1):
+        v[0, k - 1] = 1 << (bits - k)
+        if k > 1:
+            m = (m << 1) ^ m
+        v[1, k - 1] = m << (bits - k)
+    return v
+
+
+class SobolSequence:
+    """The two-dimensional Sobol (0, 2)-sequence with a random digital shift (each
+    coordinate's bits XORed with a seeded random word; the net property is kept).
+
+    Like Halton it is a low-discrepancy sequence whose consecutive points are correlated
+    (point 2k and 2k + 1 differ in the first bit of both coordinates), so stochastic
+    iteration driven by it converges to a wrong answer (thesis 1.2); form factors
+    integrated over its directions (:mod:`raybundle.radiosity`) do not iterate and converge
+    correctly.  Two dimensions only: the iteration methods draw one direction per call.
+    """
+
+    name = "sobol"
+    BITS = 32
+
+    def __init__(self, seed=0, start=0):
+        self.v = sobol_direction_numbers(self.BITS)
+        self.shift = np.random.default_rng([int(seed), 23]).integers(0, 1 << self.BITS, size=2, dtype=np.uint64)
+        self.index = int(start)
+
+    def point(self, index):
+        """Point ``index`` (2,) in [0, 1)^2: the XOR of the direction numbers of its set bits."""
+        x = self.shift.copy()
+        k = 0
+        while index:
+            if index & 1:
+                x ^= self.v[:, k]
+            index >>= 1
+            k += 1
+        return x.astype(float) / float(1 << self.BITS)
+
+    def next(self, dim):
+        if dim != 2:
+            raise ValueError("the Sobol sequence here has two dimensions (one direction per call)")
+        out = self.point(self.index)
+        self.index += 1
+        return out
+
+
+#: sequences that are not completely uniformly distributed: iterations driven by them are biased
+NOT_CUD = ("halton", "sobol")
+
 #: the sequence a render uses unless told otherwise
 DEFAULT_SEQUENCE = "stratified"
 
 SEQUENCES = {"prng": PRNGSequence, "stratified": StratifiedSequence, "pi-powers": PiPowersSequence,
-             "halton": HaltonSequence}
+             "halton": HaltonSequence, "sobol": SobolSequence}
 
 
 def make_sequence(name, seed=0):
@@ -392,7 +451,7 @@ def make_sequence(name, seed=0):
     (by 64 numbers per seed value, at most 1000)."""
     if name not in SEQUENCES:
         raise ValueError(f"unknown sequence {name!r}; choose one of {sorted(SEQUENCES)}")
-    if name in ("prng", "stratified"):
+    if name in ("prng", "stratified", "sobol"):
         return SEQUENCES[name](seed)
     if not 0 <= int(seed) <= 1000:
         raise ValueError(f"seed must lie in [0, 1000] for the {name} sequence")

@@ -75,6 +75,9 @@ class StochasticIterationSolver:
     """Stochastic iteration with ray bundles and incoming first shot (thesis 3.3, 3.4)."""
 
     name = "stochastic-iteration"
+    #: each step applies a random operator to the previous iterate (thesis 1.2: the random
+    #: numbers must then be completely uniformly distributed)
+    iterates = True
     #: iterations left out of the running average (it restarts at iteration BURN_IN + 1)
     BURN_IN = 8
 
@@ -196,8 +199,7 @@ class StochasticIterationSolver:
         return out + gathered.reshape(m, len(gp), 3).mean(axis=0)
 
     def step(self):
-        """One iteration: ``directions_per_step`` directions d_k, one bundle each (traced
-        together on the thread pool), transfer, update the running average.
+        """One iteration: :meth:`transfer` from the current iterate, then the running average.
 
         The diffuse lobe receives the mean of the K transfers, ``E_i = (1/K) sum_k E_i(d_k)``
         (an unbiased iterate whatever the joint law of the d_k, as each is uniform); a
@@ -206,11 +208,42 @@ class StochasticIterationSolver:
         """
         t0 = time.perf_counter()
         before = self.direct.rays
+        self.refine_first_shot()
+        E, e_glossy, t_glossy, bundles = self.transfer()
+        self.incoming = E
+        if not self.diffuse_only:
+            self.glossy_incoming, self.receive_direction = e_glossy, t_glossy
+        st = self.stats
+        st.iterations += 1
+        # the running average restarts once, after BURN_IN iterations: the iterates start from
+        # zero and approach the solution like albedo^n, a start-up bias ~ 1/(n (1 - albedo))
+        # that would otherwise fade only as fast as 1/n (3% after 100 iterations at albedo 0.7)
+        self.averaged = st.iterations - (self.BURN_IN if st.iterations > self.BURN_IN else 0)
+        self.mean_incoming += (E - self.mean_incoming) / self.averaged
+        st.rays += self.direct.rays - before
+        st.seconds += time.perf_counter() - t0
+        return bundles
+
+    def refine_first_shot(self):
+        """A few more shadow rays into the first shot (and lobe-sampled rays into the caustic shot)."""
         self.first_shot.refine(self.first_shot_refine)
         if self.caustic is not None:
             rays = self.caustic.rays
             self.caustic.refine(self.caustic_refine)
             self.stats.rays += self.caustic.rays - rays
+
+    def sent_environment(self):
+        """Radiance (3,) the world sends into the bundle lines that leave the scene."""
+        return self.environment
+
+    def transfer(self):
+        """One random transport operator: ``directions_per_step`` directions d_k, one bundle
+        each (traced together on the thread pool), every side's received ``E_i(d_k)`` from
+        what the senders send now (:meth:`sent_radiance`, :meth:`glossy_sent_radiance`,
+        :meth:`sent_environment`).  Returns ``(E, e_glossy, t_glossy, bundles)``: the
+        diffuse lobe's mean over the K transfers (S, 3), each glossy side's one drawn
+        transfer and its travel direction t_i (S, 3; None for diffuse-only scenes).
+        Counts directions and rays, sets ``direction``; the caller stores the iterate."""
         k_dirs = self.directions_per_step
         d = np.array([uniform_sphere(*self.sequence.next(2)) for _ in range(k_dirs)])
         g = self.grid_rng.random((k_dirs, 3))
@@ -219,12 +252,14 @@ class StochasticIterationSolver:
         # diffuse senders send the same radiance into every direction they face (a bundle
         # pairs only sides that face each other): one evaluation serves all K bundles, and
         # only glossy sides are evaluated per direction
-        s_fixed = np.vstack([self.sent_radiance(self.normal), self.environment])
+        s_fixed = np.vstack([self.sent_radiance(self.normal), self.sent_environment()])
         gp = self.glossy_patches
         E = np.zeros((n, 3))
+        e_glossy = t_glossy = None
         if not self.diffuse_only:     # the new glossy iterate (senders use the old one)
             pick = self.grid_rng.integers(k_dirs, size=len(self.glossy_patches))
             e_glossy, t_glossy = np.zeros((n, 3)), np.zeros((n, 3))
+        st = self.stats
         for k, bundle in enumerate(bundles):
             side = np.sign(self.normal @ d[k])
             # the last row is the world's radiance: sender ENVIRONMENT (-1) indexes it
@@ -241,25 +276,12 @@ class StochasticIterationSolver:
                 mine = self.glossy_patches[pick == k]
                 e_glossy[mine] = e_k[mine]
                 t_glossy[mine] = -side[mine, None] * d[k]
-            st = self.stats
             st.rays += bundle.n_casts
             st.bundle_rays += bundle.n_rays
         E /= k_dirs
-        self.incoming = E
-        if not self.diffuse_only:
-            self.glossy_incoming, self.receive_direction = e_glossy, t_glossy
         self.direction = d[-1]
-        st = self.stats
-        st.iterations += 1
         st.directions += k_dirs
-        # the running average restarts once, after BURN_IN iterations: the iterates start from
-        # zero and approach the solution like albedo^n, a start-up bias ~ 1/(n (1 - albedo))
-        # that would otherwise fade only as fast as 1/n (3% after 100 iterations at albedo 0.7)
-        self.averaged = st.iterations - (self.BURN_IN if st.iterations > self.BURN_IN else 0)
-        self.mean_incoming += (E - self.mean_incoming) / self.averaged
-        st.rays += self.direct.rays - before
-        st.seconds += time.perf_counter() - t0
-        return bundles
+        return E, e_glossy, t_glossy, bundles
 
     # ------------------------------------------------------------- estimates
     def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True, glossy_iterate=True,
@@ -319,6 +341,10 @@ class StochasticIterationSolver:
         L[cos <= 0] = 0.0
         return L
 
+    def report(self):
+        """Figures of this method beyond :class:`SolverStats` for the run's stats (none here)."""
+        return {}
+
     def iterate_radiance(self, w_out):
         """Radiance of the current iterate L_n,i(w_out) (P, 3) of every patch towards
         ``w_out`` (P, 3), all lobes, first shot and emission included."""
@@ -360,10 +386,11 @@ def auto_bundle_resolution(scene, lo=32, hi=512):
 # the other methods import SolverStats and StochasticIterationSolver from here
 from .pathtracing import PathTracer  # noqa: E402
 from .radiosity import RadiositySolver  # noqa: E402
+from .walk import RayBundleWalk  # noqa: E402
 
 #: the methods by name: patch solvers (images and bakes) and image-only methods (``image_only``)
-SOLVERS = {StochasticIterationSolver.name: StochasticIterationSolver, RadiositySolver.name: RadiositySolver,
-           PathTracer.name: PathTracer}
+SOLVERS = {StochasticIterationSolver.name: StochasticIterationSolver, RayBundleWalk.name: RayBundleWalk,
+           RadiositySolver.name: RadiositySolver, PathTracer.name: PathTracer}
 
 
 def image_only(method):
