@@ -45,7 +45,7 @@ import os
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import bpy
 import numpy as np
@@ -173,12 +173,16 @@ class BakeJob:
         when ``stop`` is set during set-up (nothing is written)."""
         from raybundle import pipeline
         from raybundle.imaging import RenderSettings
-        from raybundle.solvers import SOLVERS, image_only
+        from raybundle.methods import SOLVERS, image_only
+        from raybundle.solvers import StochasticIterationSolver
 
         self.t_start = time.perf_counter()
         s, b = self.settings, self.bake
         s.validate()
         b.validate()
+        if s.method == "auto":       # a bake needs a patch solution: auto's patch method is the iteration
+            s = replace(s, method=StochasticIterationSolver.name)
+            self.settings = s
         if s.method not in SOLVERS:
             raise ValueError(f"unknown method {s.method!r}: the core has {sorted(SOLVERS)}")
         if image_only(s.method):

@@ -98,6 +98,7 @@ class RenderJob:
         self.settings = settings or JobSettings.from_scene(depsgraph.scene)
         self.stop = stop if stop is not None else threading.Event()
         self.display, self.progress, self.stats_cb = display, progress, stats
+        self.choice = None           # auto's Choice, when the method is auto
         self.user_break = user_break
         self.camera_object = camera_object
         self.preview_interval = float(preview_interval)
@@ -164,13 +165,13 @@ class RenderJob:
         :class:`raybundle.pipeline.Cancelled` when stopped during set-up (no image yet)."""
         from raybundle import pipeline
         from raybundle.imaging import RenderSettings
-        from raybundle.solvers import SOLVERS, image_only
+        from raybundle.methods import SOLVERS, image_only
 
         self.t_start = time.perf_counter()
         s = self.settings
         s.validate()
-        if s.method not in SOLVERS:
-            raise ValueError(f"unknown method {s.method!r}: the core has {sorted(SOLVERS)}")
+        if s.method not in SOLVERS and s.method != "auto":
+            raise ValueError(f"unknown method {s.method!r}: the core has {sorted(SOLVERS)} and auto")
         active_jobs.add(self)
         try:
             if self.stats_cb is not None:
@@ -182,11 +183,19 @@ class RenderJob:
                 self.stats_cb(f"Ray Bundle GI | Preparing {self.export.counts['triangles']} triangles")
             stage = None if self.stats_cb is None else (lambda text: self.stats_cb(f"Ray Bundle GI | {text}"))
             scene = self.export.scene
-            if not image_only(s.method):       # a path tracer needs no patches
+            method, self.choice = s.method, None
+            if method == "auto":               # decided on the exported scene (raybundle.auto)
+                from raybundle.auto import choose
+
+                self.choice = choose(scene)
+                method = self.choice.method
+                if stage is not None:
+                    stage(f"Auto: {method}")
+            if not image_only(method):         # a path tracer needs no patches
                 scene = pipeline.prepare(scene, patches=s.patches, stage=stage, stop=self._stopped)
             settings = RenderSettings(seed=s.seed, bundle_resolution=s.bundle_resolution,
                                       first_shot="auto" if s.first_shot else "none")
-            self.renderer = pipeline.make_renderer(scene, settings, solver=s.method, stage=stage,
+            self.renderer = pipeline.make_renderer(scene, settings, solver=method, stage=stage,
                                                    stop=self._stopped)
             t_prepared = time.perf_counter() - self.t_start
             try:
@@ -203,6 +212,8 @@ class RenderJob:
                      first_image_seconds=round(self.first_image_seconds, 4),
                      total_seconds=round(time.perf_counter() - self.t_start, 4),
                      warnings=len(self.export.warnings))
+        if self.choice is not None:
+            stats["auto"] = self.choice.as_dict()
         outcome = RenderOutcome(result.image, stats, list(self.export.warnings), result.cancelled, self.export)
         self._notify("done")
         return outcome

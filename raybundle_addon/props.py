@@ -18,11 +18,13 @@ LAST_BAKE: dict[str, dict] = {}
 
 
 def _solver_items():
-    """One enum item per solver of the core's registry (:data:`raybundle.solvers.SOLVERS`)."""
-    from raybundle.solvers import SOLVERS
+    """One enum item per solver of the core's registry (:data:`raybundle.methods.SOLVERS`), and auto."""
+    from raybundle.methods import SOLVERS
 
     return [(name, name.replace("-", " ").capitalize(), ((cls.__doc__ or name).strip().splitlines() or [name])[0])
-            for name, cls in SOLVERS.items()]
+            for name, cls in SOLVERS.items()] + [
+        ("auto", "Auto", "Chosen from what the scene holds (raybundle.auto): the bundle iteration unless glossy "
+         "lobes carry most of the reflection, then path tracing; bakes take the bundle iteration")]
 
 
 def _stat(key, default):

@@ -266,6 +266,27 @@ def test_path_tracing_method_renders_without_patches_and_refuses_to_bake(fresh):
         BakeJob(bpy.context.evaluated_depsgraph_get()).start()
 
 
+def test_auto_method_renders_with_its_choice_and_bakes_with_the_iteration(fresh):
+    """Method Auto: the engine measures the exported scene (Lambertian here), renders with the
+    bundle iteration, shows the choice as a set-up step and keeps it in the run's stats; a bake
+    set to Auto takes the bundle iteration (it needs a patch solution)."""
+    from raybundle_addon.bake import BakeJob
+    from raybundle_addon.engine import JobSettings, RenderJob
+
+    small_lit_scene()
+    steps = []
+    out = RenderJob(bpy.context.evaluated_depsgraph_get(), JobSettings(iterations=4, time_limit=0.0, method="auto"),
+                    stats=steps.append).run()
+    assert out.stats["solver"] == "stochastic-iteration" == out.stats["auto"]["method"]
+    assert "Lambertian" in out.stats["auto"]["reason"] and any("Auto: stochastic-iteration" in t for t in steps)
+    assert np.isfinite(out.image).all() and out.image.mean() > 0
+    bpy.context.scene.raybundle.method = "auto"
+    job = BakeJob(bpy.context.evaluated_depsgraph_get()).start()
+    assert job.settings.method == "stochastic-iteration" and job.step(0.1) is True
+    job.stop.set()
+    job.finish()
+
+
 # ---------------------------------------------------------- errors, settings
 @pytest.mark.parametrize("case,message", [("no lights", "no lights"), ("no meshes", "no visible mesh"),
                                           ("no camera", "no camera"), ("zero time", "time limit")])

@@ -33,7 +33,7 @@ from .metrics import image_error, light_source_mask
 from .pipeline import make_renderer, prepare
 from .sampling import DEFAULT_SEQUENCE, uniform_sphere
 from .scenes import load_scene
-from .solvers import image_only
+from .methods import image_only
 from .visibility import RayTracer, bundle_from_hits
 
 #: bench method name -> (solver name, random sequence)
@@ -41,7 +41,8 @@ METHODS = {"stochastic-iteration": ("stochastic-iteration", DEFAULT_SEQUENCE),
            "ray-bundle-walk": ("ray-bundle-walk", DEFAULT_SEQUENCE),
            "radiosity": ("radiosity", DEFAULT_SEQUENCE),
            "path-tracing": ("path-tracing", "prng"),
-           "path-tracing-qmc": ("path-tracing", "halton")}
+           "path-tracing-qmc": ("path-tracing", "halton"),
+           "auto": ("auto", DEFAULT_SEQUENCE)}
 #: error levels whose first crossing ``summary.md`` reports
 LEVELS = (0.05, 0.02, 0.015, 0.01)
 #: seeds of the two reference halves; of the timed runs
@@ -125,9 +126,15 @@ def setup(name, method, resolution=None, seed=SEED):
     t0 = time.perf_counter()
     solver, sequence = METHODS[method]
     sc = load(name, resolution)
+    first_shot = "auto"
+    if solver == "auto":                       # decided on the scene, inside the timed set-up
+        from .auto import choose
+
+        choice = choose(sc)
+        solver, first_shot = choice.method, choice.first_shot
     if not image_only(solver):
         sc = prepare(sc)
-    r = make_renderer(sc, RenderSettings(seed=seed, sequence=sequence), solver=solver)
+    r = make_renderer(sc, RenderSettings(seed=seed, sequence=sequence, first_shot=first_shot), solver=solver)
     return sc, r, time.perf_counter() - t0
 
 

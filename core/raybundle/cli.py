@@ -19,7 +19,9 @@ import numpy as np
 from . import __version__
 from .bench import METHODS
 from .sampling import DEFAULT_SEQUENCE, SEQUENCES
-from .solvers import SOLVERS, StochasticIterationSolver, image_only
+from .pipeline import DEFAULT_PATCHES
+from .methods import SOLVERS, image_only
+from .solvers import StochasticIterationSolver
 
 
 class ProgressBar:
@@ -93,12 +95,21 @@ def cmd_render(args):
             if scene.camera is None:
                 raise SceneError("the scene has no camera")
             scene.camera = scene.camera.with_resolution(*args.resolution)
+        first_shot, choice = "auto", None
+        if args.method == "auto":
+            from .auto import choose
+
+            choice = choose(scene)
+            args.method, first_shot = choice.method, choice.first_shot
+            args.patches = choice.patches if args.patches is None else args.patches
+            stage(f"auto: {choice.method}, {args.patches:,} patches: {choice.reason}")
+        args.patches = DEFAULT_PATCHES if args.patches is None else args.patches
         if image_only(args.method) and (args.workers or args.scheduler):
             raise ValueError(f"--workers and --scheduler merge patch solutions; {args.method} has none")
         if not image_only(args.method):     # a path tracer needs no patches
             scene = prepare(scene, patches=args.patches, stage=stage, stop=stop)
         settings = RenderSettings(seed=args.seed, sequence=args.sequence, bundle_resolution=args.bundle_resolution,
-                                  threads=args.threads)
+                                  threads=args.threads, first_shot=first_shot)
         if args.workers or args.scheduler:
             signal.signal(signal.SIGINT, old)
             return _render_chains(args, scene, settings, stage)
@@ -113,7 +124,8 @@ def cmd_render(args):
     finally:
         signal.signal(signal.SIGINT, old)
         bar.close()
-    stats = _write_outputs(args, scene, result.image, result.stats)
+    stats = _write_outputs(args, scene, result.image, dict(result.stats, auto=choice.as_dict()) if choice
+                           else result.stats)
     state = "stopped early" if result.cancelled else "done"
     print(f"{state}: {stats['iterations']} iterations in {stats['seconds']:.1f} s, {scene.n_patches} patches, "
           f"{stats['rays_traced'] / 1e6:.1f} M rays -> {args.out}", file=sys.stderr)
@@ -176,14 +188,15 @@ def build_parser():
     g.add_argument("--iterations", type=COUNT, help="number of iterations, for path-tracing samples per pixel "
                    "(reproducible with --seed)")
     r.add_argument("--seed", type=COUNT, default=0)
-    r.add_argument("--patches", type=COUNT, default=4000, help="target patch count (default 4000; 0 = one "
-                   "patch per input triangle)")
+    r.add_argument("--patches", type=COUNT, help=f"target patch count (default {DEFAULT_PATCHES:,}, or auto's "
+                   "choice; 0 = one patch per input triangle)")
     r.add_argument("--resolution", type=_number(int, 1, 65536, "a resolution in [1, 65536]"), nargs=2,
                    metavar=("W", "H"))
-    r.add_argument("--method", default=StochasticIterationSolver.name, choices=sorted(SOLVERS),
+    r.add_argument("--method", default=StochasticIterationSolver.name, choices=sorted(SOLVERS) + ["auto"],
                    help=f"{StochasticIterationSolver.name} (default; ray bundles), ray-bundle-walk (random walks "
-                        "of bundles), radiosity (diffuse scenes) or path-tracing (the unbiased random walk, images "
-                        "only)")
+                        "of bundles), radiosity (diffuse scenes), path-tracing (the unbiased random walk, images "
+                        "only) or auto (chosen from what the scene holds; the choice and its reason are printed "
+                        "and written to --stats)")
     r.add_argument("--sequence", default=DEFAULT_SEQUENCE, choices=sorted(SEQUENCES),
                    help="random numbers of the global directions (ray bundles); halton and sobol bias the "
                         "iterations (thesis 1.2, a warning says so); path-tracing takes halton as randomised "

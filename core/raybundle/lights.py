@@ -572,6 +572,20 @@ def light_polygon_irradiance(light, points, normals):
     return None
 
 
+def small_emitters(scene, small_fraction=0.1):
+    """Material ids (list) of the mesh emitters the first shot takes: constant emission (not
+    the furnaces' ``c (1 - a(w))``) over at most ``small_fraction`` of the scene's area."""
+    mats = scene.materials
+    total = scene.triangle_area.sum()
+    constant = ~np.any(mats.emission_albedo_complement > 0, axis=1) & np.any(mats.emission > 0, axis=1)
+    out = []
+    for m in np.nonzero(constant)[0]:
+        tri = scene.triangle_material == m
+        if tri.any() and scene.triangle_area[tri].sum() <= small_fraction * total:
+            out.append(int(m))
+    return out
+
+
 class DirectLighting:
     """First-shot lights of a scene and the direct-illumination estimators."""
 
@@ -586,18 +600,14 @@ class DirectLighting:
         mats = scene.materials
         self.first_shot_material = np.zeros(len(mats), bool)
         self.area_lights: list[MeshLight] = []
-        total = scene.triangle_area.sum()
         if first_shot == "auto":
-            constant = ~np.any(mats.emission_albedo_complement > 0, axis=1) & np.any(mats.emission > 0, axis=1)
-            for m in np.nonzero(constant)[0]:
+            for m in small_emitters(scene, small_fraction):
                 tri = np.nonzero(scene.triangle_material == m)[0]
-                area = scene.triangle_area[tri].sum()
-                if len(tri) and area <= small_fraction * total:
-                    self.first_shot_material[m] = True
-                    cdf = np.cumsum(scene.triangle_area[tri])
-                    self.area_lights.append(MeshLight(int(m), tri, cdf / cdf[-1], float(area),
-                                                      mats.emission[m].astype(float),
-                                                      scene.triangle_two_sided[tri], scene))
+                self.first_shot_material[m] = True
+                cdf = np.cumsum(scene.triangle_area[tri])
+                self.area_lights.append(MeshLight(int(m), tri, cdf / cdf[-1], float(scene.triangle_area[tri].sum()),
+                                                  mats.emission[m].astype(float),
+                                                  scene.triangle_two_sided[tri], scene))
         pl = scene.point_lights
         self.point_lights = [PointLight(pl.position[k], pl.intensity[k], pl, k) for k in range(len(pl))
                              if np.any(pl.intensity[k] > 0)]

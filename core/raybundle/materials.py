@@ -79,6 +79,9 @@ import numpy as np
 #: Smallest GGX alpha evaluated; below it the lobe is a near-mirror that stochastic
 #: iteration cannot resolve (documented failure mode: fireflies / black highlights).
 MIN_ALPHA = 1e-3
+#: glossy lobes below this GGX roughness count as near-mirrors (:mod:`raybundle.auto`,
+#: :mod:`raybundle.walk`)
+NEAR_MIRROR_ROUGHNESS = 0.1
 _MU_TABLE = 65  # samples of cos(theta_out) in the directional-albedo tables
 
 

@@ -8,10 +8,11 @@ import warnings
 
 from .clusters import make_patches
 from .imaging import Renderer, RenderSettings
-from .lights import DirectLighting
+from .lights import DirectLighting, small_emitters
 from .sampling import NOT_CUD, make_sequence
 from .scene import subdivide
-from .solvers import SOLVERS, StochasticIterationSolver, image_only
+from .methods import SOLVERS, image_only
+from .solvers import StochasticIterationSolver
 from .visibility import RayTracer
 
 #: default patch count for scenes rendered without an explicit one
@@ -63,6 +64,11 @@ def make_solver(scene, settings: RenderSettings | None = None, solver=Stochastic
         warnings.warn(f"the {settings.sequence.capitalize()} sequence is not completely uniformly distributed: "
                       f"{solver} driven by it converges to a wrong image (thesis 1.2); use 'prng', "
                       "'stratified' or 'pi-powers'", stacklevel=3)
+    if settings.first_shot == "none" and small_emitters(scene):
+        names = ", ".join(repr(scene.materials.names[m]) for m in small_emitters(scene))
+        warnings.warn(f"first shot is off: the small emitters {names} light the scene only through the bundle "
+                      "lines that happen to hit them, so the image is far noisier (thesis 3.4); keep "
+                      "first_shot='auto'", stacklevel=3)
     _step(stage, stop, f"building the ray tracer over {len(scene.triangles):,} triangles")
     tracer = RayTracer(scene, threads=settings.threads)
     try:
@@ -107,7 +113,7 @@ def _make_image_method(scene, settings, camera, name, stage, stop):
 
 def render(scene, settings=None, iterations=None, seconds=None, progress=None, stop=None, camera=None, stage=None,
            solver=StochasticIterationSolver.name):
-    """Render a prepared scene with the method ``solver`` (a :data:`~raybundle.solvers.SOLVERS`
+    """Render a prepared scene with the method ``solver`` (a :data:`~raybundle.methods.SOLVERS`
     name); returns :class:`~raybundle.imaging.RenderResult`.  ``stop`` set during set-up
     raises :class:`Cancelled`; during the iteration it ends the run with the image so far."""
     renderer = make_renderer(scene, settings, camera, solver=solver, stage=stage, stop=stop)

@@ -1,7 +1,7 @@
 """Solvers of the rendering equation on patches.
 
 Every solver has the same interface, so the CLI, the add-on and the bench can
-drive any of them by name (:data:`SOLVERS`): ``step()`` performs one iteration,
+drive any of them by name (:data:`raybundle.methods.SOLVERS`): ``step()`` performs one iteration,
 ``incoming`` / ``receive_direction`` describe the current iterate,
 ``mean_incoming`` the running average, and ``stats`` counts the work.
 
@@ -78,7 +78,7 @@ class StochasticIterationSolver:
     #: each step applies a random operator to the previous iterate (thesis 1.2: the random
     #: numbers must then be completely uniformly distributed)
     iterates = True
-    #: iterations left out of the running average (it restarts at iteration BURN_IN + 1)
+    #: the fewest iterations left out of the running average (``burn_in``, set per scene)
     BURN_IN = 8
 
     def __init__(self, scene, tracer, direct, sequence, bundle_resolution=0, seed=0, directions_per_step=1,
@@ -116,6 +116,17 @@ class StochasticIterationSolver:
         self._glossy_tsides = gts
         self._glossy_tside_cdf = own + (np.cumsum(a) - (np.cumsum(side_total) - side_total)[own]) / side_total[own]
         self.diffuse_only = len(self.glossy_patches) == 0
+        albedo = self.kd_over_pi * np.pi
+        if len(self.glossy_patches):
+            gpm = pm[self.glossy_patches]
+            albedo[self.glossy_patches] += mats.albedo(gpm, np.full(len(gpm), 0.7), diffuse=False)
+        #: the area-weighted mean of each side's largest albedo (glossy lobe at cos 0.7): the
+        #: rate at which the iterates forget their start
+        self.mean_albedo = float(np.clip((self.area * albedo.max(axis=1)).sum() / max(self.area.sum(), 1e-300),
+                                         0.0, 0.999))
+        #: iterations left out of the running average: until the start-up transient,
+        #: about mean_albedo^n, is below 1% (at least BURN_IN, at most 1,000)
+        self.burn_in = int(np.clip(np.ceil(np.log(0.01) / np.log(max(self.mean_albedo, 1e-3))), self.BURN_IN, 1000))
         if int(glossy_send_rays) < 1:
             raise ValueError("glossy_send_rays must be at least 1")
         self.glossy_send_rays = int(glossy_send_rays)
@@ -215,10 +226,10 @@ class StochasticIterationSolver:
             self.glossy_incoming, self.receive_direction = e_glossy, t_glossy
         st = self.stats
         st.iterations += 1
-        # the running average restarts once, after BURN_IN iterations: the iterates start from
+        # the running average restarts once, after burn_in iterations: the iterates start from
         # zero and approach the solution like albedo^n, a start-up bias ~ 1/(n (1 - albedo))
         # that would otherwise fade only as fast as 1/n (3% after 100 iterations at albedo 0.7)
-        self.averaged = st.iterations - (self.BURN_IN if st.iterations > self.BURN_IN else 0)
+        self.averaged = st.iterations - (self.burn_in if st.iterations > self.burn_in else 0)
         self.mean_incoming += (E - self.mean_incoming) / self.averaged
         st.rays += self.direct.rays - before
         st.seconds += time.perf_counter() - t0
@@ -381,19 +392,3 @@ def auto_bundle_resolution(scene, lo=32, hi=512):
     time per iteration; coarser ones leave more patches without a ray."""
     _, r = scene.bounding_sphere
     return int(np.clip(np.ceil(2 * r / np.sqrt(scene.patch_area.mean())), lo, hi))
-
-
-# the other methods import SolverStats and StochasticIterationSolver from here
-from .pathtracing import PathTracer  # noqa: E402
-from .radiosity import RadiositySolver  # noqa: E402
-from .walk import RayBundleWalk  # noqa: E402
-
-#: the methods by name: patch solvers (images and bakes) and image-only methods (``image_only``)
-SOLVERS = {StochasticIterationSolver.name: StochasticIterationSolver, RayBundleWalk.name: RayBundleWalk,
-           RadiositySolver.name: RadiositySolver, PathTracer.name: PathTracer}
-
-
-def image_only(method):
-    """True for a method without a patch solution (it renders images, it does not bake and needs
-    no patch layout): :class:`~raybundle.pathtracing.PathTracer`."""
-    return bool(getattr(SOLVERS.get(method), "image_only", False))

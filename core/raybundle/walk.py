@@ -25,14 +25,18 @@ here feeds one walk only: expect more noise per step.  The thesis' further exten
 which every step of a walk also starts new sub-walks weighted 1/(D - b + 1) per bounce order
 b, is left out: it needs one state per bounce order, and in its limit it is the stochastic
 iteration.  Glossy sides send the thesis' ``E f(t, s)`` (no lobe-sampled gather rays) and
-the caustic shot is off.
+the caustic shot is off.  That is where the walk fails: near-mirror lobes (roughness below
+:data:`~raybundle.materials.NEAR_MIRROR_ROUGHNESS`) make ``E f(t, s)`` heavy-tailed (a random
+direction rarely falls into the lobe, and then with a huge weight); the solver warns.
 """
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
+from .materials import NEAR_MIRROR_ROUGHNESS
 from .solvers import StochasticIterationSolver
 
 
@@ -46,13 +50,8 @@ class RayBundleWalk(StochasticIterationSolver):
     def __init__(self, scene, tracer, direct, sequence, seed=0, **kwargs):
         kwargs["caustics"] = False
         super().__init__(scene, tracer, direct, sequence, seed=seed, **kwargs)
-        albedo = self.kd_over_pi * np.pi
-        if len(self.glossy_patches):
-            pm = self.patch_material[self.glossy_patches]
-            albedo[self.glossy_patches] += self.scene.materials.albedo(pm, np.full(len(pm), 0.7), diffuse=False)
-        #: continuation probability: the area-weighted mean of each side's largest albedo
-        self.q = float(np.clip((self.area * albedo.max(axis=1)).sum() / max(self.area.sum(), 1e-300),
-                               *self.Q_RANGE))
+        #: continuation probability: the scene's mean albedo (``mean_albedo``)
+        self.q = float(np.clip(self.mean_albedo, *self.Q_RANGE))
         n = scene.n_sides
         self.walk_incoming = np.zeros((n, 3))      # R's incoming E^(k) (diffuse lobe), weights 1/q^k in
         self.walk_glossy = np.zeros((n, 3))        # the glossy lobe's E^(k) from walk_direction
@@ -60,6 +59,14 @@ class RayBundleWalk(StochasticIterationSolver):
         self.walk_step = 0                         # steps taken by the current walk
         self.walks = 0                             # walks started
         self.roulette = np.random.default_rng([seed, 13])
+        if len(self.glossy_patches):
+            rough = np.asarray(self.scene.materials.roughness)[self.patch_material[self.glossy_patches]].min()
+            if rough < NEAR_MIRROR_ROUGHNESS:
+                warnings.warn(f"{self.name}: a glossy lobe of roughness {rough:.3g} is nearly a mirror; the walk "
+                              "sends glossy light as E f(t, s) from one random direction, which is heavy-tailed "
+                              "for sharp lobes (on the built-in near-mirror scene: 67% error after 20 s against "
+                              "3.8% for stochastic-iteration, which gathers glossy light by lobe-sampled rays)",
+                              stacklevel=4)
 
     # ----------------------------------------------------------- senders
     def sent_radiance(self, send_dir):
