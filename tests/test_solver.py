@@ -87,12 +87,17 @@ def test_halton_converges_to_a_wrong_answer():
     """Thesis 1.2: Halton points driving the iteration bias the result (here far beyond 4.5 SE)."""
     with pytest.warns(UserWarning, match="Halton"):
         r = furnace_renderer(False, "halton", patches=300)
-    exact = r.scene.analytic_radiance
-    patch, _ = batch_means(r, 8, 150)
+    assert_biased(r)
+
+
+def assert_biased(renderer, batches=8, per_batch=150):
+    """Some channel of the patch mean lies beyond 4.5 SE of the analytic answer."""
+    exact = renderer.scene.analytic_radiance
+    patch, _ = batch_means(renderer, batches, per_batch)
     mean = patch.mean(axis=0)
     se = patch.std(axis=0, ddof=1) / np.sqrt(len(patch))
     assert np.any(np.abs(mean - exact) > 4.5 * se), (mean, exact, se)
-    r.tracer.close()
+    renderer.tracer.close()
 
 
 def test_same_seed_same_image_and_different_seed_differs():

@@ -29,11 +29,11 @@ import numpy as np
 
 from .imaging import RenderSettings
 from .io import read_exr, write_exr, write_json
+from .methods import image_only
 from .metrics import image_error, light_source_mask
 from .pipeline import make_renderer, prepare
 from .sampling import DEFAULT_SEQUENCE, uniform_sphere
 from .scenes import load_scene
-from .methods import image_only
 from .visibility import RayTracer, bundle_from_hits
 
 #: bench method name -> (solver name, random sequence)

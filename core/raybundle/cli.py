@@ -18,9 +18,9 @@ import numpy as np
 
 from . import __version__
 from .bench import METHODS
-from .sampling import DEFAULT_SEQUENCE, SEQUENCES
-from .pipeline import DEFAULT_PATCHES
 from .methods import SOLVERS, image_only
+from .pipeline import DEFAULT_PATCHES
+from .sampling import DEFAULT_SEQUENCE, SEQUENCES
 from .solvers import StochasticIterationSolver
 
 

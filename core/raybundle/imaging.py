@@ -588,8 +588,9 @@ class Renderer(ProgressiveImage):
 
     def step(self):
         """One solver iteration, this iterate's glossy lobe per pixel, and an image pass
-        once the iterations since the last one have traced (1 - s) / s times the rays
-        an image pass traces on average, s = ``image_ray_share`` (the first call also
+        once the iterations since the last one have done (1 - s) / s times the work of the
+        rays an image pass traces on average, s = ``image_ray_share`` (the solver's work in
+        rays: :meth:`~raybundle.solvers.StochasticIterationSolver.work_rays`; the first call also
         makes the first pass; passes grow when penumbrae are found, so the ratio is
         re-read every time)."""
         solver = self.solver
@@ -601,7 +602,7 @@ class Renderer(ProgressiveImage):
         self._since_pass += 1
         share = self.settings.image_ray_share
         per_pass = (self.image_rays - self._setup_rays) / max(self.passes, 1)
-        per_iter = solver.stats.rays / max(solver.stats.iterations, 1)
+        per_iter = solver.work_rays() / max(solver.stats.iterations, 1)
         if self._since_pass * share * max(per_iter, 1) >= per_pass * (1 - share):
             self.image_pass()
             self._since_pass = 0

@@ -9,9 +9,9 @@ import warnings
 from .clusters import make_patches
 from .imaging import Renderer, RenderSettings
 from .lights import DirectLighting, small_emitters
+from .methods import SOLVERS, image_only
 from .sampling import NOT_CUD, make_sequence
 from .scene import subdivide
-from .methods import SOLVERS, image_only
 from .solvers import StochasticIterationSolver
 from .visibility import RayTracer
 
@@ -64,8 +64,9 @@ def make_solver(scene, settings: RenderSettings | None = None, solver=Stochastic
         warnings.warn(f"the {settings.sequence.capitalize()} sequence is not completely uniformly distributed: "
                       f"{solver} driven by it converges to a wrong image (thesis 1.2); use 'prng', "
                       "'stratified' or 'pi-powers'", stacklevel=3)
-    if settings.first_shot == "none" and small_emitters(scene):
-        names = ", ".join(repr(scene.materials.names[m]) for m in small_emitters(scene))
+    small = small_emitters(scene) if settings.first_shot == "none" else []
+    if small:
+        names = ", ".join(repr(scene.materials.names[m]) for m in small)
         warnings.warn(f"first shot is off: the small emitters {names} light the scene only through the bundle "
                       "lines that happen to hit them, so the image is far noisier (thesis 3.4); keep "
                       "first_shot='auto'", stacklevel=3)

@@ -11,6 +11,8 @@
   radiance), the ceiling's opening closed: the small bright light of the thesis' first shot.
 * ``near-mirror``: the Cornell box with the tall block a near-mirror (Glossy GGX 0.9,
   roughness 0.02): where the bundle transfer's variance grows.
+* ``room-<seed>`` / ``glossy-room-<seed>`` (:func:`random_room`): seeded random rooms with
+  boxes and ceiling lamps, Lambertian or mostly glossy, for checks on scenes nothing was tuned on.
 * ``furnace``: a closed room with a closed block inside (non-convex); every
   surface emits Le and is Lambertian with albedo a, so L = Le / (1 - a) exactly.
 * ``furnace-glossy``: the same enclosure with GGX and mixed materials emitting

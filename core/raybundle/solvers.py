@@ -352,6 +352,11 @@ class StochasticIterationSolver:
         L[cos <= 0] = 0.0
         return L
 
+    def work_rays(self):
+        """The solver's work so far in rays (what the image passes' share is measured against):
+        its traced rays."""
+        return self.stats.rays
+
     def report(self):
         """Figures of this method beyond :class:`SolverStats` for the run's stats (none here)."""
         return {}
