@@ -195,6 +195,8 @@ class RenderJob:
                 scene = pipeline.prepare(scene, patches=s.patches, stage=stage, stop=self._stopped)
             settings = RenderSettings(seed=s.seed, bundle_resolution=s.bundle_resolution,
                                       first_shot="auto" if s.first_shot else "none")
+            if self.choice is not None and self.choice.sequence:
+                settings.sequence = self.choice.sequence
             self.renderer = pipeline.make_renderer(scene, settings, solver=method, stage=stage,
                                                    stop=self._stopped)
             t_prepared = time.perf_counter() - self.t_start

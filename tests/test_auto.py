@@ -65,4 +65,5 @@ def test_cli_auto_prints_and_records_its_choice(tmp_path):
     assert "auto: path-tracing" in p.stderr and "glossy lobes carry 91%" in p.stderr
     st = json.loads(stats.read_text())
     assert st["solver"] == "path-tracing" and st["auto"]["method"] == "path-tracing"
+    assert st["auto"]["sequence"] == "halton" and st["sampler"] == "halton"      # the QMC walk
     assert st["auto"]["figures"]["glossy_share"] > 0.5

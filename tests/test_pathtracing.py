@@ -72,24 +72,27 @@ def test_cornell_boxes_match_cycles_region_by_region(tmp_path, name):
         assert abs(mo - mc) < 4.5 * np.hypot(sc_, so) + 0.005 * mc, (name, r, mo, mc, sc_, so)
 
 
-def test_cli_method_path_tracing_writes_the_image_without_patches(tmp_path):
-    """``render --method path-tracing``: no patch layout (a set-up step it does not need), the
-    image and stats written; bakes and chains refuse it with one-line errors."""
+@pytest.mark.parametrize("method,refused", [("path-tracing", "sobol"), ("single-ray-iteration", "halton")])
+def test_cli_image_only_methods_write_the_image_without_patches(tmp_path, method, refused):
+    """``render --method path-tracing`` or ``single-ray-iteration`` (light tracing,
+    ``test_lighttracing``): no patch layout (a set-up step they do not need), the image and
+    stats written; bakes, chains and a sequence they do not draw from are refused with
+    one-line errors."""
     out = tmp_path / "pt.exr"
-    p = subprocess.run([sys.executable, "-m", "raybundle", "render", "furnace", "--method", "path-tracing",
+    p = subprocess.run([sys.executable, "-m", "raybundle", "render", "furnace", "--method", method,
                         "--iterations", "4", "--resolution", "16", "16", "--out", str(out)],
                        capture_output=True, text=True)
     assert p.returncode == 0, p.stderr
     assert "laying out the patches" not in p.stderr and "4 iterations" in p.stderr
     img = read_exr(out)
     assert img.shape == (16, 16, 3) and np.isfinite(img).all() and img.mean() > 0
-    p = subprocess.run([sys.executable, "-m", "raybundle", "render", "furnace", "--method", "path-tracing",
+    p = subprocess.run([sys.executable, "-m", "raybundle", "render", "furnace", "--method", method,
                         "--workers", "2", "--iterations", "4", "--out", str(tmp_path / "x.exr")],
                        capture_output=True, text=True)
     assert p.returncode == 2 and "has none" in p.stderr and "Traceback" not in p.stderr
     with pytest.raises(ValueError, match="renders images only"):
-        pipeline.make_solver(scenes.load_scene("furnace"), solver="path-tracing")
-    p = subprocess.run([sys.executable, "-m", "raybundle", "render", "furnace", "--method", "path-tracing",
-                        "--sequence", "sobol", "--iterations", "1", "--out", str(tmp_path / "y.exr")],
+        pipeline.make_solver(scenes.load_scene("furnace"), solver=method)
+    p = subprocess.run([sys.executable, "-m", "raybundle", "render", "furnace", "--method", method,
+                        "--sequence", refused, "--iterations", "1", "--out", str(tmp_path / "y.exr")],
                        capture_output=True, text=True)
-    assert p.returncode == 2 and "not 'sobol'" in p.stderr and "Traceback" not in p.stderr
+    assert p.returncode == 2 and f"not '{refused}'" in p.stderr and "Traceback" not in p.stderr

@@ -70,6 +70,30 @@ def test_zero_area_triangles_are_dropped_with_a_count():
     assert sc.dropped_triangles == 2 and len(sc.triangles) == 2
 
 
+def test_repeated_triangles_are_dropped_and_back_to_back_pairs_become_two_sided():
+    """Triangles with another's corners: a same-facing copy (corners in any rotation, or at a
+    separate but equal vertex) is dropped; a reversed one-sided copy of the same material
+    makes the first two-sided; a reversed copy of another material stays; any copy of a
+    two-sided triangle is dropped; triangles sharing only an edge stay.  With patches given,
+    nothing becomes two-sided."""
+    v = np.vstack([QUAD_V, QUAD_V[:1]])                  # vertex 4 repeats vertex 0's position
+    t = np.array([[0, 1, 2], [1, 2, 0], [4, 1, 2], [0, 2, 1],      # copies of the first: 2 dropped, 1 merged
+                  [0, 2, 3], [0, 3, 2],                             # reversed copy, another material: stays
+                  [1, 3, 2]])                                       # shares an edge only
+    m = [1, 1, 1, 1, 1, 0, 0]
+    with pytest.warns(UserWarning, match="dropped 3 triangles that repeat.*1 one-sided triangles with a reversed"):
+        sc = build_scene(v, t, m, LIGHT)
+    assert len(sc.triangles) == 4 and sc.dropped_triangles == 3
+    assert sc.triangle_two_sided.tolist() == [True, False, False, False]
+    assert sc.triangle_source.tolist() == [0, 4, 5, 6]
+    with pytest.warns(UserWarning, match="dropped 2 triangles"):
+        sc = build_scene(v, t[:4], m[:4], LIGHT, triangle_patch=[0, 0, 0, 1])
+    assert len(sc.triangles) == 2 and not sc.triangle_two_sided.any()
+    with pytest.warns(UserWarning, match="dropped 3 triangles"):
+        sc = build_scene(v, t[:4], m[:4], LIGHT, two_sided=True)
+    assert len(sc.triangles) == 1 and sc.triangle_two_sided.all()
+
+
 @pytest.mark.parametrize("kwargs,msg", [
     (dict(triangles=np.zeros((0, 3), int), triangle_material=[]), "empty"),
     (dict(triangle_material=[0, 0]), "no lights"),

@@ -156,6 +156,39 @@ def test_bundle_projected_area_is_unbiased(rng):
     tr.close()
 
 
+def test_grid_offsets_remove_the_bundles_aliasing():
+    """Grid aliasing: a patch far smaller than a bundle cell at the centre of the bounding
+    sphere lies, for every direction, exactly between four lines of a grid whose offset is
+    fixed (even resolution, cells centred at (i + 1/2) delta - R): it never receives, whatever
+    the direction (measured: 0 lines in 4,000 directions).  The solvers shift and rotate each
+    grid at random (:meth:`~raybundle.visibility.RayTracer.bundles`' ``offsets``,
+    ``rotations``), and the same patch then receives its projected area, 2 count delta^2 / A
+    within 4.5 SE of 1 over the directions (measured: 1.000, SE 0.073)."""
+    quads = [(_oriented(q, towards=[1, 1, 1]), 0) for q in _box_quads([0, 0, 0], [2, 2, 2])]
+    v, t, m = _mesh(quads)
+    res = 40
+    h = 0.15 * 2 * np.sqrt(3) / res                      # a square of 0.3 cells (R = sqrt(3))
+    tiny = np.array([[1 - h, 1 - h, 1], [1 + h, 1 - h, 1], [1 + h, 1 + h, 1], [1 - h, 1 + h, 1]])
+    sc = build_scene(np.vstack([v, tiny]), np.vstack([t, len(v) + np.array([[0, 1, 2], [0, 2, 3]])]),
+                     np.concatenate([m, [0, 0]]), MATS)
+    tr = RayTracer(sc)
+    rng = np.random.default_rng(7)
+    n_dir = 4000
+    d = uniform_sphere(rng.random(n_dir), rng.random(n_dir))
+    fixed = tr.bundles(d, res, offsets=np.full((n_dir, 2), 0.5), rotations=np.zeros(n_dir))
+    shifted = tr.bundles(d, res, offsets=rng.random((n_dir, 2)), rotations=rng.random(n_dir))
+    tr.close()
+    patch = [len(t), len(t) + 1]
+    area = 4 * h * h
+
+    def share(bundles):
+        return np.array([2 * np.isin(b.receiver, patch).sum() * b.cell_area / area for b in bundles])
+
+    assert share(fixed).sum() == 0
+    got = share(shifted)
+    assert abs(got.mean() - 1) < 4.5 * got.std() / np.sqrt(n_dir), (got.mean(), got.std())
+
+
 def test_first_hit_and_occlusion_against_brute_force(rng):
     sc = scenes.cornell()
     tr = RayTracer(sc)

@@ -40,8 +40,10 @@ from .visibility import RayTracer, bundle_from_hits
 METHODS = {"stochastic-iteration": ("stochastic-iteration", DEFAULT_SEQUENCE),
            "ray-bundle-walk": ("ray-bundle-walk", DEFAULT_SEQUENCE),
            "radiosity": ("radiosity", DEFAULT_SEQUENCE),
+           "point-collocation": ("point-collocation", DEFAULT_SEQUENCE),
            "path-tracing": ("path-tracing", "prng"),
            "path-tracing-qmc": ("path-tracing", "halton"),
+           "single-ray-iteration": ("single-ray-iteration", "prng"),
            "auto": ("auto", DEFAULT_SEQUENCE)}
 #: error levels whose first crossing ``summary.md`` reports
 LEVELS = (0.05, 0.02, 0.015, 0.01)
@@ -131,7 +133,7 @@ def setup(name, method, resolution=None, seed=SEED):
         from .auto import choose
 
         choice = choose(sc)
-        solver, first_shot = choice.method, choice.first_shot
+        solver, first_shot, sequence = choice.method, choice.first_shot, choice.sequence or sequence
     if not image_only(solver):
         sc = prepare(sc)
     r = make_renderer(sc, RenderSettings(seed=seed, sequence=sequence, first_shot=first_shot), solver=solver)

@@ -107,6 +107,38 @@ class Camera:
         t = self.clip_start * np.sqrt(1.0 + x * x + y * y)
         return pos + t[..., None] * d, d
 
+    def project(self, points):
+        """Where world ``points`` (N, 3) land on the image, the inverse of :meth:`rays`.
+
+        Returns ``(px, py, to_eye, reach, density)``: image coordinates [pixels] (N,) each;
+        the unit direction (N, 3) from each point towards the eye; the distance [m] (N,)
+        from the point to where the camera ray starts (the clip-start plane), 0 behind it;
+        and the density [pixels^2 per m^2 of area facing the eye] (N,) with which the image
+        plane covers surface, ``fx fy / (r^2 cos^3 theta)`` for a pinhole (r the distance
+        from the eye, theta the angle from the view axis) and ``fx fy`` for an orthographic
+        camera, so that a surface element dA at cosine ``cos_y`` to ``to_eye`` covers
+        ``density cos_y dA`` pixels^2 (0 where the point is not in front of the clip plane).
+        """
+        p = np.asarray(points, float)
+        rot, pos = self.matrix_world[:3, :3], self.matrix_world[:3, 3]
+        rot = rot / np.linalg.norm(rot, axis=0)
+        local = (p - pos) @ rot                       # camera coordinates; the view axis is -z
+        depth = -local[:, 2]
+        front = depth > self.clip_start
+        if self.orthographic:
+            px, py = self.cx + self.fx * local[:, 0], self.cy - self.fy * local[:, 1]
+            to_eye = np.broadcast_to(rot[:, 2], p.shape).copy()
+            reach = np.where(front, depth - self.clip_start, 0.0)
+            density = np.where(front, self.fx * self.fy, 0.0)
+            return px, py, to_eye, reach, density
+        z = np.where(front, depth, 1.0)
+        px, py = self.cx + self.fx * local[:, 0] / z, self.cy - self.fy * local[:, 1] / z
+        r = np.linalg.norm(local, axis=1)
+        to_eye = (pos - p) / np.maximum(r, 1e-300)[:, None]
+        reach = np.where(front, r * (1.0 - self.clip_start / z), 0.0)
+        density = np.where(front, self.fx * self.fy * r / z ** 3, 0.0)
+        return px, py, to_eye, reach, density
+
     def to_arrays(self, prefix="camera_"):
         return {prefix + "intrinsics": np.array([self.width, self.height, self.fx, self.fy, self.cx, self.cy]),
                 prefix + "matrix_world": self.matrix_world,

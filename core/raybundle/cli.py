@@ -102,6 +102,8 @@ def cmd_render(args):
             choice = choose(scene)
             args.method, first_shot = choice.method, choice.first_shot
             args.patches = choice.patches if args.patches is None else args.patches
+            if choice.sequence and args.sequence == DEFAULT_SEQUENCE:
+                args.sequence = choice.sequence
             stage(f"auto: {choice.method}, {args.patches:,} patches: {choice.reason}")
         args.patches = DEFAULT_PATCHES if args.patches is None else args.patches
         if image_only(args.method) and (args.workers or args.scheduler):
@@ -182,11 +184,12 @@ def build_parser():
     p.add_argument("--version", action="version", version=f"raybundle {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", help="render a built-in scene or a .npz scene to EXR")
-    r.add_argument("scene", help="cornell, cornell-glossy, furnace, furnace-glossy or FILE.npz")
+    r.add_argument("scene", help="a built-in scene (cornell, cornell-glossy, furnace, furnace-glossy, small-light, "
+                   "near-mirror, room-<seed>, glossy-room-<seed>) or FILE.npz")
     g = r.add_mutually_exclusive_group()
     g.add_argument("--time", type=SECONDS, help="seconds to iterate (default 30)")
-    g.add_argument("--iterations", type=COUNT, help="number of iterations, for path-tracing samples per pixel "
-                   "(reproducible with --seed)")
+    g.add_argument("--iterations", type=COUNT, help="number of iterations (path-tracing: samples per pixel; "
+                   "single-ray-iteration: steps of every chain; reproducible with --seed)")
     r.add_argument("--seed", type=COUNT, default=0)
     r.add_argument("--patches", type=COUNT, help=f"target patch count (default {DEFAULT_PATCHES:,}, or auto's "
                    "choice; 0 = one patch per input triangle)")
@@ -194,13 +197,14 @@ def build_parser():
                    metavar=("W", "H"))
     r.add_argument("--method", default=StochasticIterationSolver.name, choices=sorted(SOLVERS) + ["auto"],
                    help=f"{StochasticIterationSolver.name} (default; ray bundles), ray-bundle-walk (random walks "
-                        "of bundles), radiosity (diffuse scenes), path-tracing (the unbiased random walk, images "
-                        "only) or auto (chosen from what the scene holds; the choice and its reason are printed "
-                        "and written to --stats)")
+                        "of bundles), radiosity (diffuse scenes), point-collocation (vertex unknowns, diffuse "
+                        "scenes), path-tracing (the unbiased random walk, images only), single-ray-iteration (light "
+                        "tracing as a stochastic iteration, images only) or auto (chosen from what the scene holds; "
+                        "the choice and its reason are printed and written to --stats)")
     r.add_argument("--sequence", default=DEFAULT_SEQUENCE, choices=sorted(SEQUENCES),
                    help="random numbers of the global directions (ray bundles); halton and sobol bias the "
                         "iterations (thesis 1.2, a warning says so); path-tracing takes halton as randomised "
-                        "quasi-Monte Carlo, prng or stratified as the PRNG")
+                        "quasi-Monte Carlo, prng or stratified as the PRNG; single-ray-iteration the PRNG only")
     r.add_argument("--bundle-resolution", type=_number(int, 0, 4096, "an integer in [0, 4096]"), default=0,
                    help="rays per bundle side (0 = auto)")
     r.add_argument("--threads", type=POSITIVE_INT, default=None)

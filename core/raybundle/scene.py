@@ -248,7 +248,8 @@ class PatchScene:
     camera : Camera or None
     analytic_radiance : (3,) float or None  the exact radiance everywhere, when known
     name : str
-    dropped_triangles : int  zero-area triangles removed at validation
+    dropped_triangles : int  zero-area and repeated triangles removed at validation
+        (:func:`coincident_triangles`)
     triangle_solid : (T,) bool  the triangle belongs to a closed, consistently
         oriented one-sided mesh (a solid: its inside is behind the black backs),
         see :func:`closed_solid_triangles`.  Two-sided meshes are never solids
@@ -603,6 +604,15 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
     if not keep.any():
         raise SceneError("the scene is empty: every triangle has zero area")
     t, m, src, two = t[keep], m[keep], src[keep], np.array(two[keep])
+    single, merge = coincident_triangles(v, t, m, two, merge=patch is None)
+    if not single.all() or merge.any():
+        warnings.warn(f"dropped {int((~single).sum())} triangles that repeat another's corners (they would "
+                      f"z-fight); {int(merge.sum())} one-sided triangles with a reversed copy became two-sided",
+                      stacklevel=2)
+        two[merge] = True
+        dropped += int((~single).sum())
+        keep[np.nonzero(keep)[0][~single]] = False
+        t, m, src, two = t[single], m[single], src[single], two[single]
     if patch is None:
         patch = np.arange(len(t))
     else:
@@ -625,6 +635,59 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
     solid = None if triangle_solid is None else np.asarray(triangle_solid, bool).reshape(-1)[keep] & ~two
     return PatchScene(v, t, m, patch, src, materials, point_lights, camera, ar, name, dropped, solid,
                       two, sun_lights, area_lights, env, texture=texture)
+
+
+def coincident_triangles(v, t, m, two_sided, merge=True):
+    """Triangles with the same three corner positions as another (duplicated faces).
+
+    Along a bundle line, hits closer than the tracer's ``eps`` are one surface: only one of
+    two coincident triangles takes part in each line's transfer, so a duplicated face
+    receives on about half of its lines (a furnace's duplicated block came out 35% dark),
+    and for a one-sided face with a reversed copy behind it (a sheet seen from both sides),
+    eye rays and bundle lines meet the black back half of the time (half the sheet black,
+    in the path tracer too).  Returns ``(keep (T,) bool, make_two_sided (T,) bool)``: of
+    each group of coincident triangles the first is kept, and later copies are dropped
+    where they add nothing: a same-facing copy of a one-sided triangle, any copy of a
+    two-sided one; a reversed one-sided copy of the same material makes the first
+    two-sided (``merge``; a reversed copy of another material stays, as it would in
+    Blender, and z-fights).  Positions are compared to 1e-9 of the scene's extent."""
+    keep = np.ones(len(t), bool)
+    make_two = np.zeros(len(t), bool)
+    c = v[t]
+    scale = max(float(np.ptp(v, axis=0).max()), 1e-300) * 1e-9
+    q = np.round(c / scale).astype(np.int64)                               # (T, 3, 3) integer corners
+    # candidates: an order-free hash of the corners (int64 arithmetic wraps) met more than once
+    with np.errstate(over="ignore"):
+        h = q.sum(axis=1) @ np.array([0x9E3779B97F4A7C15 - (1 << 64), 0xC2B2AE3D27D4EB4F - (1 << 64),
+                                      0x165667B19E3779F9], np.int64)
+    hs = np.sort(h)
+    repeated = hs[1:][hs[1:] == hs[:-1]]
+    cand = np.nonzero(np.isin(h, repeated))[0]
+    if not len(cand):
+        return keep, make_two
+    # exact check: the candidates' corners sorted, as one row each
+    flat = q[cand].reshape(-1, 3)
+    tri = np.repeat(np.arange(len(cand)), 3)
+    key = flat[np.lexsort((flat[:, 2], flat[:, 1], flat[:, 0], tri))].reshape(len(cand), 9)
+    _, group = unique_rows(key)
+    n = np.cross(c[cand, 1] - c[cand, 0], c[cand, 2] - c[cand, 0])
+    axis = np.argmax(np.abs(n) > 1e-9 * np.abs(n).max(axis=1, keepdims=True), axis=1)
+    facing = n[np.arange(len(cand)), axis] > 0                           # orientation against a canonical normal
+    # each group's first triangle is its head; the others are dropped where they add nothing
+    order = np.argsort(group, kind="stable")
+    g = group[order]
+    start = np.ones(len(g), bool)
+    start[1:] = g[1:] != g[:-1]
+    head_pos = np.maximum.accumulate(np.where(start, np.arange(len(g)), 0))
+    k, head = cand[order], cand[order][head_pos]
+    f_k, f_head = facing[order], facing[order][head_pos]
+    later = ~start
+    merged = later & ~two_sided[head] & (m[k] == m[head]) & merge & (two_sided[k] | (f_k != f_head))
+    drop = later & (two_sided[head] | merged | ((f_k == f_head) & ~two_sided[k]))
+    keep[k[drop]] = False
+    make_two[head[merged]] = True
+    make_two &= ~two_sided
+    return keep, make_two
 
 
 def _check_lights(point, sun, area):
