@@ -59,3 +59,24 @@ def test_bench_writes_curves_charts_and_a_summary(tmp_path):
     p = subprocess.run([sys.executable, "-m", "raybundle", "bench", "--methods", "no-such-method", "--out", str(out)],
                        capture_output=True, text=True)
     assert p.returncode == 2 and "unknown method" in p.stderr
+
+
+def test_cycles_is_one_more_curve_where_it_can_build_the_scene(tmp_path):
+    """``--cycles``: Cycles (through ``bpy`` in a subprocess, CPU, no denoising or clamping) at
+    1, 2, 4, ... samples per pixel, each render timed from loading the scene to the EXR
+    written, scored by the same error function: its error falls as samples double; a scene
+    it cannot build (emission that depends on the albedo) gets an n/a row with the reason."""
+    out = tmp_path / "bench"
+    p = subprocess.run([sys.executable, "-m", "raybundle", "bench", "--scenes", "cornell", "furnace-glossy",
+                        "--methods", "stochastic-iteration", "--time", "3", "--resolution", "16", "16",
+                        "--reference-time", "2", "--reference-dir", str(tmp_path / "ref"), "--out", str(out),
+                        "--cycles"], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    rows = [r for r in csv.DictReader(open(out / "cornell.csv")) if r["method"] == "cycles"]
+    spp = [int(r["iterations"]) for r in rows]
+    err = [float(r["error"]) for r in rows]
+    assert len(rows) >= 2 and spp == [2 ** k for k in range(len(rows))], spp
+    assert np.isfinite(err).all() and err[-1] < err[0], err
+    md = (out / "summary.md").read_text()
+    assert "| cornell | cycles |" in md and "| furnace-glossy | cycles | n/a" in md
+    assert "emission that depends on the albedo" in md

@@ -188,6 +188,43 @@ def plane_under_white_world(material, cos_view, res, samples, path):
     return render_to(str(path)).reshape(-1, 3).astype(float)
 
 
+def unsupported(scene):
+    """Why the scene cannot be built here (this script models triangles, Mix(Diffuse, Glossy)
+    materials and one-sided emission, under a black world), or None."""
+    mt = scene.materials
+    checks = [(len(scene.point_lights) + len(scene.sun_lights) + len(scene.area_lights) > 0, "lights"),
+              (np.any(scene.environment > 0), "a world that emits"),
+              (np.any(scene.triangle_two_sided), "two-sided faces"),
+              (np.any(mt.emission_albedo_complement > 0), "emission that depends on the albedo"),
+              (np.any(mt.has_layer) or np.any(mt.is_layered), "Principled layers"),
+              (scene.texture is not None, "image textures")]
+    found = [what for bad, what in checks if bad]
+    return f"Cycles is built here from triangles and Mix(Diffuse, Glossy) + Emission only: the scene has " \
+           f"{', '.join(found)}" if found else None
+
+
+def curve(name, seconds, out_dir, seed=0, resolution=None):
+    """Cycles at 1, 2, 4, ... samples per pixel until a render takes ``seconds``: one JSON line
+    per render on stdout (samples, seconds from loading the scene to the EXR written, path)."""
+    import json
+
+    from raybundle.scenes import load_scene
+
+    spp = 1
+    while True:
+        t0 = time.perf_counter()
+        scene = load_scene(name)
+        if resolution:
+            scene.camera = scene.camera.with_resolution(*resolution)
+        path = os.path.join(out_dir, f"cycles-{spp}.exr")
+        render_scene(scene, spp, path, seed)
+        dt = time.perf_counter() - t0
+        print(json.dumps({"samples": spp, "seconds": round(dt, 3), "path": path}), flush=True)
+        if dt * 2 > seconds * 1.25:        # the next one would overrun the budget by more than a quarter
+            return
+        spp *= 2
+
+
 def render_scene(scene, samples, out, seed=0):
     reset()
     add_scene_mesh(scene)
@@ -207,12 +244,26 @@ def main(argv=None):
     p.add_argument("scene")
     p.add_argument("--samples", type=int, default=1024)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", required=True)
+    p.add_argument("--out", required=True, help="the EXR (with --curve: a folder)")
+    p.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"))
+    p.add_argument("--curve", type=float, metavar="SECONDS",
+                   help="render 1, 2, 4, ... samples per pixel until a render takes SECONDS; JSON lines on stdout")
     a = p.parse_args(argv)
     from raybundle.scenes import load_scene
 
+    scene = load_scene(a.scene)
+    why = unsupported(scene)
+    if why:
+        print(f"cycles_reference: {why}", file=sys.stderr)
+        return 3
+    if a.curve is not None:
+        os.makedirs(a.out, exist_ok=True)
+        curve(a.scene, a.curve, a.out, a.seed, a.resolution)
+        return 0
+    if a.resolution:
+        scene.camera = scene.camera.with_resolution(*a.resolution)
     t = time.perf_counter()
-    render_scene(load_scene(a.scene), a.samples, a.out, a.seed)
+    render_scene(scene, a.samples, a.out, a.seed)
     print(f"Cycles: {a.scene} at {a.samples} samples/pixel in {time.perf_counter() - t:.1f} s -> {a.out}")
     return 0
 

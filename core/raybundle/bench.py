@@ -21,8 +21,11 @@ visibility against raw Embree queries (``visibility.csv``) and milliseconds per 
 from __future__ import annotations
 
 import csv
+import json
 import os
+import subprocess
 import sys
+import tempfile
 import time
 
 import numpy as np
@@ -192,6 +195,35 @@ def run_method(name, method, seconds, ref, halves, resolution=None, log=print):
     return rows, res
 
 
+def run_cycles(name, seconds, ref, halves, resolution=None, log=print, script=None):
+    """Cycles as one more curve: renders of 1, 2, 4, ... samples per pixel, each timed from
+    loading the scene to the EXR written, by the repository's ``tools/cycles_reference.py
+    --curve`` in a subprocess (the core never imports ``bpy``).  Rows as :func:`run_method`'s;
+    raises ValueError where Cycles cannot be used (no script or ``bpy``, a scene it cannot
+    build)."""
+    script = script or os.path.join(os.path.dirname(__file__), "..", "..", "tools", "cycles_reference.py")
+    if not os.path.exists(script):
+        raise ValueError("--cycles needs the repository's tools/cycles_reference.py (and the bpy module)")
+    sc = load(name, resolution)
+    mask = light_source_mask(sc)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, script, str(name), "--curve", str(seconds), "--seed", str(SEED), "--out", tmp,
+               "--resolution", str(sc.camera.width), str(sc.camera.height)]
+        p = subprocess.run(cmd, capture_output=True, text=True)
+        if p.returncode != 0:
+            raise ValueError((p.stderr.strip().splitlines() or [f"Cycles failed ({p.returncode})"])[-1])
+        for line in p.stdout.splitlines():
+            if not line.startswith("{"):
+                continue
+            r = json.loads(line)
+            e = image_error(read_exr(r["path"]), ref, reference_halves=halves, exclude=mask)
+            rows.append({"scene": name, "method": "cycles", "seconds": r["seconds"], "iterations": r["samples"],
+                         "error": e["error"], "raw_error": e["raw"], "reference_noise": e["reference_noise"]})
+            log(f"  {name} / cycles: {r['seconds']:6.1f} s, {r['samples']} samples, error {100 * e['error']:.2f}%")
+    return rows
+
+
 def time_to(rows, level):
     """First time [s] the error falls to ``level``, interpolated log-log between snapshots; None if never."""
     prev = None
@@ -324,6 +356,13 @@ def run_bench(args):
             results[name][method] = rows
             rows_scene += rows
             write_exr(os.path.join(out, f"{label(name)}-{method}.exr"), res.image)
+        if args.cycles:
+            try:
+                results[name]["cycles"] = rows = run_cycles(name, args.time, ref, halves, args.resolution, log)
+                rows_scene += rows
+            except ValueError as e:
+                log(f"  {name} / cycles: not applicable: {e}")
+                skipped.setdefault(name, {})["cycles"] = str(e)
         write_csv(os.path.join(out, f"{label(name)}.csv"), rows_scene)
         chart(os.path.join(out, f"{label(name)}.png"), label(name), rows_scene)
         summary[name] = {m: {"final_error": r[-1]["error"], "seconds": r[-1]["seconds"], "slope": slope(r),

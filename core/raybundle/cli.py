@@ -226,6 +226,9 @@ def build_parser():
     b.add_argument("--reference-time", type=SECONDS, default=600.0,
                    help="seconds of path tracing per reference half when one is missing (default 600)")
     b.add_argument("--throughput", action="store_true", help="also bundle visibility and ms per iteration")
+    b.add_argument("--cycles", action="store_true", help="also Cycles (bpy, CPU, no denoising or clamping) at "
+                   "1, 2, 4, ... samples per pixel, each render timed from loading the scene (needs the repository's "
+                   "tools/cycles_reference.py)")
     b.add_argument("--out", default="out/bench")
     return p
 
