@@ -247,23 +247,35 @@ def test_esc_during_set_up_stops_before_the_iteration_without_an_image(fresh):
     assert last_run()["status"].startswith("stopped during set-up, before laying out"), last_run()
 
 
-def test_path_tracing_method_renders_without_patches_and_refuses_to_bake(fresh):
-    """The method list holds the core's path tracer: the engine renders with it (no patch
-    layout step), the bake refuses it in one line (it has no patch solution)."""
+@pytest.mark.parametrize("method", ["path-tracing", "single-ray-iteration"])
+def test_image_only_methods_render_without_patches_and_refuse_to_bake(fresh, method):
+    """The method list holds the core's path tracer and light tracing: the engine renders with
+    them (no patch layout step), the bake refuses them in one line (no patch solution)."""
     from raybundle_addon.bake import BakeJob
     from raybundle_addon.engine import JobSettings, RenderJob
 
     small_lit_scene()
     steps = []
-    out = RenderJob(bpy.context.evaluated_depsgraph_get(), JobSettings(iterations=6, time_limit=0.0,
-                                                                       method="path-tracing"),
+    out = RenderJob(bpy.context.evaluated_depsgraph_get(), JobSettings(iterations=6, time_limit=0.0, method=method),
                     stats=steps.append).run()
-    assert out.stats["solver"] == "path-tracing" and out.stats["samples_per_pixel"] == 6
+    assert out.stats["solver"] == method and out.stats["iterations"] == 6
     assert out.image.shape == (24, 24, 3) and np.isfinite(out.image).all() and out.image.mean() > 0
     assert not any("laying out" in t for t in steps) and any("ray tracer" in t for t in steps)
-    bpy.context.scene.raybundle.method = "path-tracing"
+    bpy.context.scene.raybundle.method = method
     with pytest.raises(ValueError, match="renders images only"):
         BakeJob(bpy.context.evaluated_depsgraph_get()).start()
+
+
+def test_point_collocation_renders_from_the_panel(fresh):
+    """Point collocation (vertex unknowns) from the method list: it renders the diffuse room
+    and reports its unknowns (its bake: ``test_addon_bake``)."""
+    from raybundle_addon.engine import JobSettings, RenderJob
+
+    small_lit_scene()
+    out = RenderJob(bpy.context.evaluated_depsgraph_get(), JobSettings(iterations=8, time_limit=0.0, patches=300,
+                                                                       method="point-collocation")).run()
+    assert out.stats["solver"] == "point-collocation" and out.stats["vertices"] > 0
+    assert out.image.shape == (24, 24, 3) and np.isfinite(out.image).all() and out.image.mean() > 0
 
 
 def test_auto_method_renders_with_its_choice_and_bakes_with_the_iteration(fresh):

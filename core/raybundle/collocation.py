@@ -89,7 +89,6 @@ class PointCollocationSolver(StochasticIterationSolver):
         x = c[np.arange(n_v), corner]
         self.vertex_point = x + INSET * (c.mean(axis=1) - x)
         self.vertex_normal = scene.tside_normal[ts]
-        self.vertex_side = scene.tside_side[ts]
         self.vertex_receives = ~rec.empty
         self.vertex_incoming = np.zeros((n_v, 3))
         self.mean_vertex_incoming = np.zeros((n_v, 3))
