@@ -6,7 +6,7 @@ import numpy as np
 from raybundle import pipeline
 from raybundle.baking import locate_points
 from raybundle.gather import FinalGather, near_edge_tsides
-from raybundle.imaging import RenderSettings
+from raybundle.imaging import Renderer, RenderSettings
 from raybundle.lights import polygon_irradiance
 from raybundle.materials import MaterialTable
 from raybundle.sampling import triangle_barycentrics
@@ -106,3 +106,32 @@ def test_a_furnace_image_with_the_gather_stays_exact():
     assert np.all(np.abs(rel.mean(axis=0)) < 0.004), rel.mean(axis=0)
     assert rel.std() < 0.0056, rel.std()
     r.tracer.close()
+
+
+def test_the_automatic_gather_runs_in_time_limited_runs_within_its_share():
+    """``gather_rays`` = -1 (the default): a run limited by time gathers, at least
+    ``MIN_GATHER_RAYS`` per pixel, and its resolve takes at most about ``gather_share`` of
+    the run's seconds more than a resolve without the gather (bound: 3 times the share plus
+    0.3 s, for a 2-core machine's timing noise; the rays are set from a timed probe, so a
+    budget ignored or spent twice over fails it).  A run of given iterations does not
+    gather and is the same image for the same seed; ``gather_share`` = 0 turns it off."""
+    from raybundle import scenes
+
+    sc = pipeline.prepare(scenes.load_scene("cornell"), patches=300)
+    sc.camera = sc.camera.with_resolution(32, 32)
+
+    def run(share=0.2, **limit):
+        r = pipeline.make_renderer(sc, RenderSettings(seed=5, gather_share=share))
+        try:
+            res = r.run(**limit)
+        finally:
+            r.tracer.close()
+        return res
+
+    timed, plain = run(seconds=3.0), run(share=0.0, seconds=3.0)
+    assert timed.stats["gather_rays_per_pixel"] >= Renderer.MIN_GATHER_RAYS
+    assert plain.stats["gather_rays_per_pixel"] == 0
+    extra = timed.stats["resolve_seconds"] - plain.stats["resolve_seconds"]
+    assert extra < 3 * 0.2 * 3.0 + 0.3, (extra, timed.stats, plain.stats)
+    a, b = run(iterations=20), run(iterations=20)
+    assert a.stats["gather_rays_per_pixel"] == 0 and np.array_equal(a.image, b.image)

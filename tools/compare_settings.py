@@ -60,13 +60,18 @@ def main(argv=None):
             for k, x in solver_attrs.items():
                 setattr(r.solver, k, x)
             t0 = time.perf_counter()
-            img = r.run(**run).image
+            res = r.run(**run)
+            img, st = res.image, res.stats
             wall = time.perf_counter() - t0
             r.tracer.close()
             images.append(img)
             e = image_error(img, ref, reference_halves=halves, exclude=mask)["error"]
+            passes = (f", {st['image_passes']} image passes taking {100 * st['image_pass_seconds'] / st['seconds']:.0f}%"
+                      if "image_pass_seconds" in st else "")
+            passes += f", {st['gather_rays_per_pixel']} gather rays" if st.get("gather_rays_per_pixel") else ""
             print(f"{text} seed {seed}: {wall:.1f} s, error {100 * e:.2f}%, "
-                  f"mean ratio {img[keep].mean() / ref[keep].mean():.4f}", flush=True)
+                  f"mean ratio {img[keep].mean() / ref[keep].mean():.4f}, {st['iterations']} iterations{passes}",
+                  flush=True)
         if len(images) > 1:
             noise = np.sqrt(np.mean((images[0] - images[1])[keep] ** 2) / 2) / ref[keep].mean()
             e_mean = image_error(np.mean(images, axis=0), ref, reference_halves=halves, exclude=mask)["error"]

@@ -84,7 +84,10 @@ class RenderSettings:
     ``glossy_send_rays``: lobe-sampled rays per glossy side and bundle direction that gather
     what the side's glossy lobe sends (:meth:`~raybundle.solvers.StochasticIterationSolver.glossy_sent_radiance`);
     ``gather_rays``: final-gather rays per pixel where the patch values are not to be trusted
-    (next to concave edges and contacts, :mod:`raybundle.gather`), 0 = none;
+    (next to concave edges and contacts, :mod:`raybundle.gather`), 0 = none, -1 = as many as
+    ``gather_share`` of the run's seconds buys, in runs limited by time (none in runs of given
+    iterations, which stay reproducible, nor in images formed outside :meth:`ProgressiveImage.run`):
+    :meth:`Renderer.diffuse_indirect`;
     ``penumbra_samples``: shadow rays per light per pass for the pixels whose earlier
     samples found a light both seen and blocked (:meth:`Renderer._shade`).
     """
@@ -104,7 +107,8 @@ class RenderSettings:
     caustics: bool = True
     glossy_mis: bool = True
     glossy_send_rays: int = 2
-    gather_rays: int = 0
+    gather_rays: int = -1
+    gather_share: float = 0.1
     penumbra_samples: int = 8
     threads: int | None = None
 
@@ -127,8 +131,10 @@ class RenderSettings:
             raise ValueError("glossy_send_rays must lie in [1, 64]")
         if not 1 <= int(self.penumbra_samples) <= 4096:
             raise ValueError("penumbra_samples must lie in [1, 4096]")
-        if not 0 <= int(self.gather_rays) <= 65536:
-            raise ValueError("gather_rays must lie in [0, 65536] (0 = no final gather)")
+        if not -1 <= int(self.gather_rays) <= 65536:
+            raise ValueError("gather_rays must lie in [-1, 65536] (0 = no final gather, -1 = automatic)")
+        if not 0.0 <= float(self.gather_share) < 1.0:
+            raise ValueError("gather_share must lie in [0, 1)")
 
 
 @dataclass
@@ -151,7 +157,8 @@ class ProgressiveImage:
         between iterations.  KeyboardInterrupt ends the run like a stop; the
         image so far is returned either way (``cancelled`` says which).
         ``on_snapshot(seconds, iterations, image)`` is called when the run's clock
-        passes each of ``snapshots`` (seconds); the time it takes is not counted.
+        passes each of ``snapshots`` (seconds): ``seconds`` includes forming that image
+        (what stopping there would have cost); the run's clock then leaves the snapshot out.
         """
         if iterations is None and seconds is None:
             raise ValueError("give iterations or seconds")
@@ -172,7 +179,8 @@ class ProgressiveImage:
                 while pending and elapsed >= pending[0] and on_snapshot is not None:
                     pending.pop(0)
                     t_snap = time.perf_counter()
-                    on_snapshot(elapsed, solver.stats.iterations, self.image())
+                    img = self.resolve(elapsed if iterations is None else None)
+                    on_snapshot(elapsed + time.perf_counter() - t_snap, solver.stats.iterations, img)
                     t0 += time.perf_counter() - t_snap
                 it = solver.stats.iterations
                 if iterations is not None and it >= iterations:
@@ -190,11 +198,16 @@ class ProgressiveImage:
         except KeyboardInterrupt:
             cancelled = True
         t_res = time.perf_counter()
-        img = self.image()
+        img = self.resolve(t_res - t0 if iterations is None and not cancelled else None)   # a cancel ends now
         if not np.isfinite(img).all():
             raise FloatingPointError("the image has non-finite values; this is a bug, please report it")
         return RenderResult(img, self.stats(time.perf_counter() - t0, time.perf_counter() - t_res, cancelled),
                             cancelled)
+
+    def resolve(self, seconds=None):
+        """The image at the end of a run or at a snapshot, ``seconds`` into a run limited by
+        time (None in a run of given iterations)."""
+        return self.image()
 
 
 class Renderer(ProgressiveImage):
@@ -224,6 +237,7 @@ class Renderer(ProgressiveImage):
         self.glossy_iterations = 0
         self.image_rays = 0
         self._since_pass = 0                              # iterations since the last image pass (step)
+        self.pass_seconds = 0.0                           # seconds spent in image passes
         self.gbuffer = None
         self._glossy_pixels = np.zeros(0, np.int64)   # pixels for accumulate_glossy
         self.emission_sum = np.zeros((n, 3))             # emission seen: sum and count per pixel
@@ -237,6 +251,8 @@ class Renderer(ProgressiveImage):
         self._pixel = np.stack([px, py], axis=1).astype(float)
         self._gather_tsides = None                        # near_edge_tsides, at the first resolve
         self.gathered_points = 0
+        self.gather_rays_used = 0                         # rays per pixel of the last resolve's gather
+        self._gather_seconds = None                       # the automatic gather's budget (resolve)
         # per pixel: some earlier shadow ray reached a light / was blocked (both: a penumbra)
         self._shadow_flags = np.zeros((n, 2), bool)
 
@@ -287,6 +303,7 @@ class Renderer(ProgressiveImage):
         more samples at the edges of visible lights and where the pixel's passes
         disagree most (:meth:`_noisy_pixels`).
         Keeps the G-buffer for :meth:`accumulate_glossy`."""
+        t0 = time.perf_counter()
         u = self.pass_sampler.next()
         g = self.trace_gbuffer(u[:, :2])
         self.gbuffer = g
@@ -319,6 +336,7 @@ class Renderer(ProgressiveImage):
         self.pass_sq_sum += y * y
         self.passes += 1
         self._glossy_pixels = gl
+        self.pass_seconds += time.perf_counter() - t0
 
     def _shade(self, g, u_lobe, u_light, pixels):
         """Per-pass radiance (N, 3) of the samples in G-buffer ``g`` taken in ``pixels``
@@ -536,7 +554,11 @@ class Renderer(ProgressiveImage):
         With ``gather`` (and ``e_bar`` the solver's own), points on the sides
         :func:`~raybundle.gather.near_edge_tsides` flags gather their indirect light
         instead (:class:`~raybundle.gather.FinalGather`): ``gather_rays`` rays per pixel,
-        spread over its sub-pixel samples as one stratified set.
+        spread over its sub-pixel samples as one stratified set.  With ``gather_rays`` = -1
+        the count is what the budget :meth:`resolve` set buys (``gather_share`` of the run's
+        seconds), from the gather's cost per ray measured on a few of the last image pass's
+        points and the number of its points on flagged sides; below ``MIN_GATHER_RAYS`` per
+        pixel the gather's own noise would outweigh the bias it removes, and there is none.
         """
         sc, solver = self.scene, self.solver
         n = len(self._pixel)
@@ -546,7 +568,9 @@ class Renderer(ProgressiveImage):
         if e_bar is None:
             e_bar = solver.indirect_incoming()
             sharp = solver.caustic.E if solver.caustic is not None else None
-            if gather and self.settings.gather_rays > 0 and self.scene.n_patches:
+            self.gather_rays_used = 0
+            rays = self.settings.gather_rays
+            if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and self._gather_seconds)):
                 final = FinalGather(solver)
         if not np.any(e_bar) and final is None:
             return out
@@ -557,7 +581,10 @@ class Renderer(ProgressiveImage):
         if final is not None:
             if self._gather_tsides is None:
                 self._gather_tsides = near_edge_tsides(sc, self.tracer, np.random.default_rng([self.settings.seed, 3]))
-            per_sample = -(-int(self.settings.gather_rays) // k)
+            per_sample = -(-int(rays) // k) if rays > 0 else self._automatic_gather_rays(final, k)
+            self.gather_rays_used = per_sample * k
+            if per_sample == 0:
+                final = None
             shift = self._resolve_rng.random((n, 2))
         for j in range(k):
             g = self.trace_gbuffer(np.broadcast_to(offsets[j], (n, 2)))
@@ -574,6 +601,41 @@ class Renderer(ProgressiveImage):
             scale = self.albedo_scale(g.triangle[h], g.point[h])
             out[h] += w_d * kd[m] / np.pi * e * (1.0 if scale is None else scale)
         return out / k
+
+    #: the fewest automatic gather rays per pixel worth their noise
+    MIN_GATHER_RAYS = 256
+
+    def resolve(self, seconds=None):
+        """The image at the end of a run or at a snapshot; ``seconds`` into a run limited by
+        time, the automatic final gather may take ``gather_share`` of them."""
+        self._gather_seconds = None if seconds is None else self.settings.gather_share * seconds
+        try:
+            return self.image()
+        finally:
+            self._gather_seconds = None
+
+    def _automatic_gather_rays(self, final, k):
+        """Gather rays per sub-pixel sample that ``self._gather_seconds`` buys for ``k``
+        sub-pixel samples (0 if fewer than :data:`MIN_GATHER_RAYS` per pixel): the cost per
+        ray and point timed on up to 512 of the last image pass's points on flagged sides,
+        which also give their count."""
+        g = self.gbuffer
+        if g is None:
+            return 0
+        h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
+        f = h[self._gather_tsides[g.tside[h]]]
+        if len(f) == 0:
+            return 0
+        probe, probe_rays = f[:: max(1, len(f) // 512)], 16
+        t0 = time.perf_counter()
+        final.irradiance(g.point[probe], self.scene.tside_normal[g.tside[probe]], probe_rays,
+                         np.random.default_rng([self.settings.seed, 4]))
+        cost = (time.perf_counter() - t0) / (len(probe) * probe_rays)          # seconds per ray and point
+        left = self._gather_seconds - (time.perf_counter() - t0)
+        per_pixel = left / (cost * len(f))
+        if per_pixel < self.MIN_GATHER_RAYS:
+            return 0
+        return int(min(per_pixel, 65536) // k)
 
     def image(self, diffuse=None, preview=False):
         """The current estimate (H, W, 3) float32; ``diffuse`` = precomputed diffuse
@@ -616,7 +678,8 @@ class Renderer(ProgressiveImage):
                  "resolve_seconds": round(resolve_seconds, 4),
                  "rays_traced": int(st.rays + self.image_rays), "bundle_rays": int(st.bundle_rays),
                  "bundle_queries": int(st.rays), "image_rays": int(self.image_rays),
-                 "image_passes": self.passes, "patches": int(self.scene.n_patches),
+                 "image_passes": self.passes, "image_pass_seconds": round(self.pass_seconds, 4),
+                 "gather_rays_per_pixel": self.gather_rays_used, "patches": int(self.scene.n_patches),
                  "triangles": int(len(self.scene.triangles)), "resolution": [self.camera.width, self.camera.height],
                  "bundle_resolution": solver.bundle_resolution, "sequence": self.settings.sequence,
                  "seed": self.settings.seed, "diffuse_only": bool(solver.diffuse_only),
