@@ -163,7 +163,8 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, ga
     rec = solver.reconstruction
     e_bar = solver.indirect_incoming()
     if gather_rays:
-        e = FinalGather(solver).irradiance(points.point[idx], sc.tside_normal[ts], int(gather_rays), rng)
+        e = FinalGather(solver).irradiance(points.point[idx], sc.tside_normal[ts], int(gather_rays), rng,
+                                           at=(ts, points.bary[idx]))
     elif np.any(e_bar):
         vert = rec.smooth_and_sharp(e_bar, solver.caustic.E if solver.caustic is not None else None)
         e = rec.at(vert, ts, points.bary[idx])

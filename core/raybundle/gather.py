@@ -48,14 +48,26 @@ class FinalGather:
         self.vert_indirect = rec.smooth_and_sharp(indirect, sharp) if self.near > 0 else None
         self.near_light_samples = int(near_light_samples)
         self.hit_size = np.sqrt(sc.patch_area[sc.triangle_patch])      # per triangle [m]
+        # the first shot's glossy reflections arrive by the caustic shot, read where the gather is
+        self.vert_caustic = rec.averaged(sharp) if sharp is not None else None
 
-    def irradiance(self, points, normals, rays, rng, shift=None, first=0, chunk_rays=1 << 18):
+    def irradiance(self, points, normals, rays, rng, shift=None, first=0, at=None, chunk_rays=1 << 18):
         """E_ind (N, 3) [W/m^2] at ``points`` (N, 3) with unit ``normals`` (N, 3), by
         ``rays`` rays each: point i's ray k takes the Kronecker (R_2) point
         ``shift_i + (first + k) alpha`` (``shift`` (N, 2), default random from ``rng``),
         so calls with ``first`` = 0, rays, 2 rays, ... on one point continue one
-        stratified set (an image spreads a pixel's gather over its sub-pixel samples)."""
+        stratified set (an image spreads a pixel's gather over its sub-pixel samples).
+
+        With a caustic first shot (:mod:`raybundle.caustics`), the rays leave out the first
+        shot's glossy reflection at the glossy sides they meet (``E1_l f_g(w_l, -w)`` for the
+        one mean direction ``w_l`` per side: single rays 3,000 times the mean where a sharp
+        lobe lines up, 52% of that term in its top 10 of 200,000 rays on ``cornell-glossy``),
+        as the iteration does, and the caustic shot's ``E_c`` read at ``at`` = (tside (N,),
+        barycentrics (N, 3)) of the points takes its place."""
         sv, sc, rec = self.solver, self.scene, self.rec
+        caustic = self.vert_caustic is not None
+        if caustic and at is None:
+            raise ValueError("a gather with a caustic first shot needs the points' sides: at=(tside, bary)")
         points = np.asarray(points, float)
         normals = np.asarray(normals, float)
         shift = rng.random((len(points), 2)) if shift is None else np.asarray(shift, float)
@@ -84,10 +96,50 @@ class FinalGather:
                         h = hit[c]
                         e_hit[c] = rec.at(self.vert_indirect, ts[c], bary[c]) + sv.direct.irradiance(
                             origin[h] + w[h] * dist[h, None], sc.tside_normal[ts[c]], rng, self.near_light_samples)
-                L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False)
+                L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False,
+                                     glossy_iterate=False, first_shot_glossy=not caustic)
+                L[hit] += self.glossy_reflected(origin[hit] + w[hit] * dist[hit, None], ts, -w[hit], rng)
             if np.any(sv.environment > 0):
                 L[tri < 0] = sv.environment
             out[lo:hi] = np.pi * L.reshape(hi - lo, rays, 3).mean(axis=1)
+        if caustic:
+            out += rec.at(self.vert_caustic, at[0], at[1])
+        return out
+
+
+    def glossy_reflected(self, points, tside, w_out, rng):
+        """What the glossy lobes of the sides ``tside`` (N,) at ``points`` (N, 3) reflect
+        towards ``w_out`` (N, 3) of the light the solution carries [W m^-2 sr^-1] (N, 3),
+        by one lobe-sampled ray each: ``weight * L(next hit)``, with ``L`` the next hit's
+        diffuse part from the vertex values and its own glossy lobe spread evenly
+        (``glossy_as_diffuse``), first-shot emission left out (``E1_l f_g`` at the
+        glossy side counts it).  Zero at sides without a glossy lobe or seen from behind.
+
+        The iterate's ``E f_g(t, w_out)`` would be the plain choice, but a gather reads it
+        once, from one direction ``t``: a sharp lobe lined up with ``t`` makes single
+        gather rays hundreds of times too bright, and unlike the image's per-iteration
+        terms nothing averages them (``cornell-glossy`` at 30 s: 15% error with it, 4% without the gather)."""
+        sv, sc = self.solver, self.scene
+        out = np.zeros((len(points), 3))
+        mat = sc.triangle_material[sc.tside_triangle[tside]]
+        n = sc.tside_normal[tside]
+        g = np.nonzero(sc.materials.is_glossy[mat] & (np.einsum("ij,ij->i", n, w_out) > 0))[0]
+        if len(g) == 0:
+            return out
+        w_i, weight = sc.materials.sample_glossy(mat[g], n[g], w_out[g], rng.random((len(g), 2)))
+        keep = np.any(weight > 0, axis=1)
+        live, w_i, weight = g[keep], w_i[keep], weight[keep]
+        tri, dist, bu, bv = sv.tracer.first_hit(points[live] + n[live] * sv.tracer.eps, w_i)
+        hit = np.nonzero(tri >= 0)[0]
+        if len(hit):
+            ts = sc.seen_tside(tri[hit], w_i[hit])
+            bary = np.stack([1 - bu[hit] - bv[hit], bu[hit], bv[hit]], axis=1)
+            L = sv.radiance(sc.tside_side[ts], -w_i[hit], diffuse_incoming=self.rec.at(self.vert, ts, bary),
+                            first_shot_emission=False, glossy_as_diffuse=True)
+            out[live[hit]] = weight[hit] * L
+        if np.any(sv.environment > 0):
+            miss = np.nonzero(tri < 0)[0]
+            out[live[miss]] = weight[miss] * sv.environment
         return out
 
 

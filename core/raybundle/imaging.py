@@ -594,7 +594,8 @@ class Renderer(ProgressiveImage):
                 f = np.nonzero(self._gather_tsides[g.tside[h]])[0]
                 if len(f):
                     e[f] = final.irradiance(g.point[h[f]], sc.tside_normal[g.tside[h[f]]], per_sample,
-                                            self._resolve_rng, shift=shift[h[f]], first=j * per_sample)
+                                            self._resolve_rng, shift=shift[h[f]], first=j * per_sample,
+                                            at=(g.tside[h[f]], g.bary[h[f]]))
                     self.gathered_points += len(f)
             m = g.material[h]
             w_d = sc.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]))
@@ -629,7 +630,7 @@ class Renderer(ProgressiveImage):
         probe, probe_rays = f[:: max(1, len(f) // 512)], 16
         t0 = time.perf_counter()
         final.irradiance(g.point[probe], self.scene.tside_normal[g.tside[probe]], probe_rays,
-                         np.random.default_rng([self.settings.seed, 4]))
+                         np.random.default_rng([self.settings.seed, 4]), at=(g.tside[probe], g.bary[probe]))
         cost = (time.perf_counter() - t0) / (len(probe) * probe_rays)          # seconds per ray and point
         left = self._gather_seconds - (time.perf_counter() - t0)
         per_pixel = left / (cost * len(f))
