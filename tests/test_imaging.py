@@ -179,3 +179,36 @@ def test_penumbra_pixels_get_more_shadow_rays():
     assert rms[8] < 0.75 * rms[1], rms
     assert abs(err[8].mean()) < 4.5 * err[8].std(ddof=1) / np.sqrt(pen.sum())
     r.tracer.close()
+
+
+def test_the_first_pass_is_exact_where_the_lamp_is_wholly_seen():
+    """The first image pass has no earlier shadow rays to tell lit pixels from penumbrae,
+    so it treats every pixel as one (``penumbra_samples`` shadow rays, the analytic
+    unoccluded irradiance as a control variate): on the open floor of the penumbra scene
+    above, where the lamp is wholly seen, its direct light equals kd/pi Le I(x) at each
+    pixel's sample point to rounding (I the exact cosine-weighted solid angle of the lamp,
+    :func:`raybundle.lights.polygon_irradiance`).  A plain first pass (one shadow ray,
+    no control variate) is 10-50% off per pixel there."""
+    from raybundle.lights import polygon_irradiance
+
+    s, h = 0.4, 1.0
+    v = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0],
+                  [-s / 2, -s / 2, h], [-s / 2, s / 2, h], [s / 2, s / 2, h], [s / 2, -s / 2, h],
+                  [0.3, -2, 0], [0.3, 2, 0], [0.3, 2, 0.6], [0.3, -2, 0.6]], float)
+    t = [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7], [8, 9, 10], [8, 10, 11]]
+    mats = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.5, 0.5)), dict(name="lamp", emission=(1, 1, 1))])
+    m = np.eye(4)
+    m[0, 3], m[2, 3] = 0.81, 2.0
+    cam = Camera(16, 16, 16.0, 16.0, 8.0, 8.0, m, orthographic=True)
+    sc = pipeline.prepare(build_scene(v, t, [0, 0, 1, 1, 0, 0], mats, camera=cam), patches=200)
+    r = pipeline.make_renderer(sc, RenderSettings(seed=5))
+    r.image_pass()
+    g = r.gbuffer
+    # the wall's top edge (x 0.3, z 0.6) hides part of the lamp (x -0.2 to 0.2, z 1) up to x = 1.05
+    open_floor = np.nonzero(g.hit & (g.point[:, 0] > 1.06))[0]
+    assert len(open_floor) >= 32
+    lamp = np.broadcast_to(v[[4, 5, 6, 7]], (len(open_floor), 4, 3))
+    want = 0.5 / np.pi * polygon_irradiance(g.point[open_floor], np.tile([0, 0, 1.0], (len(open_floor), 1)), lamp)
+    got = r.pass_sum[open_floor, 0]
+    assert np.allclose(got, want, rtol=1e-9, atol=0), np.abs(got / want - 1).max()
+    r.tracer.close()

@@ -186,25 +186,29 @@ def main(argv=None):
     reference = 0.5 * (halves[0] + halves[1])
     mask = light_mask(a.blend)
 
-    def errors(img):
+    def row(engine, setting, img, wall):
         e = image_error(img, reference, reference_halves=halves, exclude=mask)
         full = image_error(img, reference, reference_halves=halves)
-        return e["error"], full["error"]
+        print(f"{engine} {setting:g}{' s' if engine == 'raybundle' else ' spp'}: {wall:.1f} s wall, "
+              f"error {e['error']:.4f} (all pixels {full['error']:.4f}), mean ratio {e['mean_ratio']:.4f}, "
+              f"p99.9 {e['p99_9']:.3f}", flush=True)
+        return dict(engine=engine, setting=setting, seconds=wall, error=e["error"], error_all_pixels=full["error"],
+                    mean_ratio=e["mean_ratio"], p99_9=e["p99_9"])
 
+    noise = image_error(reference, reference, reference_halves=halves, exclude=mask)
+    print(f"reference: noise {noise['reference_noise']:.4f} per pixel (relative RMSE), its own p99.9 "
+          f"{noise['reference_p99_9']:.3f}", flush=True)
     rows = []
     for t in a.times:
         img, wall = render(a.blend, os.path.join(a.out, f"raybundle-{t:g}s.exr"), "RAYBUNDLE", seconds=t,
                            seed=3, patches=a.patches)
-        e, full = errors(img)
-        rows.append(dict(engine="raybundle", setting=t, seconds=wall, error=e, error_all_pixels=full))
-        print(f"raybundle {t:g} s: {wall:.1f} s wall, error {e:.4f} (all pixels {full:.4f})", flush=True)
+        rows.append(row("raybundle", t, img, wall))
     samples = 1
     while True:
         img, wall = render(a.blend, os.path.join(a.out, f"cycles-{samples}spp.exr"), "CYCLES", samples=samples,
                            seed=7)
-        e, full = errors(img)
-        rows.append(dict(engine="cycles", setting=samples, seconds=wall, error=e, error_all_pixels=full))
-        print(f"cycles {samples} spp: {wall:.1f} s wall, error {e:.4f} (all pixels {full:.4f})", flush=True)
+        rows.append(row("cycles", samples, img, wall))
+        e = rows[-1]["error"]
         ours = [r for r in rows if r["engine"] == "raybundle"]
         if e < min(r["error"] for r in ours) or wall > min(8 * max(r["seconds"] for r in ours), a.max_cycles_seconds):
             break
@@ -216,7 +220,9 @@ def main(argv=None):
         w.writeheader()
         w.writerows(rows)
     with open(os.path.join(a.out, "summary.json"), "w") as f:
-        json.dump(dict(blend=a.blend, reference_samples_per_half=a.reference_samples, rows=rows, summary=summary,
+        json.dump(dict(blend=a.blend, reference_samples_per_half=a.reference_samples,
+                       reference_noise=noise["reference_noise"], reference_p99_9=noise["reference_p99_9"],
+                       rows=rows, summary=summary,
                        time_to_error=targets),
                   f, indent=1)
     chart(os.path.join(a.out, "bench.png"), rows, os.path.basename(a.blend))

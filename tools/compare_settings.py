@@ -1,8 +1,9 @@
 """Side-by-side settings on a built-in scene: error, noise and bias against a cached Cycles reference.
 
 Each variant (a JSON object of :class:`raybundle.imaging.RenderSettings` fields, plus
-``"patches"``, and ``"solver"``: attributes to set on the solver, e.g.
-``{"solver": {"caustic_refine": 4096}}``) renders the scene once per seed, for a fixed
+``"patches"``, ``"solver"``: attributes to set on the solver, e.g.
+``{"solver": {"caustic_refine": 4096}}``, and ``"renderer"``: attributes to set on the
+renderer, e.g. ``{"renderer": {"NOISY_SHARE": 0.05}}``) renders the scene once per seed, for a fixed
 time or iteration count, and prints its error (``raybundle.metrics.image_error``: pixels >= 2 px from the lamp, the
 reference's own noise subtracted) and image mean against the reference.  With two seeds
 or more it splits the error into per-image noise (from the difference of two seeds) and
@@ -54,11 +55,14 @@ def main(argv=None):
         v = json.loads(text)
         prepared = prepare(scene, v.pop("patches", DEFAULT_PATCHES))
         solver_attrs = v.pop("solver", {})
+        renderer_attrs = v.pop("renderer", {})
         images = []
         for seed in a.seeds:
             r = make_renderer(prepared, RenderSettings(seed=seed, **v))
             for k, x in solver_attrs.items():
                 setattr(r.solver, k, x)
+            for k, x in renderer_attrs.items():
+                setattr(r, k, x)
             t0 = time.perf_counter()
             res = r.run(**run)
             img, st = res.image, res.stats

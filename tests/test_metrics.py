@@ -1,0 +1,52 @@
+"""raybundle.metrics.image_error on images whose errors are known by construction."""
+import numpy as np
+import pytest
+
+from raybundle.metrics import TAIL_FLOOR, image_error
+
+
+def test_the_reference_noise_is_subtracted_and_the_tail_and_mean_are_read():
+    """Halves A, B = 1 + s u +- s v (u a +-1 checkerboard, v random signs, s = 0.1): the
+    reference (A + B) / 2 = 1 + s u has noise s, and mean((A - B)^2) / 4 = s^2 says so.  An
+    image 1.03 (a 3% bias) has the raw error sqrt(0.03^2 + s^2), the corrected one 0.03
+    exactly; its per-pixel tail is (0.03 + s) / (1 - s + 0.02) where u = -1 (half the
+    pixels), the reference's own s / (1 - s + 0.02).  Raising 0.2% of the pixels to 3 puts
+    the 99.9th percentile at their error; 0.05% of them stay below it."""
+    rng = np.random.default_rng(0)
+    h = w = 200
+    s = 0.1
+    u = np.where((np.arange(h)[:, None] + np.arange(w)) % 2, 1.0, -1.0)[..., None]
+    v = rng.choice([-1.0, 1.0], (h, w, 1))
+    a, b = 1 + s * u + s * v + np.zeros(3), 1 + s * u - s * v + np.zeros(3)
+    r = (a + b) / 2
+    x = np.full((h, w, 3), 1.03)
+    e = image_error(x, r, reference_halves=(a, b))
+    assert e["raw"] == pytest.approx(np.hypot(0.03, s), rel=1e-9)
+    assert e["reference_noise"] == pytest.approx(s, rel=1e-9)
+    assert e["error"] == pytest.approx(0.03, rel=1e-6)
+    assert e["mean_ratio"] == pytest.approx(1.03, rel=1e-9)
+    assert e["p99_9"] == pytest.approx((0.03 + s) / (1 - s + TAIL_FLOOR), rel=1e-9)
+    assert e["reference_p99_9"] == pytest.approx(s / (1 - s + TAIL_FLOOR), rel=1e-9)
+
+    r = np.ones((h, w, 3))
+    flat = x.reshape(-1, 3).copy()
+    spots = rng.choice(h * w, int(0.002 * h * w), replace=False)
+    flat[spots] = 3.0
+    assert image_error(flat.reshape(h, w, 3), r)["p99_9"] == pytest.approx(2.0 / (1 + TAIL_FLOOR), rel=1e-9)
+    flat = x.reshape(-1, 3).copy()
+    flat[spots[: int(0.0005 * h * w)]] = 3.0
+    assert image_error(flat.reshape(h, w, 3), r)["p99_9"] < 0.1
+
+
+def test_excluded_pixels_do_not_count_and_bad_input_is_refused():
+    r = np.ones((10, 10, 3))
+    x = r.copy()
+    x[:2] = 100.0                         # a lamp's pixels, excluded
+    mask = np.zeros((10, 10), bool)
+    mask[:2] = True
+    got = image_error(x, r, exclude=mask)
+    assert got["error"] == 0.0 and got["pixels"] == 80 and got["mean_ratio"] == 1.0
+    with pytest.raises(ValueError, match="shape"):
+        image_error(x[:5], r)
+    with pytest.raises(ValueError, match="black"):
+        image_error(x, np.zeros_like(r))
