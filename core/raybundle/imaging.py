@@ -67,7 +67,8 @@ class RenderSettings:
     cell per patch, :func:`~raybundle.solvers.auto_bundle_resolution`); ``sequence``: the
     random sequence name; ``light_samples``: shadow rays per light per pixel per
     image pass; ``image_ray_share``: fraction of traced rays spent on image
-    passes (the rest on bundles); ``resolve_samples``: sub-pixel positions for
+    passes (the rest on bundles), 0 = automatic: 0.2 for diffuse scenes, 0.35 where the
+    passes' eye paths also carry glossy lobes (:meth:`Renderer.step`); ``resolve_samples``: sub-pixel positions for
     the diffuse indirect part; ``smooth``: interpolate patch values;
     ``glossy_gather``: estimate the glossy lobe seen by the eye with one
     importance-sampled eye ray per pixel and pass (see :meth:`Renderer.glossy_gather`)
@@ -97,7 +98,7 @@ class RenderSettings:
     seed: int = 0
     first_shot: str = "auto"
     light_samples: int = 1
-    image_ray_share: float = 0.2
+    image_ray_share: float = 0.0
     resolve_samples: int = 16
     smooth: bool = True
     glossy_gather: bool = True
@@ -121,8 +122,8 @@ class RenderSettings:
             raise ValueError("light_samples must be at least 1 (small lights are lit only by the first shot)")
         if int(self.resolve_samples) < 1 or int(self.emission_edge_samples) < 0:
             raise ValueError("resolve_samples must be >= 1 and emission_edge_samples >= 0")
-        if not 0.0 < float(self.image_ray_share) < 1.0:
-            raise ValueError("image_ray_share must lie strictly between 0 and 1")
+        if not 0.0 <= float(self.image_ray_share) < 1.0:
+            raise ValueError("image_ray_share must lie in [0, 1) (0 = automatic)")
         if self.first_shot not in ("auto", "none"):
             raise ValueError("first_shot must be 'auto' or 'none'")
         if not 1 <= int(self.directions_per_step) <= 1024:
@@ -397,6 +398,10 @@ class Renderer(ProgressiveImage):
             gl = gl[:0]
         return out, gl
 
+    #: the image passes' share of the traced rays when ``image_ray_share`` is 0 (:meth:`step`)
+    DIFFUSE_IMAGE_SHARE = 0.2
+    GLOSSY_IMAGE_SHARE = 0.35
+
     #: :meth:`_noisy_pixels`: at most this share of the pixels, those whose squared standard
     #: error is above NOISY_CUT times the image's mean one
     NOISY_SHARE = 0.02
@@ -666,8 +671,11 @@ class Renderer(ProgressiveImage):
         rays: :meth:`~raybundle.solvers.StochasticIterationSolver.work_rays`; the first call also
         makes the first pass, whose rays, with every pixel a penumbra, are set-up, not the
         passes' average; passes grow when penumbrae are found, so the ratio is re-read every
-        time).  s = 0.2 against 0.25: ``cornell`` at 5 s 2.65 / 2.53% against 2.90 / 2.80%,
-        at 30 s 1.27 / 1.19% against 1.28 / 1.23% (seeds 3, 4; 0.15: 2.51 / 2.73% at 5 s)."""
+        time).  By default s = 0.2 for diffuse scenes, against 0.25: ``cornell`` at 5 s 2.65 /
+        2.53% against 2.90 / 2.80%, at 30 s 1.27 / 1.19% against 1.28 / 1.23% (seeds 3, 4; 0.15:
+        2.51 / 2.73% at 5 s); and 0.35 with glossy lobes, whose eye paths the passes trace:
+        ``cornell-glossy`` at 5 s per-image noise 9.9% against 11.8% (0.25) and 13.9% (0.2),
+        seeds 3-5; at 30 s level from 0.2 to 0.5 (4.1 / 4.1% at 0.35)."""
         solver = self.solver
         if self.passes == 0:
             self.image_pass()
@@ -675,7 +683,8 @@ class Renderer(ProgressiveImage):
         if not solver.diffuse_only:
             self.accumulate_glossy()
         self._since_pass += 1
-        share = self.settings.image_ray_share
+        share = self.settings.image_ray_share or (
+            self.DIFFUSE_IMAGE_SHARE if solver.diffuse_only else self.GLOSSY_IMAGE_SHARE)
         per_pass = (self.image_rays - self._setup_rays) / (self.passes - 1) if self.passes > 1 else self._setup_rays
         per_iter = solver.work_rays() / max(solver.stats.iterations, 1)
         if self._since_pass * share * max(per_iter, 1) >= per_pass * (1 - share):
