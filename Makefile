@@ -31,7 +31,7 @@ bench-blender: $(STAMP)
 # The built-in boxes against Cycles on the same triangles, side by side (about 45 minutes on 2 cores)
 bench-boxes: $(STAMP)
 	$(PY) tools/bench_blender.py cornell --times 5 10 30 60 120 --out out/bench-cornell --max-cycles-seconds 260
-	$(PY) tools/bench_blender.py cornell-glossy --times 5 10 30 60 120 --out out/bench-cornell-glossy --reference-samples 4096 --max-cycles-seconds 260
+	$(PY) tools/bench_blender.py cornell-glossy --times 5 10 30 60 120 --out out/bench-cornell-glossy --reference-samples 4096 --max-cycles-seconds 200
 
 # The point-domain bake against Cycles' bake of the same 4,624 vertices, and a 1024^2 lightmap
 # (about 25 minutes on 2 cores the first time: the Cycles reference is cached in out/bench-bake)
