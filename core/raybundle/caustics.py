@@ -32,9 +32,31 @@ travel direction of its caustic light (the first shot's approximation).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .sampling import points_on_triangles
+
+
+@dataclass
+class CausticHits:
+    """Where lobe-sampled caustic rays met the lit side of a receiving surface: ``points``
+    (K, 3), ``triangles`` (K,), receiving ``sides`` (K,), unit ``travel`` directions (K, 3)
+    and the ``power`` (K, 3) [W] each sample carries (an estimate of the whole caustic's
+    power when divided by the number of samples drawn); ``rays`` traced."""
+
+    points: np.ndarray
+    triangles: np.ndarray
+    sides: np.ndarray
+    travel: np.ndarray
+    power: np.ndarray
+    rays: int = 0
+
+    @classmethod
+    def empty(cls):
+        return cls(np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)),
+                   np.zeros((0, 3)))
 
 
 def luminance(rgb):
@@ -67,26 +89,25 @@ class CausticShot:
     def active(self):
         return len(self.tsides) > 0 and self.first_shot.n_lights > 0
 
-    def refine(self, n_samples):
-        """``n_samples`` more lobe-sampled rays; updates ``E`` and ``direction``."""
-        if not self.active or n_samples <= 0:
-            return
+    def sample(self, n_samples, rng):
+        """``n_samples`` lobe-sampled rays drawn as :meth:`refine` draws them, with the
+        uniforms of ``rng``: a :class:`CausticHits` of the rays that carry light to a
+        receiving side (every drawn sample counts in an estimator's normalisation, these
+        and the ones that carry nothing)."""
         sc, fs = self.scene, self.first_shot
         side = sc.tside_side[self.tsides]
         e1 = fs.E[side]                                     # (T, L, 3)
         power = self.tside_area[:, None] * luminance(e1)    # (T, L)
         total = power.sum()
-        self.samples += n_samples
-        if not total > 0:                 # nothing lit yet: these samples carry zero
-            self._update()
-            return
+        if n_samples <= 0 or not total > 0:                 # nothing lit yet: these samples carry zero
+            return CausticHits.empty()
         cdf = np.cumsum(power.ravel())
-        pick = np.minimum(np.searchsorted(cdf, self.rng.random(n_samples) * cdf[-1], side="right"),
+        pick = np.minimum(np.searchsorted(cdf, rng.random(n_samples) * cdf[-1], side="right"),
                           power.size - 1)
         t_idx, light = np.divmod(pick, power.shape[1])
         p = power.ravel()[pick] / total
         ts = self.tsides[t_idx]
-        u = self.rng.random((n_samples, 4))
+        u = rng.random((n_samples, 4))
         pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[ts]], u[:, 0], u[:, 1])
         nrm = sc.tside_normal[ts]
         # the light arriving at this point: one light sample (irradiance with visibility, travel
@@ -96,23 +117,34 @@ class CausticShot:
         for li in np.unique(light):
             sel = np.nonzero(light == li)[0]
             e[sel], travel[sel], _ = fs.direct._light_samples(pts[sel], nrm[sel], fs.lights[li],
-                                                              self.rng.random((len(sel), 3)))
+                                                              rng.random((len(sel), 3)))
         s, weight = sc.materials.sample_glossy(sc.side_material[side[t_idx]], nrm, -travel, u[:, 2:])
         carried = (self.tside_area[t_idx] / p)[:, None] * e * weight   # [W]
         live = np.nonzero(np.any(carried > 0, axis=1))[0]
-        if len(live):
-            tri, _, _, _ = self.tracer.first_hit(pts[live] + nrm[live] * self.tracer.eps, s[live])
-            self.rays += len(live)
-            hit = tri >= 0
-            rec = sc.side_facing(tri[hit], -s[live][hit])
-            ok = rec >= 0
-            rec, c, d = rec[ok], carried[live][hit][ok], s[live][hit][ok]
-            a = self.area[rec]
-            keep = a > 0
-            rec, c, d = rec[keep], c[keep] / a[keep, None], d[keep]
-            for k in range(3):
-                self._sum[:, k] += np.bincount(rec, c[:, k], minlength=sc.n_sides)
-                self._dsum[:, k] += np.bincount(rec, luminance(c) * d[:, k], minlength=sc.n_sides)
+        if not len(live):
+            return CausticHits.empty()
+        tri, dist, _, _ = self.tracer.first_hit(pts[live] + nrm[live] * self.tracer.eps, s[live])
+        hit = tri >= 0
+        live, tri, dist = live[hit], tri[hit], dist[hit]
+        rec = sc.side_facing(tri, -s[live])
+        ok = rec >= 0
+        live, tri, dist, rec = live[ok], tri[ok], dist[ok], rec[ok]
+        return CausticHits(pts[live] + dist[:, None] * s[live], tri, rec, s[live], carried[live], len(hit))
+
+    def refine(self, n_samples):
+        """``n_samples`` more lobe-sampled rays; updates ``E`` and ``direction``."""
+        if not self.active or n_samples <= 0:
+            return
+        self.samples += n_samples
+        h = self.sample(n_samples, self.rng)
+        self.rays += h.rays
+        a = self.area[h.sides]
+        keep = a > 0
+        rec, c, d = h.sides[keep], h.power[keep] / a[keep, None], h.travel[keep]
+        n = self.scene.n_sides
+        for k in range(3):
+            self._sum[:, k] += np.bincount(rec, c[:, k], minlength=n)
+            self._dsum[:, k] += np.bincount(rec, luminance(c) * d[:, k], minlength=n)
         self._update()
 
     def set_sums(self, total, dtotal, samples):

@@ -8,7 +8,8 @@ a running average, so chains merge exactly by pooling sums and counts:
     first shot of tside t = sum_c e_sum_c,t / sum_c count_c,t
     caustic shot = sum_c sum_c / sum_c samples_c
     pixel = sum_c S_c / sum_c P_c                  (S: sums over image passes, P: passes;
-                                                    emission seen and glossy iterations alike)
+                                                    emission seen, glossy iterations and caustic
+                                                    splats alike)
 
 :class:`ChainState` holds those sums and counts as plain arrays (picklable: what a worker
 sends back, :mod:`raybundle.distributed`); :func:`merge` pools them; :func:`apply` puts a
@@ -24,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 #: renderer arrays that are sums over image passes (pooled by adding)
-_PASS_SUMS = ("pass_sum", "pass_sq_sum", "glossy_sum", "emission_sum", "emission_count")
+_PASS_SUMS = ("pass_sum", "pass_sq_sum", "glossy_sum", "emission_sum", "emission_count", "caustic_splat_sum")
 
 
 @dataclass
@@ -62,6 +63,7 @@ def state(renderer_or_solver) -> ChainState:
     if renderer is not None:
         image = {k: getattr(renderer, k).copy() for k in _PASS_SUMS}
         image.update(passes=renderer.passes, glossy_iterations=renderer.glossy_iterations,
+                     caustic_splat_samples=renderer.caustic_splat_samples,
                      shadow_flags=renderer._shadow_flags.copy(), image_rays=renderer.image_rays)
     st = solver.stats
     return ChainState(solver.averaged, solver.mean_incoming.copy(),
@@ -85,7 +87,7 @@ def merge(states) -> ChainState:
     image = None
     if all(s.image is not None for s in states):
         image = {k: sum(s.image[k] for s in states) for k in _PASS_SUMS + ("passes", "glossy_iterations",
-                                                                            "image_rays")}
+                                                                            "caustic_splat_samples", "image_rays")}
         image["shadow_flags"] = np.logical_or.reduce([s.image["shadow_flags"] for s in states])
     stats = {k: sum(s.stats.get(k, 0) for s in states) for k in states[0].stats}
     return ChainState(n, mean, first, caustic, image, stats, sum(s.chains for s in states))
@@ -109,6 +111,7 @@ def apply(merged: ChainState, renderer_or_solver):
             setattr(renderer, k, merged.image[k].copy())
         renderer.passes = merged.image["passes"]
         renderer.glossy_iterations = merged.image["glossy_iterations"]
+        renderer.caustic_splat_samples = merged.image["caustic_splat_samples"]
         renderer.image_rays = merged.image["image_rays"]
         renderer._shadow_flags = merged.image["shadow_flags"].copy()
     return renderer_or_solver

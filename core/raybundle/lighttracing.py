@@ -47,7 +47,7 @@ import time
 
 import numpy as np
 
-from .imaging import ProgressiveImage
+from .imaging import ProgressiveImage, splat_to_camera
 from .pathtracing import _Passes
 from .sampling import frames_from_normals, points_on_triangles, uniform_sphere
 
@@ -333,23 +333,12 @@ class SingleRayIteration(ProgressiveImage):
     def _splat(self, h):
         """The image (n_pix, 3) of the photon hits ``h``: each one's reflected radiance towards
         the eye, ``Phi f(d, w_e) cos_y density / K``, where a shadow ray reaches the eye."""
-        sc, cam = self.scene, self.camera
         out = np.zeros((len(self._pixel), 3))
-        x, nrm, d, phi, tri = self.point[h], self.normal[h], self.travel[h], self.power[h], self.triangle[h]
-        px, py, to_eye, reach, density = cam.project(x)
-        cos_y = np.einsum("ij,ij->i", nrm, to_eye)
-        ok = (density > 0) & (cos_y > 0) & (px >= 0) & (px < cam.width) & (py >= 0) & (py < cam.height)
-        j = np.nonzero(ok)[0]
-        if not len(j):
-            return out
-        eps = self.tracer.eps
-        blocked = self.tracer.occluded(x[j] + nrm[j] * eps, to_eye[j], np.maximum(reach[j] - 2 * eps, 0.0))
-        self.image_rays += len(j)
-        j = j[~blocked]
-        tex = None if sc.texture is None else sc.texture.at(sc.triangle_source[tri[j]], x[j])
-        f = sc.materials.brdf(sc.triangle_material[tri[j]], nrm[j], d[j], to_eye[j], diffuse_scale=tex)
-        pix = np.floor(py[j]).astype(np.int64) * cam.width + np.floor(px[j]).astype(np.int64)
-        np.add.at(out, pix, phi[j] * f * (cos_y[j] * density[j] / self.chains)[:, None])
+        pix, value, rays = splat_to_camera(self.scene, self.camera, self.tracer, self.point[h], self.normal[h],
+                                           self.triangle[h], self.travel[h], self.power[h] / self.chains)
+        self.image_rays += rays
+        for k in range(3):
+            out[:, k] = np.bincount(pix, value[:, k], minlength=len(out))
         return out
 
     def image(self, preview=False):
