@@ -96,7 +96,7 @@ class RenderSettings:
     cell per patch, :func:`~raybundle.solvers.auto_bundle_resolution`); ``sequence``: the
     random sequence name; ``light_samples``: shadow rays per light per pixel per
     image pass; ``image_ray_share``: fraction of traced rays spent on image
-    passes (the rest on bundles), 0 = automatic: 0.2 for diffuse scenes, 0.35 where the
+    passes (the rest on bundles), 0 = automatic: 0.2 for diffuse scenes, 0.55 where the
     passes' eye paths also carry glossy lobes (:meth:`Renderer.step`); ``resolve_samples``: sub-pixel positions for
     the diffuse indirect part; ``smooth``: interpolate patch values;
     ``glossy_gather``: estimate the glossy lobe seen by the eye with one
@@ -498,7 +498,7 @@ class Renderer(ProgressiveImage):
 
     #: the image passes' share of the traced rays when ``image_ray_share`` is 0 (:meth:`step`)
     DIFFUSE_IMAGE_SHARE = 0.2
-    GLOSSY_IMAGE_SHARE = 0.35
+    GLOSSY_IMAGE_SHARE = 0.55
 
     #: :meth:`_noisy_pixels`: at most this share of the pixels, those whose squared standard
     #: error is above NOISY_CUT times the image's mean one
@@ -775,9 +775,11 @@ class Renderer(ProgressiveImage):
         passes' average; passes grow when penumbrae are found, so the ratio is re-read every
         time).  By default s = 0.2 for diffuse scenes, against 0.25: ``cornell`` at 5 s 2.65 /
         2.53% against 2.90 / 2.80%, at 30 s 1.27 / 1.19% against 1.28 / 1.23% (seeds 3, 4; 0.15:
-        2.51 / 2.73% at 5 s); and 0.35 with glossy lobes, whose eye paths the passes trace:
-        ``cornell-glossy`` at 5 s per-image noise 9.9% against 11.8% (0.25) and 13.9% (0.2),
-        seeds 3-5; at 30 s level from 0.2 to 0.5 (4.1 / 4.1% at 0.35)."""
+        2.51 / 2.73% at 5 s); and 0.55 with glossy lobes, whose eye paths the passes trace and
+        whose caustic they splat: ``cornell-glossy`` (seeds 3-6) at 5 s 9.6% mean against 10.8%
+        at 0.35, at 30 s 3.46% against 3.76% (0.45: 3.55%), the 99.9th percentile of the
+        per-pixel error 0.20-0.23 against 0.26-0.27 on three of the seeds (0.36 on the fourth
+        at both); at 120 s 2.03 / 1.78% (seeds 3, 4)."""
         solver = self.solver
         if self.passes == 0:
             self.image_pass()
