@@ -137,15 +137,9 @@ def test_png_preview_is_srgb(tmp_path):
     assert raw[1] == round(255 * (1.055 * 0.214 ** (1 / 2.4) - 0.055))    # ~128: sRGB mid grey
 
 
-def test_penumbra_pixels_get_more_shadow_rays():
-    """Floor under a 0.4 m lamp 1 m up, a wall 0.6 m high at x = 0.3 shading it: an
-    orthographic camera looks down on x in [0.31, 1.31], umbra, penumbra and open floor.
-    Direct light of the image passes (pass_sum) against a per-pixel reference (4 x 4
-    points per pixel, 512 shadow rays each, ratio estimator): after 24 passes the
-    penumbra pixels, which get 8 shadow rays per pass once an
-    earlier pass saw the lamp both reach and miss them, have under 0.75 of the RMS error of
-    1 ray per pass (measured 0.61; the pixel jitter adds the same to both), with the mean
-    error within 4.5 standard errors."""
+def penumbra_scene():
+    """Floor under a 0.4 m lamp (Le 1) 1 m up, a wall 0.6 m high at x = 0.3 shading it, an
+    orthographic 16 x 16 camera looking down on x in [0.31, 1.31]; returns (vertices, scene)."""
     s, h = 0.4, 1.0
     v = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0],
                   [-s / 2, -s / 2, h], [-s / 2, s / 2, h], [s / 2, s / 2, h], [s / 2, -s / 2, h],
@@ -155,7 +149,19 @@ def test_penumbra_pixels_get_more_shadow_rays():
     m = np.eye(4)
     m[0, 3], m[2, 3] = 0.81, 2.0
     cam = Camera(16, 16, 16.0, 16.0, 8.0, 8.0, m, orthographic=True)
-    sc = pipeline.prepare(build_scene(v, t, [0, 0, 1, 1, 0, 0], mats, camera=cam), patches=200)
+    return v, pipeline.prepare(build_scene(v, t, [0, 0, 1, 1, 0, 0], mats, camera=cam), patches=200)
+
+
+def test_penumbra_pixels_get_more_shadow_rays():
+    """Floor under a 0.4 m lamp 1 m up, a wall 0.6 m high at x = 0.3 shading it: an
+    orthographic camera looks down on x in [0.31, 1.31], umbra, penumbra and open floor.
+    Direct light of the image passes (pass_sum) against a per-pixel reference (4 x 4
+    points per pixel, 512 shadow rays each, ratio estimator): after 24 passes the
+    penumbra pixels, which get 8 shadow rays per pass once an
+    earlier pass saw the lamp both reach and miss them, have under 0.75 of the RMS error of
+    1 ray per pass (measured 0.61; the pixel jitter adds the same to both), with the mean
+    error within 4.5 standard errors."""
+    v, sc = penumbra_scene()
     images = {}
     for n_pen in (1, 8):
         r = pipeline.make_renderer(sc, RenderSettings(seed=5, penumbra_samples=n_pen))
@@ -191,16 +197,7 @@ def test_the_first_pass_is_exact_where_the_lamp_is_wholly_seen():
     no control variate) is 10-50% off per pixel there."""
     from raybundle.lights import polygon_irradiance
 
-    s, h = 0.4, 1.0
-    v = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0],
-                  [-s / 2, -s / 2, h], [-s / 2, s / 2, h], [s / 2, s / 2, h], [s / 2, -s / 2, h],
-                  [0.3, -2, 0], [0.3, 2, 0], [0.3, 2, 0.6], [0.3, -2, 0.6]], float)
-    t = [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7], [8, 9, 10], [8, 10, 11]]
-    mats = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.5, 0.5)), dict(name="lamp", emission=(1, 1, 1))])
-    m = np.eye(4)
-    m[0, 3], m[2, 3] = 0.81, 2.0
-    cam = Camera(16, 16, 16.0, 16.0, 8.0, 8.0, m, orthographic=True)
-    sc = pipeline.prepare(build_scene(v, t, [0, 0, 1, 1, 0, 0], mats, camera=cam), patches=200)
+    v, sc = penumbra_scene()
     r = pipeline.make_renderer(sc, RenderSettings(seed=5))
     r.image_pass()
     g = r.gbuffer
