@@ -38,7 +38,7 @@ from .sampling import frames_from_normals, kronecker_alpha, uniform_triangle
 class FinalGather:
     """The gather of one solution state (its vertex values computed once)."""
 
-    def __init__(self, solver, near=1.0, near_light_samples=1):
+    def __init__(self, solver, near=1.0, near_light_samples=1, caustic=True):
         sc, rec = solver.scene, solver.reconstruction
         self.solver, self.scene, self.rec = solver, sc, rec
         indirect = solver.indirect_incoming()
@@ -48,11 +48,13 @@ class FinalGather:
         self.vert_indirect = rec.smooth_and_sharp(indirect, sharp) if self.near > 0 else None
         self.near_light_samples = int(near_light_samples)
         self.hit_size = np.sqrt(sc.patch_area[sc.triangle_patch])      # per triangle [m]
-        # the first shot's glossy reflections arrive by the caustic shot, read where the gather is
-        self.vert_caustic = rec.averaged(sharp) if sharp is not None else None
+        # the first shot's glossy reflections arrive by the caustic shot, read where the gather
+        # is (``caustic`` False: left out, for an image that light-traces it into its pixels,
+        # :meth:`~raybundle.imaging.Renderer.splat_caustics`)
+        self.first_shot_glossy = sharp is None
+        self.vert_caustic = rec.averaged(sharp) if sharp is not None and caustic else None
 
-    def irradiance(self, points, normals, rays, rng, shift=None, first=0, at=None, caustic=True,
-                   chunk_rays=1 << 18):
+    def irradiance(self, points, normals, rays, rng, shift=None, first=0, at=None, chunk_rays=1 << 18):
         """E_ind (N, 3) [W/m^2] at ``points`` (N, 3) with unit ``normals`` (N, 3), by
         ``rays`` rays each: point i's ray k takes the Kronecker (R_2) point
         ``shift_i + (first + k) alpha`` (``shift`` (N, 2), default random from ``rng``),
@@ -64,11 +66,10 @@ class FinalGather:
         one mean direction ``w_l`` per side: single rays 3,000 times the mean where a sharp
         lobe lines up, 52% of that term in its top 10 of 200,000 rays on ``cornell-glossy``),
         as the iteration does, and the caustic shot's ``E_c`` read at ``at`` = (tside (N,),
-        barycentrics (N, 3)) of the points takes its place (``caustic`` False: left out, for
-        an image that light-traces it, :meth:`~raybundle.imaging.Renderer.splat_caustics`)."""
+        barycentrics (N, 3)) of the points takes its place (unless the gather was made
+        without it)."""
         sv, sc, rec = self.solver, self.scene, self.rec
-        first_shot_glossy = self.vert_caustic is None
-        caustic = caustic and not first_shot_glossy
+        caustic = self.vert_caustic is not None
         if caustic and at is None:
             raise ValueError("a gather with a caustic first shot needs the points' sides: at=(tside, bary)")
         points = np.asarray(points, float)
@@ -100,7 +101,7 @@ class FinalGather:
                         e_hit[c] = rec.at(self.vert_indirect, ts[c], bary[c]) + sv.direct.irradiance(
                             origin[h] + w[h] * dist[h, None], sc.tside_normal[ts[c]], rng, self.near_light_samples)
                 L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False,
-                                     glossy_iterate=False, first_shot_glossy=first_shot_glossy)
+                                     glossy_iterate=False, first_shot_glossy=self.first_shot_glossy)
                 L[hit] += self.glossy_reflected(origin[hit] + w[hit] * dist[hit, None], ts, -w[hit], rng)
             if np.any(sv.environment > 0):
                 L[tri < 0] = sv.environment

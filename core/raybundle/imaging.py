@@ -686,7 +686,7 @@ class Renderer(ProgressiveImage):
             self.gather_rays_used = 0
             rays = self.settings.gather_rays
             if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and self._gather_seconds)):
-                final = FinalGather(solver)
+                final = FinalGather(solver, caustic=caustic)
         if not np.any(e_bar) and final is None:
             return out
         vert = solver.reconstruction.smooth_and_sharp(e_bar, sharp) if self.settings.smooth else None
@@ -710,7 +710,7 @@ class Renderer(ProgressiveImage):
                 if len(f):
                     e[f] = final.irradiance(g.point[h[f]], sc.tside_normal[g.tside[h[f]]], per_sample,
                                             self._resolve_rng, shift=shift[h[f]], first=j * per_sample,
-                                            at=(g.tside[h[f]], g.bary[h[f]]), caustic=caustic)
+                                            at=(g.tside[h[f]], g.bary[h[f]]))
                     self.gathered_points += len(f)
             m = g.material[h]
             w_d = sc.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]))
