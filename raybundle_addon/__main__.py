@@ -70,12 +70,21 @@ def main(argv=None):
         return _fail(f"{args.blend}: no such file")
     if not args.blend.endswith(".blend"):
         return _fail(f"{args.blend}: not a .blend file")
-    if args.out is not None and not args.out.lower().endswith(".exr"):
-        return _fail(f"--out {args.out}: the output must be an .exr file")
-    if args.bake is not None and not args.bake.endswith(".blend"):
-        return _fail(f"--bake {args.bake}: the output must be a .blend file")
     if args.bake is None and (args.lightmaps or args.lightmap_size or args.domain or args.subdivide):
         return _fail("--lightmaps, --lightmap-size, --domain and --subdivide go with --bake")
+    from raybundle.io import OutputError, check_output
+
+    try:                              # outputs are checked before the work, not lost after it
+        if args.out is not None:
+            check_output(args.out, "--out", suffix=".exr")
+        if args.bake is not None:
+            check_output(args.bake, "--bake", suffix=".blend")
+        if args.lightmaps:
+            check_output(args.lightmaps, "--lightmaps", folder=True)
+        if args.save_npz:
+            check_output(args.save_npz, "--save-npz", suffix=".npz")
+    except OutputError as e:
+        return _fail(str(e))
 
     import bpy
 

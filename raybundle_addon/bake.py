@@ -161,6 +161,7 @@ class BakeJob:
         self.targets, self.lightmap_targets = [], []
         self.t_start = self._t_iter = None
         self.timings = {}
+        self.budget_note = None
 
     def warn(self, message):
         if message not in self.warnings:
@@ -295,17 +296,25 @@ class BakeJob:
     # ------------------------------------------------------------------ step
     def step(self, budget=0.1):
         """Iterate for about ``budget`` seconds; False once done (limit reached or stopped)."""
+        from raybundle.imaging import ProgressiveImage
+
         s = self.settings
         t_end = time.perf_counter() + budget
         while True:
             it = self.solver.stats.iterations
-            elapsed = time.perf_counter() - self._t_iter
+            # the time limit is the whole job's, from its start (export and set-up included),
+            # with at least MIN_ITERATIONS however short it is
+            elapsed = time.perf_counter() - self.t_start
             if s.iterations:
                 self.fraction = min(1.0, it / s.iterations)
                 done = it >= s.iterations
             else:
                 self.fraction = min(1.0, elapsed / s.time_limit)
-                done = elapsed >= s.time_limit
+                done = elapsed >= s.time_limit and it >= ProgressiveImage.MIN_ITERATIONS
+                if elapsed >= s.time_limit and not done and not self.budget_note:
+                    self.budget_note = (f"budget {s.time_limit:g} s too short: set-up "
+                                        f"{self._t_iter - self.t_start:.1f} s; {ProgressiveImage.MIN_ITERATIONS} "
+                                        "iterations run all the same")
             if done or self.stop.is_set():
                 return False
             if time.perf_counter() >= t_end:
@@ -378,6 +387,8 @@ class BakeJob:
             solver.tracer.close()
         t_done = time.perf_counter()
         st = solver.stats
+        if self.budget_note:
+            self.warn(self.budget_note)
         stats = {"iterations": st.iterations, "directions": st.directions, "patches": int(solver.scene.n_patches),
                  "triangles": int(len(solver.scene.triangles)), "rays_traced": int(st.rays),
                  "solve_seconds": round(t0 - self._t_iter, 4),

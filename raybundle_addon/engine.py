@@ -203,7 +203,7 @@ class RenderJob:
             try:
                 result = self.renderer.run(iterations=s.iterations or None,
                                            seconds=None if s.iterations else s.time_limit,
-                                           progress=self._on_progress, stop=self._poll)
+                                           progress=self._on_progress, stop=self._poll, started=self.t_start)
             finally:
                 self.renderer.tracer.close()
             self._show(result.image, final=True)
@@ -214,6 +214,8 @@ class RenderJob:
                      first_image_seconds=round(self.first_image_seconds, 4),
                      total_seconds=round(time.perf_counter() - self.t_start, 4),
                      warnings=len(self.export.warnings))
+        if "budget_note" in stats:
+            self.export.warnings.append(stats["budget_note"] + ": raise the time limit")
         if self.choice is not None:
             stats["auto"] = self.choice.as_dict()
         outcome = RenderOutcome(result.image, stats, list(self.export.warnings), result.cancelled, self.export)

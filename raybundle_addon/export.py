@@ -53,6 +53,21 @@ from .shaders import MaterialConverter, world_radiance
 
 #: object types that become triangles (through their evaluated mesh)
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES_LEGACY"}
+#: object types that render in Cycles but not here (one warning each)
+UNMODELED_TYPES = {"CURVES": "hair curves", "POINTCLOUD": "point clouds (e.g. Geometry Nodes points)",
+                   "VOLUME": "volumes"}
+
+
+def _unmodeled_features(ob, warn):
+    """Warn about what Cycles renders on object ``ob`` (an original) that the export leaves out:
+    hair particles drawn as strands, light linking."""
+    for ps in getattr(ob, "particle_systems", ()):
+        st = ps.settings
+        if st.type == "HAIR" and st.render_type == "PATH":
+            warn(f"object {ob.name!r}: hair particles ({ps.name!r}) are not rendered")
+    link = getattr(ob, "light_linking", None)
+    if link is not None and (getattr(link, "receiver_collection", None) or getattr(link, "blocker_collection", None)):
+        warn(f"object {ob.name!r}: light linking is not modeled: every light lights and shadows everything")
 
 
 @dataclass
@@ -372,6 +387,8 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
     for inst in depsgraph.object_instances:
         ob = inst.object
         kind = ob.type
+        if kind in UNMODELED_TYPES and inst.show_self and not (viewport and ob.original.hide_render):
+            warn(f"object {ob.original.name!r}: {UNMODELED_TYPES[kind]} are not rendered")
         if kind != "LIGHT" and kind not in GEOMETRY_TYPES:
             continue
         M = np.array(inst.matrix_world, float)            # copy now: the iterator reuses items
@@ -384,6 +401,8 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
             if got is not None:
                 lights[got[0]].append(got[1])
             continue
+        if not inst.is_instance:
+            _unmodeled_features(ob.original, warn)
         if not inst.show_self or not _ray_visible(ob, warn):
             continue
         me, temp = (ob.data, False) if kind == "MESH" else (None, True)

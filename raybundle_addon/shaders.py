@@ -118,6 +118,11 @@ class MaterialConverter:
         if nt is None:
             return self._viewport(mat)
         out = nt.get_output_node("CYCLES") or nt.get_output_node("ALL")
+        if out is not None:
+            for socket in ("Volume", "Displacement"):
+                if socket in out.inputs and out.inputs[socket].is_linked:
+                    self.warn(f"material {name!r}: its {socket.lower()} is not modeled: the surface alone is "
+                              "rendered")
         if out is None or not out.inputs["Surface"].is_linked:
             self.warn(f"material {name!r} has no surface shader connected to its output: rendered black")
             return dict(name=name)
@@ -331,6 +336,10 @@ def principled_to_material(inputs, distribution="MULTI_GGX", warn=print, layered
     """
     get = inputs.get
     base = np.clip(np.asarray(get("Base Color", (0.8, 0.8, 0.8)), float)[:3], 0.0, None)
+    if np.any(base > 1.0 + 1e-6):
+        warn(f"Principled BSDF base color {tuple(np.round(base, 3))} is above 1 (albedo > 1 creates energy): "
+             "clipped to 1")
+        base = np.minimum(base, 1.0)
     metallic = float(np.clip(get("Metallic", 0.0), 0.0, 1.0))
     roughness = float(np.clip(get("Roughness", 0.5), 0.0, 1.0))
     ior = float(get("IOR", 1.5))
@@ -426,6 +435,9 @@ def world_radiance(world, warn):
     if nt is None:
         return np.array(world.color[:3], float)
     out = nt.get_output_node("CYCLES") or nt.get_output_node("ALL")
+    if out is not None and "Volume" in out.inputs and out.inputs["Volume"].is_linked:
+        warn(f"world {world.name!r}: its volume (fog, atmosphere) is not modeled: the scene is rendered "
+             "without it")
     if out is None or not out.inputs["Surface"].is_linked:
         return np.zeros(3)
     node = _follow_reroutes(out.inputs["Surface"].links[0].from_node)

@@ -51,7 +51,9 @@ def test_cli_renders_an_exr_and_saves_the_scene(cornell_blend, tmp_path):
     (["--time", "abc"], "--time"),
     (["--seed", "1.5"], "--seed"),
     (["--resolution-percentage", "0"], "--resolution-percentage"),
-    (["--out", "x.png"], "must be an .exr"),
+    (["--out", "x.png"], "must end in .exr"),
+    (["--out", "/proc/nope/o.exr"], "cannot write there"),
+    (["--out", "o.exr", "--save-npz", "/proc/nope/s.npz"], "--save-npz"),
     (["--bogus"], "unrecognized"),
 ])
 def test_cli_bad_arguments_exit_2_with_one_line(cornell_blend, tmp_path, args, message):

@@ -388,3 +388,33 @@ def test_particle_and_geometry_node_instances(fresh):
     centres = np.array([sc.vertices[sc.triangles[ex.triangle_object[sc.triangle_source] == k]].reshape(-1, 3)
                         .mean(0) for k in gn])
     assert np.allclose(np.sort(centres[:, 0]), [3, 3, 4, 4]) and np.allclose(centres[:, 2], 0)
+
+
+def test_what_cycles_renders_and_the_export_leaves_out_is_warned(fresh):
+    """A world volume, hair strands, Geometry Nodes points, a displacement and a Principled
+    base color above 1 each get one warning (they were dropped or clipped silently)."""
+    v, f = box((-1, -1, -1), (1, 1, 1))
+    mat = node_material("p", kind="principled", color=(1.5, 0.5, 0.5))
+    out = mat.node_tree.nodes["Material Output"]
+    mat.node_tree.links.new(mat.node_tree.nodes.new("ShaderNodeDisplacement").outputs[0], out.inputs["Displacement"])
+    ob = add_object("room", v, f, [mat])
+    add_light("POINT", location=(0, 0, 0.5), energy=100)
+    add_camera((0, 0, 0), rotation=(1.5, 0, 0))
+    nt = set_world((0.1, 0.1, 0.1), 1.0).node_tree
+    nt.links.new(nt.nodes.new("ShaderNodeVolumePrincipled").outputs[0], nt.nodes["World Output"].inputs["Volume"])
+    ob.modifiers.new("hair", "PARTICLE_SYSTEM")
+    ob.particle_systems[0].settings.type = "HAIR"
+    pv, pf = box((-0.2, -0.2, -0.2), (0.2, 0.2, 0.2))
+    mod = add_object("pts", pv, pf).modifiers.new("gn", "NODES")
+    g = bpy.data.node_groups.new("points", "GeometryNodeTree")
+    g.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    g.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    i, o, m2p = (g.nodes.new(t) for t in ("NodeGroupInput", "NodeGroupOutput", "GeometryNodeMeshToPoints"))
+    g.links.new(i.outputs[0], m2p.inputs[0])
+    g.links.new(m2p.outputs[0], o.inputs[0])
+    mod.node_group = g
+    text = "\n".join(export().warnings)
+    for expected in ("world 'world': its volume", "hair particles ('hair') are not rendered",
+                     "object 'pts': point clouds", "material 'p': its displacement is not modeled",
+                     "base color (1.5, 0.5, 0.5) is above 1"):
+        assert text.count(expected) == 1, (expected, text)

@@ -80,3 +80,38 @@ def test_cycles_is_one_more_curve_where_it_can_build_the_scene(tmp_path):
     md = (out / "summary.md").read_text()
     assert "| cornell | cycles |" in md and "| furnace-glossy | cycles | n/a" in md
     assert "emission that depends on the albedo" in md
+
+
+def test_bench_refuses_empty_pairs_and_references_without_time(tmp_path):
+    """A scene/method pair where nothing applies, and a missing reference half with
+    ``--reference-time 0``: one line, exit 2, nothing cached."""
+    base = [sys.executable, "-m", "raybundle", "bench", "--time", "1", "--resolution", "16", "16",
+            "--reference-dir", str(tmp_path / "ref"), "--out", str(tmp_path / "b")]
+    p = subprocess.run(base + ["--scenes", "furnace-glossy", "--methods", "radiosity"], capture_output=True, text=True)
+    assert p.returncode == 2 and "no method applies" in p.stderr and "Traceback" not in p.stderr, p.stderr
+    p = subprocess.run(base + ["--scenes", "cornell", "--methods", "path-tracing", "--reference-time", "0"],
+                       capture_output=True, text=True)
+    assert p.returncode == 2 and "--reference-time" in p.stderr and "Traceback" not in p.stderr, p.stderr
+    assert not (tmp_path / "ref").exists() or not any((tmp_path / "ref").iterdir())
+
+
+def test_ctrl_c_stops_the_whole_bench_and_caches_no_cut_reference(tmp_path):
+    """Ctrl-C while a reference half is being path-traced: the bench ends (exit 130), the
+    half is not cached, so the next run does not reuse a reference cut short."""
+    import signal
+    import time
+
+    ref = tmp_path / "ref"
+    proc = subprocess.Popen([sys.executable, "-m", "raybundle", "bench", "--scenes", "cornell", "--methods",
+                             "path-tracing", "--time", "1", "--resolution", "16", "16", "--reference-time", "60",
+                             "--reference-dir", str(ref), "--out", str(tmp_path / "b")],
+                            stderr=subprocess.PIPE, text=True)
+    buf, t0 = "", time.time()
+    while "path tracing for" not in buf and time.time() - t0 < 60:
+        buf += proc.stderr.readline()
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGINT)
+    err = proc.communicate(timeout=60)[1]
+    assert proc.returncode == 130, err
+    assert "cut short: not cached" in err and "Traceback" not in err
+    assert not list(ref.glob("*.exr"))

@@ -95,3 +95,54 @@ def test_bad_arguments_get_one_line_and_exit_2(tmp_path, args):
     assert p.returncode == 2, p.stderr
     assert len(p.stderr.strip().splitlines()) == 1 and "error" in p.stderr and "Traceback" not in p.stderr
     assert not (tmp_path / "x.exr").exists()
+
+
+@pytest.mark.parametrize("out,stats,message", [
+    ("x.png", None, "must end in .exr"),                 # the PNG preview would overwrite it
+    ("folder", None, "must end in .exr"),
+    ("folder.exr", None, "is a folder"),
+    ("file.txt/x.exr", None, "cannot write there"),       # a folder that cannot be made
+    ("x.exr", "file.txt/s.json", "cannot write there"),
+])
+def test_outputs_are_checked_before_the_work(tmp_path, out, stats, message):
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "folder.exr").mkdir()
+    (tmp_path / "file.txt").write_text("not a folder")
+    args = ["render", "cornell", "--iterations", "5", "--out", str(tmp_path / out)]
+    p = run_cli(*args, *(["--stats", str(tmp_path / stats)] if stats else []))
+    assert p.returncode == 2 and message in p.stderr, p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and "laying out" not in p.stderr     # no work done
+    assert not (tmp_path / "x.exr").exists()
+
+
+@pytest.mark.parametrize("content", [b"", b"PK\x03\x04 truncated", None])
+def test_empty_truncated_and_malformed_scene_files_get_one_line(tmp_path, content):
+    bad = tmp_path / "bad.npz"
+    if content is None:                # readable, but the arrays do not fit together
+        np.savez(bad, vertices=np.zeros((3, 3)), triangles=np.array([[0, 1, 7]]), triangle_material=[0],
+                 material_names=np.array(["a"]), material_diffuse=np.zeros((1, 2)), material_glossy=[0],
+                 material_roughness=[0], material_glossy_weight=[0], material_emission=[[1, 1, 1]])
+    else:
+        bad.write_bytes(content)
+    p = run_cli("render", str(bad), "--iterations", "1", "--out", str(tmp_path / "x.exr"))
+    assert p.returncode == 2 and "Traceback" not in p.stderr, p.stderr
+    assert len(p.stderr.strip().splitlines()) == 1 and str(bad) in p.stderr
+
+
+def test_time_is_the_whole_run_and_a_short_budget_still_iterates_and_says_so(tmp_path):
+    """``--time`` counts from the command's start; a budget the set-up eats still gets
+    MIN_ITERATIONS (8) iterations, a warning and ``budget_note`` in the stats; the phases
+    add up: set-up + iterations + final image = the run's total."""
+    stats = tmp_path / "s.json"
+    p = run_cli("render", "cornell", "--time", "0", "--patches", "300", "--resolution", "16", "16",
+                "--out", str(tmp_path / "x.exr"), "--stats", str(stats))
+    assert p.returncode == 0, p.stderr
+    s = json.loads(stats.read_text())
+    assert s["iterations"] == 8 and "too short" in s["budget_note"] and "too short" in p.stderr
+    assert s["setup_seconds"] > 0
+    parts = s["setup_seconds"] + s["seconds"]
+    assert parts <= s["total_seconds"] + 1e-3 and s["total_seconds"] - parts < 0.1 + 0.1 * s["total_seconds"], s
+    p = run_cli("render", "cornell", "--iterations", "3", "--patches", "300", "--resolution", "16", "16",
+                "--out", str(tmp_path / "y.exr"), "--stats", str(stats))
+    s = json.loads(stats.read_text())
+    assert s["iterations"] == 3 and "budget_note" not in s          # given iterations are given

@@ -97,9 +97,9 @@ def pass_values(roughness, mis, passes, seed):
     r = pipeline.make_renderer(lamp_over_plane(roughness), RenderSettings(seed=seed, glossy_mis=mis))
     out = []
     for _ in range(passes):
-        before = r.pass_sum.copy()
+        before = r.pass_sum + r.gather_sum
         r.image_pass()
-        out.append(r.pass_sum - before)
+        out.append(r.pass_sum + r.gather_sum - before)
     r.tracer.close()
     return np.array(out)
 

@@ -23,9 +23,11 @@ from __future__ import annotations
 import csv
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 
 import numpy as np
@@ -156,9 +158,10 @@ def reference_paths(name, sc, folder):
     return [os.path.join(folder, f"{label(name)}-{sc.camera.width}x{sc.camera.height}-{k}.exr") for k in (1, 2)]
 
 
-def reference(name, resolution, folder, seconds, log=print):
+def reference(name, resolution, folder, seconds, log=print, stop=None):
     """(reference image, [half A, half B] or None): the analytic radiance of a furnace, else
-    two cached independent halves, rendered by the path tracer when missing."""
+    two cached independent halves, rendered by the path tracer when missing.  A half cut
+    short (``stop``, Ctrl-C) is never cached: :class:`Interrupted` is raised instead."""
     sc = load(name, resolution)
     if sc.analytic_radiance is not None:
         return np.broadcast_to(np.asarray(sc.analytic_radiance, float), (sc.camera.height, sc.camera.width, 3)), None
@@ -167,16 +170,25 @@ def reference(name, resolution, folder, seconds, log=print):
     for path, seed in zip(paths, REFERENCE_SEEDS):
         if not os.path.exists(path):
             log(f"reference half {path}: path tracing for {seconds:.0f} s (seed {seed}; cached)")
+            if not seconds > 0:
+                raise ValueError(f"reference half {path} is missing and --reference-time is {seconds:g} s: "
+                                 "give it seconds (or copy Cycles halves there)")
             _, r, _ = setup(name, "path-tracing", resolution, seed)
-            res = r.run(seconds=seconds)
+            res = r.run(seconds=seconds, stop=stop)
             r.tracer.close()
+            if res.cancelled:
+                raise Interrupted(f"reference half {path} cut short: not cached")
             write_exr(path, res.image, {"raybundle_samples_per_pixel": res.stats["iterations"],
                                         "raybundle_seconds": res.stats["seconds"]})
         halves.append(read_exr(path))
     return 0.5 * (halves[0] + halves[1]), halves
 
 
-def run_method(name, method, seconds, ref, halves, resolution=None, log=print):
+class Interrupted(Exception):
+    """Ctrl-C during the bench: it stops as a whole, its results so far marked partial."""
+
+
+def run_method(name, method, seconds, ref, halves, resolution=None, log=print, stop=None):
     """One timed run: rows (scene, method, seconds from loading, iterations, error, reference noise)."""
     sc, r, t_setup = setup(name, method, resolution)
     mask = light_source_mask(sc)
@@ -189,7 +201,7 @@ def run_method(name, method, seconds, ref, halves, resolution=None, log=print):
         log(f"  {name} / {method}: {t_setup + t:6.1f} s, {it} iterations, error {100 * e['error']:.2f}%")
 
     res = r.run(seconds=max(seconds - t_setup, 0.0), snapshots=snapshot_times(seconds - t_setup),
-                on_snapshot=snap)
+                on_snapshot=snap, stop=stop)
     r.tracer.close()
     snap(res.stats["seconds"], res.stats["iterations"], res.image)
     return rows, res
@@ -272,7 +284,7 @@ def chart(path, name, rows):
         pts = [(r["seconds"], r["error"]) for r in rows if r["method"] == method and r["error"] > 0]
         if pts:
             ax.loglog(*zip(*pts), "o-", label=method)
-    noise = max(r["reference_noise"] for r in rows)
+    noise = max((r["reference_noise"] for r in rows), default=0.0)
     if noise > 0:
         ax.axhline(noise, color="grey", ls=":", lw=1, label=f"reference noise {100 * noise:.2f}% (subtracted)")
     for level in LEVELS:
@@ -343,38 +355,62 @@ def run_bench(args):
         print(f"[{done:5.0f} s, about {max(total - done, 0):.0f} s left] {text}", file=sys.stderr, flush=True)
 
     results, summary, skipped = {}, {}, {}
-    for name in scenes:
-        ref, halves = reference(name, args.resolution, args.reference_dir, args.reference_time, log)
-        rows_scene, results[name] = [], {}
-        for method in methods:
+    stop = threading.Event()
+    old_handler = signal.signal(signal.SIGINT, lambda *_: stop.set())    # Ctrl-C: the bench stops as a whole
+    try:
+        for name in scenes:
+            if stop.is_set():
+                break
             try:
-                rows, res = run_method(name, method, args.time, ref, halves, args.resolution, log)
-            except ValueError as e:          # a method that does not apply (radiosity on a glossy scene)
-                log(f"  {name} / {method}: not applicable: {e}")
-                skipped.setdefault(name, {})[method] = str(e)
-                continue
-            results[name][method] = rows
-            rows_scene += rows
-            write_exr(os.path.join(out, f"{label(name)}-{method}.exr"), res.image)
-        if args.cycles:
-            try:
-                results[name]["cycles"] = rows = run_cycles(name, args.time, ref, halves, args.resolution, log)
-                rows_scene += rows
+                ref, halves = reference(name, args.resolution, args.reference_dir, args.reference_time, log, stop)
+            except Interrupted as e:
+                log(str(e))
+                break
             except ValueError as e:
-                log(f"  {name} / cycles: not applicable: {e}")
-                skipped.setdefault(name, {})["cycles"] = str(e)
-        write_csv(os.path.join(out, f"{label(name)}.csv"), rows_scene)
-        chart(os.path.join(out, f"{label(name)}.png"), label(name), rows_scene)
-        summary[name] = {m: {"final_error": r[-1]["error"], "seconds": r[-1]["seconds"], "slope": slope(r),
-                             **{f"seconds_to_{lv:g}": time_to(r, lv) for lv in LEVELS}}
-                         for m, r in results[name].items()}
+                print(f"raybundle bench: {e}", file=sys.stderr)
+                return 2
+            rows_scene, results[name] = [], {}
+            for method in methods:
+                if stop.is_set():
+                    break
+                try:
+                    rows, res = run_method(name, method, args.time, ref, halves, args.resolution, log, stop)
+                except ValueError as e:          # a method that does not apply (radiosity on a glossy scene)
+                    log(f"  {name} / {method}: not applicable: {e}")
+                    skipped.setdefault(name, {})[method] = str(e)
+                    continue
+                results[name][method] = rows
+                rows_scene += rows
+                write_exr(os.path.join(out, f"{label(name)}-{method}.exr"), res.image)
+            if args.cycles and not stop.is_set():
+                try:
+                    results[name]["cycles"] = rows = run_cycles(name, args.time, ref, halves, args.resolution, log)
+                    rows_scene += rows
+                except ValueError as e:
+                    log(f"  {name} / cycles: not applicable: {e}")
+                    skipped.setdefault(name, {})["cycles"] = str(e)
+            if rows_scene:
+                write_csv(os.path.join(out, f"{label(name)}.csv"), rows_scene)
+                chart(os.path.join(out, f"{label(name)}.png"), label(name), rows_scene)
+            summary[name] = {m: {"final_error": r[-1]["error"], "seconds": r[-1]["seconds"], "slope": slope(r),
+                                 **{f"seconds_to_{lv:g}": time_to(r, lv) for lv in LEVELS}}
+                             for m, r in results[name].items()}
+    finally:
+        signal.signal(signal.SIGINT, old_handler)
+    partial = stop.is_set()
+    if not partial and not any(results.values()):
+        reasons = "; ".join(f"{n} / {m}: {r.split(';')[0]}" for n, d in skipped.items() for m, r in d.items())
+        print(f"raybundle bench: no method applies to the scenes given ({reasons})", file=sys.stderr)
+        return 2
     table = summary_table(results, skipped)
     with open(os.path.join(out, "summary.md"), "w") as f:
-        f.write(f"Error (relative RMSE, reference noise subtracted) against seconds from loading the scene, "
+        f.write(("**Partial: stopped by Ctrl-C; the last method's rows end where it stopped.**\n\n" if partial else "")
+                + f"Error (relative RMSE, reference noise subtracted) against seconds from loading the scene, "
                 f"{args.time:g} s per method, one run on this machine.\n\n{table}")
-    extra = run_throughput(out) if args.throughput else {}
+    extra = run_throughput(out) if args.throughput and not partial else {}
     write_json(os.path.join(out, "summary.json"), {"seconds": args.time, "methods": methods, "scenes": summary,
-                                                   "not_applicable": skipped, **extra})
+                                                   "not_applicable": skipped, "partial": partial, **extra})
     print(table)
-    print(f"wrote {out}/summary.md, summary.json and a CSV, a PNG and the final EXRs per scene")
-    return 0
+    print(f"wrote {out}/summary.md, summary.json and a CSV, a PNG and the final EXRs per scene"
+          + (" (partial: stopped by Ctrl-C)" if partial else ""))
+    return 130 if partial else 0

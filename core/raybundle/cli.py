@@ -79,9 +79,18 @@ def cmd_render(args):
     from .scene import SceneError
     from .scenes import load_scene
 
+    from .io import OutputError, check_output
+
     if args.time is None and args.iterations is None:
         args.time = 30.0
     t_start = time.perf_counter()
+    try:                              # outputs are checked before the work, not lost after it
+        check_output(args.out, "--out", suffix=".exr")
+        if args.stats:
+            check_output(args.stats, "--stats")
+    except OutputError as e:
+        print(f"raybundle: error: {e}", file=sys.stderr)
+        return 2
 
     def stage(text):
         print(f"raybundle: {text} ({time.perf_counter() - t_start:.1f} s)", file=sys.stderr, flush=True)
@@ -116,7 +125,7 @@ def cmd_render(args):
             signal.signal(signal.SIGINT, old)
             return _render_chains(args, scene, settings, stage)
         result = render(scene, settings, iterations=args.iterations, seconds=args.time, progress=bar, stop=stop,
-                        stage=stage, solver=args.method)
+                        stage=stage, solver=args.method, started=t_start)
     except (SceneError, ValueError) as e:
         print(f"raybundle: error: {e}", file=sys.stderr)
         return 2
@@ -128,6 +137,8 @@ def cmd_render(args):
         bar.close()
     stats = _write_outputs(args, scene, result.image, dict(result.stats, auto=choice.as_dict()) if choice
                            else result.stats)
+    if "budget_note" in stats:
+        print(f"raybundle: warning: {stats['budget_note']}: give --time more seconds", file=sys.stderr)
     state = "stopped early" if result.cancelled else "done"
     print(f"{state}: {stats['iterations']} iterations in {stats['seconds']:.1f} s, {scene.n_patches} patches, "
           f"{stats['rays_traced'] / 1e6:.1f} M rays -> {args.out}", file=sys.stderr)

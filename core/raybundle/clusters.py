@@ -36,7 +36,9 @@ from dataclasses import replace
 
 import numpy as np
 
+from .contacts import gap_sides
 from .scene import PatchScene, cut_at_contacts, edge_for_patches, group_ids, split_triangles, subdivide
+from .visibility import RayTracer
 
 #: cube-map cells per face edge for the normal direction of a cluster (150 directions; odd, so
 #: that axis-aligned normals lie mid-cell, never on a border rounding could flip)
@@ -67,14 +69,15 @@ def normal_cells(normals, cells=NORMAL_CELLS):
 
 
 class _Grouping:
-    """What the cluster keys need of a scene's triangles, computed once."""
+    """What the cluster keys need of a scene's triangles, computed once (``lo``: the
+    grid's origin, the scene's lowest corner by default)."""
 
-    def __init__(self, scene: PatchScene):
+    def __init__(self, scene: PatchScene, lo=None):
         self.scene = scene
         corners = scene.triangle_corners
         self.area = scene.triangle_area
         self.centroid = corners.mean(axis=1)
-        self.lo = scene.vertices.min(axis=0)
+        self.lo = scene.vertices.min(axis=0) if lo is None else lo
         self.edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
         self.cell = normal_cells(scene.triangle_normal)
         # offset along the triangle's own normal: constant over a plane
@@ -84,13 +87,18 @@ class _Grouping:
         """(T,) bool: triangles to group at patch size ``h``."""
         return self.area < h * h / SMALL
 
-    def clusters(self, h, small):
-        """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``."""
+    def clusters(self, h, small, gap=None):
+        """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``;
+        ``gap`` (S, 2) bool: the triangle lies in a gap on its front / back
+        (:func:`~raybundle.contacts.gap_sides`), which a cluster does not straddle."""
         sc, idx = self.scene, np.nonzero(small)[0]
         cell = np.floor((self.centroid[idx] - self.lo) / h).astype(np.int64)
         slab = np.floor(self.offset[idx] / (0.5 * h)).astype(np.int64)
-        return group_ids([cell[:, 0], cell[:, 1], cell[:, 2], self.cell[idx], slab,
-                           sc.triangle_material[idx], sc.triangle_two_sided[idx]])
+        keys = [cell[:, 0], cell[:, 1], cell[:, 2], self.cell[idx], slab,
+                sc.triangle_material[idx], sc.triangle_two_sided[idx]]
+        if gap is not None:
+            keys.append(gap[:, 0] * 2 + gap[:, 1])
+        return group_ids(keys)
 
     def count(self, h):
         """Patches at size ``h``: k^2 per triangle cut, one per cluster, one per other triangle."""
@@ -101,25 +109,42 @@ class _Grouping:
         return int((k[~small] ** 2).sum()) + n_clusters
 
 
-def patch_size(scene: PatchScene, patches, grouping=None, steps=8):
-    """The patch size h [m] for about ``patches`` patches (within ~10%): h scaled by
-    sqrt(count / patches) until the count is close (a patch count falls as 1 / h^2)."""
+def patch_size(scene: PatchScene, patches, grouping=None, steps=12):
+    """The patch size h [m] whose patch count is closest to ``patches`` (within ~10% where
+    the count allows).  The count falls with h, but in jumps: where triangles stop being
+    grouped, each is cut into k^2 instead, so h is bracketed and bisected in log h, each
+    step a secant guess inside the bracket, and the best count seen wins."""
     grouping = grouping or _Grouping(scene)
     h = np.sqrt(scene.triangle_area.sum() / patches)
     best = (np.inf, h)
+    fine, coarse = None, None          # (log h, log count) with count above / below the target
     for _ in range(steps):
-        n = grouping.count(h)
+        n = max(grouping.count(h), 1)
         best = min(best, (abs(np.log(n / patches)), h))
         if abs(n - patches) <= 0.1 * patches:
             break
-        h *= np.sqrt(n / patches)
+        if n > patches:
+            fine = (np.log(h), np.log(n))
+        else:
+            coarse = (np.log(h), np.log(n))
+        guess = np.log(h) + 0.5 * np.log(n / patches)          # a count falls as 1 / h^2
+        if fine is not None and coarse is not None:
+            lo, hi = fine[0], coarse[0]
+            if not lo + 0.05 * (hi - lo) < guess < hi - 0.05 * (hi - lo):
+                guess = 0.5 * (lo + hi)
+            if hi - lo < 1e-3:
+                break
+        h = float(np.exp(guess))
     return best[1]
 
 
 def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> PatchScene:
     """The patch layout of ``scene`` for about ``patches`` patches (or patch size ``size`` [m]):
     large triangles cut, small ones grouped (module docstring).  A scene without triangles
-    smaller than a patch gets exactly :func:`~raybundle.scene.subdivide`'s layout."""
+    smaller than a patch gets exactly :func:`~raybundle.scene.subdivide`'s layout.  With
+    ``contacts``, patches follow contact lines (:func:`~raybundle.scene.cut_at_contacts`)
+    and no cluster holds triangles both in and out of a gap narrower than 5% of a patch
+    (:func:`~raybundle.contacts.gap_sides`)."""
     if (patches is None) == (size is None):
         raise ValueError("give exactly one of patches and size")
     if patches is not None and patches >= len(scene.triangles):     # fewer triangles than patches: cut
@@ -132,16 +157,36 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     if not small.any():
         return subdivide(scene, max_edge=h, contacts=contacts)
     fine, k, row = split_triangles(scene, h, whole=small)
+    gap = None
+    if contacts:
+        # cut the pieces of split faces and the triangles that straddle a contact; carry each
+        # new triangle's row in ``fine`` through the cut as its source
+        tracer = RayTracer(fine)
+        try:
+            rows = replace(fine, triangle_source=np.arange(len(fine.triangles)))
+            cut = cut_at_contacts(rows, np.nonzero((k > 1) & ~small[row])[0], h, tracer=tracer)
+            row = row[cut.triangle_source]
+            fine = replace(cut, triangle_source=fine.triangle_source[cut.triangle_source])
+            idx = np.nonzero(small[row])[0]
+            gap = gap_sides(tracer, fine.triangle_corners[idx].mean(axis=1), fine.triangle_normal[idx], 0.05 * h)
+        finally:
+            tracer.close()
     fine_small = small[row]
-    patch = np.empty(len(fine.triangles), np.int64)
-    ids = grouping.clusters(h, small)          # in the order of the small rows, as row[fine_small]
+    ids = _Grouping(fine, lo=grouping.lo).clusters(h, fine_small, gap)
     n_clusters = int(ids.max()) + 1
-    cluster_of = np.full(len(scene.triangles), -1, np.int64)
-    cluster_of[small] = ids
-    patch[fine_small] = cluster_of[row[fine_small]]
-    others = np.nonzero(~fine_small)[0]
-    patch[others] = n_clusters + np.arange(len(others))
-    out = replace(fine, triangle_patch=patch)
-    if not contacts:
-        return out
-    return cut_at_contacts(out, np.nonzero((k > 1) & ~fine_small)[0], h, exclude=fine_small)
+    patch = np.empty(len(fine.triangles), np.int64)
+    patch[fine_small] = ids
+    others = np.unique(fine.triangle_patch[~fine_small], return_inverse=True)[1].reshape(-1)
+    patch[~fine_small] = n_clusters + others
+    return replace(fine, triangle_patch=patch)
+
+
+def triangle_patches(scene: PatchScene) -> PatchScene:
+    """One patch per triangle (``--patches 0``), but cut along contact lines as
+    :func:`make_patches` cuts them (gaps under 5% of the median edge count as contact):
+    a triangle reaching from under a lamp into the room would leak the light trapped
+    there (+10% on the Cornell ``.blend`` subdivided 16 times)."""
+    corners = scene.triangle_corners
+    edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    one = replace(scene, triangle_patch=np.arange(len(scene.triangles)))
+    return cut_at_contacts(one, np.zeros(0, np.int64), float(np.median(edge)) if len(edge) else 1.0)

@@ -403,3 +403,43 @@ def _corner_tags(poly, seg, segs, seg_base, eps, tag_ids):
                 key.append((line, bool(side)))
         out.append(tag_ids.setdefault(tuple(sorted(set(key))), len(tag_ids) + 1) if key else 0)
     return out
+
+
+#: probe rays per chunk in :func:`gap_sides` (memory: about 100 bytes a ray)
+PROBE_CHUNK = 1 << 20
+
+
+def gap_sides(tracer, points, normals, tol):
+    """(N, 2) bool: another surface lies within ``tol`` [m] of ``points`` (N, 3) along
+    their unit ``normals`` (column 0) and against them (column 1).
+
+    A point in such a gap (the ceiling over a lamp hanging 0.5 mm under it, the floor
+    under a rug) sees only that surface on that side, a world apart from its neighbours
+    outside the gap: a patch must not hold both (module docstring)."""
+    points, normals = np.asarray(points, float), np.asarray(normals, float)
+    out = np.zeros((len(points), 2), bool)
+    eps = tracer.eps
+    for lo in range(0, len(points), PROBE_CHUNK // 2):
+        p, n = points[lo:lo + PROBE_CHUNK // 2], normals[lo:lo + PROBE_CHUNK // 2]
+        for col, sign in ((0, 1.0), (1, -1.0)):
+            d = sign * n
+            out[lo:lo + len(p), col] = tracer.occluded(p + eps * d, d, np.full(len(p), max(tol - eps, eps)))
+    return out
+
+
+def straddling(tracer, scene, faces, tol):
+    """(F,) bool: triangles ``faces`` part of which lies in a gap narrower than ``tol`` [m]
+    and part not (:func:`gap_sides` at the centroid and at the three corners pulled 1%
+    towards it disagree): the triangles :func:`split_at_contacts` must cut."""
+    faces = np.asarray(faces, np.int64)
+    out = np.zeros(len(faces), bool)
+    step = max(1, PROBE_CHUNK // 8)
+    for lo in range(0, len(faces), step):
+        f = faces[lo:lo + step]
+        c = scene.triangle_corners[f]
+        mid = c.mean(axis=1, keepdims=True)
+        pts = np.concatenate([mid, mid + 0.99 * (c - mid)], axis=1)              # (F, 4, 3)
+        n = np.repeat(scene.triangle_normal[f], 4, axis=0)
+        flags = gap_sides(tracer, pts.reshape(-1, 3), n, tol).reshape(len(f), 4, 2)
+        out[lo:lo + step] = (flags != flags[:, :1]).any(axis=(1, 2))
+    return out

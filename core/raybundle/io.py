@@ -41,6 +41,29 @@ def atomic_path(path):
         raise
 
 
+class OutputError(ValueError):
+    """An output path that cannot be written; the message says which and why, in one line."""
+
+
+def check_output(path, what="output", suffix=None, folder=False):
+    """Make sure ``path`` can be written before any work is done: its folder is created
+    (or ``path`` itself, a folder, with ``folder``) and a file is created and removed in it;
+    ``suffix`` (e.g. ``".exr"``) is the extension it must have.  Raises :class:`OutputError`."""
+    path = os.fspath(path)
+    if suffix is not None and not path.lower().endswith(suffix):
+        raise OutputError(f"{what} {path}: the output must end in {suffix}")
+    if not folder and (os.path.isdir(path) or path.endswith(os.sep)):
+        raise OutputError(f"{what} {path}: is a folder; give a file name")
+    target = os.path.abspath(path) if folder else os.path.dirname(os.path.abspath(path))
+    try:
+        os.makedirs(target, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".tmp-check-", dir=target)
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as e:
+        raise OutputError(f"{what} {path}: cannot write there ({e.strerror or e})") from None
+
+
 def write_exr(path, rgb, header=None):
     """Write an (H, W, 3) linear radiance image [W m^-2 sr^-1] as a FLOAT RGB EXR.
 

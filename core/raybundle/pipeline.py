@@ -4,9 +4,10 @@ This is the entry point the CLI, the Blender add-on and the bench share.
 """
 from __future__ import annotations
 
+import time
 import warnings
 
-from .clusters import make_patches
+from .clusters import make_patches, triangle_patches
 from .imaging import Renderer, RenderSettings
 from .lights import DirectLighting, small_emitters
 from .methods import SOLVERS, image_only
@@ -39,13 +40,12 @@ def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None, stage=None, stop=None
     or every face cut to edges <= ``max_edge`` m; ``patches`` = 0: one patch per triangle.
     ``stage(text)`` is told what set-up step starts (progress for large scenes); a
     ``stop`` that is set when a step starts raises :class:`Cancelled`."""
-    if patches or max_edge is not None:
-        _step(stage, stop, f"laying out the patches of {len(scene.triangles):,} triangles")
+    _step(stage, stop, f"laying out the patches of {len(scene.triangles):,} triangles")
     if max_edge is not None:
         return subdivide(scene, max_edge=max_edge)
     if patches:
         return make_patches(scene, patches=patches)
-    return scene
+    return triangle_patches(scene)
 
 
 def make_solver(scene, settings: RenderSettings | None = None, solver=StochasticIterationSolver.name, stage=None,
@@ -113,12 +113,15 @@ def _make_image_method(scene, settings, camera, name, stage, stop):
 
 
 def render(scene, settings=None, iterations=None, seconds=None, progress=None, stop=None, camera=None, stage=None,
-           solver=StochasticIterationSolver.name):
+           solver=StochasticIterationSolver.name, started=None):
     """Render a prepared scene with the method ``solver`` (a :data:`~raybundle.methods.SOLVERS`
     name); returns :class:`~raybundle.imaging.RenderResult`.  ``stop`` set during set-up
-    raises :class:`Cancelled`; during the iteration it ends the run with the image so far."""
+    raises :class:`Cancelled`; during the iteration it ends the run with the image so far.
+    ``seconds``: the budget from ``started`` (default: now), set-up included
+    (:meth:`~raybundle.imaging.ProgressiveImage.run`)."""
+    started = time.perf_counter() if started is None else started
     renderer = make_renderer(scene, settings, camera, solver=solver, stage=stage, stop=stop)
     try:
-        return renderer.run(iterations=iterations, seconds=seconds, progress=progress, stop=stop)
+        return renderer.run(iterations=iterations, seconds=seconds, progress=progress, stop=stop, started=started)
     finally:
         renderer.tracer.close()

@@ -1,0 +1,96 @@
+"""Invariance checks: the same light field described differently gives the same answer.
+
+A case is a scene and a description of it that must light it the same way (subdivided,
+flipped, scaled, reordered).  Each is solved once per patch layout; after a burn-in batch
+the iterates of B batches give, per *region* (the sides facing the room's inside, grouped
+by which way they face: floor, ceiling, back, left and right walls, and the blocks' faces
+towards the camera), the area-weighted mean radiance towards the normal per batch.
+Batch means are nearly independent (the iterates' autocorrelation q^k dies within a
+batch), so their spread gives each region's standard error SE.
+
+A case passes when every region agrees with the unmodified scene within
+``4.5 SE + b``: ``b`` is the finite-element spread, the largest region difference between
+two layouts of the unmodified scene at nearly equal patch counts (4,000 and 4,400 by
+default), and must itself stay under 1%.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from raybundle import pipeline
+from raybundle.contacts import gap_sides
+from raybundle.imaging import RenderSettings
+
+REGIONS = ("floor", "ceiling", "back", "left", "right", "front")
+
+
+def _region_of(scene, solver):
+    """(S,) region id of each side facing the inside of the scene's bounding box, -1 for others;
+    ``back`` faces -y (towards the camera of the Blender Cornell box) from the far end of the
+    box, ``front`` are the other faces turned towards -y (the blocks')."""
+    sc = scene
+    centroid = sc.patch_centroid[sc.side_patch]
+    n = solver.normal
+    lo, hi = sc.vertices.min(axis=0), sc.vertices.max(axis=0)
+    inward = np.einsum("ij,ij->i", n, 0.5 * (lo + hi) - centroid) > 0
+    axis = np.argmax(np.abs(n), axis=1)
+    sign = np.take_along_axis(n, axis[:, None], 1)[:, 0] > 0
+    # Z up: floor faces +z, ceiling -z; back wall faces -y; left (+x in Blender) faces -x ...
+    far = centroid[:, 1] > hi[1] - 0.01 * (hi[1] - lo[1])
+    region = np.full(len(n), -1)
+    for r, sel in enumerate(((axis == 2) & sign, (axis == 2) & ~sign, (axis == 1) & ~sign & far,
+                             (axis == 0) & ~sign, (axis == 0) & sign, (axis == 1) & ~sign & ~far)):
+        region[sel] = r
+    # sides in a gap (the ceiling over a lamp hanging just under it) are seen by nothing but
+    # what closes the gap: their light is trapped and their value is the layout's business
+    _, radius = sc.bounding_sphere
+    trapped = gap_sides(solver.tracer, centroid, n, 0.01 * radius)[:, 0]
+    reflects = sc.materials.reflects[sc.side_material]
+    return np.where(inward & reflects & ~trapped & (solver.area > 0), region, -1)
+
+
+def region_batches(scene, patches=4000, batches=20, per_batch=16, seed=1):
+    """(B, 6) luminance of the area-weighted mean radiance of each region per batch."""
+    sc = pipeline.prepare(scene, patches=patches)
+    solver = pipeline.make_solver(sc, RenderSettings(seed=seed))
+    try:
+        region = _region_of(sc, solver)
+        w = np.zeros((len(REGIONS), len(region)))
+        for r in range(len(REGIONS)):
+            sel = region == r
+            w[r, sel] = solver.area[sel] / max(solver.area[sel].sum(), 1e-300)
+        lum = np.array([0.2126, 0.7152, 0.0722])
+        out = []
+        for b in range(batches + 1):
+            acc = np.zeros(len(REGIONS))
+            for _ in range(per_batch):
+                solver.step()
+                acc += w @ (solver.iterate_radiance(solver.normal) @ lum)
+            if b:                       # the first batch is the burn-in
+                out.append(acc / per_batch)
+        return np.array(out)
+    finally:
+        solver.tracer.close()
+
+
+def compare(a, b):
+    """Per region: relative difference of the means of batch sets ``a``, ``b`` (B, R) and
+    its standard error (relative to ``a``'s mean)."""
+    ma, mb = a.mean(axis=0), b.mean(axis=0)
+    se = np.sqrt(a.var(axis=0, ddof=1) / len(a) + b.var(axis=0, ddof=1) / len(b))
+    return (mb - ma) / ma, se / ma
+
+
+def spread(scene, patches=(4000, 4400), **kw):
+    """``b``: the largest relative region difference between two layouts of ``scene``."""
+    d, _ = compare(region_batches(scene, patches[0], **kw), region_batches(scene, patches[1], **kw))
+    return float(np.abs(d).max())
+
+
+def check(base, case, b, patches=4000, **kw):
+    """Assert every region of ``case`` within 4.5 SE + b of ``base`` (both (B, R) batch sets)."""
+    d, se = compare(base, case)
+    bad = np.abs(d) > 4.5 * se + b
+    table = ", ".join(f"{r} {100 * x:+.2f}% (SE {100 * s:.2f}%)" for r, x, s in zip(REGIONS, d, se))
+    assert not bad.any(), f"not invariant (b = {100 * b:.2f}%): {table}"
+    return d, se

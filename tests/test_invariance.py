@@ -1,0 +1,64 @@
+"""The same light field described differently gives the same solution (``tests/invariance.py``).
+
+The scene is the Cornell box as a ``.blend`` has it (two-sided, the lamp 0.5 mm under a
+whole ceiling); the full matrix of Blender-side cases is ``make bench-invariance``.
+"""
+import numpy as np
+import pytest
+
+from invariance import check, compare, region_batches
+from raybundle.clusters import tessellate
+from raybundle.scene import build_scene
+from test_blender_semantics import blender_cornell
+
+
+@pytest.fixture(scope="module")
+def base():
+    """The unmodified box's batches and ``b``, the spread between its 4,000- and 4,400-patch
+    layouts beyond their noise (at most 1%)."""
+    sc = blender_cornell()
+    a = region_batches(sc, 4000)
+    d, se = compare(a, region_batches(sc, 4400))
+    b = float(np.maximum(np.abs(d) - 2 * se, 0).max())
+    assert b <= 0.01, (d, se)
+    return sc, a, b
+
+
+def _rebuilt(sc, vertices=None, triangles=None, order=None):
+    """``sc`` rebuilt from its input arrays, optionally with other vertices, triangles or an order."""
+    t = sc.triangles if triangles is None else triangles
+    m, two = sc.triangle_material, sc.triangle_two_sided
+    if order is not None:
+        t, m, two = t[order], m[order], two[order]
+    return build_scene(sc.vertices if vertices is None else vertices, t, m, sc.materials, camera=sc.camera,
+                       two_sided=two)
+
+
+def test_a_finely_subdivided_box_is_the_box(base):
+    """Every face cut into ~250 triangles (as Blender's Subdivide with 15 cuts does): the old
+    layout grouped the ceiling's small triangles over and beside the lamp into one patch,
+    and the light trapped over the lamp came into the room (+9% on the walls, +100% on
+    the ceiling, +18% on the blocks)."""
+    sc, a, b = base
+    check(a, region_batches(tessellate(sc, 8000), 4000), b)
+
+
+def test_one_patch_per_triangle_cuts_the_triangles_under_the_lamp(base):
+    """``--patches 0`` on the subdivided box keeps its triangles as patches, but cuts those the
+    lamp's outline crosses (+10% on the Cornell .blend subdivided 16 times before)."""
+    sc, a, b = base
+    check(a, region_batches(tessellate(sc, 8000), 0), b)
+
+
+@pytest.mark.parametrize("case", ["flipped", "scaled", "reordered"])
+def test_the_same_box_described_otherwise(base, case):
+    """Normals flipped (two-sided meshes shade both sides), everything scaled by 100 (mesh
+    emission is a radiance: unchanged), triangles in another order."""
+    sc, a, b = base
+    if case == "flipped":
+        other = _rebuilt(sc, triangles=sc.triangles[:, ::-1])
+    elif case == "scaled":
+        other = _rebuilt(sc, vertices=sc.vertices * 100.0)
+    else:
+        other = _rebuilt(sc, order=np.random.default_rng(5).permutation(len(sc.triangles)))
+    check(a, region_batches(other, 4000), b)
