@@ -62,3 +62,30 @@ def test_the_same_box_described_otherwise(base, case):
     else:
         other = _rebuilt(sc, order=np.random.default_rng(5).permutation(len(sc.triangles)))
     check(a, region_batches(other, 4000), b)
+
+
+def test_the_blend_subdivided_in_blender_is_the_blend():
+    """The user's case, through the add-on's export: ``demo_scenes/cornell_box.blend`` with every
+    mesh subdivided by Blender (Subdivide, 15 cuts: 8,192 triangles) against the file as it is
+    (the old layout rendered it 21-26% brighter in every region)."""
+    from addon_helpers import ROOT, bpy, ensure_registered
+
+    import bmesh                     # after bpy
+
+    from raybundle_addon.export import export_scene
+
+    ensure_registered()
+    bpy.ops.wm.open_mainfile(filepath=f"{ROOT}/demo_scenes/cornell_box.blend")
+    plain = export_scene(bpy.context.evaluated_depsgraph_get()).scene
+    for ob in bpy.data.objects:
+        if ob.type == "MESH":
+            bm = bmesh.new()
+            bm.from_mesh(ob.data)
+            bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=15, use_grid_fill=True)
+            bm.to_mesh(ob.data)
+            bm.free()
+    fine = export_scene(bpy.context.evaluated_depsgraph_get()).scene
+    assert len(fine.triangles) == 8192
+    a = region_batches(plain, 4000)
+    d, se = compare(a, region_batches(plain, 4400))
+    check(a, region_batches(fine, 4000), float(np.maximum(np.abs(d) - 2 * se, 0).max()))

@@ -23,7 +23,9 @@ h: triangles with an edge longer than h are cut (:func:`~raybundle.scene.split_t
 then along contact lines), triangles smaller than h^2 / :data:`SMALL` (however long) are grouped
 into the cells of a grid h wide, split by normal direction (the cube-map cell),
 by offset along the normal (half-h slabs: a shelf does not share a patch with the floor under it),
-by material and by sidedness; the rest stay patches of their own.  It is a sort
+by material, by sidedness and by whether they lie in a gap narrower than 5% of h (the
+ceiling over a lamp hanging just under it: :func:`~raybundle.contacts.gap_sides`), after the
+triangles that straddle such a gap are cut along the contact; the rest stay patches of their own.  It is a sort
 over the triangles: O(T log T), no per-triangle Python.
 
 :func:`tessellate` makes the stand-in for a finely meshed Blender scene the tests and
