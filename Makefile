@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench bench-blender bench-boxes bench-bake bench-scale extension cycles-reference clean
+.PHONY: demo test bench bench-blender bench-boxes bench-bake bench-scale bench-invariance extension cycles-reference clean
 
 $(STAMP): core/pyproject.toml requirements-dev.txt
 	$(PYTHON) -m venv $(VENV)
@@ -42,6 +42,12 @@ bench-bake: $(STAMP)
 # (about 15 minutes on 2 cores and 5 GB of memory; needs out/bench-cornell's Cycles reference from bench-boxes)
 bench-scale: $(STAMP)
 	$(PY) tools/bench_scale.py --out out/bench-scale --one-patch-per-triangle 4000 16000 64000
+
+# The Cornell .blend described in a dozen ways a Blender user would (subdivided, triangulated, flipped,
+# split, joined, instanced, transformed, scaled, reordered) against the file as it is, and the patch
+# count as a convergence (about 10 minutes on 2 cores)
+bench-invariance: $(STAMP)
+	$(PY) tools/bench_invariance.py --out out/bench-invariance
 
 # The installable Blender extension: dist/raybundle-<version>-<platform>.zip for every platform in
 # blender_manifest.toml, built without a Blender binary (Blender's blender_ext.py from the bpy module).

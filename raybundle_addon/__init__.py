@@ -8,16 +8,22 @@ renders or bakes a ``.blend`` headless (:mod:`.__main__`).
 """
 from __future__ import annotations
 
-from . import engine, operators, props, ui
+import importlib
 
-_modules = (props, engine, operators, ui)
+#: registered in this order (``bpy`` is imported with them, when Blender registers the
+#: extension: ``python -m raybundle_addon`` hears Ctrl-C before it imports ``bpy``)
+_MODULES = ("props", "engine", "operators", "ui")
+
+
+def _modules():
+    return [importlib.import_module(f"{__name__}.{name}") for name in _MODULES]
 
 
 def register():
-    for m in _modules:
+    for m in _modules():
         m.register()
 
 
 def unregister():
-    for m in reversed(_modules):
+    for m in reversed(_modules()):
         m.unregister()

@@ -28,6 +28,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 import time
 
 
@@ -65,6 +66,17 @@ def _fail(message, status=2):
 
 
 def main(argv=None):
+    # Ctrl-C from the very start (importing bpy, opening the file) is heard, not lost: before
+    # the render nothing is written (exit 130); during it, the image so far is
+    interrupted = threading.Event()
+    old_handler = signal.signal(signal.SIGINT, lambda *_: interrupted.set())
+    try:
+        return _main(argv, interrupted)
+    finally:
+        signal.signal(signal.SIGINT, old_handler)
+
+
+def _main(argv, interrupted):
     args = build_parser().parse_args(argv)
     if not os.path.isfile(args.blend):
         return _fail(f"{args.blend}: no such file")
@@ -115,8 +127,11 @@ def main(argv=None):
         rb.patches = args.patches
     if args.resolution_percentage is not None:
         scene.render.resolution_percentage = args.resolution_percentage
+    if interrupted.is_set():
+        print("stopped before the render: nothing written", file=sys.stderr)
+        return 130
     if args.bake is not None:
-        return _bake(args, scene)
+        return _bake(args, scene, interrupted)
     scene.render.engine = "RAYBUNDLE"
 
     bar = ProgressBar()
@@ -124,13 +139,19 @@ def main(argv=None):
 
     def observe(job, event):
         state["job"] = job
+        if interrupted.is_set():          # Ctrl-C before the job existed
+            job.stop.set()
         if event == "export" and args.save_npz:
             job.export.scene.save_npz(args.save_npz)
         if event == "image" and job.renderer is not None:
             bar(job.fraction, {"iterations": job.renderer.solver.stats.iterations,
                                "seconds": time.perf_counter() - job.t_start})
 
-    old = signal.signal(signal.SIGINT, lambda *_: engine.cancel_all())
+    def on_interrupt(*_):
+        interrupted.set()
+        engine.cancel_all()
+
+    old = signal.signal(signal.SIGINT, on_interrupt)
     engine.observers.append(observe)
     try:
         bpy.ops.render.render(write_still=False, scene=scene.name)
@@ -163,7 +184,7 @@ def main(argv=None):
     return 130 if cancelled else 0
 
 
-def _bake(args, scene):
+def _bake(args, scene, interrupted):
     """The ``--bake`` path: :class:`.bake.BakeJob` with a progress bar, then save the copy."""
     import bpy
 
@@ -188,6 +209,8 @@ def _bake(args, scene):
         rb.lightmap_size = args.lightmap_size
     job = BakeJob(bpy.context.evaluated_depsgraph_get())
     bar = ProgressBar()
+    if interrupted.is_set():
+        job.stop.set()
     old = signal.signal(signal.SIGINT, lambda *_: job.stop.set())
     try:
         job.start()

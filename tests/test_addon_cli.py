@@ -92,3 +92,18 @@ def test_cli_ctrl_c_keeps_the_partial_image(cornell_blend, tmp_path):
     assert time.perf_counter() - t0 < 40 and "stopped early" in err and "Traceback" not in err
     img = read_exr(out)
     assert img.shape == (48, 48, 3) and np.isfinite(img).all() and img.mean() > 0.05
+
+
+@pytest.mark.parametrize("delay", [0.3, 0.8])
+def test_cli_ctrl_c_at_once_is_heard(cornell_blend, tmp_path, delay):
+    """Ctrl-C while ``bpy`` is imported or the file opened: exit 130, nothing written, no
+    traceback (it was ignored, the render ran on and wrote ``--out``; once it segfaulted);
+    if it lands in the render, the image so far is written and the run says so."""
+    out = tmp_path / "early.exr"
+    p = subprocess.Popen([sys.executable, "-m", "raybundle_addon", cornell_blend, "--out", str(out), "--time", "60"],
+                         cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    time.sleep(delay)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 130 and "Traceback" not in err, err[-2000:]
+    assert ("nothing written" in err and not out.exists()) or ("stopped early" in err and out.exists()), err

@@ -160,3 +160,37 @@ def test_contact_segments_of_a_lamp_under_a_ceiling_and_a_wall_through_a_floor()
     g = next(x for x in contact_segments(sc, np.arange(8), tol=1e-3) if x[0][0] in (4, 5))
     world = g[1] + g[4] @ np.stack([g[2], g[3]])                 # back to 3D
     assert np.allclose(world[..., 1], 0.3) and np.allclose(world[..., 2], 0.0)
+
+
+def test_straddling_finds_the_triangles_the_lamps_outline_crosses():
+    """A ceiling meshed into ~20k triangles with a rotated lamp 0.5 mm under it: the triangles
+    ``straddling`` flags are those whose area lies partly under the lamp and partly not
+    (exact clipped areas, beyond a 2% margin either way), as brute force over all of them."""
+    from raybundle.clusters import tessellate
+    from raybundle.contacts import straddling
+    from raybundle.visibility import RayTracer
+
+    ceiling = np.array([[-1, -1, 1], [-1, 1, 1], [1, 1, 1], [1, -1, 1]], float)       # facing down
+    lamp = np.concatenate([_rot(np.array([[-0.3, -0.3, 0], [0.3, -0.3, 0], [0.3, 0.3, 0], [-0.3, 0.3, 0]]))[:, :2],
+                           np.full((4, 1), 1 - 5e-4)], axis=1)
+    v, t, m = _mesh([(ceiling, 0), (lamp, 1)])
+    sc = tessellate(build_scene(v, t, m, MATS, two_sided=True), 20000)
+    faces = np.nonzero(sc.triangle_material == 0)[0]
+    tr = RayTracer(sc)
+    try:
+        got = straddling(tr, sc, faces, tol=0.005)
+    finally:
+        tr.close()
+    outline = footprint_of(lamp)
+    corners = sc.triangle_corners[faces][:, :, :2]
+    inside = np.array([clipped_area(c, outline) for c in corners]) / sc.triangle_area[faces]
+    assert got[(inside > 0.02) & (inside < 0.98)].all()
+    assert not got[(inside == 0) | (inside >= 1 - 1e-9)].any()
+    assert 50 < got.sum() < 0.05 * len(faces)
+
+
+def footprint_of(quad):
+    """The xy outline (4, 2) of a quad, counter-clockwise."""
+    p = np.asarray(quad, float)[:, :2]
+    area = 0.5 * np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
+    return p if area > 0 else p[::-1]

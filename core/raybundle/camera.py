@@ -37,6 +37,16 @@ class Camera:
     orthographic: bool = False
     clip_start: float = 0.0
 
+    def __post_init__(self):
+        """A camera that cannot form an image is a ValueError (one line), not a black image."""
+        m = np.asarray(self.matrix_world, float)
+        if not (1 <= int(self.width) <= 65536 and 1 <= int(self.height) <= 65536):
+            raise ValueError(f"camera resolution {self.width} x {self.height}: both must lie in [1, 65536]")
+        if not all(np.isfinite(x) for x in (self.fx, self.fy, self.cx, self.cy)) or self.fx <= 0 or self.fy <= 0:
+            raise ValueError("camera: the focal length (or orthographic scale) must be finite and positive")
+        if m.shape != (4, 4) or not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) < 1e-12:
+            raise ValueError("camera: its matrix_world must be a finite 4 x 4 transform of non-zero scale")
+
     @classmethod
     def from_blender(cls, lens, sensor_width, sensor_height, sensor_fit, shift_x, shift_y,
                      resolution, matrix_world, pixel_aspect=(1.0, 1.0), ortho_scale=None, clip_start=0.0):

@@ -122,8 +122,7 @@ def cmd_render(args):
         settings = RenderSettings(seed=args.seed, sequence=args.sequence, bundle_resolution=args.bundle_resolution,
                                   threads=args.threads, first_shot=first_shot)
         if args.workers or args.scheduler:
-            signal.signal(signal.SIGINT, old)
-            return _render_chains(args, scene, settings, stage)
+            return _render_chains(args, scene, settings, stage, stop, t_start)
         result = render(scene, settings, iterations=args.iterations, seconds=args.time, progress=bar, stop=stop,
                         stage=stage, solver=args.method, started=t_start)
     except (SceneError, ValueError) as e:
@@ -148,21 +147,24 @@ def cmd_render(args):
     return 130 if stop.is_set() else 0
 
 
-def _render_chains(args, scene, settings, stage):
-    """``render --workers N`` / ``--scheduler ADDRESS``: independent chains on Dask, merged."""
+def _render_chains(args, scene, settings, stage, stop, started):
+    """``render --workers N`` / ``--scheduler ADDRESS``: independent chains on Dask, merged;
+    Ctrl-C (``stop``) merges what the chains have reported so far."""
     from .distributed import render_chains
 
     try:
         image, merged, its = render_chains(scene, settings, seconds=args.time, iterations=args.iterations,
-                                           scheduler=args.scheduler, workers=args.workers, progress=stage)
+                                           scheduler=args.scheduler, workers=args.workers, progress=stage,
+                                           stop=stop, started=started)
     except (RuntimeError, ValueError, OSError) as e:
         print(f"raybundle: error: {e}", file=sys.stderr)
         return 2
     stats = _write_outputs(args, scene, image, dict(merged.stats, chains=merged.chains, chain_iterations=its,
                                                     patches=int(scene.n_patches)))
-    print(f"done: {merged.chains} chains, {stats['iterations']} iterations ({its}), {scene.n_patches} patches "
+    state = "stopped early" if stop.is_set() else "done"
+    print(f"{state}: {merged.chains} chains, {stats['iterations']} iterations ({its}), {scene.n_patches} patches "
           f"-> {args.out}", file=sys.stderr)
-    return 0
+    return 130 if stop.is_set() else 0
 
 
 def _number(kind, low, high=None, what="a number"):

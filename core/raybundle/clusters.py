@@ -71,19 +71,27 @@ def normal_cells(normals, cells=NORMAL_CELLS):
 
 
 class _Grouping:
-    """What the cluster keys need of a scene's triangles, computed once (``lo``: the
-    grid's origin, the scene's lowest corner by default)."""
+    """What the cluster keys need of a scene's triangles ``rows`` (default: all), computed
+    once (``lo``: the grid's origin, the scene's lowest corner by default)."""
 
-    def __init__(self, scene: PatchScene, lo=None):
+    def __init__(self, scene: PatchScene, lo=None, rows=None):
         self.scene = scene
-        corners = scene.triangle_corners
-        self.area = scene.triangle_area
+        if rows is None:
+            self.rows = slice(None)
+            corners, self.area, normal = scene.triangle_corners, scene.triangle_area, scene.triangle_normal
+        else:
+            self.rows = np.asarray(rows, np.int64)
+            corners = scene.vertices[scene.triangles[self.rows]]
+            cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+            self.area = 0.5 * np.linalg.norm(cross, axis=1)
+            normal = cross / np.maximum(2.0 * self.area, 1e-300)[:, None]
         self.centroid = corners.mean(axis=1)
         self.lo = scene.vertices.min(axis=0) if lo is None else lo
         self.edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
-        self.cell = normal_cells(scene.triangle_normal)
+        self.normal = normal
+        self.cell = normal_cells(normal)
         # offset along the triangle's own normal: constant over a plane
-        self.offset = np.einsum("ij,ij->i", scene.triangle_normal, self.centroid - self.lo)
+        self.offset = np.einsum("ij,ij->i", normal, self.centroid - self.lo)
 
     def small(self, h):
         """(T,) bool: triangles to group at patch size ``h``."""
@@ -94,10 +102,11 @@ class _Grouping:
         ``gap`` (S, 2) bool: the triangle lies in a gap on its front / back
         (:func:`~raybundle.contacts.gap_sides`), which a cluster does not straddle."""
         sc, idx = self.scene, np.nonzero(small)[0]
+        rows = np.arange(len(sc.triangles))[self.rows][idx]
         cell = np.floor((self.centroid[idx] - self.lo) / h).astype(np.int64)
         slab = np.floor(self.offset[idx] / (0.5 * h)).astype(np.int64)
         keys = [cell[:, 0], cell[:, 1], cell[:, 2], self.cell[idx], slab,
-                sc.triangle_material[idx], sc.triangle_two_sided[idx]]
+                sc.triangle_material[rows], sc.triangle_two_sided[rows]]
         if gap is not None:
             keys.append(gap[:, 0] * 2 + gap[:, 1])
         return group_ids(keys)
@@ -105,7 +114,7 @@ class _Grouping:
     def count(self, h):
         """Patches at size ``h``: k^2 per triangle cut, one per cluster, one per other triangle."""
         small = self.small(h)
-        reflects = self.scene.materials.reflects[self.scene.triangle_material]
+        reflects = self.scene.materials.reflects[self.scene.triangle_material[self.rows]]
         k = np.where(reflects & ~small, np.maximum(1, np.ceil(self.edge / h - 1e-9)), 1.0)
         n_clusters = int(self.clusters(h, small).max()) + 1 if small.any() else 0
         return int((k[~small] ** 2).sum()) + n_clusters
@@ -159,22 +168,22 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     if not small.any():
         return subdivide(scene, max_edge=h, contacts=contacts)
     fine, k, row = split_triangles(scene, h, whole=small)
-    gap = None
-    if contacts:
-        # cut the pieces of split faces and the triangles that straddle a contact; carry each
-        # new triangle's row in ``fine`` through the cut as its source
-        tracer = RayTracer(fine)
-        try:
+    tracer = RayTracer(fine) if contacts else None
+    try:
+        if contacts:
+            # cut the pieces of split faces and the triangles that straddle a contact; carry
+            # each new triangle's row in ``fine`` through the cut as its source
             rows = replace(fine, triangle_source=np.arange(len(fine.triangles)))
             cut = cut_at_contacts(rows, np.nonzero((k > 1) & ~small[row])[0], h, tracer=tracer)
             row = row[cut.triangle_source]
             fine = replace(cut, triangle_source=fine.triangle_source[cut.triangle_source])
-            idx = np.nonzero(small[row])[0]
-            gap = gap_sides(tracer, fine.triangle_corners[idx].mean(axis=1), fine.triangle_normal[idx], 0.05 * h)
-        finally:
+        fine_small = small[row]
+        grouped = _Grouping(fine, lo=grouping.lo, rows=np.nonzero(fine_small)[0])
+        gap = gap_sides(tracer, grouped.centroid, grouped.normal, 0.05 * h) if contacts else None
+    finally:
+        if tracer is not None:
             tracer.close()
-    fine_small = small[row]
-    ids = _Grouping(fine, lo=grouping.lo).clusters(h, fine_small, gap)
+    ids = grouped.clusters(h, np.ones(int(fine_small.sum()), bool), gap)
     n_clusters = int(ids.max()) + 1
     patch = np.empty(len(fine.triangles), np.int64)
     patch[fine_small] = ids

@@ -294,8 +294,18 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
         return scene, 0
     keep = np.nonzero(~replaced)[0]
     pts = np.concatenate(new_pts) if new_pts else np.zeros((0, 3))
-    v = np.concatenate([scene.vertices, pts])
-    t = np.concatenate([scene.triangles[keep], np.asarray(new_tris, np.int64).reshape(-1, 3) + len(scene.vertices)])
+    # weld the new corners that coincide, among themselves and with the corners of the
+    # triangles they replace (which their neighbours keep); the other vertices stay as they are
+    # (welding the whole scene again cost seconds at millions of triangles)
+    old_ids = np.unique(scene.triangles[replaced])
+    cand = np.concatenate([scene.vertices[old_ids], pts])
+    first, inv = unique_rows(np.round(cand / max(r * 1e-7, 1e-12)).astype(np.int64))
+    at_old = first < len(old_ids)
+    own = old_ids[np.minimum(first, len(old_ids) - 1)] if len(old_ids) else np.zeros(len(first), np.int64)
+    vertex_of = np.where(at_old, own, len(scene.vertices) + np.cumsum(~at_old) - 1)
+    v = np.concatenate([scene.vertices, cand[first[~at_old]]])
+    new_t = vertex_of[inv[len(old_ids):]][np.asarray(new_tris, np.int64).reshape(-1, 3)]
+    t = np.concatenate([scene.triangles[keep], new_t])
     src = np.concatenate([keep, np.asarray(new_from, np.int64)])
     tags = np.concatenate([corner_tag[keep], np.asarray(new_tags, np.int64).reshape(-1, 3)])
     # patches: untouched triangles keep theirs (renumbered), pieces get new ids
@@ -303,15 +313,11 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
     _, old_patch = np.unique(old_patch, return_inverse=True)
     n_old = int(old_patch.max()) + 1 if len(old_patch) else 0
     patch = np.concatenate([old_patch.reshape(-1), n_old + np.asarray(new_patch_local, np.int64)]).astype(np.int64)
-    # weld the new corners that coincide
-    q = np.round(v / max(r * 1e-7, 1e-12)).astype(np.int64)
-    first, inv = unique_rows(q)
-    v, t = v[first], inv[t]
     # pieces that welding or a sliver cut flattened to zero area carry nothing (their
     # normal would be NaN): drop them, and renumber the patches densely
-    c = v[t]
+    c = v[new_t]
     area2 = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
-    ok = area2 > (r * 1e-9) ** 2
+    ok = np.concatenate([np.ones(len(keep), bool), area2 > (r * 1e-9) ** 2])
     if not ok.all():
         t, src, tags = t[ok], src[ok], tags[ok]
         patch = np.unique(patch[ok], return_inverse=True)[1].reshape(-1).astype(np.int64)
@@ -429,17 +435,32 @@ def gap_sides(tracer, points, normals, tol):
 
 def straddling(tracer, scene, faces, tol):
     """(F,) bool: triangles ``faces`` part of which lies in a gap narrower than ``tol`` [m]
-    and part not (:func:`gap_sides` at the centroid and at the three corners pulled 1%
-    towards it disagree): the triangles :func:`split_at_contacts` must cut."""
+    and part not: the triangles :func:`split_at_contacts` must cut.  :func:`gap_sides` at
+    every centroid first; where a triangle's flags differ from those of a triangle it shares
+    a corner with (or it shares none), at its three corners pulled 1% towards the centroid
+    too, and the triangle straddles where its four points disagree."""
     faces = np.asarray(faces, np.int64)
+    if len(faces) == 0:
+        return np.zeros(0, bool)
+    c = scene.triangle_corners[faces]
+    flags = gap_sides(tracer, c.mean(axis=1), scene.triangle_normal[faces], tol)
+    code = flags[:, 0] * 2 + flags[:, 1]
+    corner = scene.triangles[faces]
+    lo = np.full(len(scene.vertices), 4)
+    hi = np.full(len(scene.vertices), -1)
+    users = np.zeros(len(scene.vertices), np.int64)
+    np.minimum.at(lo, corner, code[:, None])
+    np.maximum.at(hi, corner, code[:, None])
+    np.add.at(users, corner, 1)
+    near = np.any(lo[corner] != hi[corner], axis=1) | np.all(users[corner] == 1, axis=1)
     out = np.zeros(len(faces), bool)
+    sel = np.nonzero(near)[0]
     step = max(1, PROBE_CHUNK // 8)
-    for lo in range(0, len(faces), step):
-        f = faces[lo:lo + step]
-        c = scene.triangle_corners[f]
-        mid = c.mean(axis=1, keepdims=True)
-        pts = np.concatenate([mid, mid + 0.99 * (c - mid)], axis=1)              # (F, 4, 3)
-        n = np.repeat(scene.triangle_normal[f], 4, axis=0)
-        flags = gap_sides(tracer, pts.reshape(-1, 3), n, tol).reshape(len(f), 4, 2)
-        out[lo:lo + step] = (flags != flags[:, :1]).any(axis=(1, 2))
+    for start in range(0, len(sel), step):
+        f = sel[start:start + step]
+        mid = c[f].mean(axis=1, keepdims=True)
+        pts = mid + 0.99 * (c[f] - mid)                                           # (F, 3, 3)
+        n = np.repeat(scene.triangle_normal[faces[f]], 3, axis=0)
+        at = gap_sides(tracer, pts.reshape(-1, 3), n, tol).reshape(len(f), 3, 2)
+        out[f] = (at != flags[f, None, :]).any(axis=(1, 2))
     return out

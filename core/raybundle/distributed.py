@@ -61,7 +61,8 @@ def _run_chain(scene, settings_dict, seed, deadline, iterations, report_seconds,
 
 
 def render_chains(scene, settings, chains_count=None, seconds=None, iterations=None, scheduler=None,
-                  workers=None, report_seconds=2.0, grace_seconds=30.0, progress=None, client=None):
+                  workers=None, report_seconds=2.0, grace_seconds=30.0, progress=None, client=None, stop=None,
+                  started=None):
     """Render ``scene`` (prepared) as independent chains on Dask; returns
     ``(image, merged ChainState, per-chain iteration counts)``.
 
@@ -69,7 +70,10 @@ def render_chains(scene, settings, chains_count=None, seconds=None, iterations=N
     or for a new local cluster of ``workers`` processes (closed afterwards).  One chain per
     worker unless ``chains_count`` says otherwise.  ``progress(text)`` gets a line per
     poll: each chain's iterations (``-`` before its first report, ``lost`` once its worker
-    is gone)."""
+    is gone).  ``stop`` (an object with ``is_set()``, Ctrl-C) ends the wait: every chain's
+    last report is merged (:class:`~raybundle.pipeline.Cancelled` if none has reported yet).
+    ``seconds`` is the budget from ``started`` (a ``time.perf_counter()`` reading, default
+    now): the cluster's start and the scene's scattering count."""
     try:
         from distributed import Client, LocalCluster, Variable, wait
     except ImportError as e:           # pragma: no cover - depends on the extra being installed
@@ -96,7 +100,8 @@ def render_chains(scene, settings, chains_count=None, seconds=None, iterations=N
             raise ValueError("no workers to run chains on")
         scene_future = client.scatter(scene, broadcast=True)
         base = asdict(settings)
-        deadline = time.time() + seconds if seconds is not None else None
+        spent = 0.0 if started is None else time.perf_counter() - started
+        deadline = time.time() + max(seconds - spent, 0.0) if seconds is not None else None
         names = [f"raybundle-chain-{uuid.uuid4().hex}-{k}" for k in range(n)]
         futures = [client.submit(_run_chain, scene_future, base, settings.seed + k, deadline, iterations,
                                  report_seconds, names[k], workers=[addresses[k % len(addresses)]],
@@ -112,7 +117,7 @@ def render_chains(scene, settings, chains_count=None, seconds=None, iterations=N
                 progress("chains: " + ", ".join("lost" if lost[k] else "-" if reported[k] is None
                                                 else str(reported[k]) for k in range(n)))
             running = any(st == "pending" and not lost[k] for k, st in enumerate(status))
-            if not running or (end is not None and time.time() > end):
+            if not running or (end is not None and time.time() > end) or (stop is not None and stop.is_set()):
                 break
             try:
                 wait(futures, timeout=min(report_seconds, 1.0), return_when="ALL_COMPLETED")
@@ -129,6 +134,10 @@ def render_chains(scene, settings, chains_count=None, seconds=None, iterations=N
                 got = client.get_metadata([names[k], "iterations"], None)
                 latest.append(Variable(names[k], client=client).get(timeout=30) if got is not None else None)
         states = [s for s in latest if s is not None]
+        if not states and stop is not None and stop.is_set():
+            from .pipeline import Cancelled
+
+            raise Cancelled("stopped before any chain reported")
         if not states:
             raise RuntimeError("no chain reported any state (every worker was lost)")
         merged = chains.merge(states)

@@ -4,8 +4,10 @@ This is the entry point the CLI, the Blender add-on and the bench share.
 """
 from __future__ import annotations
 
+import os
 import time
 import warnings
+from dataclasses import replace
 
 from .clusters import make_patches, triangle_patches
 from .imaging import Renderer, RenderSettings
@@ -34,12 +36,44 @@ def _step(stage, stop, text):
         stage(text)
 
 
+#: memory a pixel's buffers take in an image method (sums, counts, G-buffers, resolve) [bytes]
+BYTES_PER_PIXEL = 600
+#: memory a patch takes (its triangles, both sides' solver arrays) [bytes]
+BYTES_PER_PATCH = 2048
+
+
+def machine_memory():
+    """This machine's physical memory [bytes], or None where the system does not say."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_resources(scene, patches=0):
+    """Refuse, before anything is allocated, settings that need more memory than the machine
+    has: the camera's pixels (``BYTES_PER_PIXEL`` each) and ``patches`` (``BYTES_PER_PATCH``
+    each).  Raises ValueError naming the setting to lower."""
+    have = machine_memory()
+    if not have:
+        return
+    cam = scene.camera
+    if cam is not None and cam.width * cam.height * BYTES_PER_PIXEL > have:
+        raise ValueError(f"a {cam.width} x {cam.height} image needs about "
+                         f"{cam.width * cam.height * BYTES_PER_PIXEL / 2 ** 30:.0f} GB; this machine has "
+                         f"{have / 2 ** 30:.0f} GB: lower the resolution")
+    if patches and patches * BYTES_PER_PATCH > have:
+        raise ValueError(f"{patches:,} patches need about {patches * BYTES_PER_PATCH / 2 ** 30:.0f} GB; this "
+                         f"machine has {have / 2 ** 30:.0f} GB: lower the patch count")
+
+
 def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None, stage=None, stop=None):
     """The patch layout of ``scene``: about ``patches`` patches, large faces cut and
     triangles much smaller than a patch grouped (:func:`~raybundle.clusters.make_patches`),
     or every face cut to edges <= ``max_edge`` m; ``patches`` = 0: one patch per triangle.
     ``stage(text)`` is told what set-up step starts (progress for large scenes); a
     ``stop`` that is set when a step starts raises :class:`Cancelled`."""
+    check_resources(scene, patches)
     _step(stage, stop, f"laying out the patches of {len(scene.triangles):,} triangles")
     if max_edge is not None:
         return subdivide(scene, max_edge=max_edge)
@@ -102,6 +136,7 @@ def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
 def _make_image_method(scene, settings, camera, name, stage, stop):
     """An image-only method (:class:`~raybundle.pathtracing.PathTracer`): tracer and lights, no patches."""
     settings.validate()
+    check_resources(scene if camera is None else replace(scene, camera=camera))
     _step(stage, stop, f"building the ray tracer over {len(scene.triangles):,} triangles")
     tracer = RayTracer(scene, threads=settings.threads)
     try:
