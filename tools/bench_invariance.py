@@ -16,7 +16,9 @@ standard errors and percent, and ``b``, the spread between two layouts of the un
 file (4,000 and 4,400 patches) beyond their noise.  Then the patch count as a convergence:
 region means at 500 ... 64,000 patches against the 64,000 value.
 
-Writes ``invariance.csv``, ``summary.json`` and ``summary.md`` into ``--out``.
+Writes ``invariance.csv``, ``summary.json`` and ``summary.md`` into ``--out``.  With
+``--images SECONDS``: the issue's own table instead, images through the add-on's command line
+(the file and copies subdivided 2, 4, 8 and 16 times, wall by wall), ``images.json``.
 """
 from __future__ import annotations
 
@@ -214,6 +216,50 @@ def exported(case=None):
     return export_scene(bpy.context.evaluated_depsgraph_get()).scene
 
 
+def images(seconds, cuts, out, seeds=(1, 2)):
+    """The issue's table: the file and copies of it subdivided ``cuts`` times rendered by the
+    add-on's command line (``seconds`` each, Patches 4,000, ``seeds`` averaged); the mean of
+    each wall's pixels (its object's pixels, eroded 2 px) against the file's."""
+    import subprocess
+
+    import numpy as np
+    from addon_helpers import erode, object_id_image
+
+    from raybundle.io import read_exr
+    from raybundle_addon.export import export_scene
+
+    bpy = _open()
+    ex = export_scene(bpy.context.evaluated_depsgraph_get())
+    names = [o.original for o in ex.objects]
+    walls = ("floor", "ceiling", "back", "red", "green")
+    masks = {w: erode(object_id_image(ex) == names.index(w), 2) for w in walls}
+    files = [("as it is", BLEND)]
+    for c in cuts:
+        path = os.path.join(out, f"cornell_box-{c + 1}x.blend")
+        bpy = _open()
+        subdivide(c)(bpy)
+        bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(path))
+        files.append((f"subdivided {c + 1}x", path))
+    base, rows = None, []
+    for label, path in files:
+        means = []
+        for seed in seeds:
+            exr = os.path.join(out, f"image-{seed}.exr")
+            subprocess.run([sys.executable, "-m", "raybundle_addon", path, "--time", str(seconds), "--seed", str(seed),
+                            "--patches", "4000", "--out", exr], check=True, capture_output=True, cwd=_ROOT)
+            img = read_exr(exr).mean(axis=2)
+            means.append([img[masks[w]].mean() for w in walls])
+        m = np.mean(means, axis=0)
+        base = m if base is None else base
+        rows.append({"file": label, **{w: round(100 * float(x / b - 1), 2) for w, x, b in zip(walls, m, base)},
+                     "seed_spread_pct": round(float(100 * np.max(np.abs(np.subtract(*means[:2])) / m)), 2)})
+        print(f"{label:16s} " + " ".join(f"{w} {rows[-1][w]:+.1f}%" for w in walls)
+              + f"  (seeds differ by up to {rows[-1]['seed_spread_pct']:.1f}%)", flush=True)
+    with open(os.path.join(out, "images.json"), "w") as f:
+        json.dump(rows, f, indent=2)
+    return 0
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--out", default="out/bench-invariance")
@@ -221,9 +267,13 @@ def main(argv=None):
     p.add_argument("--per-batch", type=int, default=16)
     p.add_argument("--patches", type=int, default=4000)
     p.add_argument("--convergence", type=int, nargs="*", default=[500, 1000, 2000, 4000, 8000, 16000, 32000, 64000])
+    p.add_argument("--images", type=float, metavar="SECONDS",
+                   help="instead: the file and copies subdivided 2, 4, 8 and 16 times rendered for SECONDS each "
+                        "through the add-on's command line, wall by wall (images.json)")
     a = p.parse_args(argv)
     sys.path.insert(0, _ROOT)
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    sys.path.insert(0, os.path.join(_ROOT, "tests"))
     import numpy as np
     from invariance import REGIONS, compare, region_batches
 
@@ -231,6 +281,8 @@ def main(argv=None):
 
     raybundle_addon.register()
     os.makedirs(a.out, exist_ok=True)
+    if a.images:
+        return images(a.images, (1, 3, 7, 15), a.out)
     kw = dict(batches=a.batches, per_batch=a.per_batch)
     t0 = time.perf_counter()
     plain = exported()

@@ -2,9 +2,9 @@
 
 A case is a scene and a description of it that must light it the same way (subdivided,
 flipped, scaled, reordered).  Each is solved once per patch layout; after a burn-in batch
-the iterates of B batches give, per *region* (the sides facing the room's inside, grouped
-by which way they face: floor, ceiling, back, left and right walls, and the blocks' faces
-towards the camera), the area-weighted mean radiance towards the normal per batch.
+the iterates of B batches give, per *region* (the sides the camera sees, grouped by which
+way they face: floor, ceiling, back, left and right walls, and the blocks' faces towards the
+camera), the area-weighted mean radiance towards the normal per batch.
 Batch means are nearly independent (the iterates' autocorrelation q^k dies within a
 batch), so their spread gives each region's standard error SE.
 
@@ -25,28 +25,31 @@ REGIONS = ("floor", "ceiling", "back", "left", "right", "front")
 
 
 def _region_of(scene, solver):
-    """(S,) region id of each side facing the inside of the scene's bounding box, -1 for others;
-    ``back`` faces -y (towards the camera of the Blender Cornell box) from the far end of the
-    box, ``front`` are the other faces turned towards -y (the blocks')."""
-    sc = scene
+    """(S,) region id of each side the camera sees (its centroid unoccluded, facing the
+    camera), -1 for others; grouped by the way they face (Z up, the Blender Cornell box's
+    camera looking along +y): ``back`` faces -y from the far end of the box, ``front`` are
+    the other faces turned towards -y (the blocks').  What no pixel sees (the ceiling over a
+    lamp hanging just under it, the inside of a block) is the layout's business, not the image's."""
+    sc, tracer = scene, solver.tracer
     centroid = sc.patch_centroid[sc.side_patch]
     n = solver.normal
     lo, hi = sc.vertices.min(axis=0), sc.vertices.max(axis=0)
-    inward = np.einsum("ij,ij->i", n, 0.5 * (lo + hi) - centroid) > 0
     axis = np.argmax(np.abs(n), axis=1)
     sign = np.take_along_axis(n, axis[:, None], 1)[:, 0] > 0
-    # Z up: floor faces +z, ceiling -z; back wall faces -y; left (+x in Blender) faces -x ...
     far = centroid[:, 1] > hi[1] - 0.01 * (hi[1] - lo[1])
     region = np.full(len(n), -1)
     for r, sel in enumerate(((axis == 2) & sign, (axis == 2) & ~sign, (axis == 1) & ~sign & far,
                              (axis == 0) & ~sign, (axis == 0) & sign, (axis == 1) & ~sign & ~far)):
         region[sel] = r
-    # sides in a gap (the ceiling over a lamp hanging just under it) are seen by nothing but
-    # what closes the gap: their light is trapped and their value is the layout's business
-    _, radius = sc.bounding_sphere
-    trapped = gap_sides(solver.tracer, centroid, n, 0.01 * radius)[:, 0]
+    to_eye = sc.camera.position - centroid
+    dist = np.linalg.norm(to_eye, axis=1)
+    facing = np.einsum("ij,ij->i", n, to_eye) > 0
+    seen = facing & ~tracer.occluded(centroid + n * tracer.eps, to_eye / dist[:, None], dist - 2 * tracer.eps)
+    # a side in a contact gap (a strip of the ceiling over a lamp's edge) may see the camera past
+    # the edge, but its light is the gap's: left out too
+    trapped = gap_sides(tracer, centroid, n, 2e-3 * sc.bounding_sphere[1])[:, 0]
     reflects = sc.materials.reflects[sc.side_material]
-    return np.where(inward & reflects & ~trapped & (solver.area > 0), region, -1)
+    return np.where(seen & ~trapped & reflects & (solver.area > 0), region, -1)
 
 
 def region_batches(scene, patches=4000, batches=20, per_batch=16, seed=1):
