@@ -193,6 +193,8 @@ class RenderJob:
                     stage(f"Auto: {method}")
             if not image_only(method):         # a path tracer needs no patches
                 scene = pipeline.prepare(scene, patches=s.patches, stage=stage, stop=self._stopped)
+                if scene is not self.export.scene:
+                    self.export.scene.release_caches()      # the prepared copy renders
             settings = RenderSettings(seed=s.seed, bundle_resolution=s.bundle_resolution,
                                       first_shot="auto" if s.first_shot else "none")
             if self.choice is not None and self.choice.sequence:

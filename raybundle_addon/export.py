@@ -438,9 +438,10 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
         tobj.append(np.full(len(tri), len(objects), np.int32))
         tpoly.append(tp)
         tloops.append(loops)
-        tuv.append(textured[0] if textured else np.zeros((len(tri), 3, 2)))
-        timg.append(textured[1] if textured else np.full(len(tri), -1, np.int64))
-        tcol.append(textured[2] if textured else np.zeros((len(tri), 3, 3)))
+        # untextured objects hold None: their zeros are made only if some object is textured
+        tuv.append((len(tri), textured[0]) if textured else (len(tri), None))
+        timg.append(textured[1] if textured else None)
+        tcol.append(textured[2] if textured else None)
         objects.append(info)
         n_vert += len(pos)
         n_tri += len(tri)
@@ -471,8 +472,10 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
         return cls(**{k: np.array([r[k] for r in rows]) for k in rows[0]})
 
     texture = None
-    face_image = np.concatenate(timg)
-    if np.any(face_image != -1):
+    if any(x is not None and np.any(x != -1) for x in timg):
+        face_image = np.concatenate([np.full(n, -1, np.int64) if x is None else x for (n, _), x in zip(tuv, timg)])
+        tcol = [np.zeros((n, 3, 3)) if c is None else c for (n, _), c in zip(tuv, tcol)]
+        tuv = [np.zeros((n, 3, 2)) if u is None else u for n, u in tuv]
         from raybundle.textures import SurfaceTexture, modulation_map
 
         maps = [modulation_map(converter.image_pixels(im))[0] for _, im in sorted(images.values(), key=lambda x: x[0])]

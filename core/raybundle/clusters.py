@@ -195,8 +195,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
 def triangle_patches(scene: PatchScene) -> PatchScene:
     """One patch per triangle (``--patches 0``), but cut along contact lines as
     :func:`make_patches` cuts them (gaps under 5% of the median edge count as contact):
-    a triangle reaching from under a lamp into the room would leak the light trapped
-    there (+10% on the Cornell ``.blend`` subdivided 16 times)."""
+    a triangle reaching from under a lamp into the room would leak the light trapped there."""
     corners = scene.triangle_corners
     edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
     one = replace(scene, triangle_patch=np.arange(len(scene.triangles)))

@@ -428,9 +428,8 @@ class Renderer(ProgressiveImage):
         """Drop what the passes and iterations read from the solver before its running
         average restarted (after ``burn_in`` iterations, when the iterates have forgotten
         their zero start): the glossy eye paths' sum and the glossy iterates.  Read from an
-        average still rising from zero, they kept a start-up bias that fell only as 1/n
-        (``furnace-glossy`` at 48 iterations: image mean -0.9%, at 200: -0.2%).  Done at the
-        first pass after the restart, so a run always keeps at least one pass."""
+        average still rising from zero, they kept a start-up bias that fell only as 1/n.
+        Done at the first pass after the restart, so a run always keeps at least one pass."""
         solver = self.solver
         if self._restarted or solver.stats.iterations <= getattr(solver, "burn_in", 0):
             return

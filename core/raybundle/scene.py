@@ -290,6 +290,14 @@ class PatchScene:
             self.triangle_solid = closed_solid_triangles(self.vertices, self.triangles) & ~self.triangle_two_sided
         self.environment = np.zeros(3) if self.environment is None else np.asarray(self.environment, float)
 
+    def release_caches(self):
+        """Forget the derived arrays (corners, normals, areas, sides...): they are made again
+        when asked for.  A scene kept only for its input arrays (an export whose prepared copy
+        renders) then holds no more than those."""
+        for name, attr in type(self).__dict__.items():
+            if isinstance(attr, cached_property):
+                self.__dict__.pop(name, None)
+
     # ------------------------------------------------------------- geometry
     @cached_property
     def triangle_corners(self):
@@ -864,8 +872,7 @@ def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene
     one built here)."""
     from .contacts import split_at_contacts, straddling
     # faces the user meshed finer than the patches are cut too: a ceiling cut into a grid over
-    # a lamp hanging under it must still trap the lamp's upper light (+16% on a bake of such a
-    # box, +10% on the Cornell .blend subdivided 16 times, otherwise).  Up to CONTACT_ALL_MAX
+    # a lamp hanging under it must still trap the lamp's upper light.  Up to CONTACT_ALL_MAX
     # triangles all of them (crossings too: a post through a floor); beyond, the cut is a
     # per-triangle loop (~0.5 ms a triangle), so only those found straddling a gap.
     tol = 0.05 * max_edge
