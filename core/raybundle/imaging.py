@@ -742,7 +742,7 @@ class Renderer(ProgressiveImage):
             sharp = solver.caustic.E if caustic else None
             self.gather_rays_used = 0
             rays = self.settings.gather_rays
-            if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and self._gather_seconds)):
+            if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and self._gather_affordable())):
                 final = FinalGather(solver, caustic=caustic)
         if not np.any(e_bar) and final is None:
             return out
@@ -797,6 +797,16 @@ class Renderer(ProgressiveImage):
             return self.image()
         finally:
             self._gather_seconds = None
+
+    def _gather_affordable(self):
+        """Whether the automatic gather has a budget and points to spend it on (the last image
+        pass saw flagged sides): checked before the gather's vertex values are made, which on
+        millions of triangles take seconds."""
+        g = self.gbuffer
+        if not self._gather_seconds or g is None:
+            return False
+        h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
+        return bool(self._near_edge(g.tside[h]).any())
 
     def _automatic_gather_rays(self, final, k):
         """Gather rays per sub-pixel sample that ``self._gather_seconds`` buys for ``k``
