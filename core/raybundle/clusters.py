@@ -38,8 +38,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .contacts import gap_sides
-from .scene import PatchScene, cut_at_contacts, edge_for_patches, group_ids, split_triangles, subdivide
+from .contacts import CONTACT_SHARE, gap_sides
+from .scene import (PatchScene, cut_at_contacts, edge_for_patches, group_ids, longest_edges, split_triangles,
+                    subdivide)
 from .visibility import RayTracer
 
 #: cube-map cells per face edge for the normal direction of a cluster (150 directions; odd, so
@@ -77,7 +78,7 @@ class _Grouping:
     def __init__(self, scene: PatchScene, lo=None, rows=None):
         self.scene = scene
         if rows is None:
-            self.rows = slice(None)
+            self.rows = np.arange(len(scene.triangles))
             corners, self.area, normal = scene.triangle_corners, scene.triangle_area, scene.triangle_normal
         else:
             self.rows = np.asarray(rows, np.int64)
@@ -87,7 +88,7 @@ class _Grouping:
             normal = cross / np.maximum(2.0 * self.area, 1e-300)[:, None]
         self.centroid = corners.mean(axis=1)
         self.lo = scene.vertices.min(axis=0) if lo is None else lo
-        self.edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+        self.edge = longest_edges(corners)
         self.normal = normal
         self.cell = normal_cells(normal)
         # offset along the triangle's own normal: constant over a plane
@@ -102,7 +103,7 @@ class _Grouping:
         ``gap`` (S, 2) bool: the triangle lies in a gap on its front / back
         (:func:`~raybundle.contacts.gap_sides`), which a cluster does not straddle."""
         sc, idx = self.scene, np.nonzero(small)[0]
-        rows = np.arange(len(sc.triangles))[self.rows][idx]
+        rows = self.rows[idx]
         cell = np.floor((self.centroid[idx] - self.lo) / h).astype(np.int64)
         slab = np.floor(self.offset[idx] / (0.5 * h)).astype(np.int64)
         keys = [cell[:, 0], cell[:, 1], cell[:, 2], self.cell[idx], slab,
@@ -179,7 +180,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
             fine = replace(cut, triangle_source=fine.triangle_source[cut.triangle_source])
         fine_small = small[row]
         grouped = _Grouping(fine, lo=grouping.lo, rows=np.nonzero(fine_small)[0])
-        gap = gap_sides(tracer, grouped.centroid, grouped.normal, 0.05 * h) if contacts else None
+        gap = gap_sides(tracer, grouped.centroid, grouped.normal, CONTACT_SHARE * h) if contacts else None
     finally:
         if tracer is not None:
             tracer.close()
@@ -196,7 +197,6 @@ def triangle_patches(scene: PatchScene) -> PatchScene:
     """One patch per triangle (``--patches 0``), but cut along contact lines as
     :func:`make_patches` cuts them (gaps under 5% of the median edge count as contact):
     a triangle reaching from under a lamp into the room would leak the light trapped there."""
-    corners = scene.triangle_corners
-    edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    edge = longest_edges(scene.triangle_corners)
     one = replace(scene, triangle_patch=np.arange(len(scene.triangles)))
     return cut_at_contacts(one, np.zeros(0, np.int64), float(np.median(edge)) if len(edge) else 1.0)

@@ -411,6 +411,9 @@ def _corner_tags(poly, seg, segs, seg_base, eps, tag_ids):
     return out
 
 
+#: gaps narrower than this share of the patch size count as contact
+#: (:func:`~raybundle.scene.cut_at_contacts`, :func:`~raybundle.clusters.make_patches`)
+CONTACT_SHARE = 0.05
 #: probe rays per chunk in :func:`gap_sides` (memory: about 100 bytes a ray)
 PROBE_CHUNK = 1 << 20
 

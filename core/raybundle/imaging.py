@@ -798,26 +798,28 @@ class Renderer(ProgressiveImage):
         finally:
             self._gather_seconds = None
 
-    def _gather_affordable(self):
-        """Whether the automatic gather has a budget and points to spend it on (the last image
-        pass saw flagged sides): checked before the gather's vertex values are made, which on
-        millions of triangles take seconds."""
+    def _flagged_pass_points(self):
+        """(F,) the last image pass's pixels whose front-facing point lies on a side
+        :func:`~raybundle.gather.near_edge_tsides` flags: the points an automatic gather
+        would serve."""
         g = self.gbuffer
-        if not self._gather_seconds or g is None:
-            return False
+        if g is None:
+            return np.zeros(0, np.int64)
         h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
-        return bool(self._near_edge(g.tside[h]).any())
+        return h[self._near_edge(g.tside[h])]
+
+    def _gather_affordable(self):
+        """Whether the automatic gather has a budget and points to spend it on: checked
+        before the gather's vertex values are made, which on millions of triangles take
+        seconds."""
+        return bool(self._gather_seconds) and len(self._flagged_pass_points()) > 0
 
     def _automatic_gather_rays(self, final, k):
         """Gather rays per sub-pixel sample that ``self._gather_seconds`` buys for ``k``
         sub-pixel samples (0 if fewer than :data:`MIN_GATHER_RAYS` per pixel): the cost per
         ray and point timed on up to 512 of the last image pass's points on flagged sides,
         which also give their count."""
-        g = self.gbuffer
-        if g is None:
-            return 0
-        h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
-        f = h[self._near_edge(g.tside[h])]
+        g, f = self.gbuffer, self._flagged_pass_points()
         if len(f) == 0:
             return 0
         probe, probe_rays = f[:: max(1, len(f) // 512)], 16

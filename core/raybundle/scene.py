@@ -787,11 +787,16 @@ def subdivide(scene: PatchScene, max_edge=None, patches=None, contacts=True) -> 
     return cut_at_contacts(fine, np.nonzero(k > 1)[0], max_edge)
 
 
+def longest_edges(corners):
+    """(T,) the longest edge [m] of each triangle with ``corners`` (T, 3, 3)."""
+    return np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+
+
 def _split_edge(scene, whole=None):
     """(T,) longest edge of each triangle [m], 0 for triangles kept whole: those that reflect
     nothing and those in ``whole`` (T,) bool."""
     corners = scene.triangle_corners
-    edge = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    edge = longest_edges(corners)
     split = scene.materials.reflects[scene.triangle_material]
     if whole is not None:
         split = split & ~whole
@@ -804,7 +809,7 @@ def edge_for_patches(scene, patches):
     split_edge = _split_edge(scene)
     if patches < len(scene.triangles) or not split_edge.any():
         corners = scene.triangle_corners
-        return float(np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max()) * 1.0001
+        return float(longest_edges(corners).max()) * 1.0001
     # bisection on the edge length for sum(k^2) ~ patches
     lo, hi = 1e-9 * split_edge.max(), split_edge.max() * 1.0001
     for _ in range(60):
@@ -870,12 +875,12 @@ def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene
     beyond that every one that straddles such a gap (:func:`~raybundle.contacts.straddling`,
     probed with ``tracer``, a :class:`~raybundle.visibility.RayTracer` over ``scene``, or
     one built here)."""
-    from .contacts import split_at_contacts, straddling
+    from .contacts import CONTACT_SHARE, split_at_contacts, straddling
     # faces the user meshed finer than the patches are cut too: a ceiling cut into a grid over
     # a lamp hanging under it must still trap the lamp's upper light.  Up to CONTACT_ALL_MAX
     # triangles all of them (crossings too: a post through a floor); beyond, the cut is a
     # per-triangle loop (~0.5 ms a triangle), so only those found straddling a gap.
-    tol = 0.05 * max_edge
+    tol = CONTACT_SHARE * max_edge
     todo = np.zeros(len(scene.triangles), bool)
     todo[np.asarray(cut, np.int64)] = True
     reflects = scene.materials.reflects[scene.triangle_material]
@@ -885,7 +890,7 @@ def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene
         rest = np.nonzero(reflects & ~todo)[0]
         if len(rest):
             from .visibility import RayTracer
-            probe = tracer or RayTracer(scene)
+            probe = tracer if tracer is not None else RayTracer(scene)
             try:
                 todo[rest[straddling(probe, scene, rest, tol)]] = True
             finally:
