@@ -1,23 +1,72 @@
-# One-command set-up: `make demo` and `make test` create .venv and install everything on first use.
-PYTHON ?= $(shell command -v python3.11 || command -v python3)
+# One-command set-up: `make demo` and `make test` create the environments and install everything on first use.
+#
+# Two environments, one per end of the Blender versions the extension supports:
+#   .venv         the newest: Python 3.13 with bpy 5.3 and NumPy 2 (requirements-dev.txt); everything
+#                 runs here: the full suite, `make demo`, the benches, `make extension`
+#   .venv-oldest  the oldest: Python 3.11 with bpy 4.2 LTS and NumPy 1.26 (requirements-oldest.txt)
+#                 and nothing of ours: tests/test_extension.py installs the extension zip into it
+# Each Python is found by running it (tools/find_python: a `python3.13` on PATH can be a pyenv stub
+# that fails). Without Python 3.13, .venv is made with 3.11 (bpy 5.0.1, NumPy 1.26) and `make test`
+# says what it skipped; under CI=true a missing Python is an error.
+PY_NEWEST := $(shell tools/find_python 3.13)
+PY_OLDEST := $(shell tools/find_python 3.11)
+PYTHON    := $(or $(PY_NEWEST),$(PY_OLDEST))
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+OLDEST := .venv-oldest
+NO_NEWEST := the newest Blender's environment (no working Python 3.13: the suite ran on Python 3.11, bpy 5.0.1, NumPy 1.26)
+NO_OLDEST := the oldest Blender's environment (no working Python 3.11: the zip was not installed into bpy 4.2, NumPy 1.26)
+SKIPPED := $(if $(PY_NEWEST),,$(NO_NEWEST))$(if $(PY_OLDEST),,$(NO_OLDEST))
 
-.PHONY: demo test bench bench-blender bench-boxes bench-bake bench-scale bench-invariance extension cycles-reference clean
+.PHONY: demo test test-newest test-oldest bench bench-blender bench-boxes bench-bake bench-scale \
+        bench-invariance extension cycles-reference demo-scenes test-blender-versions clean FORCE
 
-$(STAMP): core/pyproject.toml requirements-dev.txt
-	$(PYTHON) -m venv $(VENV)
+ifeq ($(PYTHON),)
+$(error neither Python 3.13 nor 3.11 works here (tools/find_python): install one, e.g. `pyenv install 3.13`)
+endif
+
+# .venv is remade when the Python it should have changes (3.13 appeared, or went away)
+ifneq ($(shell cat $(VENV)/.python 2>/dev/null),$(PYTHON))
+$(STAMP): FORCE
+endif
+$(STAMP): core/pyproject.toml pyproject.toml requirements-dev.txt
+	$(PYTHON) -m venv --clear $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -r requirements-dev.txt -e ./core
+	$(PY) -m pip install --quiet -r requirements-dev.txt -e ./core -e .
+	echo "$(PYTHON)" > $(VENV)/.python
 	touch $(STAMP)
+
+$(OLDEST)/.installed: requirements-oldest.txt
+	$(PY_OLDEST) -m venv --clear $(OLDEST)
+	$(OLDEST)/bin/python -m pip install --quiet --upgrade pip
+	$(OLDEST)/bin/python -m pip install --quiet -r requirements-oldest.txt
+	touch $@
 
 demo: $(STAMP)
 	$(PY) -m raybundle render cornell --time 30 --out out/cornell.exr --stats out/cornell.json
-	$(PY) -m raybundle_addon demo_scenes/cornell_box.blend --time 30 --out out/cornell_box_blend.exr
+	$(VENV)/bin/raybundle-blender demo_scenes/cornell_box.blend --time 30 --out out/cornell_box_blend.exr
 
-test: $(STAMP)
+# The full suite on the newest Blender, then the extension zip in the oldest; the last line names
+# an environment that could not run (an error under CI=true)
+test: test-newest test-oldest
+	@$(if $(SKIPPED),echo "make test: skipped $(SKIPPED)")
+
+test-newest: $(STAMP)
+ifeq ($(CI)$(PY_NEWEST),true)
+	$(error CI=true: no working Python 3.13 for the newest Blender's environment (tools/find_python 3.13))
+endif
 	$(PY) -m pytest -q tests
+
+test-oldest:
+ifeq ($(PY_OLDEST),)
+ifeq ($(CI),true)
+	$(error CI=true: no working Python 3.11 for the oldest Blender's environment (tools/find_python 3.11))
+endif
+else
+	$(MAKE) --no-print-directory $(OLDEST)/.installed
+	$(OLDEST)/bin/python -m pytest -q tests/test_extension.py
+endif
 
 # Every method on the built-in scenes, 60 s each (12 minutes on 2 cores, plus 10 minutes per missing
 # reference half of the Cornell boxes: `make cycles-reference` makes Cycles ones instead)
@@ -62,5 +111,15 @@ cycles-reference: $(STAMP)
 	  $(PY) tools/cycles_reference.py $$scene --samples 1024 --seed $$k --out out/reference/$$scene-256x256-$$k.exr; \
 	done; done
 
+# The extension zip installed into each Blender release line from 4.2 to 5.3 (tests/test_extension.py
+# in a venv per bpy version; make test runs the two ends; about 6 minutes on 2 cores)
+test-blender-versions: $(STAMP)
+	$(PY) tools/blender_versions.py --out out/blender-versions
+
+# The demo .blend files, saved by the oldest supported Blender (4.2 cannot read what 5.0 writes; every
+# later Blender opens 4.2's files): the oldest env with this checkout's core and add-on on the path
+demo-scenes: $(OLDEST)/.installed
+	PYTHONPATH=core:. $(OLDEST)/bin/python demo_scenes/make_demo_scenes.py --out demo_scenes
+
 clean:
-	rm -rf $(VENV) out .pytest_cache dist build
+	rm -rf $(VENV) $(OLDEST) out .pytest_cache dist build

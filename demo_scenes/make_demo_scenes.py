@@ -2,7 +2,9 @@
 
 Usage::
 
-    .venv/bin/python demo_scenes/make_demo_scenes.py [--out demo_scenes] [--only cornell_box ...]
+    make demo-scenes      # the files in the repository: saved by Blender 4.2 (.venv-oldest), which
+                          # every supported Blender opens (4.2 cannot read what 5.0 writes)
+    .venv/bin/python demo_scenes/make_demo_scenes.py [--out DIR] [--only cornell_box ...]
 
 Writes:
 

@@ -3,7 +3,7 @@
 Modules: :mod:`.props` (``scene.raybundle`` settings), :mod:`.export` and
 :mod:`.shaders` (evaluated depsgraph -> the core's arrays), :mod:`.engine` (the
 ``RAYBUNDLE`` render engine), :mod:`.bake` and :mod:`.operators` (the ``raybundle.bake``
-operator: color attributes, lightmaps), :mod:`.ui` (panels); ``python -m raybundle_addon``
+operator: color attributes, lightmaps), :mod:`.ui` (panels); ``raybundle-blender``
 renders or bakes a ``.blend`` headless (:mod:`.__main__`).
 """
 from __future__ import annotations
@@ -11,7 +11,7 @@ from __future__ import annotations
 import importlib
 
 #: registered in this order (``bpy`` is imported with them, when Blender registers the
-#: extension: ``python -m raybundle_addon`` hears Ctrl-C before it imports ``bpy``)
+#: extension: ``raybundle-blender`` hears Ctrl-C before it imports ``bpy``)
 _MODULES = ("props", "engine", "operators", "ui")
 
 

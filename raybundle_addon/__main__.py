@@ -1,9 +1,13 @@
 """Headless rendering and baking with the ``bpy`` module::
 
-    python -m raybundle_addon SCENE.blend --out out.exr [--time S] [--iterations N] [--seed K]
-                              [--patches N] [--resolution-percentage P] [--save-npz scene.npz]
-    python -m raybundle_addon SCENE.blend --bake OUT.blend [--lightmaps DIR] [--lightmap-size N]
-                              [--domain point|corner] [--subdivide LEVELS] [--time S] [--iterations N] ...
+    raybundle-blender SCENE.blend --out out.exr [--time S] [--iterations N] [--seed K]
+                      [--patches N] [--resolution-percentage P] [--save-npz scene.npz]
+    raybundle-blender SCENE.blend --bake OUT.blend [--lightmaps DIR] [--lightmap-size N]
+                      [--domain point|corner] [--subdivide LEVELS] [--time S] [--iterations N] ...
+
+``raybundle-blender`` is this module's ``main`` installed as a command (the repository's
+``pyproject.toml``: ``pip install ./core .`` beside ``bpy``); ``python -m raybundle_addon``
+is the same from the repository's root.
 
 Registers the add-on in the ``bpy`` module, opens the file, renders its scene
 with the ``RAYBUNDLE`` engine through ``bpy.ops.render.render`` (the same code
@@ -35,7 +39,7 @@ import time
 def build_parser():
     from raybundle.cli import COUNT, SECONDS, OneLineErrors, _number
 
-    p = OneLineErrors(prog="python -m raybundle_addon",
+    p = OneLineErrors(prog="raybundle-blender",
                       description="Render a .blend with the Ray Bundle GI engine (bpy module, no Blender UI).")
     p.add_argument("blend", help="the .blend file")
     what = p.add_mutually_exclusive_group(required=True)
@@ -61,7 +65,7 @@ def build_parser():
 
 
 def _fail(message, status=2):
-    print(f"raybundle_addon: error: {message}", file=sys.stderr)
+    print(f"raybundle-blender: error: {message}", file=sys.stderr)
     return status
 
 

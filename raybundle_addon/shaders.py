@@ -36,6 +36,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from raybundle.materials import color_text
 
 #: the diffuse color of faces without a material (Blender's default surface)
 DEFAULT_GREY = 0.8
@@ -230,7 +231,7 @@ class MaterialConverter:
                     why = ("its texture coordinates are not a UV map" if albedo else
                            "only textures on a Diffuse Color or Base Color are modelled")
                     notes.append(f"image texture {node.image.name!r} on {sock.name!r} is replaced by its mean color "
-                                 f"{tuple(np.round(mean, 3))} ({why})")
+                                 f"{color_text(mean)} ({why})")
                     return mean
                 notes.append(f"image texture on {sock.name!r} has no image data: using the socket's value")
             elif node is not None and node.type == "VERTEX_COLOR" and _is_albedo(sock):
@@ -312,7 +313,7 @@ class MaterialConverter:
             if k in spec:
                 c = np.asarray(spec[k], float)
                 if np.any(c > 1.0 + 1e-6):
-                    self.warn(f"material {name!r}: {k} color {tuple(np.round(c, 3))} has albedo > 1, clipped to 1 "
+                    self.warn(f"material {name!r}: {k} color {color_text(c)} has albedo > 1, clipped to 1 "
                               "(it would create energy)")
                 spec[k] = tuple(np.clip(c, 0.0, 1.0))
         return spec
@@ -337,7 +338,7 @@ def principled_to_material(inputs, distribution="MULTI_GGX", warn=print, layered
     get = inputs.get
     base = np.clip(np.asarray(get("Base Color", (0.8, 0.8, 0.8)), float)[:3], 0.0, None)
     if np.any(base > 1.0 + 1e-6):
-        warn(f"Principled BSDF base color {tuple(np.round(base, 3))} is above 1 (albedo > 1 creates energy): "
+        warn(f"Principled BSDF base color {color_text(base)} is above 1 (albedo > 1 creates energy): "
              "clipped to 1")
         base = np.minimum(base, 1.0)
     metallic = float(np.clip(get("Metallic", 0.0), 0.0, 1.0))
@@ -456,7 +457,7 @@ def world_radiance(world, warn):
         mean = conv.image_mean(src.image) if src is not None and src.type in ("TEX_ENVIRONMENT", "TEX_IMAGE") \
             else None
         if mean is not None:
-            notes.append(f"the environment texture is replaced by its mean color {tuple(np.round(mean, 3))} "
+            notes.append(f"the environment texture is replaced by its mean color {color_text(mean)} "
                          "(a constant environment)")
             color = mean
         elif src is not None and src.type == "RGB":

@@ -23,6 +23,18 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 
+#: the headless command line as the README's set-up installs it (the repository's
+#: pyproject.toml), beside this Python
+BLENDER_CLI = os.path.join(os.path.dirname(sys.executable), "raybundle-blender")
+
+
+def blender_cli_command(*args):
+    """``raybundle-blender ARGS`` (the installed command: the tests run it from temporary folders)."""
+    if not os.path.isfile(BLENDER_CLI):
+        pytest.fail(f"{BLENDER_CLI} is not installed: `pip install -e .` in the repository (make test does)")
+    return [BLENDER_CLI, *map(str, args)]
+
+
 def ensure_registered():
     import raybundle_addon
 

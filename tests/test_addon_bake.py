@@ -10,11 +10,10 @@ the 1e-4 inset of bake points towards their face's centroid.
 """
 import os
 import subprocess
-import sys
 
 import numpy as np
 import pytest
-from addon_helpers import (ROOT, add_camera, add_light, add_object, addon, box, bpy, fresh,  # noqa: F401
+from addon_helpers import (add_camera, add_light, add_object, addon, blender_cli_command, box, bpy, fresh,  # noqa: F401
                            furnace_material, node_material)
 
 LE, ALBEDO = 0.5, np.array([0.3, 0.5, 0.7])
@@ -260,9 +259,9 @@ def test_headless_bake_writes_a_baked_copy_of_the_file_and_lightmaps(fresh, tmp_
     add_light("AREA", location=(0, 0, 1.0), energy=50.0, size=0.5)
     src, dst = tmp_path / "in.blend", tmp_path / "out.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(src))
-    r = subprocess.run([sys.executable, "-m", "raybundle_addon", str(src), "--bake", str(dst), "--iterations", "5",
-                        "--lightmaps", str(tmp_path / "maps"), "--lightmap-size", "16", "--subdivide", "2"],
-                       capture_output=True, text=True, cwd=ROOT, timeout=300)
+    r = subprocess.run(blender_cli_command(src, "--bake", dst, "--iterations", 5, "--lightmaps", tmp_path / "maps",
+                                           "--lightmap-size", 16, "--subdivide", 2),
+                       capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert r.returncode == 0, r.stderr
     assert os.path.isfile(tmp_path / "maps" / "plane.lightmap.exr")
     bpy.ops.wm.open_mainfile(filepath=str(dst))

@@ -1,14 +1,15 @@
-"""The headless command line ``python -m raybundle_addon SCENE.blend --out out.exr``
-(subprocesses with the real ``bpy`` module; the .blend is built in the test session)."""
+"""The headless command line ``raybundle-blender SCENE.blend --out out.exr`` as installed,
+run from a temporary folder (subprocesses with the real ``bpy`` module; the .blend is built
+in the test session)."""
 import os
 import signal
 import subprocess
-import sys
+import tempfile
 import time
 
 import numpy as np
 import pytest
-from addon_helpers import ROOT, addon, bpy  # noqa: F401
+from addon_helpers import addon, blender_cli_command, bpy  # noqa: F401
 
 from raybundle.io import read_exr, read_exr_header
 
@@ -27,7 +28,7 @@ def cornell_blend(tmp_path_factory, addon):  # noqa: F811
 
 def cli(*args, env=None, **kw):
     e = dict(os.environ, BLENDER_USER_RESOURCES=os.environ.get("BLENDER_USER_RESOURCES", ""), **(env or {}))
-    return subprocess.run([sys.executable, "-m", "raybundle_addon", *map(str, args)], cwd=ROOT, env=e,
+    return subprocess.run(blender_cli_command(*args), cwd=tempfile.mkdtemp(prefix="rb-cli-"), env=e,
                           capture_output=True, text=True, timeout=120, **kw)
 
 
@@ -80,8 +81,8 @@ def test_cli_missing_file_and_unrenderable_scene(tmp_path, addon):  # noqa: F811
 
 def test_cli_ctrl_c_keeps_the_partial_image(cornell_blend, tmp_path):
     out = tmp_path / "partial.exr"
-    p = subprocess.Popen([sys.executable, "-m", "raybundle_addon", cornell_blend, "--out", str(out), "--time", "60"],
-                         cwd=ROOT, env=dict(os.environ, RAYBUNDLE_PROGRESS="1"), stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(blender_cli_command(cornell_blend, "--out", out, "--time", 60), cwd=tmp_path,
+                         env=dict(os.environ, RAYBUNDLE_PROGRESS="1"), stderr=subprocess.PIPE, text=True)
     t0 = time.perf_counter()
     buf = ""
     while "iterations" not in buf and time.perf_counter() - t0 < 60:      # wait for the progress bar
@@ -100,8 +101,8 @@ def test_cli_ctrl_c_at_once_is_heard(cornell_blend, tmp_path, delay):
     traceback (it was ignored, the render ran on and wrote ``--out``; once it segfaulted);
     if it lands in the render, the image so far is written and the run says so."""
     out = tmp_path / "early.exr"
-    p = subprocess.Popen([sys.executable, "-m", "raybundle_addon", cornell_blend, "--out", str(out), "--time", "60"],
-                         cwd=ROOT, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(blender_cli_command(cornell_blend, "--out", out, "--time", 60), cwd=tmp_path,
+                         stderr=subprocess.PIPE, text=True)
     time.sleep(delay)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=60)

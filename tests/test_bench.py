@@ -40,7 +40,7 @@ def test_bench_writes_curves_charts_and_a_summary(tmp_path):
     assert p.stderr.count("path tracing for") == 2
     for name in ("furnace", "cornell"):
         assert (out / f"{name}.png").stat().st_size > 0
-        rows = list(csv.DictReader(open(out / f"{name}.csv")))
+        rows = list(csv.DictReader((out / f"{name}.csv").read_text().splitlines()))
         assert {r["method"] for r in rows} == {"stochastic-iteration", "path-tracing"}
         for method in ("stochastic-iteration", "path-tracing"):
             err = [float(r["error"]) for r in rows if r["method"] == method]
@@ -72,7 +72,7 @@ def test_cycles_is_one_more_curve_where_it_can_build_the_scene(tmp_path):
                         "--reference-time", "2", "--reference-dir", str(tmp_path / "ref"), "--out", str(out),
                         "--cycles"], capture_output=True, text=True)
     assert p.returncode == 0, p.stderr
-    rows = [r for r in csv.DictReader(open(out / "cornell.csv")) if r["method"] == "cycles"]
+    rows = [r for r in csv.DictReader((out / "cornell.csv").read_text().splitlines()) if r["method"] == "cycles"]
     spp = [int(r["iterations"]) for r in rows]
     err = [float(r["error"]) for r in rows]
     assert len(rows) >= 2 and spp == [2 ** k for k in range(len(rows))], spp

@@ -64,7 +64,7 @@ def assert_converged(samples, exact, max_se):
 
 @pytest.mark.parametrize("glossy", [False, True], ids=["diffuse", "glossy"])
 @pytest.mark.parametrize("sequence,batches,per_batch,directions", [
-    ("prng", 16, 250, 1), ("stratified", 16, 250, 1), ("pi-powers", 10, 200, 1), ("stratified", 12, 40, 8)])
+    ("prng", 12, 120, 1), ("stratified", 12, 120, 1), ("pi-powers", 10, 200, 1), ("stratified", 12, 40, 8)])
 def test_furnace_converges_to_analytic(glossy, sequence, batches, per_batch, directions):
     """Every sequence, and 8 directions per step (diffuse lobe: their mean; glossy lobe: one
     drawn per side), converges to Le / (1 - a)."""
@@ -79,7 +79,7 @@ def test_furnace_converges_to_analytic(glossy, sequence, batches, per_batch, dir
 def test_glossy_furnace_image_without_gather():
     """The thesis' own eye estimator E_i f(t_i, w_eye) per iteration (glossy_gather off)."""
     r = furnace_renderer(True, "prng", glossy_gather=False)
-    patch, img = batch_means(r, 12, 250)
+    patch, img = batch_means(r, 12, 120)
     assert r.glossy_iterations > 0 and not r.settings.glossy_gather
     assert_converged(img, r.scene.analytic_radiance, max_se=0.03)
     r.tracer.close()

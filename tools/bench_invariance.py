@@ -245,8 +245,9 @@ def images(seconds, cuts, out, seeds=(1, 2)):
         means = []
         for seed in seeds:
             exr = os.path.join(out, f"image-{seed}.exr")
-            subprocess.run([sys.executable, "-m", "raybundle_addon", path, "--time", str(seconds), "--seed", str(seed),
-                            "--patches", "4000", "--out", exr], check=True, capture_output=True, cwd=_ROOT)
+            subprocess.run([os.path.join(os.path.dirname(sys.executable), "raybundle-blender"), path, "--time",
+                            str(seconds), "--seed", str(seed), "--patches", "4000", "--out", exr],
+                           check=True, capture_output=True, cwd=_ROOT)
             img = read_exr(exr).mean(axis=2)
             means.append([img[masks[w]].mean() for w in walls])
         m = np.mean(means, axis=0)

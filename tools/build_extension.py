@@ -10,8 +10,10 @@ Steps (see ../shared/docs/blender.md section 1):
    the bundled wheels, and that the core's runtime dependencies (core/pyproject.toml,
    minus numpy) are exactly the pinned wheels below.
 2. Build the core wheel (``pip wheel --no-deps core/``, offline once setuptools is in
-   the cache) and fetch the ``embreex``/``OpenEXR`` cp311 binary wheels for each
-   platform into the download cache (``wheels/``, gitignored; a second build is offline).
+   the cache) and fetch the ``embreex``/``OpenEXR`` binary wheels for each platform and
+   each of Blender's Pythons (cp311: Blender 4.2 - 5.0; cp313: 5.1 - 5.3) into the download
+   cache (``wheels/``, gitignored; a second build is offline). One zip per platform holds
+   both: Blender installs only the wheels of its own Python (4.2 included).
 3. Stage ``raybundle_addon/*`` + the top-level ``blender_manifest.toml`` (with its
    ``wheels``/``platforms`` lists written in) + ``wheels/`` into a clean folder: the
    zip's top level is the add-on package, ``__init__.py`` next to the manifest.
@@ -47,7 +49,8 @@ CORE = ROOT / "core"
 # means adding its pin here.
 PINS = {"embreex": "4.4.0.post1", "OpenEXR": "3.5.3"}
 PROVIDED_BY_BLENDER = {"numpy"}
-PYTHON_VERSION = "3.11"          # Blender 4.2 - 5.0; 5.1 moves to 3.13 (see blender_version_max)
+# Blender's Pythons: 3.11 in Blender 4.2 - 5.0, 3.13 in 5.1 - 5.3 (blender_version_max is 5.4.0)
+PYTHON_VERSIONS = ("3.11", "3.13")
 SETUPTOOLS_REQ = "setuptools>=77"  # the core's build-system requirement (SPDX license string)
 
 # Blender platform -> (pip --platform tag, test on one platform tag of a wheel file name)
@@ -213,31 +216,33 @@ def _wheel_tags(fname: str) -> tuple[str, str, list[str]]:
     return parts[-3], parts[-2], parts[-1].split(".")
 
 
-def _wheel_fits(fname: str, dist: str, version: str, platform: str) -> bool:
+def _wheel_fits(fname: str, dist: str, version: str, platform: str, python: str) -> bool:
     if not fname.endswith(".whl") or not norm(fname).startswith(f"{norm(dist)}_{norm(version)}_"):
         return False
     if fname[:-4].split("-")[1] != version:
         return False
     py, abi, plats = _wheel_tags(fname)
-    cp = "cp" + PYTHON_VERSION.replace(".", "")
+    cp = "cp" + python.replace(".", "")
     return cp in py.split(".") and any(PLATFORMS[platform][1](t) for t in plats)
 
 
-def fetch_wheel(dist: str, version: str, platform: str, cache: pathlib.Path, offline: bool) -> pathlib.Path:
+def fetch_wheel(dist: str, version: str, platform: str, python: str, cache: pathlib.Path,
+                offline: bool) -> pathlib.Path:
     def cached():
-        return sorted(p for p in cache.glob("*.whl") if _wheel_fits(p.name, dist, version, platform))
+        return sorted(p for p in cache.glob("*.whl") if _wheel_fits(p.name, dist, version, platform, python))
     hits = cached()
     if not hits:
+        what = f"{dist}=={version} for {platform}, Python {python}"
         if offline:
-            raise BuildError(f"--offline: no cached {dist}=={version} wheel for {platform} in {cache}")
-        log(f"downloading {dist}=={version} for {platform}")
+            raise BuildError(f"--offline: no cached wheel of {what} in {cache}")
+        log(f"downloading {what}")
         cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", "--quiet",
-               "--python-version", PYTHON_VERSION, "--implementation", "cp", "--platform", PLATFORMS[platform][0],
+               "--python-version", python, "--implementation", "cp", "--platform", PLATFORMS[platform][0],
                "-d", str(cache), f"{dist}=={version}"]
         p = subprocess.run(cmd, capture_output=True, text=True)
         hits = cached()
         if p.returncode != 0 or not hits:
-            raise BuildError(f"pip download of {dist}=={version} for {platform} failed:\n{p.stderr[-2000:]}")
+            raise BuildError(f"pip download of {what} failed:\n{p.stderr[-2000:]}")
     return hits[-1]
 
 
@@ -323,8 +328,8 @@ def build(platforms: list[str] | None, out_dir: pathlib.Path, cache: pathlib.Pat
     wheel_dir = stage / "wheels"
     wheel_dir.mkdir()
     core_wheel = build_core_wheel(wheel_dir, cache, offline)
-    per_platform = {pf: [fetch_wheel(dist, ver, pf, cache, offline) for dist, ver in PINS.items()]
-                    for pf in platforms}
+    per_platform = {pf: [fetch_wheel(dist, ver, pf, py, cache, offline) for dist, ver in PINS.items()
+                         for py in PYTHON_VERSIONS] for pf in platforms}
     check_runtime_imports([core_wheel] + per_platform[platforms[0]], blender_ext, allow_imports, addon)
     for src in {w for ws in per_platform.values() for w in ws}:
         shutil.copy2(src, wheel_dir / src.name)
@@ -346,7 +351,8 @@ def build(platforms: list[str] | None, out_dir: pathlib.Path, cache: pathlib.Pat
     for z in zips:
         names = zipfile.ZipFile(z).namelist()
         in_zip = sorted(n.split("/")[-1] for n in names if n.endswith(".whl"))
-        if "__init__.py" not in names or "blender_manifest.toml" not in names or len(in_zip) != 1 + len(PINS):
+        if ("__init__.py" not in names or "blender_manifest.toml" not in names
+                or len(in_zip) != 1 + len(PINS) * len(PYTHON_VERSIONS)):
             raise BuildError(f"{z.name}: unexpected contents {names}")
         log(f"{z.relative_to(ROOT) if z.is_relative_to(ROOT) else z}: {z.stat().st_size / 2**20:.1f} MiB "
             f"({', '.join(in_zip)})")

@@ -38,7 +38,8 @@ def make_material(name, diffuse, glossy, roughness, glossy_weight, emission):
     """A node material: Add(Mix(Diffuse, Glossy GGX, fac), Emission * (1 - backfacing))."""
     bpy = _bpy()
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    if mat.node_tree is None:  # 4.2: use_nodes makes the tree
+        mat.use_nodes = True
     nt = mat.node_tree
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
@@ -132,7 +133,8 @@ def cycles_settings(samples, seed=0, world_strength=0.0):
     sc.view_settings.exposure = 0.0
     if world_strength is not None:
         world = bpy.data.worlds.new("world")
-        world.use_nodes = True
+        if world.node_tree is None:  # 4.2: use_nodes makes the tree
+            world.use_nodes = True
         bg = world.node_tree.nodes["Background"]
         bg.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
         bg.inputs["Strength"].default_value = float(world_strength)

@@ -223,7 +223,7 @@ class MaterialTable:
             if over.any():
                 m = int(np.nonzero(over.any(axis=1))[0][0])
                 raise ValueError(
-                    f"material {self.names[m]!r}: {k} color {tuple(arrays[k][m])} has a component > 1 "
+                    f"material {self.names[m]!r}: {k} color {color_text(arrays[k][m])} has a component > 1 "
                     "(albedo > 1 creates energy; the iteration would diverge)")
         if (arrays["glossy_weight"] > 1).any() or (arrays["roughness"] > 1).any():
             m = int(np.nonzero((arrays["glossy_weight"] > 1) | (arrays["roughness"] > 1))[0][0])
@@ -515,6 +515,12 @@ class MaterialTable:
                    specular_ior=opt("specular_ior", n), specular_tint=opt("specular_tint", (n, 3)),
                    glossy_fresnel=opt("glossy_fresnel", n, np.int64),
                    multiscatter=opt("multiscatter", n, np.int64))
+
+
+def color_text(c, digits=3) -> str:
+    """``(r, g, b)`` rounded to ``digits`` decimals, as plain numbers (NumPy 2 prints its scalars as
+    ``np.float64(0.5)``): the color in a message."""
+    return "(" + ", ".join(repr(round(float(x), digits)) for x in np.ravel(c)) + ")"
 
 
 def smith_lambda(alpha, cos_theta):

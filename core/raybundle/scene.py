@@ -535,11 +535,12 @@ def load_npz(path) -> PatchScene:
     import zipfile
 
     try:
-        with np.load(path, allow_pickle=False) as z:
+        # our own file object: np.load leaks the one it opens when the zip is broken
+        with open(path, "rb") as f, np.load(f, allow_pickle=False) as z:
             d = {k: z[k] for k in z.files}
     except FileNotFoundError:
         raise SceneError(f"{path}: no such file") from None
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as e:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError, TypeError) as e:
         raise SceneError(f"cannot read scene file {path}: {str(e) or type(e).__name__} (empty, truncated "
                          "or not an .npz file)") from None
     try:

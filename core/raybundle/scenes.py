@@ -26,7 +26,7 @@ import re
 import numpy as np
 
 from .camera import Camera
-from .materials import MaterialTable
+from .materials import MaterialTable, color_text
 from .scene import build_scene
 
 WHITE = (0.725, 0.71, 0.68)
@@ -172,7 +172,7 @@ def furnace(glossy=False, resolution=(128, 128), albedo=FURNACE_ALBEDO):
     else:
         albedo = np.broadcast_to(np.asarray(albedo, float), (3,))
         if not np.all((albedo >= 0) & (albedo < 1)):
-            raise ValueError(f"the furnace's albedo must lie in [0, 1), not {tuple(albedo)} (no finite solution)")
+            raise ValueError(f"the furnace's albedo must lie in [0, 1), not {color_text(albedo)} (no finite solution)")
         specs = [dict(name="walls", diffuse=tuple(albedo), emission=FURNACE_LE),
                  dict(name="block", diffuse=tuple(albedo), emission=FURNACE_LE)]
         exact = FURNACE_LE / (1 - albedo)

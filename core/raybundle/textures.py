@@ -133,7 +133,8 @@ class SurfaceTexture:
         textured = np.nonzero(img >= 0)[0]
         if len(textured):
             uv = self.face_uv[tri_face[textured]]
-            uv_area = 0.5 * np.abs(np.cross(uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]))
+            du, dv = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+            uv_area = 0.5 * np.abs(du[:, 0] * dv[:, 1] - du[:, 1] * dv[:, 0])
             c = self.face_corners[tri_face[textured]]
             src_area = 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
             texels = np.array([im.shape[0] * im.shape[1] for im in self.images], float)[img[textured]]
