@@ -116,9 +116,10 @@ def _clean_env(**extra):
 
 
 def _imports_ours(python) -> list[str]:
-    code = "import importlib.util as u; print([m for m in ('raybundle', 'embreex', 'OpenEXR') if u.find_spec(m)])"
+    code = ("import importlib.util as u, json; "
+            "print(json.dumps([m for m in ('raybundle', 'embreex', 'OpenEXR') if u.find_spec(m)]))")
     r = subprocess.run([str(python), "-c", code], capture_output=True, text=True, env=_clean_env(), check=True)
-    return eval(r.stdout)
+    return json.loads(r.stdout)
 
 
 @pytest.fixture(scope="module")
