@@ -20,7 +20,7 @@ NO_OLDEST := the oldest Blender's environment (no working Python 3.11: the zip w
 SKIPPED := $(if $(PY_NEWEST),,$(NO_NEWEST))$(if $(PY_OLDEST),,$(NO_OLDEST))
 
 .PHONY: demo test test-newest test-oldest bench bench-blender bench-boxes bench-bake bench-scale \
-        bench-invariance extension cycles-reference demo-scenes test-blender-versions clean FORCE
+        bench-invariance extension cycles-reference demo-scenes test-blender-versions golden golden-check clean FORCE
 
 ifeq ($(PYTHON),)
 $(error neither Python 3.13 nor 3.11 works here (tools/find_python): install one, e.g. `pyenv install 3.13`)
@@ -115,6 +115,15 @@ cycles-reference: $(STAMP)
 # in a venv per bpy version; make test runs the two ends; about 6 minutes on 2 cores)
 test-blender-versions: $(STAMP)
 	$(PY) tools/blender_versions.py --out out/blender-versions
+
+# Issue 28's refactoring check: the built-in scenes, every method, a fixed final gather and chains,
+# rendered by the command line and hashed; `make golden` (re)records this environment's hashes in
+# tests/golden_hashes.json, `make golden-check` compares (tests/test_golden.py does too)
+golden: $(STAMP)
+	$(PY) tools/golden.py --record
+
+golden-check: $(STAMP)
+	$(PY) tools/golden.py
 
 # The demo .blend files, saved by the oldest supported Blender (4.2 cannot read what 5.0 writes; every
 # later Blender opens 4.2's files): the oldest env with this checkout's core and add-on on the path

@@ -89,12 +89,27 @@ def test_bad_scene_names_and_files_give_errors(tmp_path):
 
 @pytest.mark.parametrize("args", [["--iterations", "-3"], ["--resolution", "0", "10"], ["--time", "nan"],
                                   ["--time", "-1"], ["--patches", "many"], ["--threads", "0"],
-                                  ["--bundle-resolution", "99999"], ["--sequence", "niederreiter"], ["--bogus"]])
+                                  ["--bundle-resolution", "99999"], ["--sequence", "niederreiter"], ["--bogus"],
+                                  ["--gather-rays", "-2"]])
 def test_bad_arguments_get_one_line_and_exit_2(tmp_path, args):
     p = run_cli("render", "cornell", *args, "--out", str(tmp_path / "x.exr"))
     assert p.returncode == 2, p.stderr
     assert len(p.stderr.strip().splitlines()) == 1 and "error" in p.stderr and "Traceback" not in p.stderr
     assert not (tmp_path / "x.exr").exists()
+
+
+def test_gather_rays_fixes_the_final_gather_of_a_run_of_given_iterations(tmp_path):
+    """--iterations alone has no final gather (reproducible); --gather-rays 64 gathers 64 rays."""
+    import json
+
+    stats = {}
+    for n in (None, 64):
+        out = tmp_path / f"g{n}.exr"
+        p = run_cli("render", "cornell", "--iterations", "3", "--resolution", "16", "16", "--patches", "300",
+                    *(["--gather-rays", str(n)] if n else []), "--out", str(out), "--stats", str(tmp_path / "s.json"))
+        assert p.returncode == 0, p.stderr
+        stats[n] = json.loads((tmp_path / "s.json").read_text())
+    assert stats[None]["gather_rays_per_pixel"] == 0 and stats[64]["gather_rays_per_pixel"] == 64, stats
 
 
 @pytest.mark.parametrize("out,stats,message", [

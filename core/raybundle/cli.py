@@ -120,7 +120,7 @@ def cmd_render(args):
         if not image_only(args.method):     # a path tracer needs no patches
             scene = prepare(scene, patches=args.patches, stage=stage, stop=stop)
         settings = RenderSettings(seed=args.seed, sequence=args.sequence, bundle_resolution=args.bundle_resolution,
-                                  threads=args.threads, first_shot=first_shot)
+                                  threads=args.threads, first_shot=first_shot, gather_rays=args.gather_rays)
         if args.workers or args.scheduler:
             return _render_chains(args, scene, settings, stage, stop, t_start)
         result = render(scene, settings, iterations=args.iterations, seconds=args.time, progress=bar, stop=stop,
@@ -220,6 +220,9 @@ def build_parser():
                         "quasi-Monte Carlo, prng or stratified as the PRNG; single-ray-iteration the PRNG only")
     r.add_argument("--bundle-resolution", type=_number(int, 0, 4096, "an integer in [0, 4096]"), default=0,
                    help="rays per bundle side (0 = auto)")
+    r.add_argument("--gather-rays", type=_number(int, -1, 65536, "an integer in [-1, 65536]"), default=-1,
+                   help="final-gather rays per pixel next to concave edges and contacts: -1 (default) as many as "
+                        "a tenth of a --time run buys, none with --iterations; N a fixed count, reproducible")
     r.add_argument("--threads", type=POSITIVE_INT, default=None)
     d = r.add_mutually_exclusive_group()
     d.add_argument("--workers", type=POSITIVE_INT, help="run that many independent chains on a local Dask "
