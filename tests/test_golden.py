@@ -1,7 +1,7 @@
 """Renders keep their golden hashes (tools/golden.py): a refactoring changes no pixel.
 
 Skipped where tests/golden_hashes.json has no hashes for this environment (Python, NumPy,
-embreex, CPU model, core count): floating-point results differ between machines. `make golden`
+embreex, CPU model and vector instruction sets, core count): floating-point results differ between machines. `make golden`
 records them; an intended change of results re-records them and says which cases changed.
 """
 import json

@@ -11,9 +11,9 @@ every method on the Cornell box; ``--gather-rays 64`` (the final gather at a fix
 chains by iterations (``--workers 2``). A case's hash is the SHA-256 of the EXR's float32
 pixels read back, with the iteration count and the rays traced from ``--stats``.
 
-Floating-point results depend on the machine (SIMD paths, core count) and the libraries, so
-the file keeps one set of hashes per environment: Python, NumPy and embreex versions, the CPU
-model and the core count. An environment the file does not know is reported, not failed:
+Floating-point results can depend on the machine (SIMD paths, core count) and the libraries,
+so the file keeps one set of hashes per environment: Python, NumPy and embreex versions, the CPU
+model, its vector instruction sets and the core count. An environment the file does not know is reported, not failed:
 record it with ``make golden`` on the commit before a refactoring.
 """
 from __future__ import annotations
@@ -48,15 +48,19 @@ def cases() -> dict[str, list[str]]:
 
 
 def environment() -> str:
-    """The key of this environment's hashes."""
-    cpu = platform.processor() or platform.machine()
+    """The key of this environment's hashes: versions, CPU model, its vector instruction sets
+    (NumPy and Embree choose their code paths by them; a digest) and the core count."""
+    cpu, simd = platform.processor() or platform.machine(), ""
     try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), cpu)
+        info = pathlib.Path("/proc/cpuinfo").read_text().splitlines()
+        cpu = next((ln.split(":", 1)[1].strip() for ln in info if ln.startswith("model name")), cpu)
+        flags = next((ln.split(":", 1)[1].split() for ln in info if ln.startswith("flags")), [])
+        vector = sorted(f for f in flags if f.startswith(("sse", "avx", "fma", "f16c", "amx")))
+        simd = f", simd {hashlib.sha256(' '.join(vector).encode()).hexdigest()[:8]}"
     except OSError:
         pass
     return (f"python {sys.version_info[0]}.{sys.version_info[1]}, numpy {version('numpy')}, "
-            f"embreex {version('embreex')}, {cpu}, {os.cpu_count()} cores")
+            f"embreex {version('embreex')}, {cpu}{simd}, {os.cpu_count()} cores")
 
 
 def render_hash(args: list[str], workdir: pathlib.Path) -> str:
