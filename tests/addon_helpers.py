@@ -1,4 +1,4 @@
-"""Shared set-up of the add-on tests (real ``bpy`` 5.0.1, no mocks).
+"""Shared set-up of the add-on tests (the real ``bpy`` module, no mocks).
 
 Importing this module points ``BLENDER_USER_RESOURCES`` at a temporary folder
 (before ``bpy`` is imported, so nothing touches the user's Blender config),

@@ -1,4 +1,4 @@
-"""The bake (raybundle_addon.bake, the raybundle.bake operator, ``python -m raybundle_addon
+"""The bake (raybundle_addon.bake, the raybundle.bake operator, ``raybundle-blender
 --bake``) in the real ``bpy`` module: color attributes and lightmaps against closed forms,
 the user's geometry untouched, shared meshes, topology-changing modifiers, cancel, reports.
 

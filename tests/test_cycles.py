@@ -1,4 +1,4 @@
-"""Checks against Blender's Cycles through the real ``bpy`` module (bpy==5.0.1 from PyPI).
+"""Checks against Blender's Cycles through the real ``bpy`` module from PyPI.
 
 * The directional albedo of our Glossy GGX lobe equals what Cycles renders for a
   Glossy BSDF (GGX) plane under a uniform white world (radiance seen = albedo).

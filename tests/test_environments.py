@@ -13,6 +13,8 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 FIND = str(ROOT / "tools" / "find_python")
 THIS = f"{sys.version_info[0]}.{sys.version_info[1]}"
+#: what find_python prints for this Python, however it is reached: the base interpreter's real file
+BASE = os.path.realpath(getattr(sys, "_base_executable", sys.executable))
 
 
 def _stub(path: pathlib.Path, body: str) -> pathlib.Path:
@@ -29,7 +31,7 @@ def _env(tmp_path, path_dirs):
 
 def test_a_failing_stub_on_path_falls_back_to_the_pyenv_versions(tmp_path):
     """`python3.X` on PATH that fails (a pyenv shim with the version not selected) is skipped; the
-    newest $(pyenv root)/versions/X.* whose python3 runs is printed."""
+    newest $(pyenv root)/versions/X.* whose python3 runs is taken (printed as its real file)."""
     bin_dir = tmp_path / "bin"
     _stub(bin_dir / f"python{THIS}", 'echo "pyenv: python{THIS}: command not found" >&2; exit 127')
     versions = tmp_path / ".pyenv" / "versions"
@@ -38,7 +40,7 @@ def test_a_failing_stub_on_path_falls_back_to_the_pyenv_versions(tmp_path):
     good.parent.mkdir(parents=True)
     good.symlink_to(sys.executable)
     r = subprocess.run([FIND, THIS], capture_output=True, text=True, env=_env(tmp_path, [bin_dir]))
-    assert r.returncode == 0 and r.stdout.strip() == str(good), (r.stdout, r.stderr)
+    assert r.returncode == 0 and r.stdout.strip() == BASE, (r.stdout, r.stderr)
 
 
 def test_a_working_python_on_path_is_taken_and_a_missing_one_is_nothing(tmp_path):
@@ -46,7 +48,7 @@ def test_a_working_python_on_path_is_taken_and_a_missing_one_is_nothing(tmp_path
     bin_dir.mkdir()
     (bin_dir / f"python{THIS}").symlink_to(sys.executable)
     r = subprocess.run([FIND, THIS], capture_output=True, text=True, env=_env(tmp_path, [bin_dir]))
-    assert r.returncode == 0 and r.stdout.strip(), r.stderr
+    assert r.returncode == 0 and r.stdout.strip() == BASE, r.stderr
     r = subprocess.run([FIND, "3.99"], capture_output=True, text=True, env=_env(tmp_path, [bin_dir]))
     assert r.returncode == 1 and r.stdout == ""
 

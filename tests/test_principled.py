@@ -1,4 +1,4 @@
-"""Blender's Principled BSDF against Cycles through the real ``bpy`` module (bpy==5.0.1).
+"""Blender's Principled BSDF against Cycles through the real ``bpy`` module.
 
 A huge plane with a Principled BSDF under a uniform white world (strength 1), seen
 by an orthographic camera: every pixel's radiance is the directional albedo

@@ -8,9 +8,9 @@ from 5.1; found by ``tools/find_python``) holding only ``bpy``, the NumPy that B
 (1.26.4 up to 5.0; from 5.1 whatever ``bpy`` asks for, 2.x) and pytest, then
 ``tests/test_extension.py`` in it: the linux-x64 zip built, installed, enabled, the demo
 ``.blend`` exported and rendered beside Cycles, uninstalled. ``make test`` runs the two ends
-(5.3 in ``.venv``, 4.2 in ``.venv-oldest``); this runs the lines between. Prints a table and
-writes it to ``OUT/versions.md``; exit status 1 if any version failed. About a minute per
-version on 2 cores (the ``bpy`` wheels come from pip's cache after the first run).
+(5.3 in ``.venv``, 4.2 in ``.venv-oldest``); this runs every release line, the ends included.
+Prints a table and writes it to ``OUT/versions.md``; exit status 1 if any version failed. About
+35 s per version on 2 cores (the ``bpy`` wheels come from pip's cache after the first run).
 """
 from __future__ import annotations
 

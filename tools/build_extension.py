@@ -44,7 +44,7 @@ ADDON = ROOT / "raybundle_addon"
 CORE = ROOT / "core"
 
 # Third-party runtime wheels bundled in the zip, pinned (these two versions were tried
-# together with bpy 5.0.1, which ships its own libembree4 and libOpenEXR). numpy is
+# together with bpy 4.2.23 - 5.3.0, which ship their own libembree4 and libOpenEXR). numpy is
 # NOT bundled: Blender ships it. Adding a runtime dependency to core/pyproject.toml
 # means adding its pin here.
 PINS = {"embreex": "4.4.0.post1", "OpenEXR": "3.5.3"}

@@ -55,7 +55,7 @@ def environment() -> str:
         info = pathlib.Path("/proc/cpuinfo").read_text().splitlines()
         cpu = next((ln.split(":", 1)[1].strip() for ln in info if ln.startswith("model name")), cpu)
         flags = next((ln.split(":", 1)[1].split() for ln in info if ln.startswith("flags")), [])
-        vector = sorted(f for f in flags if f.startswith(("sse", "avx", "fma", "f16c", "amx")))
+        vector = sorted(f for f in flags if f.startswith(("sse", "ssse", "avx", "fma", "f16c", "amx")))
         simd = f", simd {hashlib.sha256(' '.join(vector).encode()).hexdigest()[:8]}"
     except OSError:
         pass
@@ -93,14 +93,14 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     env = environment()
     golden = json.loads(GOLDEN.read_text()) if GOLDEN.exists() else {}
+    if not a.record and env not in golden:
+        print(f"golden: no hashes for this environment ({env}); record them with `make golden`")
+        return 0
     got = run(a.only)
     if a.record:
         golden[env] = dict(sorted({**golden.get(env, {}), **got}.items()))
         GOLDEN.write_text(json.dumps(golden, indent=1, sort_keys=True) + "\n")
         print(f"golden: recorded {len(got)} hashes for {env} in {GOLDEN.relative_to(ROOT)}")
-        return 0
-    if env not in golden:
-        print(f"golden: no hashes for this environment ({env}); record them with `make golden`")
         return 0
     changed = {k: (golden[env].get(k), v) for k, v in got.items() if golden[env].get(k) != v}
     for k, (old, new) in changed.items():

@@ -38,7 +38,9 @@ def imports(name: str, path: pathlib.Path, known: set[str]) -> set[str]:
             mod = node.module or ""
             if node.level:
                 mod = ".".join(base[:len(base) - node.level + 1] + ([mod] if mod else []))
-            targets = [mod] + [f"{mod}.{a.name}" for a in node.names]
+            subs = [f"{mod}.{a.name}" for a in node.names]
+            # `from pkg import module` depends on the module, not on pkg/__init__
+            targets = [s for s in subs if s in known] or [mod]
         for t in targets:
             while t and t not in known:
                 t = t.rpartition(".")[0]
