@@ -42,7 +42,7 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "tools"))
-from cycles_reference import _bpy, cycles_settings, reset  # noqa: E402  (bpy set-up shared with the references)
+from cycles_reference import _bpy, cycles_settings, new_with_nodes, reset  # noqa: E402  (bpy set-up shared with the references)
 
 
 def ensure_addon():
@@ -65,9 +65,7 @@ def ensure_addon():
 # ------------------------------------------------------------------ materials
 def _new_material(name):
     bpy = _bpy()
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:
-        mat.use_nodes = True
+    mat = new_with_nodes(bpy.data.materials, name)
     nt = mat.node_tree
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
@@ -130,9 +128,7 @@ def principled_material(name, base, roughness=0.5, metallic=0.0):
 
 def world(color, strength, name="World"):
     bpy = _bpy()
-    w = bpy.data.worlds.new(name)
-    if w.node_tree is None:
-        w.use_nodes = True
+    w = new_with_nodes(bpy.data.worlds, name)
     bg = w.node_tree.nodes["Background"]
     bg.inputs["Color"].default_value = (*color, 1.0)
     bg.inputs["Strength"].default_value = strength

@@ -18,7 +18,7 @@ for p in (ROOT, os.path.join(ROOT, "demo_scenes"), os.path.join(ROOT, "tools")):
         sys.path.insert(0, p)
 
 import bpy  # noqa: E402
-from cycles_reference import cycles_settings, exr_output  # noqa: E402
+from cycles_reference import cycles_settings, exr_output, new_with_nodes  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
@@ -86,9 +86,7 @@ def node_material(name, kind="diffuse", color=(0.8, 0.8, 0.8), strength=1.0, rou
 
 def furnace_material(le, albedo):
     """Add(Emission white x ``le``, Diffuse ``albedo``): a closed room of it glows at Le / (1 - a)."""
-    mat = bpy.data.materials.new("furnace")
-    if mat.node_tree is None:
-        mat.use_nodes = True
+    mat = new_with_nodes(bpy.data.materials, "furnace")
     nt = mat.node_tree
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
@@ -140,9 +138,7 @@ def add_camera(location, rotation=(0, 0, 0), resolution=(32, 32), lens=50.0, ort
 
 
 def set_world(color, strength):
-    w = bpy.data.worlds.new("world")
-    if w.node_tree is None:
-        w.use_nodes = True
+    w = new_with_nodes(bpy.data.worlds, "world")
     bg = w.node_tree.nodes["Background"]
     bg.inputs["Color"].default_value = (*color, 1.0)
     bg.inputs["Strength"].default_value = strength

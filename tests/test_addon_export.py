@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from addon_helpers import (add_camera, add_light, add_object, addon, box, bpy, fresh,  # noqa: F401
                            node_material, set_world)
+from cycles_reference import new_with_nodes
 
 from raybundle.scene import SceneError
 
@@ -185,10 +186,7 @@ def shader_tree(mat):
 
 
 def new_mat(name):
-    m = bpy.data.materials.new(name)
-    if m.node_tree is None:
-        m.use_nodes = True
-    return m
+    return new_with_nodes(bpy.data.materials, name)
 
 
 def test_node_trees_flatten_to_lambert_ggx(fresh):

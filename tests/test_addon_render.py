@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from addon_helpers import (add_camera, add_light, add_object, addon, box, bpy, erode, fresh,  # noqa: F401
                            furnace_material, node_material, object_id_image, render_cycles, render_raybundle)
+from cycles_reference import new_with_nodes
 
 
 def last_run():
@@ -21,10 +22,7 @@ def last_run():
 
 
 def new_mat(name):
-    m = bpy.data.materials.new(name)
-    if m.node_tree is None:
-        m.use_nodes = True
-    return m
+    return new_with_nodes(bpy.data.materials, name)
 
 
 # ------------------------------------------------------------------- furnace

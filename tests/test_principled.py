@@ -32,9 +32,7 @@ def cycles_principled_albedo(tmp_path, base, metallic, roughness, cos_view, dist
                              specular_ior_level=0.5, specular_tint=(1, 1, 1), samples=1024, res=8):
     """(pixels (res*res, 3)) radiance of a Principled plane under a white world, seen at cos_view."""
     cr.reset()
-    mat = bpy.data.materials.new("principled")
-    if mat.node_tree is None:  # 4.2: use_nodes makes the tree
-        mat.use_nodes = True
+    mat = cr.new_with_nodes(bpy.data.materials, "principled")
     node = mat.node_tree.nodes["Principled BSDF"]
     node.distribution = distribution
     node.inputs["Base Color"].default_value = (*base, 1.0)
@@ -94,9 +92,7 @@ def test_plain_mix_is_off_by_more_than_2_percent(tmp_path, metallic, roughness, 
 
 def test_principled_defaults_are_what_the_mapping_assumes():
     cr.reset()
-    mat = bpy.data.materials.new("p")
-    if mat.node_tree is None:  # 4.2: use_nodes makes the tree
-        mat.use_nodes = True
+    mat = cr.new_with_nodes(bpy.data.materials, "p")
     node = mat.node_tree.nodes["Principled BSDF"]
     assert node.distribution == "MULTI_GGX"
     assert node.inputs["IOR"].default_value == pytest.approx(1.5)

@@ -27,6 +27,16 @@ def _bpy():
     return bpy
 
 
+def new_with_nodes(collection, name):
+    """A new material or world (``collection``: ``bpy.data.materials`` or ``.worlds``) with its
+    node tree: Blender 5 makes the tree itself (``use_nodes`` is deprecated there), 4.2 makes it
+    on ``use_nodes = True``."""
+    block = collection.new(name)
+    if block.node_tree is None:
+        block.use_nodes = True
+    return block
+
+
 def reset():
     """An empty scene (factory settings, no world, no objects)."""
     bpy = _bpy()
@@ -37,9 +47,7 @@ def reset():
 def make_material(name, diffuse, glossy, roughness, glossy_weight, emission):
     """A node material: Add(Mix(Diffuse, Glossy GGX, fac), Emission * (1 - backfacing))."""
     bpy = _bpy()
-    mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:  # 4.2: use_nodes makes the tree
-        mat.use_nodes = True
+    mat = new_with_nodes(bpy.data.materials, name)
     nt = mat.node_tree
     nt.nodes.clear()
     out = nt.nodes.new("ShaderNodeOutputMaterial")
@@ -132,9 +140,7 @@ def cycles_settings(samples, seed=0, world_strength=0.0):
     sc.view_settings.look = "None"
     sc.view_settings.exposure = 0.0
     if world_strength is not None:
-        world = bpy.data.worlds.new("world")
-        if world.node_tree is None:  # 4.2: use_nodes makes the tree
-            world.use_nodes = True
+        world = new_with_nodes(bpy.data.worlds, "world")
         bg = world.node_tree.nodes["Background"]
         bg.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
         bg.inputs["Strength"].default_value = float(world_strength)
