@@ -14,7 +14,8 @@ with the ``RAYBUNDLE`` engine through ``bpy.ops.render.render`` (the same code
 path as ``blender -b SCENE.blend -E RAYBUNDLE -o //out -f 1``, with Blender's
 render-time depsgraph: render modifier levels, render visibility) and writes
 the linear radiance as a 32-bit float EXR (plus an sRGB PNG preview beside it).
-Options not given come from the file's ``scene.raybundle`` settings.
+Options not given come from the file's ``scene.raybundle`` settings; those given are
+handed to the render directly (:func:`.engine.render_options`), the file is not changed.
 
 ``--bake`` runs the ``raybundle.bake`` job instead (:mod:`.bake`): a ``RayBundle``
 color attribute on every mesh and, with ``--lightmaps DIR``, a lightmap EXR per mesh
@@ -34,6 +35,7 @@ import signal
 import sys
 import threading
 import time
+from dataclasses import replace
 
 
 def build_parser():
@@ -120,22 +122,24 @@ def _main(argv, interrupted):
         return _fail(f"--scene {args.scene!r}: the file has scenes {[s.name for s in bpy.data.scenes]}")
     if bpy.context.window is not None and bpy.context.window.scene != scene:
         bpy.context.window.scene = scene
-    rb = scene.raybundle
+    from .props import run_options
+
+    try:
+        options = replace(run_options(scene), **{k: v for k, v in (("seed", args.seed), ("patches", args.patches))
+                                                  if v is not None})
+    except ValueError as e:
+        return _fail(str(e))
     if args.time is not None:
-        rb.time_limit, rb.iterations = args.time, 0
+        options = replace(options, seconds=args.time, iterations=None)
     if args.iterations is not None:
-        rb.iterations = args.iterations
-    if args.seed is not None:
-        rb.seed = args.seed
-    if args.patches is not None:
-        rb.patches = args.patches
+        options = replace(options, seconds=None, iterations=args.iterations)
     if args.resolution_percentage is not None:
         scene.render.resolution_percentage = args.resolution_percentage
     if interrupted.is_set():
         print("stopped before the render: nothing written", file=sys.stderr)
         return 130
     if args.bake is not None:
-        return _bake(args, scene, interrupted)
+        return _bake(args, scene, options, interrupted)
     scene.render.engine = "RAYBUNDLE"
 
     bar = ProgressBar()
@@ -158,7 +162,8 @@ def _main(argv, interrupted):
     old = signal.signal(signal.SIGINT, on_interrupt)
     engine.observers.append(observe)
     try:
-        bpy.ops.render.render(write_still=False, scene=scene.name)
+        with engine.render_options(options):
+            bpy.ops.render.render(write_still=False, scene=scene.name)
     except RuntimeError as e:                   # the engine's ERROR report
         bar.close()
         msg = str(e).strip().splitlines()[-1].removeprefix("Error: ").removeprefix("Ray Bundle GI: ")
@@ -188,7 +193,7 @@ def _main(argv, interrupted):
     return 130 if cancelled else 0
 
 
-def _bake(args, scene, interrupted):
+def _bake(args, scene, options, interrupted):
     """The ``--bake`` path: :class:`.bake.BakeJob` with a progress bar, then save the copy."""
     import bpy
 
@@ -196,22 +201,18 @@ def _bake(args, scene, interrupted):
     from raybundle.pipeline import Cancelled
     from raybundle.scene import SceneError
 
-    from .bake import BakeJob
+    from .bake import BakeJob, BakeSettings
 
-    rb = scene.raybundle
-    rb.bake_color_attribute = True
+    bake = replace(BakeSettings.from_scene(scene), color_attribute=True, lightmaps=bool(args.lightmaps))
     if args.domain:
-        rb.bake_domain = args.domain.upper()
+        bake.domain = args.domain.upper()
     if args.subdivide:
-        rb.bake_subdivide, rb.bake_subdivide_levels = True, args.subdivide
+        bake.subdivide, bake.subdivide_levels = True, args.subdivide
     if args.lightmaps:
-        rb.bake_lightmaps = True
-        rb.bake_directory = os.path.abspath(args.lightmaps)
-    else:
-        rb.bake_lightmaps = False
+        bake.directory = os.path.abspath(args.lightmaps)
     if args.lightmap_size:
-        rb.lightmap_size = args.lightmap_size
-    job = BakeJob(bpy.context.evaluated_depsgraph_get())
+        bake.lightmap_size = args.lightmap_size
+    job = BakeJob(bpy.context.evaluated_depsgraph_get(), options, bake)
     bar = ProgressBar()
     if interrupted.is_set():
         job.stop.set()

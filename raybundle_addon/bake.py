@@ -45,14 +45,13 @@ import os
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
 
-from .engine import JobSettings
 from .export import corner_vertices, export_scene
-from .props import LAST_BAKE
+from .props import LAST_BAKE, from_properties, run_options
 
 ATTRIBUTE = "RayBundle"
 COPY_SUFFIX = ".RayBundle"
@@ -77,13 +76,9 @@ class BakeSettings:
 
     @classmethod
     def from_scene(cls, scene):
+        """The bake settings of ``scene.raybundle``, by field name (``bake_<field>`` or ``<field>``)."""
         rb = getattr(scene, "raybundle", None)
-        if rb is None:
-            return cls()
-        return cls(bool(rb.bake_color_attribute), str(rb.bake_domain), bool(rb.bake_lightmaps),
-                   int(rb.lightmap_size), int(rb.lightmap_margin), bool(rb.bake_camera), str(rb.bake_directory),
-                   int(rb.bake_light_samples), bool(rb.bake_single_user), int(rb.bake_gather_rays),
-                   bool(rb.bake_subdivide), int(rb.bake_subdivide_levels))
+        return cls() if rb is None else from_properties(cls, rb, prefix="bake_")
 
     def validate(self):
         if not (self.color_attribute or self.lightmaps or self.camera):
@@ -148,10 +143,12 @@ class BakeJob:
     """One bake of an evaluated depsgraph (module docstring).  ``lightmap_objects``:
     names of the objects to bake lightmaps for (None: every mesh object with a UV map)."""
 
-    def __init__(self, depsgraph, settings=None, bake=None, lightmap_objects=None, stop=None):
+    def __init__(self, depsgraph, options=None, bake=None, lightmap_objects=None, stop=None):
         self.depsgraph = depsgraph
         self.scene = depsgraph.scene
-        self.settings = settings or JobSettings.from_scene(self.scene)
+        #: :class:`raybundle.plan.RunOptions` (None: the scene's settings, read at the start); the plan
+        self.options = options
+        self.plan = None
         self.bake = bake or BakeSettings.from_scene(self.scene)
         self.lightmap_objects = None if lightmap_objects is None else set(lightmap_objects)
         self.stop = stop if stop is not None else threading.Event()
@@ -173,22 +170,14 @@ class BakeJob:
         (one-line reasons) for what cannot be baked, :class:`raybundle.pipeline.Cancelled`
         when ``stop`` is set during set-up (nothing is written)."""
         from raybundle import pipeline
-        from raybundle.imaging import RenderSettings
-        from raybundle.methods import SOLVERS, image_only
-        from raybundle.solvers import StochasticIterationSolver
+        from raybundle.plan import check, plan
 
         self.t_start = time.perf_counter()
-        s, b = self.settings, self.bake
-        s.validate()
+        b = self.bake
+        if self.options is None:
+            self.options = run_options(self.scene)
+        check(self.options, bake=True)
         b.validate()
-        if s.method == "auto":       # a bake needs a patch solution: auto's patch method is the iteration
-            s = replace(s, method=StochasticIterationSolver.name)
-            self.settings = s
-        if s.method not in SOLVERS:
-            raise ValueError(f"unknown method {s.method!r}: the core has {sorted(SOLVERS)}")
-        if image_only(s.method):
-            raise ValueError(f"{s.method} renders images only, it has no patch solution to bake; choose "
-                             "another method")
         self.export = export_scene(self.depsgraph, require_camera=b.camera)
         for w in self.export.warnings:
             self.warn(w)
@@ -199,14 +188,12 @@ class BakeJob:
             if not self.lightmap_targets and not b.color_attribute and not b.camera:
                 raise ValueError("nothing to bake: no selected mesh has a UV map for a lightmap")
         self.timings["export_seconds"] = time.perf_counter() - self.t_start
-        scene = pipeline.prepare(self.export.scene, patches=s.patches, stop=self.stop)
-        rs = RenderSettings(seed=s.seed, bundle_resolution=s.bundle_resolution,
-                            first_shot="auto" if s.first_shot else "none")
-        if b.camera:
-            self.renderer = pipeline.make_renderer(scene, rs, solver=s.method, stop=self.stop)
-            self.solver = self.renderer.solver
-        else:
-            self.solver = pipeline.make_solver(scene, rs, solver=s.method, stop=self.stop)
+        self.plan = plan(self.export.scene, self.options, bake=True)
+        if self.plan.notes:
+            self.warn(self.plan.describe())
+        _, runner = pipeline.build(self.export.scene, self.plan, image=b.camera, stop=self.stop)
+        self.renderer = runner if b.camera else None
+        self.solver = runner.solver if b.camera else runner
         self.timings["prepare_seconds"] = time.perf_counter() - self.t_start - self.timings["export_seconds"]
         self._t_iter = time.perf_counter()
         return self
@@ -298,7 +285,7 @@ class BakeJob:
         """Iterate for about ``budget`` seconds; False once done (limit reached or stopped)."""
         from raybundle.imaging import ProgressiveImage
 
-        s = self.settings
+        s = self.plan
         t_end = time.perf_counter() + budget
         while True:
             it = self.solver.stats.iterations
@@ -309,10 +296,10 @@ class BakeJob:
                 self.fraction = min(1.0, it / s.iterations)
                 done = it >= s.iterations
             else:
-                self.fraction = min(1.0, elapsed / s.time_limit)
-                done = elapsed >= s.time_limit and it >= ProgressiveImage.MIN_ITERATIONS
-                if elapsed >= s.time_limit and not done and not self.budget_note:
-                    self.budget_note = (f"budget {s.time_limit:g} s too short: set-up "
+                self.fraction = min(1.0, elapsed / max(s.seconds, 1e-9))
+                done = elapsed >= s.seconds and it >= ProgressiveImage.MIN_ITERATIONS
+                if elapsed >= s.seconds and not done and not self.budget_note:
+                    self.budget_note = (f"budget {s.seconds:g} s too short: set-up "
                                         f"{self._t_iter - self.t_start:.1f} s; {ProgressiveImage.MIN_ITERATIONS} "
                                         "iterations run all the same")
             if done or self.stop.is_set():
@@ -352,7 +339,7 @@ class BakeJob:
         t0 = time.perf_counter()
         cancelled = self.stop.is_set()
         solver, ex = self.solver, self.export
-        rng = np.random.default_rng([self.settings.seed, 21])
+        rng = np.random.default_rng([self.plan.settings.seed, 21])
         n = self.bake.light_samples
         attributes, lightmaps, camera_path = [], {}, None
         try:

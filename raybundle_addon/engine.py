@@ -22,6 +22,7 @@ reports; export warnings become ``WARNING`` reports.
 """
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 import traceback
@@ -31,7 +32,7 @@ import bpy
 import numpy as np
 
 from .export import export_scene
-from .props import LAST_RUN
+from .props import LAST_RUN, run_options
 
 #: callables ``fn(job, event)`` told about every job: events "export" (after export),
 #: "image" (after each displayed image) and "done".  The command line uses it for its
@@ -39,39 +40,28 @@ from .props import LAST_RUN
 observers: list = []
 #: jobs running now (``cancel_all`` sets their stop flags)
 active_jobs: set = set()
+#: :class:`raybundle.plan.RunOptions` for the renders started while it is set, instead of the
+#: scene's settings: how the headless command line hands its options to a render that
+#: ``bpy.ops.render.render`` starts (:func:`render_options`)
+_options_override = None
+
+
+@contextlib.contextmanager
+def render_options(options):
+    """Renders started inside the ``with`` block run ``options`` (a
+    :class:`raybundle.plan.RunOptions`), not the scene's settings; the ``.blend`` is not changed."""
+    global _options_override
+    _options_override = options
+    try:
+        yield
+    finally:
+        _options_override = None
 
 
 def cancel_all():
     """Ask every running job to stop after its current iteration (keeps the image so far)."""
     for job in list(active_jobs):
         job.stop.set()
-
-
-@dataclass
-class JobSettings:
-    """Plain copy of ``scene.raybundle`` (see :mod:`.props`)."""
-
-    time_limit: float = 30.0
-    iterations: int = 0
-    seed: int = 0
-    patches: int = 4000
-    bundle_resolution: int = 0
-    first_shot: bool = True
-    method: str = "stochastic-iteration"
-
-    @classmethod
-    def from_scene(cls, scene):
-        rb = getattr(scene, "raybundle", None)
-        if rb is None:
-            return cls()
-        return cls(float(rb.time_limit), int(rb.iterations), int(rb.seed), int(rb.patches),
-                   int(rb.bundle_resolution), bool(rb.first_shot), str(rb.method))
-
-    def validate(self):
-        if self.iterations < 0 or self.time_limit < 0 or not np.isfinite(self.time_limit):
-            raise ValueError("the time limit and the iteration count must be non-negative")
-        if self.iterations == 0 and self.time_limit == 0:
-            raise ValueError("set a time limit (seconds) or an iteration count: both are 0")
 
 
 @dataclass
@@ -87,15 +77,18 @@ class RenderOutcome:
 class RenderJob:
     """One progressive render of an evaluated depsgraph (see the module docstring).
 
+    ``options``: :class:`raybundle.plan.RunOptions` (default: the scene's settings).
     Callbacks (all optional): ``display(image (H, W, 3) f32 top-down, final)``,
     ``progress(fraction)``, ``stats(text)``; ``user_break()`` is polled between
     iterations and sets ``stop`` when true.
     """
 
-    def __init__(self, depsgraph, settings=None, stop=None, display=None, progress=None, stats=None,
+    def __init__(self, depsgraph, options=None, stop=None, display=None, progress=None, stats=None,
                  user_break=None, camera_object=None, preview_interval=0.3):
         self.depsgraph = depsgraph
-        self.settings = settings or JobSettings.from_scene(depsgraph.scene)
+        #: :class:`raybundle.plan.RunOptions`: given, handed over (:func:`render_options`), or (None)
+        #: the scene's, read when the job runs
+        self.options = options or _options_override
         self.stop = stop if stop is not None else threading.Event()
         self.display, self.progress, self.stats_cb = display, progress, stats
         self.choice = None           # auto's Choice, when the method is auto
@@ -164,14 +157,12 @@ class RenderJob:
         SceneError/ValueError for scenes and settings that cannot be rendered, and
         :class:`raybundle.pipeline.Cancelled` when stopped during set-up (no image yet)."""
         from raybundle import pipeline
-        from raybundle.imaging import RenderSettings
-        from raybundle.methods import SOLVERS, image_only
+        from raybundle.plan import check, plan
 
         self.t_start = time.perf_counter()
-        s = self.settings
-        s.validate()
-        if s.method not in SOLVERS and s.method != "auto":
-            raise ValueError(f"unknown method {s.method!r}: the core has {sorted(SOLVERS)} and auto")
+        if self.options is None:
+            self.options = run_options(self.depsgraph.scene)
+        check(self.options)
         active_jobs.add(self)
         try:
             if self.stats_cb is not None:
@@ -182,30 +173,17 @@ class RenderJob:
             if self.stats_cb is not None:
                 self.stats_cb(f"Ray Bundle GI | Preparing {self.export.counts['triangles']} triangles")
             stage = None if self.stats_cb is None else (lambda text: self.stats_cb(f"Ray Bundle GI | {text}"))
-            scene = self.export.scene
-            method, self.choice = s.method, None
-            if method == "auto":               # decided on the exported scene (raybundle.auto)
-                from raybundle.auto import choose
-
-                self.choice = choose(scene)
-                method = self.choice.method
-                if stage is not None:
-                    stage(f"Auto: {method}")
-            if not image_only(method):         # a path tracer needs no patches
-                scene = pipeline.prepare(scene, patches=s.patches, stage=stage, stop=self._stopped)
-                if scene is not self.export.scene:
-                    self.export.scene.release_caches()      # the prepared copy renders
-            settings = RenderSettings(seed=s.seed, bundle_resolution=s.bundle_resolution,
-                                      first_shot="auto" if s.first_shot else "none")
-            if self.choice is not None and self.choice.sequence:
-                settings.sequence = self.choice.sequence
-            self.renderer = pipeline.make_renderer(scene, settings, solver=method, stage=stage,
+            p = plan(self.export.scene, self.options)
+            self.choice = p.choice
+            scene = pipeline.lay_out(self.export.scene, p, stage=stage, stop=self._stopped)
+            if scene is not self.export.scene:
+                self.export.scene.release_caches()          # the prepared copy renders
+            self.renderer = pipeline.make_renderer(scene, p.settings, solver=p.method, stage=stage,
                                                    stop=self._stopped)
             t_prepared = time.perf_counter() - self.t_start
             try:
-                result = self.renderer.run(iterations=s.iterations or None,
-                                           seconds=None if s.iterations else s.time_limit,
-                                           progress=self._on_progress, stop=self._poll, started=self.t_start)
+                result = self.renderer.run(iterations=p.iterations, seconds=p.seconds, progress=self._on_progress,
+                                           stop=self._poll, started=self.t_start)
             finally:
                 self.renderer.tracer.close()
             self._show(result.image, final=True)

@@ -8,6 +8,8 @@ need not be saved.
 """
 from __future__ import annotations
 
+from dataclasses import fields
+
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
@@ -25,6 +27,36 @@ def _solver_items():
             for name, cls in SOLVERS.items()] + [
         ("auto", "Auto", "Chosen from what the scene holds (raybundle.auto): the bundle iteration unless glossy "
          "lobes carry most of the reflection, then path tracing; bakes take the bundle iteration")]
+
+
+def run_options(scene):
+    """``scene.raybundle`` as the core's :class:`raybundle.plan.RunOptions`, field by field
+    name; Iterations 0 means the Time Limit rules (both 0 is an error)."""
+    from raybundle.plan import RunOptions
+
+    rb = getattr(scene, "raybundle", None)
+    if rb is None:
+        return RunOptions()
+    names = {f.name for f in fields(RunOptions)} & set(rb.bl_rna.properties.keys())
+    values = {name: getattr(rb, name) for name in names}
+    if not values["iterations"]:
+        if rb.time_limit == 0:
+            raise ValueError("set a time limit (seconds) or an iteration count: both are 0")
+        values.update(iterations=None, seconds=float(rb.time_limit))
+    return RunOptions(**values)
+
+
+def from_properties(cls, rb, prefix=""):
+    """A dataclass ``cls`` filled from the property group ``rb`` by field name: field ``x``
+    from ``prefix + x`` or ``x``; fields without a property keep their defaults."""
+    props = set(rb.bl_rna.properties.keys())
+    values = {}
+    for f in fields(cls):
+        for name in (prefix + f.name, f.name):
+            if name in props:
+                values[f.name] = getattr(rb, name)
+                break
+    return cls(**values)
 
 
 def _stat(key, default):

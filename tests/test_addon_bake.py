@@ -269,6 +269,8 @@ def test_headless_bake_writes_a_baked_copy_of_the_file_and_lightmaps(fresh, tmp_
     assert rgba[:, :3].max() > 0 and len(bpy.data.objects["plane.RayBundle"].data.polygons) > 32
     assert "plane.lightmap" in bpy.data.images
     assert "baked" in r.stderr
+    rb = bpy.context.scene.raybundle          # the options went to the bake, not into the file
+    assert (rb.iterations, rb.bake_lightmaps, rb.bake_subdivide, rb.lightmap_size) == (0, False, False, 1024)
 
 
 def textured_plane():

@@ -175,7 +175,8 @@ def small_lit_scene():
 def test_cancel_through_the_stop_flag_keeps_a_valid_partial_image(fresh):
     """The stop Event the engine sets on Esc (test_break) ends the render after the current
     iteration; the image so far is returned complete and finite."""
-    from raybundle_addon.engine import JobSettings, RenderJob
+    from raybundle.plan import RunOptions
+    from raybundle_addon.engine import RenderJob
 
     small_lit_scene()
     stop = threading.Event()
@@ -186,7 +187,7 @@ def test_cancel_through_the_stop_flag_keeps_a_valid_partial_image(fresh):
         if len(shown) == 2:
             stop.set()                                  # what Esc does, through the same flag
 
-    job = RenderJob(bpy.context.evaluated_depsgraph_get(), JobSettings(time_limit=60.0, patches=500), stop=stop,
+    job = RenderJob(bpy.context.evaluated_depsgraph_get(), RunOptions(seconds=60.0, patches=500), stop=stop,
                     display=display, preview_interval=0.05)
     out = job.run()
     assert out.cancelled and out.stats["iterations"] < 10_000 and out.stats["seconds"] < 30
@@ -217,8 +218,9 @@ def test_esc_during_set_up_stops_before_the_iteration_without_an_image(fresh):
     pipeline.Cancelled, no image is shown; through bpy.ops.render.render the engine records
     it as stopped, not as an error."""
     from raybundle.pipeline import Cancelled
+    from raybundle.plan import RunOptions
     from raybundle_addon import engine
-    from raybundle_addon.engine import JobSettings, RenderJob
+    from raybundle_addon.engine import RenderJob
 
     small_lit_scene()
     steps, shown = [], []
@@ -226,7 +228,7 @@ def test_esc_during_set_up_stops_before_the_iteration_without_an_image(fresh):
     def stats(text):
         steps.append(text)
 
-    job = RenderJob(bpy.context.evaluated_depsgraph_get(), JobSettings(time_limit=60.0, patches=500), stats=stats,
+    job = RenderJob(bpy.context.evaluated_depsgraph_get(), RunOptions(seconds=60.0, patches=500), stats=stats,
                     display=lambda image, final: shown.append(final),
                     user_break=lambda: any("building the ray tracer" in t for t in steps))
     with pytest.raises(Cancelled, match="before first shot"):
@@ -250,11 +252,12 @@ def test_image_only_methods_render_without_patches_and_refuse_to_bake(fresh, met
     """The method list holds the core's path tracer and light tracing: the engine renders with
     them (no patch layout step), the bake refuses them in one line (no patch solution)."""
     from raybundle_addon.bake import BakeJob
-    from raybundle_addon.engine import JobSettings, RenderJob
+    from raybundle.plan import RunOptions
+    from raybundle_addon.engine import RenderJob
 
     small_lit_scene()
     steps = []
-    out = RenderJob(bpy.context.evaluated_depsgraph_get(), JobSettings(iterations=6, time_limit=0.0, method=method),
+    out = RenderJob(bpy.context.evaluated_depsgraph_get(), RunOptions(iterations=6, method=method),
                     stats=steps.append).run()
     assert out.stats["solver"] == method and out.stats["iterations"] == 6
     assert out.image.shape == (24, 24, 3) and np.isfinite(out.image).all() and out.image.mean() > 0
@@ -267,11 +270,12 @@ def test_image_only_methods_render_without_patches_and_refuse_to_bake(fresh, met
 def test_point_collocation_renders_from_the_panel(fresh):
     """Point collocation (vertex unknowns) from the method list: it renders the diffuse room
     and reports its unknowns (its bake: ``test_addon_bake``)."""
-    from raybundle_addon.engine import JobSettings, RenderJob
+    from raybundle.plan import RunOptions
+    from raybundle_addon.engine import RenderJob
 
     small_lit_scene()
-    out = RenderJob(bpy.context.evaluated_depsgraph_get(), JobSettings(iterations=8, time_limit=0.0, patches=300,
-                                                                       method="point-collocation")).run()
+    out = RenderJob(bpy.context.evaluated_depsgraph_get(), RunOptions(iterations=8, patches=300,
+                                                                      method="point-collocation")).run()
     assert out.stats["solver"] == "point-collocation" and out.stats["vertices"] > 0
     assert out.image.shape == (24, 24, 3) and np.isfinite(out.image).all() and out.image.mean() > 0
 
@@ -281,18 +285,19 @@ def test_auto_method_renders_with_its_choice_and_bakes_with_the_iteration(fresh)
     bundle iteration, shows the choice as a set-up step and keeps it in the run's stats; a bake
     set to Auto takes the bundle iteration (it needs a patch solution)."""
     from raybundle_addon.bake import BakeJob
-    from raybundle_addon.engine import JobSettings, RenderJob
+    from raybundle.plan import RunOptions
+    from raybundle_addon.engine import RenderJob
 
     small_lit_scene()
     steps = []
-    out = RenderJob(bpy.context.evaluated_depsgraph_get(), JobSettings(iterations=4, time_limit=0.0, method="auto"),
+    out = RenderJob(bpy.context.evaluated_depsgraph_get(), RunOptions(iterations=4, method="auto"),
                     stats=steps.append).run()
     assert out.stats["solver"] == "stochastic-iteration" == out.stats["auto"]["method"]
-    assert "Lambertian" in out.stats["auto"]["reason"] and any("Auto: stochastic-iteration" in t for t in steps)
+    assert "Lambertian" in out.stats["auto"]["reason"] and any("auto: stochastic-iteration" in t for t in steps)
     assert np.isfinite(out.image).all() and out.image.mean() > 0
     bpy.context.scene.raybundle.method = "auto"
     job = BakeJob(bpy.context.evaluated_depsgraph_get()).start()
-    assert job.settings.method == "stochastic-iteration" and job.step(0.1) is True
+    assert job.plan.method == "stochastic-iteration" and job.step(0.1) is True
     job.stop.set()
     job.finish()
 

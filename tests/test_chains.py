@@ -13,9 +13,9 @@ from raybundle.imaging import RenderSettings
 SETTINGS = dict(resolve_samples=4)
 
 
-def run_chain(scene, seed, iterations):
+def run_chain(scene, seed, iterations, method="stochastic-iteration"):
     """One chain as a worker runs it: renderer steps until ``iterations``."""
-    r = pipeline.make_renderer(scene, RenderSettings(seed=seed, **SETTINGS))
+    r = pipeline.make_renderer(scene, RenderSettings(seed=seed, **SETTINGS), solver=method)
     while r.solver.stats.iterations < iterations:
         r.step()
     return r
@@ -88,18 +88,22 @@ def cluster():
             yield lc, client
 
 
-def test_chains_on_two_workers_equal_the_same_seeds_run_one_by_one(cluster):
+@pytest.mark.parametrize("method", ["stochastic-iteration", "radiosity"])
+def test_chains_on_two_workers_equal_the_same_seeds_run_one_by_one(cluster, method):
+    """The chains run the plan's method (before the one set-up path they ran the bundle
+    iteration whatever --method said)."""
     from raybundle.distributed import render_chains
+    from raybundle.plan import Plan
 
     _, client = cluster
     sc = pipeline.prepare(scenes.cornell(resolution=(24, 24)), patches=200)
     settings = RenderSettings(seed=5, **SETTINGS)
     lines = []
-    image, merged, its = render_chains(sc, settings, iterations=24, client=client, report_seconds=0.2,
-                                       progress=lines.append)
+    image, merged, its = render_chains(sc, Plan(method, 200, 24, None, settings), client=client,
+                                       report_seconds=0.2, progress=lines.append)
     assert its == [24, 24] and merged.chains == 2 and lines
-    local = chains.merge([chains.state(run_chain(sc, seed, 24)) for seed in (5, 6)])
-    expected = chains.apply(local, pipeline.make_renderer(sc, settings)).image()
+    local = chains.merge([chains.state(run_chain(sc, seed, 24, method)) for seed in (5, 6)])
+    expected = chains.apply(local, pipeline.make_renderer(sc, settings, solver=method)).image()
     assert np.allclose(image, expected, rtol=1e-6, atol=1e-9), np.abs(image - expected).max()
 
 
@@ -127,6 +131,7 @@ def test_a_lost_worker_costs_only_its_last_segment(cluster):
     runs to the end, and the pooled furnace image is right (image mean within 5 SE of the
     analytic radiance, SE from the pixel spread; each chain alone is unbiased)."""
     from raybundle.distributed import render_chains
+    from raybundle.plan import Plan
 
     lc, client = cluster
     sc = pipeline.prepare(scenes.furnace(resolution=(16, 16)), patches=200)
@@ -141,7 +146,8 @@ def test_a_lost_worker_costs_only_its_last_segment(cluster):
 
     killer = threading.Thread(target=kill)
     killer.start()
-    image, merged, its = render_chains(sc, RenderSettings(seed=2, **SETTINGS), seconds=12.0, client=client,
+    image, merged, its = render_chains(sc, Plan("stochastic-iteration", 200, None, 12.0,
+                                                RenderSettings(seed=2, **SETTINGS)), client=client,
                                        report_seconds=0.5, grace_seconds=10.0)
     killer.join()
     assert merged.chains == 2 and all(i is not None and i > 0 for i in its), its

@@ -70,8 +70,9 @@ def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None
         if engine == "CYCLES":
             img = render_scene(load_scene(blend), samples, path, seed)
         else:
-            from raybundle.pipeline import DEFAULT_PATCHES, make_renderer, prepare
+            from raybundle.clusters import DEFAULT_PATCHES
             from raybundle.imaging import RenderSettings
+            from raybundle.pipeline import make_renderer, prepare
 
             r = make_renderer(prepare(load_scene(blend), patches or DEFAULT_PATCHES), RenderSettings(seed=seed))
             img = r.run(seconds=seconds).image

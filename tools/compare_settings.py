@@ -41,7 +41,8 @@ def main(argv=None):
     from raybundle.imaging import RenderSettings
     from raybundle.io import read_exr
     from raybundle.metrics import image_error, light_source_mask
-    from raybundle.pipeline import DEFAULT_PATCHES, make_renderer, prepare
+    from raybundle.clusters import DEFAULT_PATCHES
+    from raybundle.pipeline import make_renderer, prepare
     from raybundle.scenes import load_scene
 
     folder = a.reference or os.path.join("out", f"bench-{a.scene}")

@@ -21,7 +21,7 @@ the first shot takes, and the area that emits.  :func:`choose` turns those figur
   picked path tracing there).
 
 The first shot is always on (``auto``: it takes the small emitters and lights and changes
-nothing without them); the patch count stays at the default (:data:`~raybundle.pipeline.DEFAULT_PATCHES`, 4,000 sides), which measured best at
+nothing without them); the patch count stays at the default (:data:`~raybundle.clusters.DEFAULT_PATCHES`, 4,000 sides), which measured best at
 a fixed time on scenes from 42 to 4M triangles (finer layouts cost more per step than their
 smaller discretisation error gains, issue 8).
 """
@@ -33,7 +33,7 @@ import numpy as np
 
 from .lights import small_emitters
 from .materials import NEAR_MIRROR_ROUGHNESS
-from .pipeline import DEFAULT_PATCHES
+from .clusters import DEFAULT_PATCHES
 
 #: path tracing wins above this share of the reflected light carried by glossy lobes ...
 GLOSSY_SHARE_LIMIT = 0.5

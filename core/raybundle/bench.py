@@ -34,9 +34,9 @@ import numpy as np
 
 from .imaging import RenderSettings
 from .io import read_exr, write_exr, write_json
-from .methods import image_only
 from .metrics import image_error, light_source_mask
-from .pipeline import make_renderer, prepare
+from .pipeline import build, make_renderer, prepare
+from .plan import RunOptions, plan
 from .sampling import DEFAULT_SEQUENCE, uniform_sphere
 from .scenes import load_scene
 from .visibility import RayTracer, bundle_from_hits
@@ -49,7 +49,7 @@ METHODS = {"stochastic-iteration": ("stochastic-iteration", DEFAULT_SEQUENCE),
            "path-tracing": ("path-tracing", "prng"),
            "path-tracing-qmc": ("path-tracing", "halton"),
            "single-ray-iteration": ("single-ray-iteration", "prng"),
-           "auto": ("auto", DEFAULT_SEQUENCE)}
+           "auto": ("auto", None)}
 #: error levels whose first crossing ``summary.md`` reports
 LEVELS = (0.05, 0.02, 0.015, 0.01)
 #: seeds of the two reference halves; of the timed runs
@@ -132,16 +132,8 @@ def setup(name, method, resolution=None, seed=SEED):
     """Scene loaded, laid out (patch methods only) and its renderer built: (scene, renderer, seconds)."""
     t0 = time.perf_counter()
     solver, sequence = METHODS[method]
-    sc = load(name, resolution)
-    first_shot = "auto"
-    if solver == "auto":                       # decided on the scene, inside the timed set-up
-        from .auto import choose
-
-        choice = choose(sc)
-        solver, first_shot, sequence = choice.method, choice.first_shot, choice.sequence or sequence
-    if not image_only(solver):
-        sc = prepare(sc)
-    r = make_renderer(sc, RenderSettings(seed=seed, sequence=sequence, first_shot=first_shot), solver=solver)
+    sc = load(name, resolution)                # auto decides on the scene, inside the timed set-up
+    sc, r = build(sc, plan(sc, RunOptions(method=solver, sequence=sequence, seed=seed)))
     return sc, r, time.perf_counter() - t0
 
 

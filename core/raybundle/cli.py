@@ -18,8 +18,9 @@ import numpy as np
 
 from . import __version__
 from .bench import METHODS
-from .methods import SOLVERS, image_only
-from .pipeline import DEFAULT_PATCHES
+from .clusters import DEFAULT_PATCHES
+from .methods import SOLVERS
+from .plan import DEFAULT_SECONDS
 from .sampling import DEFAULT_SEQUENCE, SEQUENCES
 from .solvers import StochasticIterationSolver
 
@@ -74,15 +75,13 @@ def _write_outputs(args, scene, image, stats):
 
 
 def cmd_render(args):
-    from .imaging import RenderSettings
-    from .pipeline import Cancelled, prepare, render
+    from .pipeline import Cancelled, lay_out, run_plan
+    from .plan import RunOptions, check, plan
     from .scene import SceneError
     from .scenes import load_scene
 
     from .io import OutputError, check_output
 
-    if args.time is None and args.iterations is None:
-        args.time = 30.0
     t_start = time.perf_counter()
     try:                              # outputs are checked before the work, not lost after it
         check_output(args.out, "--out", suffix=".exr")
@@ -98,33 +97,22 @@ def cmd_render(args):
     stop = threading.Event()
     old = signal.signal(signal.SIGINT, lambda *_: stop.set())   # Ctrl-C: set-up stops, the iteration writes
     bar = ProgressBar()
+    chains = bool(args.workers or args.scheduler)
+    options = RunOptions(method=args.method, iterations=args.iterations, seconds=args.time, seed=args.seed,
+                         patches=args.patches, sequence=args.sequence, bundle_resolution=args.bundle_resolution,
+                         gather_rays=args.gather_rays, threads=args.threads)
     try:
+        check(options, chains=chains)
         scene = load_scene(args.scene)
         if args.resolution:
             if scene.camera is None:
                 raise SceneError("the scene has no camera")
             scene.camera = scene.camera.with_resolution(*args.resolution)
-        first_shot, choice = "auto", None
-        if args.method == "auto":
-            from .auto import choose
-
-            choice = choose(scene)
-            args.method, first_shot = choice.method, choice.first_shot
-            args.patches = choice.patches if args.patches is None else args.patches
-            if choice.sequence and args.sequence == DEFAULT_SEQUENCE:
-                args.sequence = choice.sequence
-            stage(f"auto: {choice.method}, {args.patches:,} patches: {choice.reason}")
-        args.patches = DEFAULT_PATCHES if args.patches is None else args.patches
-        if image_only(args.method) and (args.workers or args.scheduler):
-            raise ValueError(f"--workers and --scheduler merge patch solutions; {args.method} has none")
-        if not image_only(args.method):     # a path tracer needs no patches
-            scene = prepare(scene, patches=args.patches, stage=stage, stop=stop)
-        settings = RenderSettings(seed=args.seed, sequence=args.sequence, bundle_resolution=args.bundle_resolution,
-                                  threads=args.threads, first_shot=first_shot, gather_rays=args.gather_rays)
-        if args.workers or args.scheduler:
-            return _render_chains(args, scene, settings, stage, stop, t_start)
-        result = render(scene, settings, iterations=args.iterations, seconds=args.time, progress=bar, stop=stop,
-                        stage=stage, solver=args.method, started=t_start)
+        p = plan(scene, options, chains=chains)
+        if chains:
+            scene = lay_out(scene, p, stage=stage, stop=stop)
+            return _render_chains(args, scene, p, stage, stop, t_start)
+        scene, result = run_plan(scene, p, progress=bar, stop=stop, stage=stage, started=t_start)
     except (SceneError, ValueError) as e:
         print(f"raybundle: error: {e}", file=sys.stderr)
         return 2
@@ -134,7 +122,7 @@ def cmd_render(args):
     finally:
         signal.signal(signal.SIGINT, old)
         bar.close()
-    stats = _write_outputs(args, scene, result.image, dict(result.stats, auto=choice.as_dict()) if choice
+    stats = _write_outputs(args, scene, result.image, dict(result.stats, auto=p.choice.as_dict()) if p.choice
                            else result.stats)
     if "budget_note" in stats:
         print(f"raybundle: warning: {stats['budget_note']}: give --time more seconds", file=sys.stderr)
@@ -147,14 +135,13 @@ def cmd_render(args):
     return 130 if stop.is_set() else 0
 
 
-def _render_chains(args, scene, settings, stage, stop, started):
-    """``render --workers N`` / ``--scheduler ADDRESS``: independent chains on Dask, merged;
-    Ctrl-C (``stop``) merges what the chains have reported so far."""
+def _render_chains(args, scene, plan, stage, stop, started):
+    """``render --workers N`` / ``--scheduler ADDRESS``: independent chains on Dask of the
+    laid-out ``scene``, merged; Ctrl-C (``stop``) merges what the chains have reported so far."""
     from .distributed import render_chains
 
     try:
-        image, merged, its = render_chains(scene, settings, seconds=args.time, iterations=args.iterations,
-                                           scheduler=args.scheduler, workers=args.workers, progress=stage,
+        image, merged, its = render_chains(scene, plan, scheduler=args.scheduler, workers=args.workers, progress=stage,
                                            stop=stop, started=started)
     except (RuntimeError, ValueError, OSError) as e:
         print(f"raybundle: error: {e}", file=sys.stderr)
@@ -200,7 +187,8 @@ def build_parser():
     r.add_argument("scene", help="a built-in scene (cornell, cornell-glossy, furnace, furnace-glossy, small-light, "
                    "near-mirror, room-<seed>, glossy-room-<seed>) or FILE.npz")
     g = r.add_mutually_exclusive_group()
-    g.add_argument("--time", type=SECONDS, help="seconds to iterate (default 30)")
+    g.add_argument("--time", type=SECONDS, help=f"seconds of the whole run, from loading the scene to the image "
+                   f"written (default {DEFAULT_SECONDS:g})")
     g.add_argument("--iterations", type=COUNT, help="number of iterations (path-tracing: samples per pixel; "
                    "single-ray-iteration: steps of every chain; reproducible with --seed)")
     r.add_argument("--seed", type=COUNT, default=0)
@@ -214,8 +202,8 @@ def build_parser():
                         "scenes), path-tracing (the unbiased random walk, images only), single-ray-iteration (light "
                         "tracing as a stochastic iteration, images only) or auto (chosen from what the scene holds; "
                         "the choice and its reason are printed and written to --stats)")
-    r.add_argument("--sequence", default=DEFAULT_SEQUENCE, choices=sorted(SEQUENCES),
-                   help="random numbers of the global directions (ray bundles); halton and sobol bias the "
+    r.add_argument("--sequence", choices=sorted(SEQUENCES),
+                   help=f"(default {DEFAULT_SEQUENCE}, or auto's choice) random numbers of the global directions (ray bundles); halton and sobol bias the "
                         "iterations (thesis 1.2, a warning says so); path-tracing takes halton as randomised "
                         "quasi-Monte Carlo, prng or stratified as the PRNG; single-ray-iteration the PRNG only")
     r.add_argument("--bundle-resolution", type=_number(int, 0, 4096, "an integer in [0, 4096]"), default=0,

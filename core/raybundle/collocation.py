@@ -68,6 +68,8 @@ class PointCollocationSolver(StochasticIterationSolver):
     The first shot, the image and the set-up are the bundle iteration's."""
 
     name = "point-collocation"
+    #: its vertex averages are not in :class:`~raybundle.chains.ChainState`
+    merges_chains = False
 
     def __init__(self, scene, tracer, direct, sequence, **kwargs):
         kwargs["caustics"] = False

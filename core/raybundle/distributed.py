@@ -26,7 +26,7 @@ import uuid
 from . import chains
 
 
-def _run_chain(scene, settings_dict, seed, deadline, iterations, report_seconds, name):
+def _run_chain(scene, method, settings_dict, seed, deadline, iterations, report_seconds, name):
     """On a worker: one chain.  Every ``report_seconds`` its state goes to the Variable
     ``name`` and its iteration count to the scheduler's metadata ``[name, "iterations"]``
     (small, polled by the client for progress); returns the final state."""
@@ -39,7 +39,7 @@ def _run_chain(scene, settings_dict, seed, deadline, iterations, report_seconds,
     from .pipeline import make_renderer
 
     settings = RenderSettings(**dict(settings_dict, seed=seed))
-    renderer = make_renderer(scene, settings)
+    renderer = make_renderer(scene, settings, solver=method)
     var, client = Variable(name), get_client()
 
     def report():
@@ -60,11 +60,11 @@ def _run_chain(scene, settings_dict, seed, deadline, iterations, report_seconds,
         renderer.tracer.close()
 
 
-def render_chains(scene, settings, chains_count=None, seconds=None, iterations=None, scheduler=None,
-                  workers=None, report_seconds=2.0, grace_seconds=30.0, progress=None, client=None, stop=None,
-                  started=None):
-    """Render ``scene`` (prepared) as independent chains on Dask; returns
-    ``(image, merged ChainState, per-chain iteration counts)``.
+def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, report_seconds=2.0,
+                  grace_seconds=30.0, progress=None, client=None, stop=None, started=None):
+    """Render ``scene`` (laid out) as independent chains of ``plan``'s method on Dask (the plan
+    made with ``chains=True``: :func:`~raybundle.plan.plan`), for its iterations or seconds;
+    returns ``(image, merged ChainState, per-chain iteration counts)``.
 
     ``client``: a ``distributed.Client`` to use; else one for ``scheduler`` (an address)
     or for a new local cluster of ``workers`` processes (closed afterwards).  One chain per
@@ -72,14 +72,13 @@ def render_chains(scene, settings, chains_count=None, seconds=None, iterations=N
     poll: each chain's iterations (``-`` before its first report, ``lost`` once its worker
     is gone).  ``stop`` (an object with ``is_set()``, Ctrl-C) ends the wait: every chain's
     last report is merged (:class:`~raybundle.pipeline.Cancelled` if none has reported yet).
-    ``seconds`` is the budget from ``started`` (a ``time.perf_counter()`` reading, default
-    now): the cluster's start and the scene's scattering count."""
+    The plan's ``seconds`` are the budget from ``started`` (a ``time.perf_counter()`` reading,
+    default now): the cluster's start and the scene's scattering count."""
     try:
         from distributed import Client, LocalCluster, Variable, wait
     except ImportError as e:           # pragma: no cover - depends on the extra being installed
         raise RuntimeError("chains on Dask need the distributed extra: pip install raybundle[distributed]") from e
-    if (seconds is None) == (iterations is None):
-        raise ValueError("give seconds or iterations")
+    settings, seconds, iterations = plan.settings, plan.seconds, plan.iterations
     from dataclasses import asdict
 
     from .pipeline import make_renderer
@@ -103,7 +102,7 @@ def render_chains(scene, settings, chains_count=None, seconds=None, iterations=N
         spent = 0.0 if started is None else time.perf_counter() - started
         deadline = time.time() + max(seconds - spent, 0.0) if seconds is not None else None
         names = [f"raybundle-chain-{uuid.uuid4().hex}-{k}" for k in range(n)]
-        futures = [client.submit(_run_chain, scene_future, base, settings.seed + k, deadline, iterations,
+        futures = [client.submit(_run_chain, scene_future, plan.method, base, settings.seed + k, deadline, iterations,
                                  report_seconds, names[k], workers=[addresses[k % len(addresses)]],
                                  allow_other_workers=False, pure=False, key=f"chain-{names[k]}")
                    for k in range(n)]
@@ -141,7 +140,7 @@ def render_chains(scene, settings, chains_count=None, seconds=None, iterations=N
         if not states:
             raise RuntimeError("no chain reported any state (every worker was lost)")
         merged = chains.merge(states)
-        renderer = make_renderer(scene, settings)
+        renderer = make_renderer(scene, settings, solver=plan.method)
         try:
             chains.apply(merged, renderer)
             image = renderer.image()

@@ -1,6 +1,9 @@
-"""One call from a scene to an image: subdivide, build the tracer, first shot, solve, image.
+"""What a :class:`~raybundle.plan.Plan` says, built: the patch layout, the ray tracer, the first
+shot, the solver and the image accumulator.
 
-This is the entry point the CLI, the Blender add-on and the bench share.
+:func:`build` is what the CLI, the Blender add-on, the bench and the chains call after
+:func:`~raybundle.plan.plan`; :func:`run_plan` builds and runs in one call; :func:`render`
+renders a scene already laid out with settings as given.
 """
 from __future__ import annotations
 
@@ -9,7 +12,7 @@ import time
 import warnings
 from dataclasses import replace
 
-from .clusters import make_patches, triangle_patches
+from .clusters import DEFAULT_PATCHES, make_patches, triangle_patches
 from .imaging import Renderer, RenderSettings
 from .lights import DirectLighting, small_emitters
 from .methods import SOLVERS, image_only
@@ -17,10 +20,6 @@ from .sampling import NOT_CUD, make_sequence
 from .scene import subdivide
 from .solvers import StochasticIterationSolver
 from .visibility import RayTracer
-
-#: default patch count for scenes rendered without an explicit one
-DEFAULT_PATCHES = 4000
-
 
 class Cancelled(Exception):
     """Set-up was stopped (the caller's ``stop``) before the first iteration: there is no image yet."""
@@ -147,13 +146,47 @@ def _make_image_method(scene, settings, camera, name, stage, stop):
         raise
 
 
+def lay_out(scene, plan, stage=None, stop=None):
+    """``scene`` (loaded, not laid out) as ``plan`` (:func:`~raybundle.plan.plan`) runs it: its
+    patch layout (:func:`prepare`) for a patch method, itself for an image-only one.
+    ``stage(text)`` is told auto's choice and each set-up step; ``stop`` as in :func:`prepare`."""
+    line = plan.describe()
+    if line:
+        _step(stage, stop, line)
+    return scene if plan.image_only else prepare(scene, patches=plan.patches, stage=stage, stop=stop)
+
+
+def build(scene, plan, camera=None, image=True, stage=None, stop=None):
+    """``(prepared scene, runner)`` for ``scene`` (loaded, not laid out) and ``plan``: the
+    layout (:func:`lay_out`), then with ``image`` a renderer (:func:`make_renderer`), else
+    the solver alone (:func:`make_solver`, bakes).  ``stage`` and ``stop`` as in :func:`lay_out`."""
+    scene = lay_out(scene, plan, stage, stop)
+    if image:
+        return scene, make_renderer(scene, plan.settings, camera, solver=plan.method, stage=stage, stop=stop)
+    return scene, make_solver(scene, plan.settings, solver=plan.method, stage=stage, stop=stop)
+
+
+def run_plan(scene, plan, progress=None, stop=None, camera=None, stage=None, started=None):
+    """Build (:func:`build`) and run ``plan`` (:func:`~raybundle.plan.plan`) on ``scene``
+    (loaded, not laid out): ``(laid-out scene, :class:`~raybundle.imaging.RenderResult`)``.
+    ``stop`` set during set-up raises :class:`Cancelled`; during the iteration it ends the run
+    with the image so far.  The plan's ``seconds`` are the budget from ``started`` (default:
+    now), set-up included (:meth:`~raybundle.imaging.ProgressiveImage.run`)."""
+    started = time.perf_counter() if started is None else started
+    scene, renderer = build(scene, plan, camera, stage=stage, stop=stop)
+    try:
+        return scene, renderer.run(iterations=plan.iterations, seconds=plan.seconds, progress=progress, stop=stop,
+                                   started=started)
+    finally:
+        renderer.tracer.close()
+
+
 def render(scene, settings=None, iterations=None, seconds=None, progress=None, stop=None, camera=None, stage=None,
            solver=StochasticIterationSolver.name, started=None):
-    """Render a prepared scene with the method ``solver`` (a :data:`~raybundle.methods.SOLVERS`
-    name); returns :class:`~raybundle.imaging.RenderResult`.  ``stop`` set during set-up
-    raises :class:`Cancelled`; during the iteration it ends the run with the image so far.
-    ``seconds``: the budget from ``started`` (default: now), set-up included
-    (:meth:`~raybundle.imaging.ProgressiveImage.run`)."""
+    """Render a scene already laid out (:func:`prepare`) with the method ``solver`` and
+    ``settings`` as given (no plan: tests and studies of one setting); returns
+    :class:`~raybundle.imaging.RenderResult`.  ``stop``, ``seconds`` and ``started`` as in
+    :func:`run_plan`."""
     started = time.perf_counter() if started is None else started
     renderer = make_renderer(scene, settings, camera, solver=solver, stage=stage, stop=stop)
     try:

@@ -78,6 +78,8 @@ class StochasticIterationSolver:
     #: each step applies a random operator to the previous iterate (thesis 1.2: the random
     #: numbers must then be completely uniformly distributed)
     iterates = True
+    #: independent chains of it merge exactly (:mod:`raybundle.chains`)
+    merges_chains = True
     #: the fewest iterations left out of the running average (``burn_in``, set per scene)
     BURN_IN = 8
 
