@@ -41,7 +41,7 @@ def test_bakes_and_chains_take_a_patch_method_where_auto_picks_an_image_method(w
     (RunOptions(patches=-1), {}, "patch count"),
     (RunOptions(bundle_resolution=5000), {}, "bundle_resolution"),
     (RunOptions(method="path-tracing"), {"bake": True}, "renders images only"),
-    (RunOptions(method="single-ray-iteration"), {"chains": True}, "cannot run as merged chains"),
+    (RunOptions(method="single-ray-iteration"), {"chains": True}, "no patch solution to merge"),
     (RunOptions(method="point-collocation"), {"chains": True}, "cannot run as merged chains"),
 ])
 def test_what_cannot_run_is_one_line_before_the_scene_is_read(options, kw, message):

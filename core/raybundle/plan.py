@@ -106,7 +106,9 @@ def _check_method(method, bake, chains):
     if bake and image_only(method):
         raise ValueError(f"{method} renders images only, it has no patch solution to bake; choose another method")
     if chains and not getattr(SOLVERS[method], "merges_chains", False):
-        raise ValueError(f"{method} cannot run as merged chains; chains take "
+        why = "renders images only, it has no patch solution to merge" if image_only(method) else \
+            "cannot run as merged chains"
+        raise ValueError(f"{method} {why}; chains take "
                          f"{', '.join(n for n, c in SOLVERS.items() if getattr(c, 'merges_chains', False))}")
 
 
