@@ -50,6 +50,8 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from raybundle.run import RunLoop
+
 from .export import corner_vertices, export_scene
 from .props import LAST_BAKE, from_properties, run_options
 
@@ -156,9 +158,8 @@ class BakeJob:
         self.fraction = 0.0
         self.export = self.solver = self.renderer = None
         self.targets, self.lightmap_targets = [], []
-        self.t_start = self._t_iter = None
+        self.t_start = self.loop = None
         self.timings = {}
-        self.budget_note = None
 
     def warn(self, message):
         if message not in self.warnings:
@@ -195,7 +196,7 @@ class BakeJob:
         self.renderer = runner if b.camera else None
         self.solver = runner.solver if b.camera else runner
         self.timings["prepare_seconds"] = time.perf_counter() - self.t_start - self.timings["export_seconds"]
-        self._t_iter = time.perf_counter()
+        self.loop = RunLoop(runner, self.plan.iterations, self.plan.seconds, started=self.t_start, stop=self.stop)
         return self
 
     def _corners(self, info):
@@ -282,43 +283,18 @@ class BakeJob:
 
     # ------------------------------------------------------------------ step
     def step(self, budget=0.1):
-        """Iterate for about ``budget`` seconds; False once done (limit reached or stopped)."""
-        from raybundle.imaging import ProgressiveImage
-
-        s = self.plan
-        t_end = time.perf_counter() + budget
-        while True:
-            it = self.solver.stats.iterations
-            # the time limit is the whole job's, from its start (export and set-up included),
-            # with at least MIN_ITERATIONS however short it is
-            elapsed = time.perf_counter() - self.t_start
-            if s.iterations:
-                self.fraction = min(1.0, it / s.iterations)
-                done = it >= s.iterations
-            else:
-                self.fraction = min(1.0, elapsed / max(s.seconds, 1e-9))
-                done = elapsed >= s.seconds and it >= ProgressiveImage.MIN_ITERATIONS
-                if elapsed >= s.seconds and not done and not self.budget_note:
-                    self.budget_note = (f"budget {s.seconds:g} s too short: set-up "
-                                        f"{self._t_iter - self.t_start:.1f} s; {ProgressiveImage.MIN_ITERATIONS} "
-                                        "iterations run all the same")
-            if done or self.stop.is_set():
-                return False
-            if time.perf_counter() >= t_end:
-                return True
-            if self.renderer is not None:
-                self.renderer.step()
-            else:
-                self.solver.step()
+        """Iterate for about ``budget`` seconds (the run loop, :class:`raybundle.run.RunLoop`,
+        owns the whole job's budget from its start, export and set-up included); False once
+        done (limit reached or stopped)."""
+        more = self.loop.advance(max_seconds=budget)
+        self.fraction = self.loop.fraction
+        return more
 
     def run(self):
         """start, step to the end, finish: the headless bake.  Returns :class:`BakeOutcome`."""
         self.start()
-        try:
-            while self.step(1.0):
-                pass
-        except KeyboardInterrupt:
-            self.stop.set()
+        while self.step(1.0):
+            pass
         return self.finish()
 
     # ---------------------------------------------------------------- finish
@@ -337,7 +313,7 @@ class BakeJob:
         from raybundle.baking import baked_radiance, locate_points
 
         t0 = time.perf_counter()
-        cancelled = self.stop.is_set()
+        cancelled = self.stop.is_set() or self.loop.cancelled
         solver, ex = self.solver, self.export
         rng = np.random.default_rng([self.plan.settings.seed, 21])
         n = self.bake.light_samples
@@ -374,11 +350,12 @@ class BakeJob:
             solver.tracer.close()
         t_done = time.perf_counter()
         st = solver.stats
-        if self.budget_note:
-            self.warn(self.budget_note)
+        note = self.loop.budget_note(t_done - self.t_start)
+        if note:
+            self.warn(note)
         stats = {"iterations": st.iterations, "directions": st.directions, "patches": int(solver.scene.n_patches),
                  "triangles": int(len(solver.scene.triangles)), "rays_traced": int(st.rays),
-                 "solve_seconds": round(t0 - self._t_iter, 4),
+                 "solve_seconds": round(t0 - self.loop.t0, 4),
                  "bake_seconds": round(t_done - t0, 4), "total_seconds": round(t_done - self.t_start, 4),
                  "attributes": len(attributes), "lightmaps": len(lightmaps), "cancelled": cancelled,
                  **{k: round(v, 4) for k, v in self.timings.items()}}

@@ -126,10 +126,8 @@ class RenderJob:
             self.stop.set()
         return self.stop.is_set()
 
-    def _poll(self):
-        """Between iterations: Esc, previews.  Returns True to stop."""
-        if self._stopped():
-            return True
+    def _preview(self):
+        """Between iterations: a preview image when the last is old enough."""
         now = time.perf_counter()
         if self.images == 0 or now - self._last_push >= self._interval:
             img = self.renderer.image(preview=True)
@@ -137,7 +135,6 @@ class RenderJob:
             done = time.perf_counter()
             self._interval = max(self.preview_interval, 4.0 * (done - now))   # previews <= ~20% of the time
             self._last_push = done
-        return self.stop.is_set()
 
     def _on_progress(self, fraction, info):
         self.fraction = fraction
@@ -183,7 +180,8 @@ class RenderJob:
             t_prepared = time.perf_counter() - self.t_start
             try:
                 result = self.renderer.run(iterations=p.iterations, seconds=p.seconds, progress=self._on_progress,
-                                           stop=self._poll, started=self.t_start)
+                                           stop=self._stopped, between=self._preview, started=self.t_start,
+                                           stage=stage)
             finally:
                 self.renderer.tracer.close()
             self._show(result.image, final=True)

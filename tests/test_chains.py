@@ -107,6 +107,22 @@ def test_chains_on_two_workers_equal_the_same_seeds_run_one_by_one(cluster, meth
     assert np.allclose(image, expected, rtol=1e-6, atol=1e-9), np.abs(image - expected).max()
 
 
+def test_timed_chains_get_the_final_gather_of_a_single_run(cluster):
+    """A timed run of chains leaves the client's resolve the final image's share, as a single
+    run's loop does: the automatic final gather runs next to the box's concave edges (before
+    the run loop, chains resolved without it)."""
+    from raybundle.distributed import render_chains
+    from raybundle.plan import Plan
+
+    _, client = cluster
+    sc = pipeline.prepare(scenes.cornell(resolution=(24, 24)), patches=200)
+    started = time.perf_counter()
+    image, merged, its = render_chains(sc, Plan("stochastic-iteration", 200, None, 6.0, RenderSettings(seed=3)),
+                                       client=client, report_seconds=0.5, started=started)
+    assert merged.stats["gather_rays_per_pixel"] >= 256 and all(i >= 8 for i in its)
+    assert time.perf_counter() - started < 6.0 + 3.0           # the budget, give or take a poll
+
+
 def test_cli_workers_writes_the_merged_image(tmp_path):
     import json
     import subprocess

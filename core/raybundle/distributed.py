@@ -27,9 +27,11 @@ from . import chains
 
 
 def _run_chain(scene, method, settings_dict, seed, deadline, iterations, report_seconds, name):
-    """On a worker: one chain.  Every ``report_seconds`` its state goes to the Variable
-    ``name`` and its iteration count to the scheduler's metadata ``[name, "iterations"]``
-    (small, polled by the client for progress); returns the final state."""
+    """On a worker: one chain, iterated by the run loop (:class:`~raybundle.run.RunLoop`) for
+    ``iterations`` or until ``deadline`` (a ``time.time()``).  Every ``report_seconds`` its
+    state goes to the Variable ``name`` and its iteration count to the scheduler's metadata
+    ``[name, "iterations"]`` (small, polled by the client for progress); returns the final
+    state."""
     try:
         from distributed import Variable, get_client
     except ImportError as e:           # pragma: no cover - only ever called on a Dask worker
@@ -37,6 +39,7 @@ def _run_chain(scene, method, settings_dict, seed, deadline, iterations, report_
 
     from .imaging import RenderSettings
     from .pipeline import make_renderer
+    from .run import RunLoop
 
     settings = RenderSettings(**dict(settings_dict, seed=seed))
     renderer = make_renderer(scene, settings, solver=method)
@@ -47,13 +50,9 @@ def _run_chain(scene, method, settings_dict, seed, deadline, iterations, report_
         client.set_metadata([name, "iterations"], int(renderer.solver.stats.iterations))
 
     try:
-        last = time.time()
-        while not (renderer.solver.stats.iterations >= iterations if iterations is not None
-                   else time.time() >= deadline):
-            renderer.step()
-            if time.time() - last >= report_seconds:
-                report()
-                last = time.time()
+        loop = RunLoop(renderer, iterations, None if iterations is not None else max(deadline - time.time(), 0.0))
+        while loop.advance(max_seconds=report_seconds):
+            report()
         report()
         return chains.state(renderer)
     finally:
@@ -82,9 +81,10 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
     from dataclasses import asdict
 
     from .pipeline import make_renderer
+    from .run import iteration_seconds
 
     own = client is None
-    cluster = None
+    cluster = renderer = None
     if own:
         if scheduler:
             client = Client(scheduler)
@@ -99,8 +99,13 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
             raise ValueError("no workers to run chains on")
         scene_future = client.scatter(scene, broadcast=True)
         base = asdict(settings)
-        spent = 0.0 if started is None else time.perf_counter() - started
-        deadline = time.time() + max(seconds - spent, 0.0) if seconds is not None else None
+        renderer = make_renderer(scene, settings, solver=plan.method)     # the client's: merges, resolves
+        # the chains iterate until the deadline; the client's resolve then has the final image's
+        # share, as a single run has (run.RunLoop)
+        share = renderer.final_share()
+        loop_seconds = None if seconds is None else iteration_seconds(
+            seconds, time.perf_counter() if started is None else started, share)
+        deadline = None if seconds is None else time.time() + loop_seconds
         names = [f"raybundle-chain-{uuid.uuid4().hex}-{k}" for k in range(n)]
         futures = [client.submit(_run_chain, scene_future, plan.method, base, settings.seed + k, deadline, iterations,
                                  report_seconds, names[k], workers=[addresses[k % len(addresses)]],
@@ -140,14 +145,14 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
         if not states:
             raise RuntimeError("no chain reported any state (every worker was lost)")
         merged = chains.merge(states)
-        renderer = make_renderer(scene, settings, solver=plan.method)
-        try:
-            chains.apply(merged, renderer)
-            image = renderer.image()
-        finally:
-            renderer.tracer.close()
+        chains.apply(merged, renderer)
+        image = renderer.resolve(None if seconds is None or (stop is not None and stop.is_set())
+                                 else share * loop_seconds)
+        merged.stats["gather_rays_per_pixel"] = renderer.gather_rays_used
         return image, merged, [None if s is None else s.stats["iterations"] for s in latest]
     finally:
+        if renderer is not None:
+            renderer.tracer.close()
         if own:
             client.close()
             if cluster is not None:

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .gather import FinalGather, near_edge_tsides
+from .run import RunLoop
 from .sampling import DEFAULT_SEQUENCE, ShiftedKronecker, kronecker_alpha, stratified_2d
 
 
@@ -182,97 +183,57 @@ class RenderResult:
 
 
 class ProgressiveImage:
-    """The progressive loop shared by image methods (:class:`Renderer`,
-    :class:`~raybundle.pathtracing.PathTracer`): they provide ``solver.stats.iterations``,
-    ``passes``, ``image_pass()``, ``step()``, ``image()`` and ``stats(...)``."""
-
-    #: the fewest iterations of a run limited by time, however short its budget
-    MIN_ITERATIONS = 8
+    """A progressive image method (:class:`Renderer`, :class:`~raybundle.pathtracing.PathTracer`,
+    :class:`~raybundle.lighttracing.SingleRayIteration`) run by the one run loop
+    (:class:`~raybundle.run.RunLoop`): they provide ``solver.stats.iterations``, ``passes``,
+    ``image_pass()``, ``step()``, ``image()`` and ``stats(...)``."""
 
     def run(self, iterations=None, seconds=None, progress=None, stop=None, snapshots=(), on_snapshot=None,
-            started=None):
-        """Iterate until ``iterations`` or ``seconds`` is reached or ``stop()`` is true.
-
-        ``seconds`` is the budget of the whole run counted from ``started`` (a
-        ``time.perf_counter()`` reading: the start of the command or the job, so loading and
-        set-up count; default: now): the iterations stop when what is left equals the final
-        image's share (``gather_share``, :meth:`resolve`), but not before
-        :data:`MIN_ITERATIONS`; the stats then say the budget was too short
-        (``budget_note``), with the set-up's seconds (``setup_seconds``) and the run's
-        (``total_seconds``).
-
-        ``progress(fraction, info)`` is called after every iteration; ``stop`` is
-        a callable or an object with ``is_set()`` (threading.Event), checked
-        between iterations.  KeyboardInterrupt ends the run like a stop; the
-        image so far is returned either way (``cancelled`` says which).
-        ``on_snapshot(seconds, iterations, image)`` is called when the run's clock
-        passes each of ``snapshots`` (seconds): ``seconds`` includes forming that image
-        (what stopping there would have cost); the run's clock then leaves the snapshot out.
-        """
-        if iterations is None and seconds is None:
-            raise ValueError("give iterations or seconds")
-        if seconds is not None and not (np.isfinite(seconds) and seconds >= 0):
-            raise ValueError("seconds must be a finite, non-negative number")
-        if iterations is not None and int(iterations) < 0:
-            raise ValueError("iterations must be non-negative")
-        should_stop = (stop.is_set if hasattr(stop, "is_set") else stop) or (lambda: False)
-        solver = self.solver
-        t0 = time.perf_counter()
-        started = t0 if started is None else started
-        setup = t0 - started
-        loop_seconds = None
-        if seconds is not None:      # what is left after set-up, less the final image's share
-            loop_seconds = max(seconds - setup, 0.0) / (1.0 + self.resolve_share())
-        cancelled = short = False
-        pending = sorted(snapshots)
+            started=None, stage=None, between=None):
+        """Iterate (:class:`~raybundle.run.RunLoop`: ``iterations``, or ``seconds`` of the whole
+        run from ``started``, set-up included; ``progress``; ``stop``; ``between``) and form the final
+        image; returns :class:`RenderResult`, whose stats add the set-up's seconds
+        (``setup_seconds``), the run's (``total_seconds``) and, when the budget was too short
+        for the minimum of iterations, ``budget_note``.  ``stage(text)`` is told when the
+        final image is formed.  ``on_snapshot(seconds, iterations, image)`` is called when the
+        run's clock passes each of ``snapshots`` (seconds): ``seconds`` includes forming that
+        image (what stopping there would have cost); the run's clock then leaves it out."""
+        loop = RunLoop(self, iterations, seconds, started, final_share=self.final_share(), progress=progress,
+                       stop=stop, between=between)
+        pending = sorted(snapshots) if on_snapshot is not None else []
         try:
             if self.passes == 0:
                 self.image_pass()
-            while True:
-                elapsed = time.perf_counter() - t0
-                while pending and elapsed >= pending[0] and on_snapshot is not None:
-                    pending.pop(0)
-                    t_snap = time.perf_counter()
-                    img = self.resolve(elapsed if iterations is None else None)
-                    on_snapshot(elapsed + time.perf_counter() - t_snap, solver.stats.iterations, img)
-                    t0 += time.perf_counter() - t_snap
-                it = solver.stats.iterations
-                if iterations is not None and it >= iterations:
-                    break
-                if loop_seconds is not None and elapsed >= loop_seconds:
-                    if it >= self.MIN_ITERATIONS:
-                        break
-                    short = True
-                if should_stop():
-                    cancelled = True
-                    break
-                self.step()
-                if progress is not None:
-                    it = solver.stats.iterations
-                    frac = (it / iterations if iterations else
-                            (time.perf_counter() - t0) / max(loop_seconds, 1e-9))
-                    progress(min(frac, 1.0), {"iterations": it, "seconds": time.perf_counter() - t0})
         except KeyboardInterrupt:
-            cancelled = True
+            loop.cancelled = loop.finished = True
+        while loop.advance(until=pending[0] if pending else None):
+            pending.pop(0)
+            t_snap = time.perf_counter()
+            img = self.resolve(loop.final_seconds())
+            on_snapshot(loop.elapsed() + time.perf_counter() - t_snap, loop.iterations, img)
+            loop.pause(time.perf_counter() - t_snap)
+        if stage is not None:
+            stage("forming the final image")
         t_res = time.perf_counter()
-        img = self.resolve(t_res - t0 if iterations is None and not cancelled else None)   # a cancel ends now
+        img = self.resolve(loop.final_seconds())
         if not np.isfinite(img).all():
             raise FloatingPointError("the image has non-finite values; this is a bug, please report it")
         t_end = time.perf_counter()
-        stats = self.stats(t_end - t0, t_end - t_res, cancelled)
-        stats.update(setup_seconds=round(setup, 4), total_seconds=round(t_end - started, 4))
-        if short:
-            stats["budget_note"] = (f"budget {seconds:g} s too short: set-up {setup:.1f} s, total {t_end - started:.1f} s"
-                                    f" ({solver.stats.iterations} iterations)")
-        return RenderResult(img, stats, cancelled)
+        stats = self.stats(t_end - loop.t0, t_end - t_res, loop.cancelled)
+        stats.update(setup_seconds=round(loop.setup_seconds, 4), total_seconds=round(t_end - loop.started, 4))
+        note = loop.budget_note(t_end - loop.started)
+        if note:
+            stats["budget_note"] = note
+        return RenderResult(img, stats, loop.cancelled)
 
-    def resolve_share(self):
+    def final_share(self):
         """The final image's share of a time-limited run's iteration seconds (none here)."""
         return 0.0
 
-    def resolve(self, seconds=None):
-        """The image at the end of a run or at a snapshot, ``seconds`` into a run limited by
-        time (None in a run of given iterations)."""
+    def resolve(self, final_seconds=None):
+        """The image at the end of a run or at a snapshot; ``final_seconds``: what forming it
+        may take in a run limited by time (:meth:`~raybundle.run.RunLoop.final_seconds`), None
+        in a run of given iterations."""
         return self.image()
 
 
@@ -325,7 +286,6 @@ class Renderer(ProgressiveImage):
         self._gather_rng = np.random.default_rng([settings.seed, 3])
         self.gathered_points = 0
         self.gather_rays_used = 0                         # rays per pixel of the last resolve's gather
-        self._gather_seconds = None                       # the automatic gather's budget (resolve)
         # per pixel: some earlier shadow ray reached a light / was blocked (both: a penumbra)
         self._shadow_flags = np.zeros((n, 2), bool)
         # the caustic first shot on the surfaces seen, light-traced into the pixels
@@ -713,7 +673,7 @@ class Renderer(ProgressiveImage):
             self.glossy_sum[gl] += solver.caustic.E[patch] * f
 
     # -------------------------------------------------------------- resolve
-    def diffuse_indirect(self, e_bar=None, samples=None, gather=True):
+    def diffuse_indirect(self, e_bar=None, samples=None, gather=True, gather_seconds=None):
         """(N, 3) W_d kd/pi * E_bar at the pixels (W_d: the diffuse weight under a
         Principled layer, 1 without), box-filtered with ``samples`` (default
         ``resolve_samples``) stratified sub-pixel samples.
@@ -725,8 +685,8 @@ class Renderer(ProgressiveImage):
         :func:`~raybundle.gather.near_edge_tsides` flags gather their indirect light
         instead (:class:`~raybundle.gather.FinalGather`): ``gather_rays`` rays per pixel,
         spread over its sub-pixel samples as one stratified set.  With ``gather_rays`` = -1
-        the count is what the budget :meth:`resolve` set buys (``gather_share`` of the run's
-        seconds), from the gather's cost per ray measured on a few of the last image pass's
+        the count is what ``gather_seconds`` buy (the run loop gives ``gather_share`` of a timed
+        run's iteration seconds, :meth:`resolve`; none: no automatic gather), from the gather's cost per ray measured on a few of the last image pass's
         points and the number of its points on flagged sides; below ``MIN_GATHER_RAYS`` per
         pixel the gather's own noise would outweigh the bias it removes, and there is none.
         """
@@ -742,7 +702,7 @@ class Renderer(ProgressiveImage):
             sharp = solver.caustic.E if caustic else None
             self.gather_rays_used = 0
             rays = self.settings.gather_rays
-            if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and self._gather_affordable())):
+            if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and self._gather_affordable(gather_seconds))):
                 final = FinalGather(solver, caustic=caustic)
         if not np.any(e_bar) and final is None:
             return out
@@ -751,7 +711,7 @@ class Renderer(ProgressiveImage):
         k = max(1, int(samples or self.settings.resolve_samples))
         offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve
         if final is not None:
-            per_sample = -(-int(rays) // k) if rays > 0 else self._automatic_gather_rays(final, k)
+            per_sample = -(-int(rays) // k) if rays > 0 else self._automatic_gather_rays(final, k, gather_seconds)
             self.gather_rays_used = per_sample * k
             if per_sample == 0:
                 final = None
@@ -785,41 +745,39 @@ class Renderer(ProgressiveImage):
     #: the fewest automatic gather rays per pixel worth their noise
     MIN_GATHER_RAYS = 256
 
-    def resolve_share(self):
+    def final_share(self):
         """The automatic final gather's share of a time-limited run (``gather_share``)."""
         return self.settings.gather_share if self.settings.gather_rays < 0 else 0.0
 
-    def resolve(self, seconds=None):
-        """The image at the end of a run or at a snapshot; ``seconds`` into a run limited by
-        time, the automatic final gather may take ``gather_share`` of them."""
-        self._gather_seconds = None if seconds is None else self.settings.gather_share * seconds
-        try:
-            return self.image()
-        finally:
-            self._gather_seconds = None
+    def resolve(self, final_seconds=None):
+        """The image at the end of a run or at a snapshot; in a run limited by time the
+        automatic final gather may take ``final_seconds``."""
+        return self.image(gather_seconds=final_seconds)
 
     def _flagged_pass_points(self):
         """(F,) the last image pass's pixels whose front-facing point lies on a side
         :func:`~raybundle.gather.near_edge_tsides` flags: the points an automatic gather
-        would serve."""
+        would serve.  A renderer without a pass of its own (chains merged into it) traces the
+        pixel centres first."""
         g = self.gbuffer
         if g is None:
-            return np.zeros(0, np.int64)
+            g = self.gbuffer = self.trace_gbuffer(np.full((len(self._pixel), 2), 0.5))
         h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
         return h[self._near_edge(g.tside[h])]
 
-    def _gather_affordable(self):
-        """Whether the automatic gather has a budget and points to spend it on: checked
-        before the gather's vertex values are made, which on millions of triangles take
-        seconds."""
-        return bool(self._gather_seconds) and len(self._flagged_pass_points()) > 0
+    def _gather_affordable(self, gather_seconds):
+        """Whether the automatic gather has a budget (``gather_seconds``) and points to spend
+        it on: checked before the gather's vertex values are made, which on millions of
+        triangles take seconds."""
+        return bool(gather_seconds) and len(self._flagged_pass_points()) > 0
 
-    def _automatic_gather_rays(self, final, k):
-        """Gather rays per sub-pixel sample that ``self._gather_seconds`` buys for ``k``
+    def _automatic_gather_rays(self, final, k, gather_seconds):
+        """Gather rays per sub-pixel sample that ``gather_seconds`` buy for ``k``
         sub-pixel samples (0 if fewer than :data:`MIN_GATHER_RAYS` per pixel): the cost per
         ray and point timed on up to 512 of the last image pass's points on flagged sides,
         which also give their count."""
-        g, f = self.gbuffer, self._flagged_pass_points()
+        f = self._flagged_pass_points()
+        g = self.gbuffer
         if len(f) == 0:
             return 0
         probe, probe_rays = f[:: max(1, len(f) // 512)], 16
@@ -827,15 +785,16 @@ class Renderer(ProgressiveImage):
         final.irradiance(g.point[probe], self.scene.tside_normal[g.tside[probe]], probe_rays,
                          np.random.default_rng([self.settings.seed, 4]), at=(g.tside[probe], g.bary[probe]))
         cost = (time.perf_counter() - t0) / (len(probe) * probe_rays)          # seconds per ray and point
-        left = self._gather_seconds - (time.perf_counter() - t0)
+        left = gather_seconds - (time.perf_counter() - t0)
         per_pixel = left / (cost * len(f))
         if per_pixel < self.MIN_GATHER_RAYS:
             return 0
         return int(min(per_pixel, 65536) // k)
 
-    def image(self, diffuse=None, preview=False):
+    def image(self, diffuse=None, preview=False, gather_seconds=None):
         """The current estimate (H, W, 3) float32; ``diffuse`` = precomputed diffuse
-        indirect; ``preview``: resolve it with one sub-pixel sample (fast, aliased)."""
+        indirect; ``preview``: resolve it with one sub-pixel sample (fast, aliased);
+        ``gather_seconds``: the automatic final gather's budget (:meth:`diffuse_indirect`)."""
         img = self.pass_sum / max(self.passes, 1) + self.emission_sum / np.maximum(self.emission_count, 1)[:, None]
         if self.gather_passes:
             img = img + self.gather_sum / self.gather_passes
@@ -844,7 +803,8 @@ class Renderer(ProgressiveImage):
         if self.glossy_iterations:
             img = img + self.glossy_sum / self.glossy_iterations
         if diffuse is None:
-            diffuse = self.diffuse_indirect(samples=1 if preview else None, gather=not preview)
+            diffuse = self.diffuse_indirect(samples=1 if preview else None, gather=not preview,
+                                            gather_seconds=gather_seconds)
         img = img + diffuse
         return img.reshape(self.camera.height, self.camera.width, 3).astype(np.float32)
 

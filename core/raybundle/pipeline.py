@@ -176,7 +176,7 @@ def run_plan(scene, plan, progress=None, stop=None, camera=None, stage=None, sta
     scene, renderer = build(scene, plan, camera, stage=stage, stop=stop)
     try:
         return scene, renderer.run(iterations=plan.iterations, seconds=plan.seconds, progress=progress, stop=stop,
-                                   started=started)
+                                   started=started, stage=stage)
     finally:
         renderer.tracer.close()
 

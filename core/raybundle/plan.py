@@ -21,12 +21,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from .auto import Choice, choose
 from .clusters import DEFAULT_PATCHES
 from .imaging import RenderSettings
 from .methods import SOLVERS, image_only
+from .run import check_budget
 from .sampling import DEFAULT_SEQUENCE
 from .solvers import StochasticIterationSolver
 
@@ -89,17 +88,18 @@ def check(options: RunOptions, bake=False, chains=False):
     o = options
     if o.method != "auto" and o.method not in SOLVERS:
         raise ValueError(f"unknown method {o.method!r}; choose one of {sorted(SOLVERS)} or auto")
-    if o.iterations is not None and o.seconds is not None:
-        raise ValueError("give iterations or seconds, not both")
-    if o.iterations is not None and int(o.iterations) < 0:
-        raise ValueError("iterations must be non-negative")
+    check_budget(o.iterations, _seconds(o))
     if o.patches is not None and int(o.patches) < 0:
         raise ValueError("the patch count must be non-negative (0: one patch per triangle)")
-    if o.seconds is not None and not (np.isfinite(o.seconds) and o.seconds >= 0):
-        raise ValueError("seconds must be a finite, non-negative number")
     if o.method != "auto":
         _check_method(o.method, bake, chains)
     _settings(o, o.sequence).validate()
+
+
+def _seconds(o):
+    """The budget's seconds: the options', or :data:`DEFAULT_SECONDS` when neither seconds nor
+    iterations are given."""
+    return DEFAULT_SECONDS if o.iterations is None and o.seconds is None else o.seconds
 
 
 def _check_method(method, bake, chains):
@@ -125,7 +125,7 @@ def plan(scene, options: RunOptions, bake=False, chains=False) -> Plan:
     a one-line reason for options that cannot run (:func:`check`)."""
     o = options
     check(o, bake, chains)
-    seconds = DEFAULT_SECONDS if o.iterations is None and o.seconds is None else o.seconds
+    seconds = _seconds(o)
     method, choice, notes, sequence, patches = o.method, None, [], o.sequence, o.patches
     if method == "auto":
         choice = choose(scene)

@@ -93,8 +93,8 @@ class RunLoop:
 
     def advance(self, max_seconds=None, until=None):
         """Step until the budget is spent or ``stop`` is set (then False, and :attr:`finished`),
-        or for at most ``max_seconds`` or until ``until`` seconds of iteration (then True:
-        call again to go on)."""
+        or for about ``max_seconds`` (at least one step) or until ``until`` seconds of iteration
+        (then True: call again to go on)."""
         if self.finished:
             return False
         t_end = None if max_seconds is None else time.perf_counter() + max_seconds
@@ -115,11 +115,11 @@ class RunLoop:
                 if self._stop():
                     self.cancelled = True
                     break
-                if t_end is not None and time.perf_counter() >= t_end:
-                    return True
                 self.runner.step()
                 if self.progress is not None:
                     self.progress(self.fraction, {"iterations": self.iterations, "seconds": self.elapsed()})
+                if t_end is not None and time.perf_counter() >= t_end:
+                    return True
         except KeyboardInterrupt:
             self.cancelled = True
         self.finished = True

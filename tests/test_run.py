@@ -1,0 +1,99 @@
+"""The one run loop (:mod:`raybundle.run`): the budget it owns, its stop, its slices, on a real
+solver and renderer."""
+import threading
+import time
+
+import pytest
+
+from raybundle import pipeline, scenes
+from raybundle.imaging import RenderSettings
+from raybundle.run import RunLoop, check_budget
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return pipeline.prepare(scenes.cornell(resolution=(8, 8)), patches=60)
+
+
+def solver(scene, seed=0):
+    return pipeline.make_solver(scene, RenderSettings(seed=seed))
+
+
+@pytest.mark.parametrize("iterations,seconds,message", [
+    (None, None, "give iterations or seconds"), (3, 1.0, "not both"), (-1, None, "non-negative"),
+    (None, float("inf"), "finite"), (None, -2.0, "non-negative")])
+def test_a_budget_that_cannot_run_is_one_line(iterations, seconds, message):
+    with pytest.raises(ValueError, match=message):
+        check_budget(iterations, seconds)
+
+
+def test_iterations_in_slices_are_the_iterations_in_one_go(scene):
+    """A bake's timer ticks (``advance(max_seconds=...)``) step exactly as one call: the same
+    iterations, the same solution."""
+    one, sliced = solver(scene, 4), solver(scene, 4)
+    try:
+        RunLoop(one, iterations=12).advance()
+        loop, calls = RunLoop(sliced, iterations=12), 0
+        while loop.advance(max_seconds=0.0):
+            calls += 1
+        assert loop.finished and not loop.cancelled and loop.fraction == 1.0 and calls == 12
+        assert one.stats.iterations == sliced.stats.iterations == 12
+        assert (one.mean_incoming == sliced.mean_incoming).all()
+        assert loop.final_seconds() is None          # a run of given iterations gathers nothing automatic
+    finally:
+        one.tracer.close()
+        sliced.tracer.close()
+
+
+def test_a_budget_spent_in_set_up_still_runs_the_minimum_and_says_so(scene):
+    s = solver(scene)
+    try:
+        loop = RunLoop(s, seconds=0.5, started=time.perf_counter() - 2.0)     # set-up took 2 s of 0.5
+        assert loop.loop_seconds == 0.0 and loop.setup_seconds >= 2.0
+        assert loop.advance() is False and s.stats.iterations == RunLoop.MIN_ITERATIONS
+        assert loop.short and "too short" in loop.budget_note(2.5)
+    finally:
+        s.tracer.close()
+
+
+def test_the_time_left_after_set_up_is_shared_with_the_final_image(scene):
+    """A timed run iterates for (seconds - set-up) / (1 + final share) and leaves the final
+    image that share of its iteration time."""
+    s = solver(scene)
+    try:
+        loop = RunLoop(s, seconds=2.0, started=time.perf_counter() - 0.5, final_share=0.25)
+        assert abs(loop.loop_seconds - 1.5 / 1.25) < 0.05
+        loop.advance()
+        assert loop.elapsed() >= loop.loop_seconds and not loop.short
+        assert abs(loop.final_seconds() - 0.25 * loop.elapsed()) < 0.01
+    finally:
+        s.tracer.close()
+
+
+def test_stop_and_ctrl_c_end_the_loop_with_what_was_done(scene):
+    s = solver(scene)
+    stop = threading.Event()
+    try:
+        loop = RunLoop(s, iterations=1000, progress=lambda f, info: stop.set() if info["iterations"] >= 3 else None,
+                       stop=stop)
+        assert loop.advance() is False and loop.cancelled and s.stats.iterations == 3
+        assert loop.final_seconds() is None
+
+        def interrupt(f, info):
+            raise KeyboardInterrupt
+        loop = RunLoop(s, seconds=60.0, progress=interrupt)
+        assert loop.advance() is False and loop.cancelled and s.stats.iterations == 4
+    finally:
+        s.tracer.close()
+
+
+def test_a_renderer_run_keeps_the_loop_budget(scene):
+    """``Renderer.run`` through the loop: the stats carry set-up and total seconds, the
+    budget note only when the budget was too short."""
+    r = pipeline.make_renderer(scene, RenderSettings(seed=1, resolve_samples=1))
+    try:
+        res = r.run(iterations=5, started=time.perf_counter() - 1.0)
+        assert res.stats["iterations"] == 5 and res.stats["setup_seconds"] >= 1.0 and "budget_note" not in res.stats
+        assert res.stats["total_seconds"] >= res.stats["setup_seconds"]
+    finally:
+        r.tracer.close()
