@@ -39,7 +39,7 @@ from dataclasses import replace
 
 
 def build_parser():
-    from raybundle.cli import COUNT, SECONDS, OneLineErrors, _number
+    from raybundle.cli import COUNT, SECONDS, OneLineErrors, bounded_number
 
     p = OneLineErrors(prog="raybundle-blender",
                       description="Render a .blend with the Ray Bundle GI engine (bpy module, no Blender UI).")
@@ -48,18 +48,18 @@ def build_parser():
     what.add_argument("--out", help="render: the output EXR (linear radiance, 32-bit float)")
     what.add_argument("--bake", metavar="OUT.blend", help="bake: save the baked copy of the file here")
     p.add_argument("--lightmaps", metavar="DIR", help="bake: also a lightmap per mesh with a UV map, into DIR")
-    p.add_argument("--lightmap-size", type=_number(int, 16, 16384, "an integer in [16, 16384]"),
+    p.add_argument("--lightmap-size", type=bounded_number(int, 16, 16384, "an integer in [16, 16384]"),
                    help="bake: lightmap width and height in texels (default: the file's)")
     p.add_argument("--domain", choices=("point", "corner"), help="bake: color attribute domain (default: the file's)")
-    p.add_argument("--subdivide", metavar="LEVELS", type=_number(int, 1, 6, "an integer in [1, 6]"),
+    p.add_argument("--subdivide", metavar="LEVELS", type=bounded_number(int, 1, 6, "an integer in [1, 6]"),
                    help="bake: into a copy of each mesh cut up to LEVELS times where the light needs it")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--time", type=SECONDS, help="seconds to iterate (default: the file's time limit)")
-    g.add_argument("--iterations", type=_number(int, 1, what="a positive integer"),
+    g.add_argument("--iterations", type=bounded_number(int, 1, what="a positive integer"),
                    help="number of iterations (reproducible with --seed)")
     p.add_argument("--seed", type=COUNT, help="random seed (default: the file's)")
     p.add_argument("--patches", type=COUNT, help="target patch count (default: the file's)")
-    p.add_argument("--resolution-percentage", type=_number(int, 1, 1000, "an integer in [1, 1000]"),
+    p.add_argument("--resolution-percentage", type=bounded_number(int, 1, 1000, "an integer in [1, 1000]"),
                    help="override the file's resolution percentage")
     p.add_argument("--scene", help="scene name (default: the file's active scene)")
     p.add_argument("--save-npz", metavar="NPZ", help="also write the exported scene as .npz")

@@ -168,7 +168,7 @@ def test_penumbra_pixels_get_more_shadow_rays():
         for _ in range(24):
             r.image_pass()
         images[n_pen] = (r.pass_sum / r.passes)[:, 0].reshape(16, 16)
-        pen_flags = r._shadow_flags.all(axis=1).reshape(16, 16)
+        pen_flags = r.shadow_flags.all(axis=1).reshape(16, 16)
     ref = np.zeros((16, 16))
     for a in (0.125, 0.375, 0.625, 0.875):
         for b in (0.125, 0.375, 0.625, 0.875):

@@ -17,7 +17,7 @@ estimate of the incoming radiance of every receiving side i::
 
 With (tside t, light l) drawn with probability p_tl ~ A_t lum(E1_jl), a uniform
 point x on t, one sample of light l at x (irradiance ``e`` with visibility, travel
-direction ``w``: :meth:`~raybundle.lights.DirectLighting._light_samples`) and s from
+direction ``w``: :meth:`~raybundle.lights.DirectLighting.light_samples_at`) and s from
 the lobe for ``w``, one sample adds ``A_t e weight(s) / (p_tl A_i)`` to the side it
 hits, ``weight = f cos / pdf`` (bounded: at most the lobe's albedo).  The light
 sample, not the side's mean travel direction, spreads a lamp's reflection as its
@@ -116,7 +116,7 @@ class CausticShot:
         travel = np.zeros((n_samples, 3))
         for li in np.unique(light):
             sel = np.nonzero(light == li)[0]
-            e[sel], travel[sel], _ = fs.direct._light_samples(pts[sel], nrm[sel], fs.lights[li],
+            e[sel], travel[sel], _ = fs.direct.light_samples_at(pts[sel], nrm[sel], fs.lights[li],
                                                               rng.random((len(sel), 3)))
         s, weight = sc.materials.sample_glossy(sc.side_material[side[t_idx]], nrm, -travel, u[:, 2:])
         carried = (self.tside_area[t_idx] / p)[:, None] * e * weight   # [W]
@@ -146,6 +146,11 @@ class CausticShot:
             self._sum[:, k] += np.bincount(rec, c[:, k], minlength=n)
             self._dsum[:, k] += np.bincount(rec, luminance(c) * d[:, k], minlength=n)
         self._update()
+
+    def sums(self):
+        """Copies of the running sums and the sample count ``(sum, dsum, samples)``
+        (what chains pool, :mod:`raybundle.chains`)."""
+        return self._sum.copy(), self._dsum.copy(), self.samples
 
     def set_sums(self, total, dtotal, samples):
         """Replace the running sums and sample count (chains pooled, :mod:`raybundle.chains`)."""

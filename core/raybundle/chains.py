@@ -66,11 +66,10 @@ def state(renderer_or_solver) -> ChainState:
         image.update(passes=renderer.passes, glossy_iterations=renderer.glossy_iterations,
                      gather_passes=renderer.gather_passes,
                      caustic_splat_samples=renderer.caustic_splat_samples,
-                     shadow_flags=renderer._shadow_flags.copy(), image_rays=renderer.image_rays)
+                     shadow_flags=renderer.shadow_flags.copy(), image_rays=renderer.image_rays)
     st = solver.stats
     return ChainState(solver.averaged, solver.mean_incoming.copy(),
-                      (fs._e_sum.copy(), fs._d_sum.copy(), fs._count.copy()),
-                      None if cs is None else (cs._sum.copy(), cs._dsum.copy(), cs.samples),
+                      fs.sums(), None if cs is None else cs.sums(),
                       image, dict(iterations=st.iterations, directions=st.directions, rays=st.rays,
                                   seconds=st.seconds))
 
@@ -116,5 +115,5 @@ def apply(merged: ChainState, renderer_or_solver):
         renderer.gather_passes = merged.image["gather_passes"]
         renderer.caustic_splat_samples = merged.image["caustic_splat_samples"]
         renderer.image_rays = merged.image["image_rays"]
-        renderer._shadow_flags = merged.image["shadow_flags"].copy()
+        renderer.shadow_flags = merged.image["shadow_flags"].copy()
     return renderer_or_solver

@@ -154,7 +154,7 @@ def _render_chains(args, scene, plan, stage, stop, started):
     return 130 if stop.is_set() else 0
 
 
-def _number(kind, low, high=None, what="a number"):
+def bounded_number(kind, low, high=None, what="a number"):
     """An argparse type: ``kind`` (int or float) in [low, high], else a one-line error."""
     def parse(text):
         try:
@@ -167,9 +167,9 @@ def _number(kind, low, high=None, what="a number"):
     return parse
 
 
-POSITIVE_INT = _number(int, 1, what="a positive integer")
-COUNT = _number(int, 0, what="a non-negative integer")
-SECONDS = _number(float, 0.0, what="a non-negative number of seconds")
+POSITIVE_INT = bounded_number(int, 1, what="a positive integer")
+COUNT = bounded_number(int, 0, what="a non-negative integer")
+SECONDS = bounded_number(float, 0.0, what="a non-negative number of seconds")
 
 
 class OneLineErrors(argparse.ArgumentParser):
@@ -194,7 +194,7 @@ def build_parser():
     r.add_argument("--seed", type=COUNT, default=0)
     r.add_argument("--patches", type=COUNT, help=f"target patch count (default {DEFAULT_PATCHES:,}, or auto's "
                    "choice; 0 = one patch per input triangle)")
-    r.add_argument("--resolution", type=_number(int, 1, 65536, "a resolution in [1, 65536]"), nargs=2,
+    r.add_argument("--resolution", type=bounded_number(int, 1, 65536, "a resolution in [1, 65536]"), nargs=2,
                    metavar=("W", "H"))
     r.add_argument("--method", default=StochasticIterationSolver.name, choices=sorted(SOLVERS) + ["auto"],
                    help=f"{StochasticIterationSolver.name} (default; ray bundles), ray-bundle-walk (random walks "
@@ -206,9 +206,9 @@ def build_parser():
                    help=f"(default {DEFAULT_SEQUENCE}, or auto's choice) random numbers of the global directions (ray bundles); halton and sobol bias the "
                         "iterations (thesis 1.2, a warning says so); path-tracing takes halton as randomised "
                         "quasi-Monte Carlo, prng or stratified as the PRNG; single-ray-iteration the PRNG only")
-    r.add_argument("--bundle-resolution", type=_number(int, 0, 4096, "an integer in [0, 4096]"), default=0,
+    r.add_argument("--bundle-resolution", type=bounded_number(int, 0, 4096, "an integer in [0, 4096]"), default=0,
                    help="rays per bundle side (0 = auto)")
-    r.add_argument("--gather-rays", type=_number(int, -1, 65536, "an integer in [-1, 65536]"), default=-1,
+    r.add_argument("--gather-rays", type=bounded_number(int, -1, 65536, "an integer in [-1, 65536]"), default=-1,
                    help="final-gather rays per pixel next to concave edges and contacts: -1 (default) as many as "
                         "a tenth of a --time run buys, none with --iterations; N a fixed count, reproducible")
     r.add_argument("--threads", type=POSITIVE_INT, default=None)
@@ -224,7 +224,7 @@ def build_parser():
     b.add_argument("--methods", nargs="+", default=["all"], help="all, or some of: " + ", ".join(METHODS))
     b.add_argument("--time", type=SECONDS, default=60.0, help="seconds per method and scene, from loading the "
                    "scene (default 60)")
-    b.add_argument("--resolution", type=_number(int, 1, 65536, "a resolution in [1, 65536]"), nargs=2,
+    b.add_argument("--resolution", type=bounded_number(int, 1, 65536, "a resolution in [1, 65536]"), nargs=2,
                    metavar=("W", "H"), help="image size (default: the scene's)")
     b.add_argument("--reference-dir", default="out/reference", help="cached reference halves (default out/reference)")
     b.add_argument("--reference-time", type=SECONDS, default=600.0,

@@ -182,6 +182,19 @@ class RenderResult:
     cancelled: bool = False
 
 
+@dataclass
+class ImagePasses:
+    """The solver of an image-only method (:class:`~raybundle.pathtracing.PathTracer`,
+    :class:`~raybundle.lighttracing.SingleRayIteration`), as progress reporting and the run
+    loop read it: ``stats.iterations`` (its passes) and ``stats.rays`` (0: every ray is an
+    image ray)."""
+
+    tracer: object
+    stats: object
+    name: str
+    diffuse_only: bool = False
+
+
 class ProgressiveImage:
     """A progressive image method (:class:`Renderer`, :class:`~raybundle.pathtracing.PathTracer`,
     :class:`~raybundle.lighttracing.SingleRayIteration`) run by the one run loop
@@ -287,7 +300,7 @@ class Renderer(ProgressiveImage):
         self.gathered_points = 0
         self.gather_rays_used = 0                         # rays per pixel of the last resolve's gather
         # per pixel: some earlier shadow ray reached a light / was blocked (both: a penumbra)
-        self._shadow_flags = np.zeros((n, 2), bool)
+        self.shadow_flags = np.zeros((n, 2), bool)
         # the caustic first shot on the surfaces seen, light-traced into the pixels
         self.splats_caustics = solver.caustic is not None and settings.caustic_splats > 0
         self.caustic_splat_sum = np.zeros((n, 3))
@@ -479,7 +492,7 @@ class Renderer(ProgressiveImage):
         if self.direct.n_lights and len(hf):
             before = self.direct.rays
             mis = self.glossy_material[g.material[hf]] if self._light_mis else None
-            flags = self._shadow_flags[pixels[hf]]
+            flags = self.shadow_flags[pixels[hf]]
             start = self.passes == 0          # no earlier samples: every point is treated as a penumbra
             pen = flags.all(axis=1) | start
             if mis is not None:       # the lobe's MIS weight assumes light_samples light samples
@@ -504,7 +517,7 @@ class Renderer(ProgressiveImage):
                 g.point[i], g.normal[i], g.material[i], g.w_eye[i], u, n_s, mis=None if mis is None else mis[rep],
                 diffuse_scale=self.albedo_scale(g.triangle[i], g.point[i]), shadow_flags=f, analytic=f[:, 0] | start)
             out[hf] += np.add.reduceat(value, first, axis=0) / reps[:, None]      # copies are contiguous
-            np.logical_or.at(self._shadow_flags, pixels[hf], np.logical_or.reduceat(f, first, axis=0))
+            np.logical_or.at(self.shadow_flags, pixels[hf], np.logical_or.reduceat(f, first, axis=0))
             self.image_rays += self.direct.rays - before
         gl = hf[self.glossy_material[g.material[hf]]]
         gathered = np.zeros_like(out)

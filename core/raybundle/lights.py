@@ -58,8 +58,8 @@ class MeshLight:
         c = self.scene.triangle_corners[self.triangles]
         self._centroid = c.mean(axis=1)
         self._radius = np.linalg.norm(c - self._centroid[:, None], axis=2).max(axis=1)
-        self.planes = _light_planes(self)
-        self._fans = _plane_fans(self)
+        self.planes = light_planes(self)
+        self._fans = plane_fans(self)
 
     def sample(self, points, u):
         """One sample of the light for each point (N, 3) from uniforms ``u`` (N, 3).
@@ -68,7 +68,7 @@ class MeshLight:
         unshadowed irradiance estimate on a plane facing it: the caller
         multiplies by ``cos_x`` (w = direction to y) and tests visibility.
 
-        A light whose planar parts have convex outlines (:func:`_plane_fans`: a lamp
+        A light whose planar parts have convex outlines (:func:`plane_fans`: a lamp
         quad, a box, a lamp cut into a grid of many triangles) is sampled part by part:
         part g with probability ``p_g = A_g / A``; where it looks small, a point uniform
         on it (``e = Le cos_l A_g / (r^2 p_g)``); where it may look large, a direction
@@ -434,7 +434,7 @@ def _merge_collinear(vertices, directed):
 MAX_PLANES = 64
 
 
-def _light_planes(light):
+def light_planes(light):
     """The planar parts of a mesh light: a list of (triangle rows into ``light.triangles``,
     unit normal, a point of the plane, two-sided, bounding-box corners (8, 3), directed
     boundary edges (B, 2, 3) or None when the triangles do not form a consistently
@@ -480,7 +480,7 @@ def _light_planes(light):
     return planes
 
 
-def _plane_fans(light):
+def plane_fans(light):
     """Sampling tables of a mesh light whose planar parts (``light.planes``) each
     have one convex outline: per part its area, probability ``A_g / A`` and CDF, normal,
     sidedness, bounding sphere, and the fan triangles of its outline (``fan`` (F, 3, 3),
@@ -631,7 +631,7 @@ class DirectLighting:
     def n_lights(self):
         return len(self.area_lights) + len(self.point_lights)
 
-    def _light_samples(self, points, normals, light, u, unshadowed=False):
+    def light_samples_at(self, points, normals, light, u, unshadowed=False):
         """One sample of every point's irradiance from one light.
 
         Returns ``(E (N,3) [W/m^2], travel (N,3), cos_x (N,))`` where E already
@@ -718,10 +718,10 @@ class DirectLighting:
                 out[cv] += f_d[cv] * exact[0][:, None] * np.asarray(light.radiance, float)
             for _ in range(n_s):
                 if shadow_flags is None and exact is None:
-                    e, travel, cos_x = self._light_samples(points, normals, light, u[:, k])
+                    e, travel, cos_x = self.light_samples_at(points, normals, light, u[:, k])
                     live = np.any(e > 0, axis=1)
                 else:
-                    e, travel, cos_x, free = self._light_samples(points, normals, light, u[:, k], unshadowed=True)
+                    e, travel, cos_x, free = self.light_samples_at(points, normals, light, u[:, k], unshadowed=True)
                     live, blocked = self._seen_blocked(e, free)
                     if shadow_flags is not None:
                         shadow_flags[:, 0] |= live
@@ -785,7 +785,7 @@ class DirectLighting:
                 seen, total = np.zeros((len(p), 3)), np.zeros((len(p), 3))
                 lit, shade = np.zeros(len(p), bool), np.zeros(len(p), bool)
                 for s in range(first, last):
-                    e, _, _, free = self._light_samples(p, nrm, light, (sh + s * alpha) % 1.0, unshadowed=True)
+                    e, _, _, free = self.light_samples_at(p, nrm, light, (sh + s * alpha) % 1.0, unshadowed=True)
                     seen += e
                     total += free
                     reached, blocked = self._seen_blocked(e, free)
@@ -842,7 +842,7 @@ class PatchFirstShot:
 
     For every side i (:mod:`raybundle.scene`) and light l it keeps running sums
     over uniformly random points of the side and light samples of the
-    irradiance ``e cos_x V`` (:meth:`DirectLighting._light_samples`) and of the
+    irradiance ``e cos_x V`` (:meth:`DirectLighting.light_samples_at`) and of the
     irradiance-weighted travel direction, divided by the side's receiving area
     (``receiving_area`` (S,); buried parts receive nothing).  ``E`` (S, L, 3)
     [W/m^2] is the side-average irradiance, ``direction`` (S, L, 3) the mean
@@ -898,7 +898,7 @@ class PatchFirstShot:
         old = self._e_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
         old_d = self._d_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
         for li, light in enumerate(self.lights):
-            e, travel, _ = self.direct._light_samples(pts, nrm, light, self.rng.random((len(tri), 3)))
+            e, travel, _ = self.direct.light_samples_at(pts, nrm, light, self.rng.random((len(tri), 3)))
             self._e_sum[tri, li] += e
             self._d_sum[tri, li] += e.sum(axis=1, keepdims=True) * travel
         self._count[tri] += 1
@@ -912,6 +912,11 @@ class PatchFirstShot:
         p = np.unique(side)
         norm = np.linalg.norm(self._d_patch[p], axis=2, keepdims=True)
         self.direction[p] = np.where(norm > 0, self._d_patch[p] / np.maximum(norm, 1e-300), 0.0)
+
+    def sums(self):
+        """Copies of the per-tside sums and counts ``(e_sum, d_sum, count)`` that ``E`` and
+        ``direction`` are formed from (what chains pool, :mod:`raybundle.chains`)."""
+        return self._e_sum.copy(), self._d_sum.copy(), self._count.copy()
 
     def set_sums(self, e_sum, d_sum, count):
         """Replace the per-tside sums and counts (e.g. those of several chains pooled,

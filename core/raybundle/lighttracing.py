@@ -47,8 +47,7 @@ import time
 
 import numpy as np
 
-from .imaging import ProgressiveImage, splat_to_camera
-from .pathtracing import _Passes
+from .imaging import ImagePasses, ProgressiveImage, splat_to_camera
 from .sampling import frames_from_normals, points_on_triangles, uniform_sphere
 
 
@@ -214,7 +213,7 @@ class SingleRayIteration(ProgressiveImage):
                              "(the direction sequences drive the bundle methods' global directions)")
         self.scene, self.camera, self.tracer, self.direct, self.settings = scene, camera, tracer, direct, settings
         self.emission = LightEmission(scene, tracer)
-        self.solver = _Passes(tracer, SolverStats(), name=self.name)
+        self.solver = ImagePasses(tracer, SolverStats(), name=self.name)
         self.rng = np.random.default_rng([settings.seed, 13])
         n_pix = camera.width * camera.height
         self.chains = max(self.MIN_CHAINS, n_pix)

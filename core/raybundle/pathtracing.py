@@ -33,11 +33,10 @@ thesis' observation that the low-discrepancy gain shrinks as walks get long can 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
-from .imaging import ProgressiveImage
+from .imaging import ImagePasses, ProgressiveImage
 from .sampling import frames_from_normals, halton_permutations, halton_points
 
 #: bounces before Russian roulette starts
@@ -66,17 +65,6 @@ class _PassUniforms:
         return out
 
 
-@dataclass
-class _Passes:
-    """What progress reporting reads of a renderer's solver: ``stats.iterations`` (here the
-    passes, i.e. samples per pixel) and ``stats.rays`` (0: every ray is an image ray)."""
-
-    tracer: object
-    stats: object
-    name: str = "path-tracing"
-    diffuse_only: bool = False
-
-
 class PathTracer(ProgressiveImage):
     """Unidirectional path tracing with next-event estimation (module docstring).
 
@@ -101,7 +89,7 @@ class PathTracer(ProgressiveImage):
             raise ValueError(f"path tracing draws its paths from {' or '.join(self.SEQUENCES)}, not "
                              f"{settings.sequence!r} (that one drives the iteration methods' directions)")
         self.scene, self.camera, self.tracer, self.direct, self.settings = scene, camera, tracer, direct, settings
-        self.solver = _Passes(tracer, SolverStats())
+        self.solver = ImagePasses(tracer, SolverStats(), name=self.name)
         self.rng = np.random.default_rng([settings.seed, 11])
         n = camera.width * camera.height
         self.qmc = settings.sequence == "halton"

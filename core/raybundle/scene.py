@@ -64,7 +64,7 @@ def group_ids(columns):
     return unique_rows(np.stack(cols, axis=1))[1]
 
 
-def _components(n, links):
+def connected_components(n, links):
     """Dense component ids (n,) of n nodes joined by ``links`` (K, 2): min-label propagation
     with pointer jumping (targets sorted once; each round one reduceat)."""
     label = np.arange(n)
@@ -401,7 +401,7 @@ class PatchScene:
         for c1, c2 in ((k1, c2a), ((k1 + 1) % 3, c2b)):
             ok = np.ones(len(t1), bool) if tag is None else tag[t1, c1] == tag[t2, c2]
             links.append(np.stack([cls[t1[ok], c1[ok]], cls[t2[ok], c2[ok]]], axis=1))
-        return _components(int(cls.max(initial=-1)) + 1, np.concatenate(links))[cls]
+        return connected_components(int(cls.max(initial=-1)) + 1, np.concatenate(links))[cls]
 
     # ---------------------------------------------------------------- sides
     @cached_property
@@ -926,6 +926,6 @@ def closed_solid_triangles(vertices, triangles, tol=1e-7):
     und = np.minimum(a, b) * nv + np.maximum(a, b)
     order = np.argsort(und, kind="stable")
     same = und[order][1:] == und[order][:-1]
-    label = _components(len(t), np.stack([order[:-1][same] // 3, order[1:][same] // 3], axis=1))
+    label = connected_components(len(t), np.stack([order[:-1][same] // 3, order[1:][same] // 3], axis=1))
     bad = np.bincount(label, ~tri_ok, minlength=len(t)) > 0
     return ~bad[label]
