@@ -8,7 +8,7 @@ Usage::
 
 Writes:
 
-* ``cornell_box.blend``: the core's Cornell box data (:mod:`raybundle.scenes`) as a
+* ``cornell_box.blend``: the core's Cornell box data (:mod:`raybundle.scene.builtin`) as a
   Blender scene: Diffuse BSDF walls and blocks, an Emission lamp (radiance =
   color x strength = the core's ``CORNELL_LIGHT``), two-sided as Blender is.
   Unlike the core's built-in scene, the ceiling is one full quad (no opening
@@ -199,7 +199,7 @@ def render_settings(time_limit=30.0, samples=256):
 # --------------------------------------------------------------------- scenes
 def build_cornell(glossy=False, resolution=(256, 256)):
     """The Cornell box .blend (module docstring); returns {name: object}."""
-    from raybundle import scenes
+    from raybundle.scene import builtin as scenes
 
     to_m = scenes.cornell_to_blender
     white = diffuse_material("white", scenes.WHITE)

@@ -1,6 +1,6 @@
 """RayBundle GI, the Blender extension: thin glue over the ``raybundle`` library.
 
-Modules: :mod:`.props` (``scene.raybundle`` settings), :mod:`.export` and
+Modules: :mod:`.properties` (``scene.raybundle`` settings), :mod:`.export` and
 :mod:`.shaders` (evaluated depsgraph -> the core's arrays), :mod:`.engine` (the
 ``RAYBUNDLE`` render engine), :mod:`.bake` and :mod:`.operators` (the ``raybundle.bake``
 operator: color attributes, lightmaps), :mod:`.ui` (panels); ``raybundle-blender``
@@ -12,7 +12,7 @@ import importlib
 
 #: registered in this order (``bpy`` is imported with them, when Blender registers the
 #: extension: ``raybundle-blender`` hears Ctrl-C before it imports ``bpy``)
-_MODULES = ("props", "engine", "operators", "ui")
+_MODULES = ("properties", "engine", "operators", "ui")
 
 
 def _modules():

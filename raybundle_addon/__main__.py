@@ -39,7 +39,7 @@ from dataclasses import replace
 
 
 def build_parser():
-    from raybundle.cli import COUNT, SECONDS, OneLineErrors, bounded_number
+    from raybundle.app.cli import COUNT, SECONDS, OneLineErrors, bounded_number
 
     p = OneLineErrors(prog="raybundle-blender",
                       description="Render a .blend with the Ray Bundle GI engine (bpy module, no Blender UI).")
@@ -90,7 +90,7 @@ def _main(argv, interrupted):
         return _fail(f"{args.blend}: not a .blend file")
     if args.bake is None and (args.lightmaps or args.lightmap_size or args.domain or args.subdivide):
         return _fail("--lightmaps, --lightmap-size, --domain and --subdivide go with --bake")
-    from raybundle.io import OutputError, check_output
+    from raybundle.util.io import OutputError, check_output
 
     try:                              # outputs are checked before the work, not lost after it
         if args.out is not None:
@@ -106,8 +106,8 @@ def _main(argv, interrupted):
 
     import bpy
 
-    from raybundle.cli import ProgressBar
-    from raybundle.io import write_exr, write_png
+    from raybundle.app.cli import ProgressBar
+    from raybundle.util.io import write_exr, write_png
 
     from . import engine, register
 
@@ -122,7 +122,7 @@ def _main(argv, interrupted):
         return _fail(f"--scene {args.scene!r}: the file has scenes {[s.name for s in bpy.data.scenes]}")
     if bpy.context.window is not None and bpy.context.window.scene != scene:
         bpy.context.window.scene = scene
-    from .props import run_options
+    from .properties import run_options
 
     try:
         options = replace(run_options(scene), **{k: v for k, v in (("seed", args.seed), ("patches", args.patches))
@@ -178,7 +178,7 @@ def _main(argv, interrupted):
         return 130
     if job is None or job.last_image is None:
         return _fail("the render produced no image", 1)
-    from .props import LAST_RUN
+    from .properties import LAST_RUN
 
     stats = LAST_RUN.get(scene.name, {}).get("stats", {})
     header = {"raybundle_" + k: v for k, v in stats.items() if isinstance(v, (int, float, str))}
@@ -197,9 +197,9 @@ def _bake(args, scene, options, interrupted):
     """The ``--bake`` path: :class:`.bake.BakeJob` with a progress bar, then save the copy."""
     import bpy
 
-    from raybundle.cli import ProgressBar
-    from raybundle.pipeline import Cancelled
-    from raybundle.scene import SceneError
+    from raybundle.app.cli import ProgressBar
+    from raybundle.app.pipeline import Cancelled
+    from raybundle.scene.model import SceneError
 
     from .bake import BakeJob, BakeSettings
 

@@ -10,7 +10,7 @@
   once the time limit or the iteration count is reached or ``stop`` is set (the
   modal operator calls it on every timer tick, headless code in a loop);
 * :meth:`BakeJob.finish` evaluates the radiance at the targets' points
-  (:func:`raybundle.baking.baked_radiance`: per-point direct light with
+  (:func:`raybundle.imaging.baking.baked_radiance`: per-point direct light with
   ``light_samples`` shadow rays; the indirect light of vertices and corners by a final
   gather of ``gather_rays`` rays each (1024) into the solution, that of lightmap texels
   interpolated from the patches) and writes it into the file, on the main thread.
@@ -50,10 +50,10 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from raybundle.run import RunLoop
+from raybundle.imaging.run import RunLoop
 
 from .export import corner_vertices, export_scene
-from .props import LAST_BAKE, from_properties, run_options
+from .properties import LAST_BAKE, from_properties, run_options
 
 ATTRIBUTE = "RayBundle"
 COPY_SUFFIX = ".RayBundle"
@@ -61,7 +61,7 @@ COPY_SUFFIX = ".RayBundle"
 
 @dataclass
 class BakeSettings:
-    """Plain copy of the bake settings of ``scene.raybundle`` (see :mod:`.props`)."""
+    """Plain copy of the bake settings of ``scene.raybundle`` (see :mod:`.properties`)."""
 
     color_attribute: bool = True
     domain: str = "POINT"
@@ -101,7 +101,7 @@ def _unique_points(input_scene, face, bary):
     """Representatives of the bake points (input face ids ``face`` (N,), barycentrics
     (N, 3)) that share a position and a face normal: ``(rep (M,), back (N,))`` with point
     i baked as point ``rep[back[i]]``."""
-    from raybundle.baking import input_rows
+    from raybundle.imaging.baking import input_rows
 
     r = input_rows(input_scene, face)
     ok = r >= 0
@@ -126,7 +126,7 @@ class _Target:
     corner_bary: np.ndarray
     copy: bool = False                  # bake into a new object made from the evaluated mesh
     refine: bool = False                # ... cut where the lighting needs it (corners set in finish)
-    refined: object = None              # raybundle.baking.RefinedTriangles
+    refined: object = None              # raybundle.imaging.baking.RefinedTriangles
     own_mesh: bool = False              # give the object its own copy of a shared mesh first
     sharing: list = field(default_factory=list)      # other objects that share the mesh
 
@@ -148,7 +148,7 @@ class BakeJob:
     def __init__(self, depsgraph, options=None, bake=None, lightmap_objects=None, stop=None):
         self.depsgraph = depsgraph
         self.scene = depsgraph.scene
-        #: :class:`raybundle.plan.RunOptions` (None: the scene's settings, read at the start); the plan
+        #: :class:`raybundle.app.plan.RunOptions` (None: the scene's settings, read at the start); the plan
         self.options = options
         self.plan = None
         self.bake = bake or BakeSettings.from_scene(self.scene)
@@ -168,10 +168,10 @@ class BakeJob:
     # ----------------------------------------------------------------- start
     def start(self):
         """Export, choose the targets, prepare the solver.  Raises SceneError/ValueError
-        (one-line reasons) for what cannot be baked, :class:`raybundle.pipeline.Cancelled`
+        (one-line reasons) for what cannot be baked, :class:`raybundle.app.pipeline.Cancelled`
         when ``stop`` is set during set-up (nothing is written)."""
-        from raybundle import pipeline
-        from raybundle.plan import check, plan
+        from raybundle.app import pipeline
+        from raybundle.app.plan import check, plan
 
         self.t_start = time.perf_counter()
         b = self.bake
@@ -283,7 +283,7 @@ class BakeJob:
 
     # ------------------------------------------------------------------ step
     def step(self, budget=0.1):
-        """Iterate for about ``budget`` seconds (the run loop, :class:`raybundle.run.RunLoop`,
+        """Iterate for about ``budget`` seconds (the run loop, :class:`raybundle.imaging.run.RunLoop`,
         owns the whole job's budget from its start, export and set-up included); False once
         done (limit reached or stopped)."""
         more = self.loop.advance(max_seconds=budget)
@@ -310,7 +310,7 @@ class BakeJob:
 
     def finish(self):
         """Evaluate and write everything (main thread).  Returns :class:`BakeOutcome`."""
-        from raybundle.baking import baked_radiance, locate_points
+        from raybundle.imaging.baking import baked_radiance, locate_points
 
         t0 = time.perf_counter()
         cancelled = self.stop.is_set() or self.loop.cancelled
@@ -403,8 +403,8 @@ class BakeJob:
 
     def _refine(self, t, rng):
         """Cut target ``t``'s triangles where the lighting needs it
-        (:func:`raybundle.baking.refine_by_lighting`); its corners become the copy's."""
-        from raybundle.baking import refine_by_lighting
+        (:func:`raybundle.imaging.baking.refine_by_lighting`); its corners become the copy's."""
+        from raybundle.imaging.baking import refine_by_lighting
 
         faces = np.arange(t.info.first_triangle, t.info.first_triangle + t.info.n_triangles)
         t.refined = r = refine_by_lighting(self.solver, self.export.scene, faces, max_level=self.bake.subdivide_levels,
@@ -494,7 +494,7 @@ class BakeJob:
 
     def _save_image(self, name, rgb_bottom_up, directory, packed, header):
         """Write (H, W, 3) rows bottom-up as ``directory/name.exr`` and load it as Image ``name``."""
-        from raybundle.io import write_exr
+        from raybundle.util.io import write_exr
 
         safe = "".join("_" if ch in '/\\:*?"<>|' else ch for ch in name)
         path = os.path.join(directory, safe + ".exr")
@@ -511,7 +511,7 @@ class BakeJob:
         return path
 
     def _lightmap(self, info, uv, uv_name, directory, packed, rng):
-        from raybundle.baking import baked_radiance, dilate, locate_points, texel_points
+        from raybundle.imaging.baking import baked_radiance, dilate, locate_points, texel_points
 
         size = self.bake.lightmap_size
         tx = texel_points(uv, size, size)

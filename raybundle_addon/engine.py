@@ -10,14 +10,14 @@ count, or when its ``stop`` event is set; the engine sets that event when
 Blender's ``test_break()`` says so (Esc), tests and the command line set it
 directly.  The image so far is kept either way; a stop during set-up (export,
 patch layout, tracer, first shot) ends the job at the next set-up step with
-:class:`raybundle.pipeline.Cancelled` and no image.
+:class:`raybundle.app.pipeline.Cancelled` and no image.
 
 The engine pushes images with ``RenderPass.rect.foreach_set`` (rows bottom-up,
 RGBA float32, alpha 1) into one result per view layer; the pixels are linear
 radiance [W m^-2 sr^-1], so a 32-bit OpenEXR save holds the core's numbers.
 Resolution percentage and the render border (cropped or not) are honoured; each
 view layer is rendered in turn (each for the whole time limit).  Errors
-(:class:`raybundle.scene.SceneError`, ValueError) become one-line ``ERROR``
+(:class:`raybundle.scene.model.SceneError`, ValueError) become one-line ``ERROR``
 reports; export warnings become ``WARNING`` reports.
 """
 from __future__ import annotations
@@ -32,7 +32,7 @@ import bpy
 import numpy as np
 
 from .export import export_scene
-from .props import LAST_RUN, run_options
+from .properties import LAST_RUN, run_options
 
 #: callables ``fn(job, event)`` told about every job: events "export" (after export),
 #: "image" (after each displayed image) and "done".  The command line uses it for its
@@ -40,7 +40,7 @@ from .props import LAST_RUN, run_options
 observers: list = []
 #: jobs running now (``cancel_all`` sets their stop flags)
 active_jobs: set = set()
-#: :class:`raybundle.plan.RunOptions` for the renders started while it is set, instead of the
+#: :class:`raybundle.app.plan.RunOptions` for the renders started while it is set, instead of the
 #: scene's settings: how the headless command line hands its options to a render that
 #: ``bpy.ops.render.render`` starts (:func:`render_options`)
 _options_override = None
@@ -49,7 +49,7 @@ _options_override = None
 @contextlib.contextmanager
 def render_options(options):
     """Renders started inside the ``with`` block run ``options`` (a
-    :class:`raybundle.plan.RunOptions`), not the scene's settings; the ``.blend`` is not changed."""
+    :class:`raybundle.app.plan.RunOptions`), not the scene's settings; the ``.blend`` is not changed."""
     global _options_override
     _options_override = options
     try:
@@ -77,7 +77,7 @@ class RenderOutcome:
 class RenderJob:
     """One progressive render of an evaluated depsgraph (see the module docstring).
 
-    ``options``: :class:`raybundle.plan.RunOptions` (default: the scene's settings).
+    ``options``: :class:`raybundle.app.plan.RunOptions` (default: the scene's settings).
     Callbacks (all optional): ``display(image (H, W, 3) f32 top-down, final)``,
     ``progress(fraction)``, ``stats(text)``; ``user_break()`` is polled between
     iterations and sets ``stop`` when true.
@@ -86,7 +86,7 @@ class RenderJob:
     def __init__(self, depsgraph, options=None, stop=None, display=None, progress=None, stats=None,
                  user_break=None, camera_object=None, preview_interval=0.3):
         self.depsgraph = depsgraph
-        #: :class:`raybundle.plan.RunOptions`: given, handed over (:func:`render_options`), or (None)
+        #: :class:`raybundle.app.plan.RunOptions`: given, handed over (:func:`render_options`), or (None)
         #: the scene's, read when the job runs
         self.options = options or _options_override
         self.stop = stop if stop is not None else threading.Event()
@@ -152,9 +152,9 @@ class RenderJob:
     def run(self):
         """Export, prepare and iterate; returns :class:`RenderOutcome`.  Raises
         SceneError/ValueError for scenes and settings that cannot be rendered, and
-        :class:`raybundle.pipeline.Cancelled` when stopped during set-up (no image yet)."""
-        from raybundle import pipeline
-        from raybundle.plan import check, plan
+        :class:`raybundle.app.pipeline.Cancelled` when stopped during set-up (no image yet)."""
+        from raybundle.app import pipeline
+        from raybundle.app.plan import check, plan
 
         self.t_start = time.perf_counter()
         if self.options is None:
@@ -218,8 +218,8 @@ def _record(scene_name, outcome=None, error=None):
 def render_with_engine(engine, depsgraph):
     """The body of ``RAYBUNDLE.render``: a :class:`RenderJob` whose images go to the
     engine's render result.  Never raises: errors become reports."""
-    from raybundle.pipeline import Cancelled
-    from raybundle.scene import SceneError
+    from raybundle.app.pipeline import Cancelled
+    from raybundle.scene.model import SceneError
 
     scene = depsgraph.scene
     layer = depsgraph.view_layer.name

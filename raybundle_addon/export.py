@@ -1,4 +1,4 @@
-"""Evaluated depsgraph -> a :class:`raybundle.scene.PatchScene` (arrays only; no rendering).
+"""Evaluated depsgraph -> a :class:`raybundle.scene.model.PatchScene` (arrays only; no rendering).
 
 Geometry
     Every mesh-like object instance of ``depsgraph.object_instances`` (objects,
@@ -91,7 +91,7 @@ class ObjectInfo:
 class ExportResult:
     """What :func:`export_scene` returns.
 
-    ``scene`` is the validated, two-sided :class:`~raybundle.scene.PatchScene`
+    ``scene`` is the validated, two-sided :class:`~raybundle.scene.model.PatchScene`
     (not yet subdivided); ``scene.triangle_source`` indexes the export arrays
     ``triangle_object`` (T,) int32 (into ``objects``), ``triangle_polygon`` (T,)
     int32 and ``triangle_loops`` (T, 3) int32 (the object's evaluated mesh
@@ -315,17 +315,17 @@ def border_rect(render, size):
     if (x0, y0, x1, y1) == (0, 0, w, h):
         return None
     if x1 <= x0 or y1 <= y0:
-        from raybundle.scene import SceneError
+        from raybundle.scene.model import SceneError
 
         raise SceneError("the render border is empty: widen it or turn it off")
     return x0, y0, x1 - x0, y1 - y0
 
 
 def export_camera(cam_ob, render, size=None, border=None, warn=print):
-    """A :class:`raybundle.camera.Camera` for camera object ``cam_ob`` (evaluated) and
+    """A :class:`raybundle.scene.camera.Camera` for camera object ``cam_ob`` (evaluated) and
     the render settings; ``border`` (x0, y0, w, h) crops it to the border's pixels."""
-    from raybundle.camera import Camera
-    from raybundle.scene import SceneError
+    from raybundle.scene.camera import Camera
+    from raybundle.scene.model import SceneError
 
     if cam_ob is None:
         raise SceneError("the scene has no camera: add one and make it the active camera")
@@ -357,12 +357,13 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
     ``camera_object`` overrides the scene camera (e.g. ``RenderEngine.camera_override``);
     with ``require_camera`` False (bakes) a scene without a camera exports with
     ``scene.camera = None``.
-    Raises :class:`raybundle.scene.SceneError` (a ValueError) with a one-line reason
+    Raises :class:`raybundle.scene.model.SceneError` (a ValueError) with a one-line reason
     when there is nothing to render: no mesh, no light, no camera.
     Returns :class:`ExportResult`.
     """
-    from raybundle.materials import MaterialTable
-    from raybundle.scene import AreaLights, PointLights, SceneError, SunLights, build_scene
+    from raybundle.scene.build import build_scene
+    from raybundle.scene.materials import MaterialTable
+    from raybundle.scene.model import AreaLights, PointLights, SceneError, SunLights
 
     t0 = time.perf_counter()
     warn = _Warnings()
@@ -476,7 +477,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
         face_image = np.concatenate([np.full(n, -1, np.int64) if x is None else x for (n, _), x in zip(tuv, timg)])
         tcol = [np.zeros((n, 3, 3)) if c is None else c for (n, _), c in zip(tuv, tcol)]
         tuv = [np.zeros((n, 3, 2)) if u is None else u for n, u in tuv]
-        from raybundle.textures import SurfaceTexture, modulation_map
+        from raybundle.scene.textures import SurfaceTexture, modulation_map
 
         maps = [modulation_map(converter.image_pixels(im))[0] for _, im in sorted(images.values(), key=lambda x: x[0])]
         texture = SurfaceTexture(maps, face_image, v[t], np.concatenate(tuv), np.concatenate(tcol))

@@ -15,7 +15,7 @@ import traceback
 import bpy
 
 from .bake import BakeJob
-from .props import LAST_BAKE
+from .properties import LAST_BAKE
 
 
 def _report_outcome(op, outcome):
@@ -67,8 +67,8 @@ class RAYBUNDLE_OT_bake(bpy.types.Operator):
         return {"CANCELLED"}
 
     def execute(self, context):
-        from raybundle.pipeline import Cancelled
-        from raybundle.scene import SceneError
+        from raybundle.app.pipeline import Cancelled
+        from raybundle.scene.model import SceneError
 
         job = _make_job(context)
         try:
@@ -86,7 +86,7 @@ class RAYBUNDLE_OT_bake(bpy.types.Operator):
         return {"FINISHED"}
 
     def invoke(self, context, event):
-        from raybundle.scene import SceneError
+        from raybundle.scene.model import SceneError
 
         if bpy.app.background:
             return self.execute(context)

@@ -1,6 +1,6 @@
 """Blender shader node trees -> the core's material parameters (no rendering here).
 
-The core's material (:class:`raybundle.materials.MaterialTable`) is one
+The core's material (:class:`raybundle.scene.materials.MaterialTable`) is one
 Lambert + GGX mix with emission, optionally with the Principled BSDF's layered
 model.  A material's node tree is read from its Cycles output node:
 
@@ -20,7 +20,7 @@ model.  A material's node tree is read from its Cycles output node:
 * An **Image Texture** on a Diffuse BSDF's Color or a Principled BSDF's Base Color,
   looked up through a UV map (the Vector input unlinked, or from a UV Map node or
   Texture Coordinate's UV), is an albedo texture (:attr:`MaterialConverter.textures`,
-  :mod:`raybundle.textures`): the material holds the image's mean linear color, each
+  :mod:`raybundle.scene.textures`): the material holds the image's mean linear color, each
   patch its mean over the patch, and images and bakes its detail.  A **Color Attribute**
   node there is the albedo per point the same way (the material white, times the
   attribute's color interpolated over each face).  On any other
@@ -36,14 +36,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from raybundle.materials import color_text
+
+from raybundle.scene.materials import color_text
 
 #: the diffuse color of faces without a material (Blender's default surface)
 DEFAULT_GREY = 0.8
 
 
 def _core_supports(fieldname):
-    from raybundle.materials import MaterialTable
+    from raybundle.scene.materials import MaterialTable
 
     return fieldname in getattr(MaterialTable, "__dataclass_fields__", {})
 
@@ -329,7 +330,7 @@ def principled_to_material(inputs, distribution="MULTI_GGX", warn=print, layered
     ignored feature.
 
     With ``layered`` and a core that has the Principled model
-    (:func:`raybundle.materials.principled_material`: Fresnel-weighted dielectric
+    (:func:`raybundle.scene.materials.principled_material`: Fresnel-weighted dielectric
     GGX layer over Lambert, F82 conductor, multiscatter), that model is used.
     Otherwise the plain Lambert + GGX mix: diffuse = base color, glossy weight
     ``g = metallic + (1 - metallic) F0`` with ``F0 = ((ior-1)/(ior+1))^2 * 2 *
@@ -358,7 +359,7 @@ def principled_to_material(inputs, distribution="MULTI_GGX", warn=print, layered
         warn("Principled BSDF alpha (transparency) is ignored: the surface is opaque")
     if layered:
         try:
-            from raybundle.materials import principled_material
+            from raybundle.scene.materials import principled_material
         except ImportError:
             principled_material = None
         if principled_material is not None:

@@ -51,7 +51,7 @@ class RAYBUNDLE_PT_stats(RaybundlePanel, bpy.types.Panel):
     bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
-        from .props import LAST_RUN
+        from .properties import LAST_RUN
 
         layout = self.layout
         rb = context.scene.raybundle
@@ -75,7 +75,7 @@ class RAYBUNDLE_PT_bake(RaybundlePanel, bpy.types.Panel):
     bl_parent_id = "RAYBUNDLE_PT_settings"
 
     def draw(self, context):
-        from .props import LAST_BAKE
+        from .properties import LAST_BAKE
 
         layout = self.layout
         layout.use_property_split = True

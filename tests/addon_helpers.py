@@ -18,10 +18,9 @@ for p in (ROOT, os.path.join(ROOT, "demo_scenes"), os.path.join(ROOT, "tools")):
         sys.path.insert(0, p)
 
 import bpy  # noqa: E402
-from cycles_reference import cycles_settings, exr_output, new_with_nodes  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-
+from cycles_reference import cycles_settings, exr_output, new_with_nodes  # noqa: E402
 
 #: the headless command line as the README's set-up installs it (the repository's
 #: pyproject.toml), beside this Python
@@ -158,7 +157,7 @@ def box(lo, hi):
 # ----------------------------------------------------------------- rendering
 def render_raybundle(path, time_limit=None, iterations=None, seed=0, patches=None):
     """Render the current scene with RAYBUNDLE to a 32-bit EXR via write_still; returns (H, W, 3)."""
-    from raybundle.io import read_exr
+    from raybundle.util.io import read_exr
 
     sc = bpy.context.scene
     sc.render.engine = "RAYBUNDLE"
@@ -178,7 +177,7 @@ def render_raybundle(path, time_limit=None, iterations=None, seed=0, patches=Non
 def render_cycles(path, samples=64, seed=0):
     """Render the current scene with Cycles (CPU, no denoising/clamping, box filter 1 px,
     no glossy filter, Standard view) to an EXR; returns (H, W, 3)."""
-    from raybundle.io import read_exr
+    from raybundle.util.io import read_exr
 
     cycles_settings(samples, seed, world_strength=None)          # keeps the scene's world
     exr_output(path)
@@ -189,7 +188,7 @@ def render_cycles(path, samples=64, seed=0):
 def object_id_image(export, camera=None):
     """(H, W) int: the exported object seen through each pixel centre (-1 = nothing),
     traced with the core's tracer on the exported (unsubdivided) scene."""
-    from raybundle.visibility import RayTracer
+    from raybundle.tracing.visibility import RayTracer
 
     sc = export.scene
     cam = camera or sc.camera

@@ -13,8 +13,18 @@ import subprocess
 
 import numpy as np
 import pytest
-from addon_helpers import (add_camera, add_light, add_object, addon, blender_cli_command, box, bpy, fresh,  # noqa: F401
-                           furnace_material, node_material)
+from addon_helpers import (  # noqa: F401
+    add_camera,
+    add_light,
+    add_object,
+    addon,
+    blender_cli_command,
+    box,
+    bpy,
+    fresh,
+    furnace_material,
+    node_material,
+)
 
 LE, ALBEDO = 0.5, np.array([0.3, 0.5, 0.7])
 
@@ -113,8 +123,7 @@ def plane_with_uvs(size=2.0):
 
 
 def test_lightmap_of_a_plane_under_a_point_light_matches_the_closed_form(fresh, tmp_path):
-    from raybundle.io import read_exr
-
+    from raybundle.util.io import read_exr
     from raybundle_addon.bake import BakeJob
 
     plane = plane_with_uvs()
@@ -238,7 +247,7 @@ def test_cancel_keeps_a_valid_partial_bake_and_errors_are_one_line(fresh):
     _, rgba = attribute(room)
     assert np.all(np.isfinite(rgba)) and rgba[:, :3].min() > 0
     # stopped before set-up is done: pipeline.Cancelled, no solver, the attribute left as it was
-    from raybundle.pipeline import Cancelled
+    from raybundle.app.pipeline import Cancelled
 
     early = BakeJob(bpy.context.evaluated_depsgraph_get())
     early.stop.set()
@@ -249,7 +258,7 @@ def test_cancel_keeps_a_valid_partial_bake_and_errors_are_one_line(fresh):
     bake_settings(fresh, iterations=5, bake_color_attribute=False)
     with pytest.raises(RuntimeError, match="nothing to bake"):
         bpy.ops.raybundle.bake()
-    from raybundle_addon.props import LAST_BAKE
+    from raybundle_addon.properties import LAST_BAKE
 
     assert LAST_BAKE[fresh.name]["status"].startswith("error: nothing to bake")
 
@@ -343,8 +352,8 @@ def test_camera_view_bake_is_the_render_of_the_same_iterations(fresh, tmp_path):
     """Camera View writes <scene>.camera.exr and an Image: the engine's image for the same
     seed and iteration count (the same solver and image passes), read back from the EXR."""
     from addon_helpers import render_raybundle
-    from raybundle.io import read_exr
 
+    from raybundle.util.io import read_exr
     from raybundle_addon.bake import BakeJob
 
     textured_plane()

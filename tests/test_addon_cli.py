@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from addon_helpers import addon, blender_cli_command, bpy  # noqa: F401
 
-from raybundle.io import read_exr, read_exr_header
+from raybundle.util.io import read_exr, read_exr_header
 
 
 @pytest.fixture(scope="module")
@@ -41,7 +41,7 @@ def test_cli_renders_an_exr_and_saves_the_scene(cornell_blend, tmp_path):
     assert (tmp_path / "out.png").exists()
     assert read_exr_header(out)["raybundle_iterations"] == "30"
     assert "done: 30 iterations" in r.stderr and "Traceback" not in r.stderr
-    from raybundle.scene import load_npz
+    from raybundle.scene.npz import load_npz
 
     sc = load_npz(npz)                            # the core CLI's exchange format, two-sided
     assert sc.triangle_two_sided.all() and len(sc.triangles) == 2 * (6 + 5 + 5)

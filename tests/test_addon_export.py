@@ -8,11 +8,10 @@ import time
 
 import numpy as np
 import pytest
-from addon_helpers import (add_camera, add_light, add_object, addon, box, bpy, fresh,  # noqa: F401
-                           node_material, set_world)
+from addon_helpers import add_camera, add_light, add_object, addon, box, bpy, fresh, node_material, set_world  # noqa: F401
 from cycles_reference import new_with_nodes
 
-from raybundle.scene import SceneError
+from raybundle.scene.model import SceneError
 
 
 def export(**kw):
@@ -190,7 +189,7 @@ def new_mat(name):
 
 
 def test_node_trees_flatten_to_lambert_ggx(fresh):
-    from raybundle.materials import MaterialTable
+    from raybundle.scene.materials import MaterialTable
 
     minimal(fresh)
     mix = new_mat("mix")

@@ -32,7 +32,7 @@ def test_register_unregister_twice():
         rb = sc.raybundle
         assert (rb.time_limit, rb.iterations, rb.patches, rb.bundle_resolution, rb.first_shot) == (30.0, 0, 4000, 0,
                                                                                                      True)
-        from raybundle.methods import SOLVERS
+        from raybundle.methods.registry import SOLVERS
         assert rb.method in SOLVERS
         assert {i.identifier for i in rb.bl_rna.properties["method"].enum_items} == set(SOLVERS) | {"auto"}
         with pytest.raises((AttributeError, TypeError)):

@@ -10,13 +10,26 @@ import threading
 
 import numpy as np
 import pytest
-from addon_helpers import (add_camera, add_light, add_object, addon, box, bpy, erode, fresh,  # noqa: F401
-                           furnace_material, node_material, object_id_image, render_cycles, render_raybundle)
+from addon_helpers import (  # noqa: F401
+    add_camera,
+    add_light,
+    add_object,
+    addon,
+    box,
+    bpy,
+    erode,
+    fresh,
+    furnace_material,
+    node_material,
+    object_id_image,
+    render_cycles,
+    render_raybundle,
+)
 from cycles_reference import new_with_nodes
 
 
 def last_run():
-    from raybundle_addon.props import LAST_RUN
+    from raybundle_addon.properties import LAST_RUN
 
     return LAST_RUN[bpy.context.scene.name]
 
@@ -175,7 +188,7 @@ def small_lit_scene():
 def test_cancel_through_the_stop_flag_keeps_a_valid_partial_image(fresh):
     """The stop Event the engine sets on Esc (test_break) ends the render after the current
     iteration; the image so far is returned complete and finite."""
-    from raybundle.plan import RunOptions
+    from raybundle.app.plan import RunOptions
     from raybundle_addon.engine import RenderJob
 
     small_lit_scene()
@@ -217,8 +230,8 @@ def test_esc_during_set_up_stops_before_the_iteration_without_an_image(fresh):
     """Esc (``test_break``) while the scene is being laid out: the next set-up step raises
     pipeline.Cancelled, no image is shown; through bpy.ops.render.render the engine records
     it as stopped, not as an error."""
-    from raybundle.pipeline import Cancelled
-    from raybundle.plan import RunOptions
+    from raybundle.app.pipeline import Cancelled
+    from raybundle.app.plan import RunOptions
     from raybundle_addon import engine
     from raybundle_addon.engine import RenderJob
 
@@ -251,8 +264,8 @@ def test_esc_during_set_up_stops_before_the_iteration_without_an_image(fresh):
 def test_image_only_methods_render_without_patches_and_refuse_to_bake(fresh, method):
     """The method list holds the core's path tracer and light tracing: the engine renders with
     them (no patch layout step), the bake refuses them in one line (no patch solution)."""
+    from raybundle.app.plan import RunOptions
     from raybundle_addon.bake import BakeJob
-    from raybundle.plan import RunOptions
     from raybundle_addon.engine import RenderJob
 
     small_lit_scene()
@@ -270,7 +283,7 @@ def test_image_only_methods_render_without_patches_and_refuse_to_bake(fresh, met
 def test_point_collocation_renders_from_the_panel(fresh):
     """Point collocation (vertex unknowns) from the method list: it renders the diffuse room
     and reports its unknowns (its bake: ``test_addon_bake``)."""
-    from raybundle.plan import RunOptions
+    from raybundle.app.plan import RunOptions
     from raybundle_addon.engine import RenderJob
 
     small_lit_scene()
@@ -284,8 +297,8 @@ def test_auto_method_renders_with_its_choice_and_bakes_with_the_iteration(fresh)
     """Method Auto: the engine measures the exported scene (Lambertian here), renders with the
     bundle iteration, shows the choice as a set-up step and keeps it in the run's stats; a bake
     set to Auto takes the bundle iteration (it needs a patch solution)."""
+    from raybundle.app.plan import RunOptions
     from raybundle_addon.bake import BakeJob
-    from raybundle.plan import RunOptions
     from raybundle_addon.engine import RenderJob
 
     small_lit_scene()

@@ -1,4 +1,4 @@
-"""The ``auto`` method (:mod:`raybundle.auto`): it decides from what it measures in a scene.
+"""The ``auto`` method (:mod:`raybundle.app.auto`): it decides from what it measures in a scene.
 
 The rule comes from the methods bench (README); these tests check that the figures it reads
 are right (against hand computations on the built-in boxes), that the choice follows them on
@@ -12,7 +12,8 @@ import sys
 import numpy as np
 import pytest
 
-from raybundle import auto, scenes
+from raybundle.app import auto
+from raybundle.scene import builtin as scenes
 
 
 def test_figures_of_the_cornell_boxes_match_hand_computations():

@@ -1,4 +1,4 @@
-"""Bakes of the solution at surface points (raybundle.baking) against closed forms, and
+"""Bakes of the solution at surface points (raybundle.imaging.baking) against closed forms, and
 the point location against a brute-force search.
 
 Statistical tolerances: fixed seeds; the furnace bounds are about 4.5 times the bias and
@@ -8,12 +8,14 @@ is constant, so everything measured is noise).
 import numpy as np
 import pytest
 
-from raybundle import pipeline, scenes
-from raybundle.baking import _locate_by_search, baked_radiance, locate_points
-from raybundle.camera import Camera
-from raybundle.imaging import RenderSettings
-from raybundle.materials import MaterialTable
-from raybundle.scene import PointLights, build_scene
+from raybundle.app import pipeline
+from raybundle.imaging.baking import _locate_by_search, baked_radiance, locate_points
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
+from raybundle.scene.build import build_scene
+from raybundle.scene.camera import Camera
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.model import PointLights
 
 
 def random_face_points(scene, n, rng):
@@ -88,10 +90,10 @@ def test_dropped_faces_and_bad_ids_are_not_found_and_bake_to_zero():
 
 
 def test_refinement_by_lighting_cuts_until_edges_interpolate():
-    """raybundle.baking.refine_by_lighting on the plane under a point light: the sub-triangles
+    """raybundle.imaging.baking.refine_by_lighting on the plane under a point light: the sub-triangles
     tile each face exactly (areas add up), and every edge of a triangle that stopped before
     the last level interpolates the closed form at its midpoint within the tolerance."""
-    from raybundle.baking import refine_by_lighting
+    from raybundle.imaging.baking import refine_by_lighting
 
     coarse, r = plane_under_point_light()
     out = refine_by_lighting(r.solver, coarse, np.arange(len(coarse.triangles)), max_level=4, tolerance=0.05)
@@ -120,8 +122,8 @@ def test_refinement_by_lighting_cuts_until_edges_interpolate():
 def test_textures_survive_the_npz_round_trip(tmp_path):
     """A textured scene written to .npz and read back keeps its maps and faces, and renders
     the same image (same seed and iterations); corner colors (a color attribute) too."""
-    from raybundle.scene import load_npz
-    from raybundle.textures import SurfaceTexture
+    from raybundle.scene.npz import load_npz
+    from raybundle.scene.textures import SurfaceTexture
 
     coarse, _, tex = textured_plane(patches=100, res=8)
     coarse.save_npz(tmp_path / "textured.npz")
@@ -163,7 +165,7 @@ def test_furnace_bake_is_le_over_one_minus_albedo(gather, seed=0):
 
 
 def test_texel_points_cover_each_texel_once_and_reproduce_its_centre():
-    from raybundle.baking import texel_points
+    from raybundle.imaging.baking import texel_points
 
     # the unit square as two triangles, plus a degenerate triangle (covers nothing)
     uv = np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]], [[0.2, 0.2], [0.2, 0.2], [0.3, 0.3]]], float)
@@ -181,7 +183,7 @@ def test_texel_points_cover_each_texel_once_and_reproduce_its_centre():
 
 
 def test_dilate_grows_the_margin_by_neighbour_means():
-    from raybundle.baking import dilate
+    from raybundle.imaging.baking import dilate
 
     img = np.zeros((9, 9, 1))
     ok = np.zeros((9, 9), bool)
@@ -197,7 +199,7 @@ def textured_plane(patches=400, res=32):
     """``plane_under_point_light`` with a 4 x 4 checker texture (texels 0.4 and 1.6 of the
     mean) on the plane's albedo through UVs (x, y) / 2 + 0.5, seen by an ortho camera
     from above (res x res pixels over the plane)."""
-    from raybundle.textures import SurfaceTexture, modulation_map
+    from raybundle.scene.textures import SurfaceTexture, modulation_map
 
     v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
     t = np.array([[0, 1, 2], [0, 2, 3]])

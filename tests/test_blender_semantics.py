@@ -8,13 +8,16 @@ render), as the rest of the suite does.
 import numpy as np
 import pytest
 
-from raybundle import pipeline, scenes
-from raybundle.imaging import RenderSettings
-from raybundle.lights import DirectLighting
-from raybundle.materials import MaterialTable
-from raybundle.metrics import image_error, light_source_mask
-from raybundle.scene import AreaLights, PointLights, SunLights, build_scene, load_npz
-from raybundle.visibility import RayTracer
+from raybundle.app import pipeline
+from raybundle.app.metrics import image_error, light_source_mask
+from raybundle.imaging.settings import RenderSettings
+from raybundle.lights.direct import DirectLighting
+from raybundle.scene import builtin as scenes
+from raybundle.scene.build import build_scene
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.model import AreaLights, PointLights, SunLights
+from raybundle.scene.npz import load_npz
+from raybundle.tracing.visibility import RayTracer
 
 FLOOR = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.5, 0.5))])
 
@@ -22,7 +25,7 @@ FLOOR = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.5, 0.5))])
 def blender_cornell(flip=(), full_ceiling=True, materials=None, environment=None, one_sided_lamp=False):
     """The Cornell box as a .blend has it: two-sided, 5-face blocks, and (``full_ceiling``)
     no opening above the lamp, which hangs 0.5 mm under the ceiling."""
-    from raybundle.scenes import _CORNELL_QUADS, _block_quads, _mesh, cornell_camera, cornell_to_blender
+    from raybundle.scene.builtin import _CORNELL_QUADS, _block_quads, _mesh, cornell_camera, cornell_to_blender
 
     quads = [(np.array(q, float), {"green": 2, "red": 1, "light": 3}.get(k, 0)) for k, q in _CORNELL_QUADS.items()
              if not (full_ceiling and k.startswith("ceiling"))]
@@ -188,7 +191,7 @@ def test_npz_keeps_sides_lights_and_world(tmp_path):
 
 
 def test_world_alone_is_a_light_and_bad_lights_are_errors():
-    from raybundle.scene import SceneError
+    from raybundle.scene.model import SceneError
 
     v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0]], float)
     assert build_scene(v, [[0, 1, 2]], [0], FLOOR, environment=(0.5, 0.5, 0.5)).n_sides == 1
@@ -215,8 +218,8 @@ def test_principled_plane_under_a_white_world_renders_its_albedo(spec):
     escaping to the world) and the solver's layered radiance together must give it.
     Tolerance: 4.5 standard errors of the mean ratio, from two seeds, plus 0.5% for
     the albedo tables' interpolation."""
-    from raybundle.camera import Camera
-    from raybundle.materials import principled_material
+    from raybundle.scene.camera import Camera
+    from raybundle.scene.materials import principled_material
 
     mats = MaterialTable.from_list([principled_material(**spec)])
     v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)

@@ -1,4 +1,4 @@
-"""The caustic first shot (raybundle.caustics) against a brute-force one-bounce integral.
+"""The caustic first shot (raybundle.lights.caustics) against a brute-force one-bounce integral.
 
 A sun lights a glossy floor (GGX, roughness 0.3) whose mirror lobe falls on a diffuse wall
 standing on the floor's edge.  Per wall patch, the incoming radiance that the floor's
@@ -9,12 +9,14 @@ combined standard error, each from 10 independent batches (fixed seeds).
 """
 import numpy as np
 
-from raybundle import pipeline
-from raybundle.camera import Camera
-from raybundle.imaging import RenderSettings
-from raybundle.materials import MaterialTable
-from raybundle.sampling import frames_from_normals, points_on_triangles
-from raybundle.scene import SunLights, build_scene, subdivide
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.patches.layout import subdivide
+from raybundle.scene.build import build_scene
+from raybundle.scene.camera import Camera
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.model import SunLights
+from raybundle.tracing.sampling import frames_from_normals, points_on_triangles
 
 SUN = np.array([0.6, 0.0, -0.8])            # travel direction: down and towards +x
 

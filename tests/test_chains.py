@@ -1,5 +1,5 @@
-"""Independent chains: their exact merge (:mod:`raybundle.chains`) and chains on a Dask
-``LocalCluster`` of 2 worker processes (:mod:`raybundle.distributed`)."""
+"""Independent chains: their exact merge (:mod:`raybundle.app.chains`) and chains on a Dask
+``LocalCluster`` of 2 worker processes (:mod:`raybundle.app.distributed`)."""
 import os
 import threading
 import time
@@ -7,8 +7,9 @@ import time
 import numpy as np
 import pytest
 
-from raybundle import chains, pipeline, scenes
-from raybundle.imaging import RenderSettings
+from raybundle.app import chains, pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
 
 SETTINGS = dict(resolve_samples=4)
 
@@ -92,8 +93,8 @@ def cluster():
 def test_chains_on_two_workers_equal_the_same_seeds_run_one_by_one(cluster, method):
     """The chains run the plan's method (before the one set-up path they ran the bundle
     iteration whatever --method said)."""
-    from raybundle.distributed import render_chains
-    from raybundle.plan import Plan
+    from raybundle.app.distributed import render_chains
+    from raybundle.app.plan import Plan
 
     _, client = cluster
     sc = pipeline.prepare(scenes.cornell(resolution=(24, 24)), patches=200)
@@ -111,8 +112,8 @@ def test_timed_chains_get_the_final_gather_of_a_single_run(cluster):
     """A timed run of chains leaves the client's resolve the final image's share, as a single
     run's loop does: the automatic final gather runs next to the box's concave edges (before
     the run loop, chains resolved without it)."""
-    from raybundle.distributed import render_chains
-    from raybundle.plan import Plan
+    from raybundle.app.distributed import render_chains
+    from raybundle.app.plan import Plan
 
     _, client = cluster
     sc = pipeline.prepare(scenes.cornell(resolution=(24, 24)), patches=200)
@@ -128,7 +129,7 @@ def test_cli_workers_writes_the_merged_image(tmp_path):
     import subprocess
     import sys
 
-    from raybundle.io import read_exr
+    from raybundle.util.io import read_exr
 
     out, stats = tmp_path / "f.exr", tmp_path / "f.json"
     p = subprocess.run([sys.executable, "-m", "raybundle", "render", "furnace", "--iterations", "10",
@@ -146,8 +147,8 @@ def test_a_lost_worker_costs_only_its_last_segment(cluster):
     """Killing one worker mid-run: its chain's last report still counts, the other chain
     runs to the end, and the pooled furnace image is right (image mean within 5 SE of the
     analytic radiance, SE from the pixel spread; each chain alone is unbiased)."""
-    from raybundle.distributed import render_chains
-    from raybundle.plan import Plan
+    from raybundle.app.distributed import render_chains
+    from raybundle.app.plan import Plan
 
     lc, client = cluster
     sc = pipeline.prepare(scenes.furnace(resolution=(16, 16)), patches=200)

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from raybundle.io import read_exr
+from raybundle.util.io import read_exr
 
 
 def run_cli(*args, **kw):
@@ -59,8 +59,8 @@ def test_ctrl_c_stops_and_still_writes_the_image(tmp_path):
 def test_ctrl_c_during_set_up_writes_nothing(tmp_path):
     """Ctrl-C while a 256k-triangle scene is laid out (about 2 s of set-up on 2 cores): the next
     set-up step stops the run, exit 130, no image and no half-written file."""
-    from raybundle.clusters import tessellate
-    from raybundle.scenes import load_scene
+    from raybundle.patches.clusters import tessellate
+    from raybundle.scene.builtin import load_scene
 
     big = tmp_path / "big.npz"
     tessellate(load_scene("cornell"), 256_000).save_npz(big)

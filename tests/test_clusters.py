@@ -1,18 +1,20 @@
-"""Patches as clusters of triangles (:mod:`raybundle.clusters`): the layout, and the
+"""Patches as clusters of triangles (:mod:`raybundle.patches.clusters`): the layout, and the
 solution on curved clusters against the furnace's exact answer.
 
 Statistical checks follow ``test_solver``: batch means after a burn-in batch, |mean -
 exact| < 4.5 SE and SE itself small."""
 import numpy as np
 import pytest
-
-from raybundle import pipeline, scenes
-from raybundle.clusters import NORMAL_CELLS, make_patches, normal_cells, tessellate
-from raybundle.imaging import RenderSettings
-from raybundle.materials import MaterialTable
-from raybundle.reconstruction import LinearReconstruction
-from raybundle.scene import build_scene, subdivide
 from test_solver import assert_converged
+
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.patches.clusters import NORMAL_CELLS, make_patches, normal_cells, tessellate
+from raybundle.patches.layout import subdivide
+from raybundle.patches.reconstruction import LinearReconstruction
+from raybundle.scene import builtin as scenes
+from raybundle.scene.build import build_scene
+from raybundle.scene.materials import MaterialTable
 
 
 def uv_sphere(centre, radius, rings, segments):

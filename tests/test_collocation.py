@@ -1,15 +1,16 @@
-"""Point collocation with linear basis functions (:mod:`raybundle.collocation`).
+"""Point collocation with linear basis functions (:mod:`raybundle.methods.point_collocation`).
 
 Statistical tolerances: fixed seeds; 4.5 standard errors, estimated from batch means (the
 furnace) or from the spread of independent directions (the collocation operator).
 """
 import numpy as np
 import pytest
-
-from raybundle import pipeline, scenes
-from raybundle.imaging import RenderSettings
-from raybundle.sampling import frames_from_normals, uniform_sphere
 from test_solver import assert_converged, batch_means
+
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
+from raybundle.tracing.sampling import frames_from_normals, uniform_sphere
 
 
 def collocation_renderer(name="furnace", patches=300, seed=0, res=(16, 16)):

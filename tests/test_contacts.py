@@ -1,4 +1,4 @@
-"""Patches conform to contact lines (raybundle.contacts): a box standing on a floor,
+"""Patches conform to contact lines (raybundle.patches.contacts): a box standing on a floor,
 a lamp hanging just under a ceiling, a wall piercing a floor.
 
 Geometry checks are exact (areas, orientations, which side of a line every
@@ -9,13 +9,15 @@ import numpy as np
 import pytest
 from geometry_helpers import clipped_area
 
-from raybundle import pipeline
-from raybundle.camera import Camera
-from raybundle.contacts import contact_segments
-from raybundle.imaging import RenderSettings
-from raybundle.materials import MaterialTable
-from raybundle.scene import PointLights, build_scene, subdivide
-from raybundle.scenes import _mesh
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.patches.contacts import contact_segments
+from raybundle.patches.layout import subdivide
+from raybundle.scene.build import build_scene
+from raybundle.scene.builtin import _mesh
+from raybundle.scene.camera import Camera
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.model import PointLights
 
 MATS = MaterialTable.from_list([dict(name="white", diffuse=(0.7, 0.7, 0.7)),
                                 dict(name="lamp", emission=(10.0, 10.0, 10.0))])
@@ -166,9 +168,9 @@ def test_straddling_finds_the_triangles_the_lamps_outline_crosses():
     """A ceiling meshed into ~20k triangles with a rotated lamp 0.5 mm under it: the triangles
     ``straddling`` flags are those whose area lies partly under the lamp and partly not
     (exact clipped areas, beyond a 2% margin either way), as brute force over all of them."""
-    from raybundle.clusters import tessellate
-    from raybundle.contacts import straddling
-    from raybundle.visibility import RayTracer
+    from raybundle.patches.clusters import tessellate
+    from raybundle.patches.contacts import straddling
+    from raybundle.tracing.visibility import RayTracer
 
     ceiling = np.array([[-1, -1, 1], [-1, 1, 1], [1, 1, 1], [1, -1, 1]], float)       # facing down
     lamp = np.concatenate([_rot(np.array([[-0.3, -0.3, 0], [0.3, -0.3, 0], [0.3, 0.3, 0], [-0.3, 0.3, 0]]))[:, :2],

@@ -9,16 +9,17 @@
 import os
 import sys
 
+import bpy  # noqa: E402  (the test set-up installs bpy: a missing one must fail)
 import numpy as np
 import pytest
 
-import bpy  # noqa: E402  (the test set-up installs bpy: a missing one must fail)
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tools"))
 import cycles_reference as cr  # noqa: E402
 
-from raybundle import pipeline, scenes  # noqa: E402
-from raybundle.imaging import RenderSettings  # noqa: E402
-from raybundle.materials import MaterialTable  # noqa: E402
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
+from raybundle.scene.materials import MaterialTable
 
 
 def cycles_plane_radiance(tmp_path, roughness, cos_view, samples=512, res=6):
@@ -60,7 +61,7 @@ def test_camera_from_blender_matches_bpy_projection(fit, res, shift, ortho):
     from bpy_extras.object_utils import world_to_camera_view
     from mathutils import Euler, Vector
 
-    from raybundle.camera import Camera
+    from raybundle.scene.camera import Camera
 
     cr.reset()
     cd = bpy.data.cameras.new("cam")

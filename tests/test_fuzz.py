@@ -4,18 +4,18 @@ The contract for any argument list and any ``.npz`` file: exit status 0 with a f
 or exit status 2 with one line on stderr; never a traceback, a hang or a NaN.  Every
 generated command is capped to a few iterations of a tiny image.
 """
-import io
 import contextlib
+import io
 
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from raybundle.cli import main
-from raybundle.io import read_exr
-from raybundle.methods import SOLVERS
-from raybundle.sampling import SEQUENCES
+from raybundle.app.cli import main
+from raybundle.methods.registry import SOLVERS
+from raybundle.tracing.sampling import SEQUENCES
+from raybundle.util.io import read_exr
 
 FUZZ = settings(derandomize=True, max_examples=80, deadline=None, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])

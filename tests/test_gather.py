@@ -1,16 +1,17 @@
-"""The final gather (raybundle.gather) against brute-force integrals, and where the image
+"""The final gather (raybundle.imaging.gather) against brute-force integrals, and where the image
 spends it.  Statistical tolerances: fixed seeds, bounds from the spread measured over seeds
 (stated in each test)."""
 import numpy as np
 
-from raybundle import pipeline
-from raybundle.baking import locate_points
-from raybundle.gather import FinalGather, near_edge_tsides
-from raybundle.imaging import Renderer, RenderSettings
-from raybundle.lights import polygon_irradiance
-from raybundle.materials import MaterialTable
-from raybundle.sampling import triangle_barycentrics
-from raybundle.scene import build_scene
+from raybundle.app import pipeline
+from raybundle.imaging.baking import locate_points
+from raybundle.imaging.gather import FinalGather, near_edge_tsides
+from raybundle.imaging.renderer import Renderer
+from raybundle.imaging.settings import RenderSettings
+from raybundle.lights.polygon import polygon_irradiance
+from raybundle.scene.build import build_scene
+from raybundle.scene.materials import MaterialTable
+from raybundle.tracing.sampling import triangle_barycentrics
 
 LE, KD = 10.0, 0.8
 LAMP = np.array([[0.4, -0.1, 0.98], [0.6, -0.1, 0.98], [0.6, 0.1, 0.98], [0.4, 0.1, 0.98]])
@@ -35,7 +36,7 @@ def test_gather_next_to_a_concave_edge_matches_a_brute_force_integral():
     to zero towards the edge.  The gathered irradiance at ceiling points 2 mm to 30 cm from
     the wall (no iterations: the wall's first shot, made exact by many samples, is all the
     light) against the integral over the wall of its exact radiance
-    ``kd / pi Le I(y)`` (:func:`raybundle.lights.polygon_irradiance`, zero above the lamp's
+    ``kd / pi Le I(y)`` (:func:`raybundle.lights.polygon.polygon_irradiance`, zero above the lamp's
     plane) times each of 80,000 wall cells' exact form factor.  Reading the wall's patch
     values (``near=0``) is off by +29% at 3 cm, +113% at 1 cm and 6.6 times at 2 mm; with
     the direct light evaluated where rays land within a patch (``near=1``) it is within
@@ -96,7 +97,7 @@ def test_a_furnace_image_with_the_gather_stays_exact():
     next to its edges and the block: the image mean stays within 0.4% of exact per channel
     and the pixels' spread does not grow (measured, seeds 0 and 1, 150 iterations: means
     within 0.12%, spread 0.36-0.38% gathered against 0.49-0.56% without)."""
-    from raybundle import scenes
+    from raybundle.scene import builtin as scenes
 
     sc = scenes.furnace(resolution=(24, 24))
     r = pipeline.make_renderer(pipeline.prepare(sc, patches=400), RenderSettings(seed=0, resolve_samples=4,
@@ -115,7 +116,7 @@ def test_the_automatic_gather_runs_in_time_limited_runs_within_its_share():
     0.3 s, for a 2-core machine's timing noise; the rays are set from a timed probe, so a
     budget ignored or spent twice over fails it).  A run of given iterations does not
     gather and is the same image for the same seed; ``gather_share`` = 0 turns it off."""
-    from raybundle import scenes
+    from raybundle.scene import builtin as scenes
 
     sc = pipeline.prepare(scenes.load_scene("cornell"), patches=300)
     sc.camera = sc.camera.with_resolution(32, 32)
@@ -146,8 +147,8 @@ def test_gather_rays_meeting_glossy_sides_have_no_heavy_tail():
     no run averages away (``cornell-glossy`` at 30 s: 15% error instead of 4%).  Now glossy
     sides reflect by one lobe-sampled ray (``FinalGather.glossy_reflected``) and the first
     shot's glossy reflection arrives by the caustic shot."""
-    from raybundle.sampling import uniform_triangle
-    from raybundle.scenes import load_scene
+    from raybundle.scene.builtin import load_scene
+    from raybundle.tracing.sampling import uniform_triangle
 
     sc = pipeline.prepare(load_scene("cornell-glossy"), 600)
     solver = pipeline.make_solver(sc, RenderSettings(seed=3))

@@ -7,9 +7,8 @@ and says which cases changed.
 """
 import json
 
-import pytest
-
 import golden
+import pytest
 
 
 def test_renders_keep_their_golden_hashes():

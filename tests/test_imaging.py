@@ -5,12 +5,14 @@ import numpy as np
 import pytest
 from geometry_helpers import clipped_area
 
-from raybundle import pipeline, scenes
-from raybundle.camera import Camera
-from raybundle.imaging import RenderSettings
-from raybundle.io import read_exr, read_exr_header, write_exr, write_png
-from raybundle.materials import MaterialTable
-from raybundle.scene import PointLights, build_scene
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
+from raybundle.scene.build import build_scene
+from raybundle.scene.camera import Camera
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.model import PointLights
+from raybundle.util.io import read_exr, read_exr_header, write_exr, write_png
 
 
 def test_cornell_camera_looks_along_plus_y_with_red_on_the_left():
@@ -193,9 +195,9 @@ def test_the_first_pass_is_exact_where_the_lamp_is_wholly_seen():
     unoccluded irradiance as a control variate): on the open floor of the penumbra scene
     above, where the lamp is wholly seen, its direct light equals kd/pi Le I(x) at each
     pixel's sample point to rounding (I the exact cosine-weighted solid angle of the lamp,
-    :func:`raybundle.lights.polygon_irradiance`).  A plain first pass (one shadow ray,
+    :func:`raybundle.lights.polygon.polygon_irradiance`).  A plain first pass (one shadow ray,
     no control variate) is 10-50% off per pixel there."""
-    from raybundle.lights import polygon_irradiance
+    from raybundle.lights.polygon import polygon_irradiance
 
     v, sc = penumbra_scene()
     r = pipeline.make_renderer(sc, RenderSettings(seed=5))

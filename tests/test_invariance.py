@@ -7,11 +7,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-
 from invariance import check, compare, region_batches
-from raybundle.clusters import tessellate
-from raybundle.scene import build_scene
 from test_blender_semantics import blender_cornell
+
+from raybundle.patches.clusters import tessellate
+from raybundle.scene.build import build_scene
 
 
 @pytest.fixture(scope="module")
@@ -75,9 +75,8 @@ def test_the_blend_subdivided_in_blender_is_the_blend():
     """The user's case, through the add-on's export: ``demo_scenes/cornell_box.blend`` with every
     mesh subdivided by Blender (Subdivide, 15 cuts: 8,192 triangles) against the file as it is
     (the old layout rendered it 21-26% brighter in every region)."""
+    import bmesh  # after bpy
     from addon_helpers import ROOT, bpy, ensure_registered
-
-    import bmesh                     # after bpy
 
     from raybundle_addon.export import export_scene
 

@@ -2,11 +2,15 @@
 import numpy as np
 import pytest
 
-from raybundle import pipeline, scenes
-from raybundle.lights import DirectLighting, PatchFirstShot
-from raybundle.materials import MaterialTable
-from raybundle.scene import PointLights, build_scene, subdivide
-from raybundle.visibility import RayTracer
+from raybundle.app import pipeline
+from raybundle.lights.direct import DirectLighting
+from raybundle.lights.first_shot import PatchFirstShot
+from raybundle.patches.layout import subdivide
+from raybundle.scene import builtin as scenes
+from raybundle.scene.build import build_scene
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.model import PointLights
+from raybundle.tracing.visibility import RayTracer
 
 LAMP = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.5, 0.5)), dict(name="lamp", emission=(1, 2, 3))])
 
@@ -108,10 +112,10 @@ def test_patch_first_shot_matches_closed_form_under_lamp():
 
 
 def test_polygon_irradiance_matches_the_rectangle_closed_form_and_clips_at_the_horizon():
-    """Lambert's formula (raybundle.lights.polygon_irradiance) against the closed form of a
+    """Lambert's formula (raybundle.lights.polygon.polygon_irradiance) against the closed form of a
     point under a rectangle's corner, and, with the rectangle partly below a tilted
     point's horizon, against dense midpoint quadrature of cos_x cos_l / r^2 (deterministic)."""
-    from raybundle.lights import polygon_irradiance
+    from raybundle.lights.polygon import polygon_irradiance
 
     a, b, c = 1.3, 0.7, 0.9                   # rectangle [0, a] x [0, b] at height c over the origin
     rect = np.array([[0, 0, c], [a, 0, c], [a, b, c], [0, b, c]], float)
@@ -139,11 +143,11 @@ def test_polygon_irradiance_matches_the_rectangle_closed_form_and_clips_at_the_h
 
 
 def test_a_concave_outline_with_a_hole_clipped_at_the_horizon_equals_its_clipped_triangles():
-    """raybundle.lights.clipped_edge_irradiance over an L-shaped outline with a square hole
+    """raybundle.lights.polygon.clipped_edge_irradiance over an L-shaped outline with a square hole
     (cells of a 4 x 4 grid at z = 1, facing down) equals the sum of polygon_irradiance over
     its 26 triangles, each clipped on its own, at random points below it with random
     normals, many of whose horizons cut it (deterministic; agreement to round-off)."""
-    from raybundle.lights import clipped_edge_irradiance, polygon_irradiance
+    from raybundle.lights.polygon import clipped_edge_irradiance, polygon_irradiance
 
     cells = [(i, j) for i in range(4) for j in range(4) if not (i >= 2 and j >= 2) and (i, j) != (1, 1)]
     triangles, boundary = [], {}
@@ -249,7 +253,8 @@ def test_a_lamp_cut_into_a_grid_integrates_by_its_outline_like_the_whole_lamp():
     """A mesh lamp of 2 x 5 x 5 triangles: its plane's outline is merged to 4 edges, and the
     analytic irradiance (outline where the lamp is above the horizon, clipped triangles
     where the horizon cuts it) equals the two-triangle lamp's at random points."""
-    from raybundle.lights import MeshLight, light_polygon_irradiance
+    from raybundle.lights.polygon import light_polygon_irradiance
+    from raybundle.lights.sources import MeshLight
 
     def lamp_scene(n):
         g = np.linspace(-0.5, 0.5, n + 1)

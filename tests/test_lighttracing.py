@@ -1,4 +1,4 @@
-"""Stochastic iteration with single rays (:mod:`raybundle.lighttracing`): the camera's inverse
+"""Stochastic iteration with single rays (:mod:`raybundle.methods.single_ray_iteration`): the camera's inverse
 projection against its rays, the photons' powers against each light's emitted power, the
 furnaces against their analytic radiance, and every kind of light against the path tracer.
 
@@ -8,16 +8,17 @@ renders A and B (region means, ``test_pathtracing.region_means``).
 """
 import numpy as np
 import pytest
-
-from raybundle import pipeline, scenes
-from raybundle.camera import Camera
-from raybundle.imaging import RenderSettings
-from raybundle.lighttracing import LightEmission
-from raybundle.materials import MaterialTable
-from raybundle.scene import AreaLights, PointLights, SunLights
-from raybundle.visibility import RayTracer
 from test_blender_semantics import blender_cornell
 from test_pathtracing import region_means
+
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.methods.single_ray_iteration import LightEmission
+from raybundle.scene import builtin as scenes
+from raybundle.scene.camera import Camera
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.model import AreaLights, PointLights, SunLights
+from raybundle.tracing.visibility import RayTracer
 
 
 @pytest.mark.parametrize("ortho", [False, True])

@@ -1,8 +1,8 @@
-"""raybundle.metrics.image_error on images whose errors are known by construction."""
+"""raybundle.app.metrics.image_error on images whose errors are known by construction."""
 import numpy as np
 import pytest
 
-from raybundle.metrics import TAIL_FLOOR, image_error
+from raybundle.app.metrics import TAIL_FLOOR, image_error
 
 
 def test_the_reference_noise_is_subtracted_and_the_tail_and_mean_are_read():

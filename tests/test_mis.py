@@ -8,12 +8,13 @@ the variance on the highlight.
 """
 import numpy as np
 
-from raybundle import pipeline
-from raybundle.camera import Camera
-from raybundle.imaging import RenderSettings
-from raybundle.lights import MeshLight
-from raybundle.materials import MaterialTable, principled_material
-from raybundle.scene import build_scene, subdivide
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.lights.sources import MeshLight
+from raybundle.patches.layout import subdivide
+from raybundle.scene.build import build_scene
+from raybundle.scene.camera import Camera
+from raybundle.scene.materials import MaterialTable, principled_material
 
 MATS = MaterialTable.from_list([
     dict(name="ggx", glossy=(0.9, 0.8, 0.7), roughness=0.4, glossy_weight=1.0),

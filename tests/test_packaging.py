@@ -20,5 +20,5 @@ def test_core_builds_a_wheel_named_raybundle(tmp_path):
     assert p.returncode == 0, p.stderr
     (wheel,) = tmp_path.glob("raybundle-*.whl")
     names = zipfile.ZipFile(wheel).namelist()
-    assert "raybundle/__init__.py" in names and "raybundle/solvers.py" in names
+    assert "raybundle/__init__.py" in names and "raybundle/methods/stochastic_iteration.py" in names
     assert not any(n.startswith(("core/", "tests/")) for n in names)

@@ -1,4 +1,4 @@
-"""The path tracer (:mod:`raybundle.pathtracing`): unbiased against closed forms and against Cycles.
+"""The path tracer (:mod:`raybundle.methods.path_tracing`): unbiased against closed forms and against Cycles.
 
 Statistical tolerances: fixed seeds; pixels are independent (one PRNG stream, or for the
 quasi-Monte Carlo walk one random shift per pixel), so the standard error of a region's
@@ -13,9 +13,10 @@ import sys
 import numpy as np
 import pytest
 
-from raybundle import pipeline, scenes
-from raybundle.imaging import RenderSettings
-from raybundle.io import read_exr
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
+from raybundle.util.io import read_exr
 
 
 def small(name, res=24):

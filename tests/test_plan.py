@@ -1,11 +1,11 @@
-"""The one set-up path (:mod:`raybundle.plan`): what ``auto`` decides, what the user keeps,
+"""The one set-up path (:mod:`raybundle.app.plan`): what ``auto`` decides, what the user keeps,
 and what cannot run, for every front-end alike."""
 import pytest
 
-from raybundle import scenes
-from raybundle.clusters import DEFAULT_PATCHES
-from raybundle.plan import DEFAULT_SECONDS, RunOptions, check, plan
-from raybundle.sampling import DEFAULT_SEQUENCE
+from raybundle.app.plan import DEFAULT_SECONDS, RunOptions, check, plan
+from raybundle.patches.clusters import DEFAULT_PATCHES
+from raybundle.scene import builtin as scenes
+from raybundle.tracing.sampling import DEFAULT_SEQUENCE
 
 
 def test_defaults_and_the_budget():

@@ -12,14 +12,14 @@ at 80 degrees (a black-ish metal) and by 44% head-on (a rough white metal).
 import os
 import sys
 
+import bpy  # noqa: E402  (the test set-up installs bpy: a missing one must fail)
 import numpy as np
 import pytest
 
-import bpy  # noqa: E402  (the test set-up installs bpy: a missing one must fail)
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tools"))
 import cycles_reference as cr  # noqa: E402
 
-from raybundle.materials import MaterialTable, f0_from_ior, principled_material  # noqa: E402
+from raybundle.scene.materials import MaterialTable, f0_from_ior, principled_material
 
 BASE = (1.0, 0.5, 0.05)
 #: Cycles' own lookup tables (32 x 32 GGX albedo, 16^3 Fresnel factor) differ from the

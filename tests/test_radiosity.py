@@ -1,9 +1,10 @@
-"""Classical radiosity on global-line form factors (:mod:`raybundle.radiosity`)."""
+"""Classical radiosity on global-line form factors (:mod:`raybundle.methods.radiosity`)."""
 import numpy as np
 import pytest
 
-from raybundle import pipeline, scenes
-from raybundle.imaging import RenderSettings
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
 
 
 def furnace_solver(seed=1, patches=300):
@@ -53,7 +54,7 @@ def test_furnace_image_and_refusals():
     assert np.all(np.abs(img.reshape(-1, 3).mean(axis=0) / np.asarray(sc.analytic_radiance) - 1) < 0.02)
     with pytest.raises(ValueError, match="diffuse scenes only"):
         pipeline.make_solver(pipeline.prepare(scenes.load_scene("cornell-glossy"), patches=300), solver="radiosity")
-    from raybundle.radiosity import RadiositySolver
+    from raybundle.methods.radiosity import RadiositySolver
     big = pipeline.prepare(scenes.load_scene("furnace"), patches=RadiositySolver.MAX_SIDES + 2000)
     with pytest.raises(ValueError, match="n x n"):
         pipeline.make_solver(big, solver="radiosity")

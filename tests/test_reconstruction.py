@@ -1,5 +1,5 @@
 """Reconstruction of the diffuse light between patches: the L2 projection onto hat
-functions (raybundle.reconstruction.LinearReconstruction.projected) against closed forms,
+functions (raybundle.patches.reconstruction.LinearReconstruction.projected) against closed forms,
 and against averaging the patches around a vertex (LinearReconstruction.averaged), which
 puts a patch-wide mean on a concave edge.
 
@@ -8,12 +8,14 @@ measure the reconstruction alone, not the solver's noise.
 """
 import numpy as np
 
-from raybundle import pipeline
-from raybundle.camera import Camera
-from raybundle.imaging import RenderSettings
-from raybundle.materials import MaterialTable
-from raybundle.scene import SunLights, build_scene, subdivide
-from raybundle.sampling import points_on_triangles
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.patches.layout import subdivide
+from raybundle.scene.build import build_scene
+from raybundle.scene.camera import Camera
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.model import SunLights
+from raybundle.tracing.sampling import points_on_triangles
 
 
 def floor_and_wall(patches=240):

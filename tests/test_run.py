@@ -1,13 +1,14 @@
-"""The one run loop (:mod:`raybundle.run`): the budget it owns, its stop, its slices, on a real
+"""The one run loop (:mod:`raybundle.imaging.run`): the budget it owns, its stop, its slices, on a real
 solver and renderer."""
 import threading
 import time
 
 import pytest
 
-from raybundle import pipeline, scenes
-from raybundle.imaging import RenderSettings
-from raybundle.run import RunLoop, check_budget
+from raybundle.app import pipeline
+from raybundle.imaging.run import RunLoop, check_budget
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
 
 
 @pytest.fixture(scope="module")

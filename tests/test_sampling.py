@@ -4,8 +4,16 @@ import mpmath
 import numpy as np
 import pytest
 
-from raybundle.sampling import (HaltonSequence, PiPowersSequence, PRNGSequence, invert_uniform_sphere,
-                                radical_inverse, stratified_2d, uniform_sphere, uniform_triangle)
+from raybundle.tracing.sampling import (
+    HaltonSequence,
+    PiPowersSequence,
+    PRNGSequence,
+    invert_uniform_sphere,
+    radical_inverse,
+    stratified_2d,
+    uniform_sphere,
+    uniform_triangle,
+)
 
 
 def chi2_uniform_sphere(d, n_theta=9, n_phi=17):
@@ -53,7 +61,7 @@ def test_pi_powers_match_arbitrary_precision():
 
 
 def test_pi_fixed_point_matches_arbitrary_precision():
-    from raybundle.sampling import pi_fixed_point
+    from raybundle.tracing.sampling import pi_fixed_point
 
     for bits in (53, 1000, 20000):
         with mpmath.workprec(bits + 64):
@@ -91,7 +99,7 @@ def test_stratified_sequence_covers_every_cell_and_keeps_consecutive_steps_indep
     streams, so their joint distribution is uniform on cell pairs (chi-square over
     16 x 16 pairs of 4 x 4 cells, 255 dof: mean 255, sd 22.6; bound mean + 5 sd).  With
     one stream the same check fails: a cell cannot follow itself within a block."""
-    from raybundle.sampling import StratifiedSequence
+    from raybundle.tracing.sampling import StratifiedSequence
 
     seq = StratifiedSequence(seed=4, strata=256, streams=4)
     first = np.array([seq.next(2) for _ in range(4 * 256)])
@@ -111,7 +119,7 @@ def test_stratified_sequence_covers_every_cell_and_keeps_consecutive_steps_indep
 
 def test_toy_iteration_stratified_converges():
     """The toy iteration driven by the first coordinate of the stratified directions."""
-    from raybundle.sampling import StratifiedSequence
+    from raybundle.tracing.sampling import StratifiedSequence
 
     class FirstOfTwo:
         def __init__(self):
@@ -134,7 +142,7 @@ def test_toy_iteration_van_der_corput_is_wrong():
 
 
 def test_kronecker_generators_and_stratification(rng):
-    from raybundle.sampling import ShiftedKronecker, kronecker_alpha
+    from raybundle.tracing.sampling import ShiftedKronecker, kronecker_alpha
 
     assert np.isclose(kronecker_alpha(1)[0], (math.sqrt(5) - 1) / 2)
     assert np.isclose(kronecker_alpha(2)[0], 1 / 1.324717957244746)      # plastic number
@@ -152,7 +160,7 @@ def test_kronecker_generators_and_stratification(rng):
 
 
 def test_pi_powers_refuse_runs_they_cannot_afford():
-    from raybundle.sampling import make_sequence
+    from raybundle.tracing.sampling import make_sequence
 
     seq = PiPowersSequence(start=PiPowersSequence.MAX_N - 3)
     with pytest.raises(ValueError, match="use the 'prng'"):
@@ -165,7 +173,7 @@ def test_spherical_triangle_sampling_is_uniform_in_solid_angle(rng):
     """Arvo's sampler: every direction meets the triangle, the solid angle equals the
     closed form, and the mean of a smooth function of the direction equals its mean
     under area sampling weighted by the solid-angle Jacobian cos_l / r^2."""
-    from raybundle.sampling import sample_spherical_triangle, triangle_solid_angle, points_on_triangles
+    from raybundle.tracing.sampling import points_on_triangles, sample_spherical_triangle, triangle_solid_angle
 
     tri = np.array([[0.3, -0.2, 1.0], [-0.5, 0.1, 0.4], [0.2, 0.6, 0.2]])     # seen from the origin
     n = 200_000
@@ -195,7 +203,7 @@ def test_sobol_is_a_0_2_sequence_and_its_shift_keeps_the_net_property():
     """Unshifted, the first points are (0, 0), (1/2, 1/2), (1/4, 3/4), (3/4, 1/4); shifted or
     not, every aligned block of 2^m points puts exactly one point into every dyadic box
     2^-a x 2^-(m-a) (the (0, m, 2)-net property), for m up to 8 and blocks up to 2^10."""
-    from raybundle.sampling import SobolSequence
+    from raybundle.tracing.sampling import SobolSequence
 
     plain = SobolSequence()
     plain.shift[:] = 0
@@ -216,7 +224,7 @@ def test_toy_iteration_sobol_is_wrong():
     """Sobol's first coordinate driving the toy iteration: consecutive points fall in opposite
     halves (points 2k and 2k + 1), the same systematic error as Halton's (-0.0049 at 5e4
     steps, 8.6 times the PRNG's SE of 0.00057), whatever the digital shift."""
-    from raybundle.sampling import SobolSequence
+    from raybundle.tracing.sampling import SobolSequence
 
     class FirstOfTwo:
         def __init__(self, seed):

@@ -1,9 +1,12 @@
 import numpy as np
 import pytest
 
-from raybundle import scenes
-from raybundle.materials import MaterialTable
-from raybundle.scene import PointLights, SceneError, build_scene, load_npz, subdivide
+from raybundle.patches.layout import subdivide
+from raybundle.scene import builtin as scenes
+from raybundle.scene.build import build_scene
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.model import PointLights, SceneError
+from raybundle.scene.npz import load_npz
 
 LIGHT = MaterialTable.from_list([dict(name="white", diffuse=(0.5, 0.5, 0.5)), dict(name="lamp", emission=(1, 1, 1))])
 QUAD_V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)

@@ -11,8 +11,9 @@ import threading
 import numpy as np
 import pytest
 
-from raybundle import pipeline, scenes
-from raybundle.imaging import RenderSettings
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
 
 
 def furnace_renderer(glossy, sequence, patches=600, seed=0, res=(24, 24), glossy_gather=True, directions=1):

@@ -4,17 +4,18 @@ repeated, back-to-back and thin faces.
 Each test pins a behaviour the methods bench measured (README, "Where each method fails"):
 the failure itself where a method has one (a warning says so), and that nothing turns into
 NaN, Inf or unbounded energy.  Noise is measured, not assumed: two seeds' images differ by
-sqrt(2) times one image's noise (relative RMSE, :func:`raybundle.metrics.image_error`,
+sqrt(2) times one image's noise (relative RMSE, :func:`raybundle.app.metrics.image_error`,
 pixels near the visible lamp left out).
 """
 import numpy as np
 import pytest
-
-from raybundle import pipeline, scenes
-from raybundle.imaging import RenderSettings
-from raybundle.metrics import image_error, light_source_mask
-from raybundle.scene import build_scene
 from test_solver import assert_converged, batch_means
+
+from raybundle.app import pipeline
+from raybundle.app.metrics import image_error, light_source_mask
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
+from raybundle.scene.build import build_scene
 
 
 def small_scene(name, patches=600, res=24):
@@ -81,7 +82,7 @@ def test_repeated_back_to_back_and_thin_faces_keep_the_furnace_exact():
     """The furnace with its block duplicated face for face, a sheet made of two one-sided
     quads back to back, and a slab 1 mm thick (far thinner than a patch or a bundle cell,
     far thicker than the tracer's eps).  Bundle lines and eye rays take hits closer than
-    eps as one surface, so before :func:`~raybundle.scene.coincident_triangles` the
+    eps as one surface, so before :func:`~raybundle.scene.build.coincident_triangles` the
     duplicated block came out up to 35% dark (one copy received on about half of the lines)
     and half the sheet black, in the path tracer too (the black back won the tie).  Now the
     copies are dropped and the sheet made two-sided with a warning, and the iteration

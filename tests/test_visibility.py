@@ -2,12 +2,13 @@
 import numpy as np
 import pytest
 
-from raybundle import scenes
-from raybundle.materials import MaterialTable
-from raybundle.sampling import uniform_sphere
-from raybundle.scene import build_scene, subdivide
-from raybundle.scenes import _box_quads, _mesh, _oriented
-from raybundle.visibility import ENVIRONMENT, RayTracer, brute_force_bundle, brute_force_hits, bundle_from_hits
+from raybundle.patches.layout import subdivide
+from raybundle.scene import builtin as scenes
+from raybundle.scene.build import build_scene
+from raybundle.scene.builtin import _box_quads, _mesh, _oriented
+from raybundle.scene.materials import MaterialTable
+from raybundle.tracing.sampling import uniform_sphere
+from raybundle.tracing.visibility import ENVIRONMENT, RayTracer, brute_force_bundle, brute_force_hits, bundle_from_hits
 
 MATS = MaterialTable.from_list([dict(name="w", diffuse=(0.5, 0.5, 0.5), emission=(1, 1, 1))])
 
@@ -161,7 +162,7 @@ def test_grid_offsets_remove_the_bundles_aliasing():
     sphere lies, for every direction, exactly between four lines of a grid whose offset is
     fixed (even resolution, cells centred at (i + 1/2) delta - R): it never receives, whatever
     the direction (measured: 0 lines in 4,000 directions).  The solvers shift and rotate each
-    grid at random (:meth:`~raybundle.visibility.RayTracer.bundles`' ``offsets``,
+    grid at random (:meth:`~raybundle.tracing.visibility.RayTracer.bundles`' ``offsets``,
     ``rotations``), and the same patch then receives its projected area, 2 count delta^2 / A
     within 4.5 SE of 1 over the directions (measured: 1.000, SE 0.073)."""
     quads = [(_oriented(q, towards=[1, 1, 1]), 0) for q in _box_quads([0, 0, 0], [2, 2, 2])]
@@ -242,7 +243,7 @@ def test_one_sided_shelf_buries_nothing():
 
 
 def test_closed_solid_detection():
-    from raybundle.scene import closed_solid_triangles
+    from raybundle.scene.model import closed_solid_triangles
 
     oriented = np.array([_oriented(q, away=[0.5, 0.5, 0.5]) for q in _box_quads([0, 0, 0], [1, 1, 1])])
     vv = oriented.reshape(-1, 3)

@@ -1,4 +1,4 @@
-"""Random ray-bundle tracing (:mod:`raybundle.walk`, thesis 3.2) against the furnaces'
+"""Random ray-bundle tracing (:mod:`raybundle.methods.ray_bundle_walk`, thesis 3.2) against the furnaces'
 analytic answers, and the failure the thesis predicts for non-CUD sequences.
 
 Tolerances as in :mod:`test_solver`: batch means after a burn-in batch, |mean - exact| <
@@ -13,10 +13,11 @@ import sys
 
 import numpy as np
 import pytest
-
-from raybundle import pipeline, scenes
-from raybundle.imaging import RenderSettings
 from test_solver import assert_biased, assert_converged, batch_means
+
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
 
 
 def walk_renderer(glossy, sequence, patches=300, seed=0):
@@ -55,7 +56,7 @@ def test_cli_walk_on_the_glossy_box_reports_its_walks(tmp_path):
     """``render --method ray-bundle-walk``: a finite image, and the walks and q in --stats."""
     import json
 
-    from raybundle.io import read_exr
+    from raybundle.util.io import read_exr
 
     out, stats = tmp_path / "walk.exr", tmp_path / "walk.json"
     p = subprocess.run([sys.executable, "-m", "raybundle", "render", "cornell-glossy", "--method", "ray-bundle-walk",

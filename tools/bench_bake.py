@@ -17,7 +17,7 @@ vertices, 4,624 in all.
    seconds of iteration, and Cycles bakes with 4, 8, 16, ... samples until its error is
    below every raybundle error or a bake takes ``--max-cycles-seconds``.  Each is timed
    from opening the ``.blend`` to the attribute written.
-3. The error of each: :func:`raybundle.metrics.image_error` over the vertices (as a
+3. The error of each: :func:`raybundle.app.metrics.image_error` over the vertices (as a
    one-column image), the lamp's vertices excluded, the reference's own noise
    (from its halves) subtracted.
 4. A 1024² lightmap of the floor (its lightmap UV tile) after a ``--lightmap-seconds``
@@ -78,7 +78,6 @@ def read_attribute(name):
 def cycles_bake(blend, samples, seed):
     """Open ``blend``, bake every mesh with Cycles into a POINT attribute; (values, emitters, wall s)."""
     import bpy
-
     from cycles_reference import cycles_settings
 
     t0 = time.perf_counter()
@@ -127,7 +126,7 @@ def main(argv=None):
     p.add_argument("--lightmap-seconds", type=float, default=5.0)
     p.add_argument("--reference-only", action="store_true", help="make the cached reference and stop")
     a = p.parse_args(argv)
-    from raybundle.metrics import image_error
+    from raybundle.app.metrics import image_error
 
     os.makedirs(a.out, exist_ok=True)
     blend = ensure_blend()

@@ -16,7 +16,7 @@ triangles, built in ``bpy`` by ``tools/cycles_reference.py``).
 2. RAYBUNDLE renders with ``--times`` seconds of iteration, and Cycles renders
    with 1, 2, 4, ... samples until its error is below every RAYBUNDLE error (or a
    render takes 8 times the longest RAYBUNDLE run, at most ``--max-cycles-seconds``).  Every render is timed from opening the ``.blend`` to the EXR written.
-3. The error of each, :func:`raybundle.metrics.image_error` (RMSE / mean of the
+3. The error of each, :func:`raybundle.app.metrics.image_error` (RMSE / mean of the
    reference over pixels at least 2 px from a directly seen light, with the
    reference's own noise from its halves subtracted), and over all pixels.
 
@@ -60,19 +60,19 @@ def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None
     """Open ``blend`` (or build the built-in scene), render with ``engine`` to the EXR
     ``path``; returns (image, wall seconds)."""
     import bpy
-
     from cycles_reference import cycles_settings, exr_output, render_scene
-    from raybundle.io import read_exr, write_exr
-    from raybundle.scenes import load_scene
+
+    from raybundle.scene.builtin import load_scene
+    from raybundle.util.io import read_exr, write_exr
 
     t0 = time.perf_counter()
     if not is_blend(blend):
         if engine == "CYCLES":
             img = render_scene(load_scene(blend), samples, path, seed)
         else:
-            from raybundle.clusters import DEFAULT_PATCHES
-            from raybundle.imaging import RenderSettings
-            from raybundle.pipeline import make_renderer, prepare
+            from raybundle.app.pipeline import make_renderer, prepare
+            from raybundle.imaging.settings import RenderSettings
+            from raybundle.patches.clusters import DEFAULT_PATCHES
 
             r = make_renderer(prepare(load_scene(blend), patches or DEFAULT_PATCHES), RenderSettings(seed=seed))
             img = r.run(seconds=seconds).image
@@ -98,8 +98,8 @@ def light_mask(blend):
     """Pixels within 2 px of a directly seen light, from the exported (or built-in) scene."""
     import bpy
 
-    from raybundle.metrics import light_source_mask
-    from raybundle.scenes import load_scene
+    from raybundle.app.metrics import light_source_mask
+    from raybundle.scene.builtin import load_scene
     from raybundle_addon.export import export_scene
 
     if not is_blend(blend):
@@ -173,8 +173,8 @@ def main(argv=None):
                    help="stop the Cycles ladder after a render this long")
     p.add_argument("--patches", type=int, default=None, help="RAYBUNDLE target patch count (default: the file's)")
     a = p.parse_args(argv)
-    from raybundle.io import read_exr
-    from raybundle.metrics import image_error
+    from raybundle.app.metrics import image_error
+    from raybundle.util.io import read_exr
 
     os.makedirs(a.out, exist_ok=True)
     halves = []

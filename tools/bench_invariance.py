@@ -225,7 +225,7 @@ def images(seconds, cuts, out, seeds=(1, 2)):
     import numpy as np
     from addon_helpers import erode, object_id_image
 
-    from raybundle.io import read_exr
+    from raybundle.util.io import read_exr
     from raybundle_addon.export import export_scene
 
     bpy = _open()

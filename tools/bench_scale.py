@@ -6,7 +6,7 @@ Usage (about 1 to 2 minutes per triangle count up to 1M, 4 minutes for 4M, on 2 
         [--time 20] [--one-patch-per-triangle 4000 16000 64000]
 
 For each triangle count: the built-in ``cornell`` tessellated
-(:func:`raybundle.clusters.tessellate`: every reflecting face cut into small triangles, each
+(:func:`raybundle.patches.clusters.tessellate`: every reflecting face cut into small triangles, each
 its own input face, the stand-in for a finely meshed Blender scene), laid out by
 ``pipeline.prepare`` with the default patch target, then rendered for ``--time`` seconds.
 Each row runs in two fresh processes, one after the other:
@@ -16,7 +16,7 @@ Each row runs in two fresh processes, one after the other:
 2. *render*: set-up (``prepare``; tracer, first shot and solver) and the render, timed,
    with the process's peak RSS; its error against the cached Cycles reference of the
    same box (``out/bench-cornell/reference-{1,2}.exr``, written by
-   ``tools/bench_blender.py cornell``), by :func:`raybundle.metrics.image_error`: the
+   ``tools/bench_blender.py cornell``), by :func:`raybundle.app.metrics.image_error`: the
    lamp excluded, the reference's own noise subtracted.
 
 ``--one-patch-per-triangle`` adds rows of the old layout (``--patches 0``: every triangle
@@ -45,10 +45,10 @@ def one(triangles, seconds, patches, mode):
 
     import numpy as np
 
-    from raybundle.clusters import tessellate
-    from raybundle.imaging import RenderSettings
-    from raybundle.pipeline import make_renderer, prepare
-    from raybundle.scenes import load_scene
+    from raybundle.app.pipeline import make_renderer, prepare
+    from raybundle.imaging.settings import RenderSettings
+    from raybundle.patches.clusters import tessellate
+    from raybundle.scene.builtin import load_scene
 
     scene = tessellate(load_scene("cornell"), triangles)
     if mode == "memory":
@@ -70,8 +70,8 @@ def one(triangles, seconds, patches, mode):
         return dict(row, traced_peak_mb=peak / 1e6, traced_bytes_per_triangle=peak / len(scene.triangles))
     result = renderer.run(seconds=seconds, started=t0)          # the budget covers the set-up too
     t3 = time.perf_counter()
-    from raybundle.io import read_exr
-    from raybundle.metrics import image_error, light_source_mask
+    from raybundle.app.metrics import image_error, light_source_mask
+    from raybundle.util.io import read_exr
 
     halves = [read_exr(os.path.join(REFERENCE, f"reference-{k}.exr")) for k in (1, 2)]
     reference = 0.5 * (halves[0] + halves[1])

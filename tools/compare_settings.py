@@ -1,10 +1,10 @@
 """Side-by-side settings on a built-in scene: error, noise and bias against a cached Cycles reference.
 
-Each variant (a JSON object of :class:`raybundle.imaging.RenderSettings` fields, plus
+Each variant (a JSON object of :class:`raybundle.imaging.settings.RenderSettings` fields, plus
 ``"patches"``, ``"solver"``: attributes to set on the solver, e.g.
 ``{"solver": {"caustic_refine": 4096}}``, and ``"renderer"``: attributes to set on the
 renderer, e.g. ``{"renderer": {"NOISY_SHARE": 0.05}}``) renders the scene once per seed, for a fixed
-time or iteration count, and prints its error (``raybundle.metrics.image_error``: pixels >= 2 px from the lamp, the
+time or iteration count, and prints its error (``raybundle.app.metrics.image_error``: pixels >= 2 px from the lamp, the
 reference's own noise subtracted) and image mean against the reference.  With two seeds
 or more it splits the error into per-image noise (from the difference of two seeds) and
 bias (what the mean of the seeds keeps): ``e^2 = bias^2 + noise^2``.
@@ -38,12 +38,12 @@ def main(argv=None):
     p.add_argument("--reference", default=None, help="folder of reference-1/2.exr (default out/bench-SCENE)")
     a = p.parse_args(argv)
 
-    from raybundle.imaging import RenderSettings
-    from raybundle.io import read_exr
-    from raybundle.metrics import image_error, light_source_mask
-    from raybundle.clusters import DEFAULT_PATCHES
-    from raybundle.pipeline import make_renderer, prepare
-    from raybundle.scenes import load_scene
+    from raybundle.app.metrics import image_error, light_source_mask
+    from raybundle.app.pipeline import make_renderer, prepare
+    from raybundle.imaging.settings import RenderSettings
+    from raybundle.patches.clusters import DEFAULT_PATCHES
+    from raybundle.scene.builtin import load_scene
+    from raybundle.util.io import read_exr
 
     folder = a.reference or os.path.join("out", f"bench-{a.scene}")
     halves = [read_exr(os.path.join(folder, f"reference-{k}.exr")) for k in (1, 2)]

@@ -4,7 +4,7 @@ Usage::
 
     python tools/cycles_reference.py cornell --samples 1024 --seed 1 --out out/reference/cornell-256x256-1.exr
 
-Builds the scene in Blender with the node set-up that :mod:`raybundle.materials`
+Builds the scene in Blender with the node set-up that :mod:`raybundle.scene.materials`
 models (Mix Shader(Diffuse BSDF, Glossy BSDF GGX) + one-sided Emission), the
 same camera, and renders with settings that match the raybundle estimator: box
 pixel filter one pixel wide, no clamping, no glossy filter, caustics on, many
@@ -97,7 +97,7 @@ def add_scene_mesh(scene):
 
 
 def add_camera(camera):
-    """A Blender camera equal to a :class:`raybundle.camera.Camera` (horizontal sensor fit)."""
+    """A Blender camera equal to a :class:`raybundle.scene.camera.Camera` (horizontal sensor fit)."""
     bpy = _bpy()
     from mathutils import Matrix
 
@@ -163,7 +163,7 @@ def exr_output(path):
 def render_to(path):
     """Render the current scene to ``path`` (EXR) and read it back as (H, W, 3) float32."""
     bpy = _bpy()
-    from raybundle.io import read_exr
+    from raybundle.util.io import read_exr
 
     exr_output(path)
     bpy.ops.render.render(write_still=True)
@@ -216,7 +216,7 @@ def curve(name, seconds, out_dir, seed=0, resolution=None):
     per render on stdout (samples, seconds from loading the scene to the EXR written, path)."""
     import json
 
-    from raybundle.scenes import load_scene
+    from raybundle.scene.builtin import load_scene
 
     spp = 1
     while True:
@@ -240,7 +240,7 @@ def render_scene(scene, samples, out, seed=0):
     cycles_settings(samples, seed)
     tmp = out + ".tmp.exr"
     img = render_to(tmp)
-    from raybundle.io import write_exr
+    from raybundle.util.io import write_exr
 
     write_exr(out, img, {"cycles_samples": samples})
     os.unlink(tmp)
@@ -257,7 +257,7 @@ def main(argv=None):
     p.add_argument("--curve", type=float, metavar="SECONDS",
                    help="render 1, 2, 4, ... samples per pixel until a render takes SECONDS; JSON lines on stdout")
     a = p.parse_args(argv)
-    from raybundle.scenes import load_scene
+    from raybundle.scene.builtin import load_scene
 
     scene = load_scene(a.scene)
     why = unsupported(scene)

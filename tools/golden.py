@@ -5,7 +5,7 @@
     python tools/golden.py --record     # (re)write this environment's hashes (`make golden`)
     python tools/golden.py --only cornell:stochastic-iteration ...
 
-Each case is a command line, run in-process through ``raybundle.cli.main`` (the front door a
+Each case is a command line, run in-process through ``raybundle.app.cli.main`` (the front door a
 user has): the built-in scenes with ``--iterations 4 --seed 3`` at 24 x 24 pixels and 300 patches;
 every method on the Cornell box; ``--gather-rays 64`` (the final gather at a fixed count); and
 chains by iterations (``--workers 2``). A case's hash is the SHA-256 of the EXR's float32
@@ -65,8 +65,8 @@ def environment() -> str:
 
 def render_hash(args: list[str], workdir: pathlib.Path) -> str:
     """Run ``raybundle render ARGS`` in-process; the hash of its pixels, iterations and rays."""
-    from raybundle.cli import main
-    from raybundle.io import read_exr
+    from raybundle.app.cli import main
+    from raybundle.util.io import read_exr
 
     out, stats = workdir / "golden.exr", workdir / "golden.json"
     err = io.StringIO()

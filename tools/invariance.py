@@ -17,9 +17,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from raybundle import pipeline
-from raybundle.contacts import gap_sides
-from raybundle.imaging import RenderSettings
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.patches.contacts import gap_sides
 
 REGIONS = ("floor", "ceiling", "back", "left", "right", "front")
 

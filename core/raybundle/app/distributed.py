@@ -1,0 +1,159 @@
+"""Chains on Dask: one prepared scene, one chain per worker, merged exactly.
+
+    python -m raybundle render SCENE --workers N            # a local cluster of N processes
+    python -m raybundle render SCENE --scheduler ADDRESS    # an existing dask.distributed cluster
+
+(``pip install raybundle[distributed]``; not part of the Blender extension.)  The prepared
+scene is scattered once to every worker.  Chain k runs with seed ``seed + k`` until the
+shared deadline (or for ``iterations``), and every ``report_seconds`` publishes its
+:class:`~raybundle.app.chains.ChainState` in a ``distributed.Variable``.  The client polls
+those, reports per-chain progress, and when every chain has finished (or the deadline and
+a grace period have passed) merges the newest state of each (:func:`raybundle.app.chains.merge`)
+into a renderer of its own, which resolves the image.  A worker lost mid-run loses only
+what its chain did since its last report: the chain is not restarted elsewhere (its seed
+would repeat), its last report counts.
+
+Over ``c`` chains the pooled image has the error of one chain run ``c`` times as long, less
+each chain's own start (burn-in, first image pass) and the client's resolve; on one machine
+the chains share its cores, so ``--workers`` pays off only across machines (or with more
+cores than one chain's threads use).
+"""
+from __future__ import annotations
+
+import time
+import uuid
+
+from . import chains
+
+
+def _run_chain(scene, method, settings_dict, seed, deadline, iterations, report_seconds, name):
+    """On a worker: one chain, iterated by the run loop (:class:`~raybundle.imaging.run.RunLoop`) for
+    ``iterations`` or until ``deadline`` (a ``time.time()``).  Every ``report_seconds`` its
+    state goes to the Variable ``name`` and its iteration count to the scheduler's metadata
+    ``[name, "iterations"]`` (small, polled by the client for progress); returns the final
+    state."""
+    try:
+        from distributed import Variable, get_client
+    except ImportError as e:           # pragma: no cover - only ever called on a Dask worker
+        raise RuntimeError("a chain runs on a Dask worker: pip install raybundle[distributed]") from e
+
+    from ..imaging.run import RunLoop
+    from ..imaging.settings import RenderSettings
+    from .pipeline import make_renderer
+
+    settings = RenderSettings(**dict(settings_dict, seed=seed))
+    renderer = make_renderer(scene, settings, solver=method)
+    var, client = Variable(name), get_client()
+
+    def report():
+        var.set(chains.state(renderer))
+        client.set_metadata([name, "iterations"], int(renderer.solver.stats.iterations))
+
+    try:
+        loop = RunLoop(renderer, iterations, None if iterations is not None else max(deadline - time.time(), 0.0))
+        while loop.advance(max_seconds=report_seconds):
+            report()
+        report()
+        return chains.state(renderer)
+    finally:
+        renderer.tracer.close()
+
+
+def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, report_seconds=2.0,
+                  grace_seconds=30.0, progress=None, client=None, stop=None, started=None):
+    """Render ``scene`` (laid out) as independent chains of ``plan``'s method on Dask (the plan
+    made with ``chains=True``: :func:`~raybundle.app.plan.plan`), for its iterations or seconds;
+    returns ``(image, merged ChainState, per-chain iteration counts)``.
+
+    ``client``: a ``distributed.Client`` to use; else one for ``scheduler`` (an address)
+    or for a new local cluster of ``workers`` processes (closed afterwards).  One chain per
+    worker unless ``chains_count`` says otherwise.  ``progress(text)`` gets a line per
+    poll: each chain's iterations (``-`` before its first report, ``lost`` once its worker
+    is gone).  ``stop`` (an object with ``is_set()``, Ctrl-C) ends the wait: every chain's
+    last report is merged (:class:`~raybundle.app.pipeline.Cancelled` if none has reported yet).
+    The plan's ``seconds`` are the budget from ``started`` (a ``time.perf_counter()`` reading,
+    default now): the cluster's start and the scene's scattering count."""
+    try:
+        from distributed import Client, LocalCluster, Variable, wait
+    except ImportError as e:           # pragma: no cover - depends on the extra being installed
+        raise RuntimeError("chains on Dask need the distributed extra: pip install raybundle[distributed]") from e
+    settings, seconds, iterations = plan.settings, plan.seconds, plan.iterations
+    from dataclasses import asdict
+
+    from ..imaging.run import iteration_seconds
+    from .pipeline import make_renderer
+
+    own = client is None
+    cluster = renderer = None
+    if own:
+        if scheduler:
+            client = Client(scheduler)
+        else:
+            cluster = LocalCluster(n_workers=int(workers or 2), threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
+            client = Client(cluster)
+    try:
+        addresses = sorted(client.scheduler_info()["workers"])
+        n = int(chains_count or len(addresses))
+        if n < 1 or not addresses:
+            raise ValueError("no workers to run chains on")
+        scene_future = client.scatter(scene, broadcast=True)
+        base = asdict(settings)
+        renderer = make_renderer(scene, settings, solver=plan.method)     # the client's: merges, resolves
+        # the chains iterate until the deadline; the client's resolve then has the final image's
+        # share, as a single run has (run.RunLoop)
+        share = renderer.final_share()
+        loop_seconds = None if seconds is None else iteration_seconds(
+            seconds, time.perf_counter() if started is None else started, share)
+        deadline = None if seconds is None else time.time() + loop_seconds
+        names = [f"raybundle-chain-{uuid.uuid4().hex}-{k}" for k in range(n)]
+        futures = [client.submit(_run_chain, scene_future, plan.method, base, settings.seed + k, deadline, iterations,
+                                 report_seconds, names[k], workers=[addresses[k % len(addresses)]],
+                                 allow_other_workers=False, pure=False, key=f"chain-{names[k]}")
+                   for k in range(n)]
+        end = None if deadline is None else deadline + grace_seconds
+        while True:
+            status = [f.status for f in futures]
+            alive = set(client.scheduler_info()["workers"])
+            lost = [st == "pending" and addresses[k % len(addresses)] not in alive for k, st in enumerate(status)]
+            reported = [client.get_metadata([name, "iterations"], None) for name in names]
+            if progress is not None:
+                progress("chains: " + ", ".join("lost" if lost[k] else "-" if reported[k] is None
+                                                else str(reported[k]) for k in range(n)))
+            running = any(st == "pending" and not lost[k] for k, st in enumerate(status))
+            if not running or (end is not None and time.time() > end) or (stop is not None and stop.is_set()):
+                break
+            try:
+                wait(futures, timeout=min(report_seconds, 1.0), return_when="ALL_COMPLETED")
+            except TimeoutError:
+                pass
+        latest = []
+        for k, f in enumerate(futures):
+            if f.status == "finished":
+                latest.append(f.result())
+            elif f.status == "error" and not lost[k]:
+                raise RuntimeError(f"chain {k} failed: {f.exception()!r}")
+            else:                        # lost (or past the deadline): its last report, if any
+                f.cancel()
+                got = client.get_metadata([names[k], "iterations"], None)
+                latest.append(Variable(names[k], client=client).get(timeout=30) if got is not None else None)
+        states = [s for s in latest if s is not None]
+        if not states and stop is not None and stop.is_set():
+            from .pipeline import Cancelled
+
+            raise Cancelled("stopped before any chain reported")
+        if not states:
+            raise RuntimeError("no chain reported any state (every worker was lost)")
+        merged = chains.merge(states)
+        chains.apply(merged, renderer)
+        image = renderer.resolve(None if seconds is None or (stop is not None and stop.is_set())
+                                 else share * loop_seconds)
+        merged.stats["gather_rays_per_pixel"] = renderer.gather_rays_used
+        return image, merged, [None if s is None else s.stats["iterations"] for s in latest]
+    finally:
+        if renderer is not None:
+            renderer.tracer.close()
+        if own:
+            client.close()
+            if cluster is not None:
+                cluster.close()

@@ -1,0 +1,108 @@
+"""The image error every figure of the project quotes, from this one function.
+
+Relative RMSE of an image ``x`` against a reference ``r`` (both (H, W, 3) linear
+radiance)::
+
+    e = sqrt(mean over kept pixels and channels of (x - r)^2) / mean(r over kept pixels)
+
+Kept pixels are those at least 2 px away from a directly seen light source
+(:func:`light_source_mask`: an emitter that lights the scene; a furnace's
+glowing walls are not light sources here).  When the reference is the mean of
+two independent halves A and B, its own noise is subtracted::
+
+    sigma_ref^2 = mean((A - B)^2) / 4 / mean(r)^2         (same pixels, same units)
+    error       = sqrt(max(0, e^2 - sigma_ref^2))
+
+so a converging curve does not flatten at the reference's noise.
+
+Beside it, for blotches and fireflies that an RMSE averages away: the 99.9th percentile
+over kept pixels of the per-pixel relative error ``|x - r| / (r + 0.02)`` (x, r the
+pixel's mean over its channels, 0.02 W m^-2 sr^-1 keeping dark pixels from dominating),
+and the image mean against the reference's.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def dilate(mask, radius=2):
+    """(H, W) bool: ``mask`` grown by ``radius`` pixels (square neighbourhood)."""
+    out = np.array(mask, bool)
+    h, w = out.shape
+    src = out.copy()
+    for dy in range(-radius, radius + 1):
+        for dx in range(-radius, radius + 1):
+            ys, yd = slice(max(0, -dy), h - max(0, dy)), slice(max(0, dy), h - max(0, -dy))
+            xs, xd = slice(max(0, -dx), w - max(0, dx)), slice(max(0, dx), w - max(0, -dx))
+            out[yd, xd] |= src[ys, xs]
+    return out
+
+
+def light_source_mask(scene, camera=None, samples=4, seed=0, radius=2, tracer=None):
+    """(H, W) bool: pixels within ``radius`` px of a directly seen light source.
+
+    A light source is a small emitter that the renderer treats as a light (the
+    first-shot emitters of :class:`~raybundle.lights.direct.DirectLighting`); a pixel sees
+    one when any of ``samples`` jittered primary rays hits its front.
+    """
+    from ..lights.direct import DirectLighting
+    from ..tracing.visibility import RayTracer
+
+    cam = camera if camera is not None else scene.camera
+    own = tracer is None
+    tracer = tracer or RayTracer(scene)
+    try:
+        lights = DirectLighting(scene, tracer).first_shot_material
+        rng = np.random.default_rng([seed, 5])
+        py, px = np.divmod(np.arange(cam.width * cam.height), cam.width)
+        seen = np.zeros(len(px), bool)
+        for _ in range(samples):
+            j = rng.random((len(px), 2))
+            org, d = cam.rays(px + j[:, 0], py + j[:, 1])
+            tri, _, _, _ = tracer.first_hit(org, d)
+            hit = tri >= 0
+            ts = scene.seen_tside(np.where(hit, tri, 0), d)
+            facing = np.einsum("ij,ij->i", scene.tside_normal[ts], d) < 0
+            seen |= hit & facing & lights[scene.triangle_material[np.maximum(tri, 0)]]
+    finally:
+        if own:
+            tracer.close()
+    return dilate(seen.reshape(cam.height, cam.width), radius)
+
+
+#: W m^-2 sr^-1 added to the reference in the per-pixel relative error's denominator
+TAIL_FLOOR = 0.02
+
+
+def image_error(image, reference, reference_halves=None, exclude=None):
+    """Relative RMSE of ``image`` against ``reference`` (module docstring).
+
+    ``reference_halves``: (A, B), two independent halves whose mean is the
+    reference, to subtract its noise; ``exclude``: (H, W) bool pixels left out
+    (:func:`light_source_mask`).  Returns a dict: ``error`` (noise-corrected),
+    ``raw`` (uncorrected e), ``reference_noise`` (sigma_ref, relative),
+    ``pixels`` (kept), ``mean_ratio`` (mean of x / mean of r), ``p99_9`` (the
+    per-pixel tail of the module docstring) and, with halves, ``reference_p99_9``:
+    the same percentile of the reference's own per-pixel noise ``|A - B| / 2 / (r + 0.02)``,
+    below which ``p99_9`` cannot be read.
+    """
+    x = np.asarray(image, float)
+    r = np.asarray(reference, float)
+    if x.shape != r.shape:
+        raise ValueError(f"image {x.shape} and reference {r.shape} differ in shape")
+    keep = np.ones(x.shape[:2], bool) if exclude is None else ~np.asarray(exclude, bool)
+    mean = r[keep].mean()
+    if not mean > 0:
+        raise ValueError("the reference is black over the compared pixels")
+    e2 = ((x[keep] - r[keep]) ** 2).mean() / mean ** 2
+    grey = r[keep].mean(axis=-1) + TAIL_FLOOR
+    out = {"pixels": int(keep.sum()), "mean_ratio": float(x[keep].mean() / mean),
+           "p99_9": float(np.percentile(np.abs(x[keep].mean(axis=-1) - r[keep].mean(axis=-1)) / grey, 99.9))}
+    s2 = 0.0
+    if reference_halves is not None:
+        a, b = (np.asarray(h, float) for h in reference_halves)
+        s2 = ((a[keep] - b[keep]) ** 2).mean() / 4.0 / mean ** 2
+        half = np.abs(a[keep].mean(axis=-1) - b[keep].mean(axis=-1)) / 2
+        out["reference_p99_9"] = float(np.percentile(half / grey, 99.9))
+    return {"error": float(np.sqrt(max(0.0, e2 - s2))), "raw": float(np.sqrt(e2)),
+            "reference_noise": float(np.sqrt(s2)), **out}

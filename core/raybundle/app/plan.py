@@ -1,0 +1,143 @@
+"""The one set-up decision: from what the user asks and the scene to what runs.
+
+Every front-end (the CLI, the Blender render engine, the bake, the bench, the chains on
+Dask) turns its user's input into :class:`RunOptions` and calls :func:`plan`, which makes
+every decision they share and returns a :class:`Plan`:
+
+* the method: a :data:`~raybundle.methods.registry.SOLVERS` name, or ``auto``'s choice
+  (:func:`~raybundle.app.auto.choose`, made on the loaded scene); a bake needs a patch
+  solution, so where ``auto`` would pick an image-only method a bake takes the bundle
+  iteration, and naming an image-only method for a bake or for chains is an error;
+* what ``auto`` decides is what the user left open (``None``): the patch count and the
+  random sequence; a value the user gave is kept;
+* the budget: ``iterations`` or ``seconds`` (the whole run's, from its start), 30 s when
+  neither is given;
+* the :class:`~raybundle.imaging.settings.RenderSettings` the run is built with, validated.
+
+:func:`raybundle.app.pipeline.build` then lays out the patches and builds the renderer or the
+solver the plan says.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from ..imaging.run import check_budget
+from ..imaging.settings import RenderSettings
+from ..methods.registry import SOLVERS, image_only
+from ..methods.stochastic_iteration import StochasticIterationSolver
+from ..patches.clusters import DEFAULT_PATCHES
+from ..tracing.sampling import DEFAULT_SEQUENCE
+from .auto import Choice, choose
+
+#: the budget of a run given neither iterations nor seconds [s]
+DEFAULT_SECONDS = 30.0
+
+
+@dataclass
+class RunOptions:
+    """What the user asks for, as plain values (CLI options, the add-on's properties).
+
+    ``method``: a :data:`~raybundle.methods.registry.SOLVERS` name or ``"auto"``; ``iterations`` or
+    ``seconds`` (the whole run from its start, set-up included; neither: 30 s);
+    ``patches`` (0: one patch per triangle) and ``sequence``: None leaves them to ``auto``
+    or the defaults; ``first_shot``: shoot the lights and small emitters first;
+    ``gather_rays``: final-gather rays per pixel next to concave edges (-1: as many as a
+    tenth of a timed run buys); ``threads``: the ray tracer's (None: all cores)."""
+
+    method: str = StochasticIterationSolver.name
+    iterations: int | None = None
+    seconds: float | None = None
+    seed: int = 0
+    patches: int | None = None
+    sequence: str | None = None
+    bundle_resolution: int = 0
+    first_shot: bool = True
+    gather_rays: int = -1
+    threads: int | None = None
+
+
+@dataclass
+class Plan:
+    """What runs: the method, the patch count, the budget and the settings; ``choice`` is
+    ``auto``'s (None when the user named the method)."""
+
+    method: str
+    patches: int
+    iterations: int | None
+    seconds: float | None
+    settings: RenderSettings
+    choice: Choice | None = None
+    notes: list = field(default_factory=list)
+
+    @property
+    def image_only(self):
+        """The method renders images only: no patch layout, no bake, no chains."""
+        return image_only(self.method)
+
+    def describe(self):
+        """One line: auto's choice and why (None when the user named the method)."""
+        if self.choice is None:
+            return None
+        return f"auto: {self.method}, {self.patches:,} patches: {self.choice.reason}" + "".join(
+            f"; {n}" for n in self.notes)
+
+
+def check(options: RunOptions, bake=False, chains=False):
+    """Raise ValueError (one line) for options that cannot run whatever the scene: what
+    :func:`plan` checks first, for front-ends to call before loading or exporting."""
+    o = options
+    if o.method != "auto" and o.method not in SOLVERS:
+        raise ValueError(f"unknown method {o.method!r}; choose one of {sorted(SOLVERS)} or auto")
+    check_budget(o.iterations, _seconds(o))
+    if o.patches is not None and int(o.patches) < 0:
+        raise ValueError("the patch count must be non-negative (0: one patch per triangle)")
+    if o.method != "auto":
+        _check_method(o.method, bake, chains)
+    _settings(o, o.sequence).validate()
+
+
+def _seconds(o):
+    """The budget's seconds: the options', or :data:`DEFAULT_SECONDS` when neither seconds nor
+    iterations are given."""
+    return DEFAULT_SECONDS if o.iterations is None and o.seconds is None else o.seconds
+
+
+def _check_method(method, bake, chains):
+    if bake and image_only(method):
+        raise ValueError(f"{method} renders images only, it has no patch solution to bake; choose another method")
+    if chains and not getattr(SOLVERS[method], "merges_chains", False):
+        why = "renders images only, it has no patch solution to merge" if image_only(method) else \
+            "cannot run as merged chains"
+        raise ValueError(f"{method} {why}; chains take "
+                         f"{', '.join(n for n, c in SOLVERS.items() if getattr(c, 'merges_chains', False))}")
+
+
+def _settings(o, sequence):
+    return RenderSettings(seed=int(o.seed), sequence=sequence or DEFAULT_SEQUENCE,
+                          bundle_resolution=int(o.bundle_resolution), threads=o.threads,
+                          first_shot="auto" if o.first_shot else "none", gather_rays=int(o.gather_rays))
+
+
+def plan(scene, options: RunOptions, bake=False, chains=False) -> Plan:
+    """The :class:`Plan` for ``scene`` (loaded or exported, not yet laid out) and ``options``
+    (module docstring).  ``bake``: the run bakes a patch solution; ``chains``: it runs as
+    independent chains that are merged (:mod:`raybundle.app.chains`).  Raises ValueError with
+    a one-line reason for options that cannot run (:func:`check`)."""
+    o = options
+    check(o, bake, chains)
+    seconds = _seconds(o)
+    method, choice, notes, sequence, patches = o.method, None, [], o.sequence, o.patches
+    if method == "auto":
+        choice = choose(scene)
+        method = choice.method
+        if sequence is None:
+            sequence = choice.sequence
+        if patches is None:
+            patches = choice.patches
+        if (bake or chains) and image_only(method):
+            method, sequence = StochasticIterationSolver.name, o.sequence
+            notes.append(f"{'a bake needs' if bake else 'chains need'} a patch solution: {method}")
+        _check_method(method, bake, chains)
+    settings = _settings(o, sequence)
+    return Plan(method, DEFAULT_PATCHES if patches is None else int(patches), o.iterations, seconds, settings,
+                choice, notes)

@@ -1,0 +1,1 @@
+"""Camera images and bakes from a solution: settings, the renderer, the run loop, the final gather."""

@@ -1,0 +1,180 @@
+"""Final gather: the indirect irradiance at surface points by rays into the solution.
+
+At a point x with unit normal n, ``rays`` cosine-distributed rays each read the
+outgoing radiance of the surface they meet from the patch solution, and
+
+    E_ind(x) = pi * mean over the rays of L(hit, -w)                  [W/m^2]
+
+(cosine-weighted sampling of ``int L cos dw``).  ``L`` at a hit is its diffuse part,
+``W_d kd/pi E``, with ``E`` the running average of the incoming radiance plus the
+first shot read through the linear reconstruction
+(:meth:`~raybundle.patches.reconstruction.LinearReconstruction.smooth_and_sharp`), plus its
+glossy lobe from the iterate; the emission of first-shot lights is left out (the
+direct light at x counts it).  The finite-element error of the patch values then
+enters one bounce later and averaged over the hemisphere: next to a concave edge or
+a contact, where a patch value cannot follow the fall-off, the gather is right where
+the reconstruction is not.
+
+Rays that land within ``near`` patch sizes (the square root of the hit patch's area)
+land in just such a place, where the first shot's patch values are wrong most (a
+wall's direct light falls to zero towards the ceiling): there the hit's direct
+irradiance is estimated at the hit point itself
+(:meth:`~raybundle.lights.direct.DirectLighting.irradiance`, ``near_light_samples`` shadow
+rays per light).  ``tests/test_baking.py`` pins the corner profile against a
+brute-force integral; on the Cornell bake (280 iterations) 6% of the rays land near,
+and the error falls from 1.23% to 0.97% (1.36% reading the Gouraud average).
+
+Bakes gather at every vertex and corner (:func:`raybundle.imaging.baking.baked_radiance`);
+images only where the patch values are not to be trusted
+(:func:`near_edge_tsides`), the rest reads the reconstruction directly.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..tracing.sampling import frames_from_normals, kronecker_alpha, uniform_triangle
+
+
+class FinalGather:
+    """The gather of one solution state (its vertex values computed once)."""
+
+    def __init__(self, solver, near=1.0, near_light_samples=1, caustic=True):
+        sc, rec = solver.scene, solver.reconstruction
+        self.solver, self.scene, self.rec = solver, sc, rec
+        indirect = solver.indirect_incoming()
+        sharp = solver.caustic.E if solver.caustic is not None else None
+        self.vert = rec.smooth_and_sharp(indirect + solver.first_shot.E.sum(axis=1), sharp)
+        self.near = float(near) if solver.direct.n_lights else 0.0
+        self.vert_indirect = rec.smooth_and_sharp(indirect, sharp) if self.near > 0 else None
+        self.near_light_samples = int(near_light_samples)
+        self.hit_size = np.sqrt(sc.patch_area[sc.triangle_patch])      # per triangle [m]
+        # the first shot's glossy reflections arrive by the caustic shot, read where the gather
+        # is (``caustic`` False: left out, for an image that light-traces it into its pixels,
+        # :meth:`~raybundle.imaging.renderer.Renderer.splat_caustics`)
+        self.first_shot_glossy = sharp is None
+        self.vert_caustic = rec.averaged(sharp) if sharp is not None and caustic else None
+
+    def irradiance(self, points, normals, rays, rng, shift=None, first=0, at=None, chunk_rays=1 << 18):
+        """E_ind (N, 3) [W/m^2] at ``points`` (N, 3) with unit ``normals`` (N, 3), by
+        ``rays`` rays each: point i's ray k takes the Kronecker (R_2) point
+        ``shift_i + (first + k) alpha`` (``shift`` (N, 2), default random from ``rng``),
+        so calls with ``first`` = 0, rays, 2 rays, ... on one point continue one
+        stratified set (an image spreads a pixel's gather over its sub-pixel samples).
+
+        With a caustic first shot (:mod:`raybundle.lights.caustics`), the rays leave out the first
+        shot's glossy reflection at the glossy sides they meet (``E1_l f_g(w_l, -w)`` for the
+        one mean direction ``w_l`` per side: single rays 3,000 times the mean where a sharp
+        lobe lines up, 52% of that term in its top 10 of 200,000 rays on ``cornell-glossy``),
+        as the iteration does, and the caustic shot's ``E_c`` read at ``at`` = (tside (N,),
+        barycentrics (N, 3)) of the points takes its place (unless the gather was made
+        without it)."""
+        sv, sc, rec = self.solver, self.scene, self.rec
+        caustic = self.vert_caustic is not None
+        if caustic and at is None:
+            raise ValueError("a gather with a caustic first shot needs the points' sides: at=(tside, bary)")
+        points = np.asarray(points, float)
+        normals = np.asarray(normals, float)
+        shift = rng.random((len(points), 2)) if shift is None else np.asarray(shift, float)
+        k = (first + np.arange(rays))[None, :, None] * kronecker_alpha(2)
+        out = np.zeros((len(points), 3))
+        step = max(1, chunk_rays // max(rays, 1))
+        for lo in range(0, len(points), step):
+            hi = min(lo + step, len(points))
+            n = normals[lo:hi]
+            t, b = frames_from_normals(n)
+            u = (shift[lo:hi, None, :] + k) % 1                                # (P, R, 2)
+            r, phi = np.sqrt(u[..., 0]), 2 * np.pi * u[..., 1]
+            w = ((r * np.cos(phi))[..., None] * t[:, None] + (r * np.sin(phi))[..., None] * b[:, None]
+                 + np.sqrt(1 - u[..., :1]) * n[:, None]).reshape(-1, 3)
+            origin = np.repeat(points[lo:hi] + n * sv.tracer.eps, rays, axis=0)
+            tri, dist, bu, bv = sv.tracer.first_hit(origin, w)
+            L = np.zeros((len(w), 3))
+            hit = np.nonzero(tri >= 0)[0]
+            if len(hit):
+                ts = sc.seen_tside(tri[hit], w[hit])
+                bary = np.stack([1 - bu[hit] - bv[hit], bu[hit], bv[hit]], axis=1)
+                e_hit = rec.at(self.vert, ts, bary)
+                if self.vert_indirect is not None:
+                    c = np.nonzero(dist[hit] < self.near * self.hit_size[tri[hit]])[0]
+                    if len(c):
+                        h = hit[c]
+                        e_hit[c] = rec.at(self.vert_indirect, ts[c], bary[c]) + sv.direct.irradiance(
+                            origin[h] + w[h] * dist[h, None], sc.tside_normal[ts[c]], rng, self.near_light_samples)
+                L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False,
+                                     glossy_iterate=False, first_shot_glossy=self.first_shot_glossy)
+                L[hit] += self.glossy_reflected(origin[hit] + w[hit] * dist[hit, None], ts, -w[hit], rng)
+            if np.any(sv.environment > 0):
+                L[tri < 0] = sv.environment
+            out[lo:hi] = np.pi * L.reshape(hi - lo, rays, 3).mean(axis=1)
+        if caustic:
+            out += rec.at(self.vert_caustic, at[0], at[1])
+        return out
+
+
+    def glossy_reflected(self, points, tside, w_out, rng):
+        """What the glossy lobes of the sides ``tside`` (N,) at ``points`` (N, 3) reflect
+        towards ``w_out`` (N, 3) of the light the solution carries [W m^-2 sr^-1] (N, 3),
+        by one lobe-sampled ray each: ``weight * L(next hit)``, with ``L`` the next hit's
+        diffuse part from the vertex values and its own glossy lobe spread evenly
+        (``glossy_as_diffuse``), first-shot emission left out (``E1_l f_g`` at the
+        glossy side counts it).  Zero at sides without a glossy lobe or seen from behind.
+
+        The iterate's ``E f_g(t, w_out)`` would be the plain choice, but a gather reads it
+        once, from one direction ``t``: a sharp lobe lined up with ``t`` makes single
+        gather rays hundreds of times too bright, and unlike the image's per-iteration
+        terms nothing averages them (``cornell-glossy`` at 30 s: 15% error with it, 4% without the gather)."""
+        sv, sc = self.solver, self.scene
+        out = np.zeros((len(points), 3))
+        mat = sc.triangle_material[sc.tside_triangle[tside]]
+        n = sc.tside_normal[tside]
+        g = np.nonzero(sc.materials.is_glossy[mat] & (np.einsum("ij,ij->i", n, w_out) > 0))[0]
+        if len(g) == 0:
+            return out
+        w_i, weight = sc.materials.sample_glossy(mat[g], n[g], w_out[g], rng.random((len(g), 2)))
+        keep = np.any(weight > 0, axis=1)
+        live, w_i, weight = g[keep], w_i[keep], weight[keep]
+        tri, dist, bu, bv = sv.tracer.first_hit(points[live] + n[live] * sv.tracer.eps, w_i)
+        hit = np.nonzero(tri >= 0)[0]
+        if len(hit):
+            ts = sc.seen_tside(tri[hit], w_i[hit])
+            bary = np.stack([1 - bu[hit] - bv[hit], bu[hit], bv[hit]], axis=1)
+            L = sv.radiance(sc.tside_side[ts], -w_i[hit], diffuse_incoming=self.rec.at(self.vert, ts, bary),
+                            first_shot_emission=False, glossy_as_diffuse=True)
+            out[live[hit]] = weight[hit] * L
+        if np.any(sv.environment > 0):
+            miss = np.nonzero(tri < 0)[0]
+            out[live[miss]] = weight[miss] * sv.environment
+        return out
+
+
+def near_edge_tsides(scene, tracer, rng, tsides=None, probes=32, reach=1.0, chunk=1 << 20):
+    """(N,) bool for triangle sides ``tsides`` (N,) (default: all): sides where the patch
+    values are not to be trusted, because something else lies within ``reach`` patch sizes
+    above them (a concave edge, a contact, an object close by): any of ``probes``
+    cosine-distributed rays from uniformly random points of the side meets a surface
+    within that distance.  Sides that reflect no diffuse light are never flagged.  (On
+    ``cornell`` one patch size flags 22% of the sides, two 31%, for the same image error:
+    1.45% and 1.43% with 1,024 rays.)  Traced ``chunk`` rays at a time: an image asks only
+    for the sides its pixels see, whatever the scene's size."""
+    tsides = np.arange(len(scene.tside_triangle)) if tsides is None else np.asarray(tsides, np.int64)
+    kd = scene.materials.diffuse_reflectance[scene.triangle_material[scene.tside_triangle[tsides]]]
+    todo = np.nonzero(np.any(kd > 0, axis=1))[0]
+    flag = np.zeros(len(tsides), bool)
+    if len(todo) == 0 or probes < 1:
+        return flag
+    step = max(1, chunk // probes)
+    for lo in range(0, len(todo), step):
+        sel = todo[lo:lo + step]
+        ts = tsides[sel]
+        tri = scene.tside_triangle[ts]
+        p = np.einsum("npk,nkc->npc", uniform_triangle(*rng.random((2, len(ts), probes))),
+                      scene.triangle_corners[tri])                                          # (T, P, 3)
+        n = np.repeat(scene.tside_normal[ts], probes, axis=0)
+        t, b = frames_from_normals(n)
+        u = rng.random((len(n), 2))
+        r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
+        w = (r * np.cos(phi))[:, None] * t + (r * np.sin(phi))[:, None] * b + np.sqrt(1 - u[:, :1]) * n
+        reach_m = np.repeat(reach * np.sqrt(scene.patch_area[scene.triangle_patch[tri]]), probes)
+        blocked = tracer.occluded(p.reshape(-1, 3) + n * tracer.eps, w, reach_m)
+        flag[sel] = blocked.reshape(len(ts), probes).any(axis=1)
+    return flag

@@ -1,0 +1,142 @@
+"""The one run loop: iterate a renderer or a solver until the budget is spent or the user stops.
+
+Renders (:meth:`~raybundle.imaging.renderer.ProgressiveImage.run`), bakes (the add-on's ``BakeJob``)
+and the chains on Dask (:mod:`raybundle.app.distributed`) all iterate through :class:`RunLoop`,
+which owns the budget of the whole run:
+
+* ``iterations``: that many steps of the runner, reproducible with a fixed seed; or
+* ``seconds``, counted from ``started`` (the start of the command or the job, so loading,
+  export and set-up count): the iterations stop when what is left is the final image's
+  share, ``final_share`` of the iteration time (the automatic final gather,
+  :meth:`~raybundle.imaging.renderer.Renderer.diffuse_indirect`), so that the image is written when
+  the budget ends, but not before :data:`RunLoop.MIN_ITERATIONS` steps; the run then says
+  its budget was too short (:meth:`RunLoop.budget_note`).
+
+The loop checks ``stop`` (a callable or an object with ``is_set()``, e.g. a
+``threading.Event`` that Esc or Ctrl-C sets) between steps, and treats KeyboardInterrupt
+as a stop; what has been computed is kept either way.  It can run in one go
+(:meth:`RunLoop.advance` with no limit) or in slices (a modal operator's timer ticks,
+a chain's reports).
+"""
+from __future__ import annotations
+
+import math
+import time
+
+
+def check_budget(iterations=None, seconds=None):
+    """Raise ValueError (one line) for a budget that cannot run: both or neither given,
+    negative iterations, seconds that are negative or not finite."""
+    if (iterations is None) == (seconds is None):
+        raise ValueError("give iterations or seconds" + (", not both" if iterations is not None else ""))
+    if iterations is not None and int(iterations) < 0:
+        raise ValueError("iterations must be non-negative")
+    if seconds is not None and not (math.isfinite(seconds) and seconds >= 0):
+        raise ValueError("seconds must be a finite, non-negative number")
+
+
+def iteration_seconds(seconds, started, final_share=0.0):
+    """Of a budget of ``seconds`` from ``started`` (a ``time.perf_counter()`` reading), the
+    seconds left for iterating now: what set-up left, less the final image's share
+    (``final_share`` of the iteration time)."""
+    return max(seconds - (time.perf_counter() - started), 0.0) / (1.0 + final_share)
+
+
+def iterations_of(runner):
+    """Iterations a renderer (``runner.solver.stats``) or a solver (``runner.stats``) has done."""
+    return getattr(runner, "solver", runner).stats.iterations
+
+
+class RunLoop:
+    """Steps ``runner`` (``step()``; a renderer or a solver) within a budget (module docstring).
+
+    ``progress(fraction, {"iterations", "seconds"})`` is told after every step;
+    ``between()`` is called between steps before ``stop`` is checked (the render engine's
+    previews)."""
+
+    #: the fewest iterations of a run limited by time, however short its budget
+    MIN_ITERATIONS = 8
+
+    def __init__(self, runner, iterations=None, seconds=None, started=None, final_share=0.0, progress=None,
+                 stop=None, between=None):
+        check_budget(iterations, seconds)
+        self.runner, self.target, self.seconds = runner, iterations, seconds
+        self.final_share = float(final_share)
+        self.progress, self.between = progress, between
+        self._stop = (stop.is_set if hasattr(stop, "is_set") else stop) or (lambda: False)
+        self.t0 = time.perf_counter()
+        self.started = self.t0 if started is None else started
+        #: seconds from ``started`` to the first step (loading, export, set-up)
+        self.setup_seconds = self.t0 - self.started
+        #: the iteration time a timed run has: what set-up left, less the final image's share
+        self.loop_seconds = None if seconds is None else iteration_seconds(seconds, self.started, self.final_share)
+        self.cancelled = self.short = self.finished = False
+
+    @property
+    def iterations(self):
+        return iterations_of(self.runner)
+
+    def elapsed(self):
+        """Seconds of iteration so far (pauses left out)."""
+        return time.perf_counter() - self.t0
+
+    def pause(self, seconds):
+        """Leave ``seconds`` (spent outside the run: a bench's snapshot) off the run's clock."""
+        self.t0 += seconds
+
+    @property
+    def fraction(self):
+        """How much of the budget is spent, in [0, 1]."""
+        if self.target is not None:
+            return min(1.0, self.iterations / self.target) if self.target else 1.0
+        return min(1.0, self.elapsed() / max(self.loop_seconds, 1e-9))
+
+    def advance(self, max_seconds=None, until=None):
+        """Step until the budget is spent or ``stop`` is set (then False, and :attr:`finished`),
+        or for about ``max_seconds`` (at least one step) or until ``until`` seconds of iteration
+        (then True: call again to go on)."""
+        if self.finished:
+            return False
+        t_end = None if max_seconds is None else time.perf_counter() + max_seconds
+        try:
+            while True:
+                elapsed = self.elapsed()
+                if until is not None and elapsed >= until:
+                    return True
+                it = self.iterations
+                if self.target is not None and it >= self.target:
+                    break
+                if self.loop_seconds is not None and elapsed >= self.loop_seconds:
+                    if it >= self.MIN_ITERATIONS:
+                        break
+                    self.short = True
+                if self.between is not None:
+                    self.between()
+                if self._stop():
+                    self.cancelled = True
+                    break
+                self.runner.step()
+                if self.progress is not None:
+                    self.progress(self.fraction, {"iterations": self.iterations, "seconds": self.elapsed()})
+                if t_end is not None and time.perf_counter() >= t_end:
+                    return True
+        except KeyboardInterrupt:
+            self.cancelled = True
+        self.finished = True
+        return False
+
+    def final_seconds(self):
+        """What the final image may take [s]: ``final_share`` of the iteration time in a run
+        limited by time that ran to its end; None in a run of given iterations (which stays
+        reproducible) or one that was stopped (a stop ends it now)."""
+        if self.seconds is None or self.cancelled:
+            return None
+        return self.final_share * self.elapsed()
+
+    def budget_note(self, total_seconds):
+        """Why a timed run overran its budget (None when it did not): set-up and the minimum
+        of iterations took longer."""
+        if not self.short:
+            return None
+        return (f"budget {self.seconds:g} s too short: set-up {self.setup_seconds:.1f} s, total "
+                f"{total_seconds:.1f} s ({self.iterations} iterations)")

@@ -1,0 +1,93 @@
+"""The settings of a render (:class:`RenderSettings`): plain values shared by the CLI, the
+add-on, the bench and the chains, validated before any work."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..tracing.sampling import DEFAULT_SEQUENCE
+
+
+@dataclass
+class RenderSettings:
+    """Settings shared by the CLI, the add-on and the bench (plain values only).
+
+    ``bundle_resolution``: rays per side of each bundle grid (0 = about one
+    cell per patch, :func:`~raybundle.methods.stochastic_iteration.auto_bundle_resolution`); ``sequence``: the
+    random sequence name; ``light_samples``: shadow rays per light per pixel per
+    image pass; ``image_ray_share``: fraction of traced rays spent on image
+    passes (the rest on bundles), 0 = automatic: 0.2 for diffuse scenes, 0.55 where the
+    passes' eye paths also carry glossy lobes (:meth:`Renderer.step`); ``resolve_samples``: sub-pixel positions for
+    the diffuse indirect part; ``smooth``: interpolate patch values;
+    ``glossy_gather``: estimate the glossy lobe seen by the eye with one
+    importance-sampled eye ray per pixel and pass (see :meth:`Renderer.glossy_gather`)
+    instead of the per-iteration ``E f(t, w_eye)``, following up to
+    ``glossy_gather_depth`` glossy bounces; ``emission_edge_samples``:
+    extra samples per pass (a jittered s x s grid, rounded to a square) for the
+    pixels on the edge of a visible emitter and those whose passes disagree
+    most (:meth:`Renderer._noisy_pixels`); ``directions_per_step``: bundle directions
+    per iteration, traced together (:meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.step`);
+    ``caustics``: the first shot's glossy reflection by lobe-sampled rays (:mod:`raybundle.lights.caustics`)
+    instead of through the bundles; ``glossy_mis``: with ``glossy_gather``, the mesh lights a
+    glossy lobe reflects are estimated by light samples and by the lobe's ray together
+    (multiple importance sampling, power heuristic) instead of by light samples alone;
+    ``glossy_send_rays``: lobe-sampled rays per glossy side and bundle direction that gather
+    what the side's glossy lobe sends (:meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.glossy_sent_radiance`);
+    ``gather_rays``: final-gather rays per pixel where the patch values are not to be trusted
+    (next to concave edges and contacts, :mod:`raybundle.imaging.gather`), 0 = none, -1 = as many as
+    ``gather_share`` of the run's seconds buys, in runs limited by time (none in runs of given
+    iterations, which stay reproducible, nor in images formed outside :meth:`ProgressiveImage.run`):
+    :meth:`Renderer.diffuse_indirect`;
+    ``penumbra_samples``: shadow rays per light per pass for the pixels whose earlier
+    samples found a light both seen and blocked (:meth:`Renderer._shade`);
+    ``caustic_splats``: with a caustic first shot, its samples per pixel and image pass that
+    light-trace the caustic on the surfaces the eye sees into the pixels
+    (:meth:`Renderer.splat_caustics`), 0 = read it from the patches as the rest of the
+    diffuse indirect light.
+    """
+
+    bundle_resolution: int = 0
+    sequence: str = DEFAULT_SEQUENCE
+    seed: int = 0
+    first_shot: str = "auto"
+    light_samples: int = 1
+    image_ray_share: float = 0.0
+    resolve_samples: int = 16
+    smooth: bool = True
+    glossy_gather: bool = True
+    glossy_gather_depth: int = 3
+    emission_edge_samples: int = 16
+    directions_per_step: int = 16
+    caustics: bool = True
+    glossy_mis: bool = True
+    glossy_send_rays: int = 2
+    gather_rays: int = -1
+    gather_share: float = 0.1
+    penumbra_samples: int = 8
+    caustic_splats: float = 1.0
+    threads: int | None = None
+
+
+    def validate(self):
+        """Raise ValueError on settings that cannot work (before any work is done)."""
+        if not 0 <= int(self.bundle_resolution) <= 4096:
+            raise ValueError("bundle_resolution must lie in [0, 4096] (0 = automatic)")
+        if int(self.light_samples) < 1:
+            raise ValueError("light_samples must be at least 1 (small lights are lit only by the first shot)")
+        if int(self.resolve_samples) < 1 or int(self.emission_edge_samples) < 0:
+            raise ValueError("resolve_samples must be >= 1 and emission_edge_samples >= 0")
+        if not 0.0 <= float(self.image_ray_share) < 1.0:
+            raise ValueError("image_ray_share must lie in [0, 1) (0 = automatic)")
+        if self.first_shot not in ("auto", "none"):
+            raise ValueError("first_shot must be 'auto' or 'none'")
+        if not 1 <= int(self.directions_per_step) <= 1024:
+            raise ValueError("directions_per_step must lie in [1, 1024]")
+        if not 1 <= int(self.glossy_send_rays) <= 64:
+            raise ValueError("glossy_send_rays must lie in [1, 64]")
+        if not 1 <= int(self.penumbra_samples) <= 4096:
+            raise ValueError("penumbra_samples must lie in [1, 4096]")
+        if not -1 <= int(self.gather_rays) <= 65536:
+            raise ValueError("gather_rays must lie in [-1, 65536] (0 = no final gather, -1 = automatic)")
+        if not 0.0 <= float(self.gather_share) < 1.0:
+            raise ValueError("gather_share must lie in [0, 1)")
+        if not 0.0 <= float(self.caustic_splats) <= 64.0:
+            raise ValueError("caustic_splats must lie in [0, 64] (0 = the caustic from the patches)")

@@ -1,0 +1,117 @@
+"""The incoming first shot per patch side (thesis 3.4), used inside the iteration: for every
+light l the side-average irradiance ``E_{i,l}`` [W/m^2] and its mean travel direction
+``w_{i,l}``, so the first-shot radiance is ``L1_i(w) = sum_l E_{i,l} f_i(w_{i,l}, w)`` (only
+incoming values are stored, the BRDF is applied on the fly).  Its glossy reflections, the
+caustic first shot, are :mod:`raybundle.lights.sources.caustics`."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..tracing.sampling import points_on_triangles
+from .direct import DirectLighting
+
+
+class PatchFirstShot:
+    """Incoming first shot per patch, refined progressively while the solver iterates.
+
+    For every side i (:mod:`raybundle.scene.model`) and light l it keeps running sums
+    over uniformly random points of the side and light samples of the
+    irradiance ``e cos_x V`` (:meth:`DirectLighting.light_samples_at`) and of the
+    irradiance-weighted travel direction, divided by the side's receiving area
+    (``receiving_area`` (S,); buried parts receive nothing).  ``E`` (S, L, 3)
+    [W/m^2] is the side-average irradiance, ``direction`` (S, L, 3) the mean
+    travel direction.  Samples are kept per triangle side (tside).
+
+    A fixed first shot would freeze its Monte Carlo noise into the solution (a
+    bias that no number of iterations removes); refining it with a few shadow
+    rays per iteration (:meth:`refine`) keeps E a running average of unbiased
+    samples.  For glossy patches the reflected first shot uses one mean
+    direction per light, ``E f(w_mean, w)``: an approximation (exact for point
+    lights, close for lights small as seen from the patch), used only inside
+    the iteration; the image's direct light is per pixel and exact.
+    """
+
+    def __init__(self, direct: DirectLighting, rng, initial_samples=16, receiving_area=None):
+        self.direct = direct
+        # average over the area that can receive light (see RayTracer.open_fraction)
+        sc = direct.scene
+        self.receiving_area = sc.patch_area[sc.side_patch] if receiving_area is None else receiving_area
+        self.rng = rng
+        self.scene = sc
+        self.lights = direct.light_list()
+        n_t, n_l = len(sc.tside_triangle), len(self.lights)
+        self._e_sum = np.zeros((n_t, n_l, 3))
+        self._d_sum = np.zeros((n_t, n_l, 3))
+        self._count = np.zeros(n_t)
+        self._next = 0
+        self.E = np.zeros((sc.n_sides, n_l, 3))
+        self._d_patch = np.zeros((sc.n_sides, n_l, 3))
+        self.direction = np.zeros((sc.n_sides, n_l, 3))
+        # tsides that no light is in front of receive nothing: they cost no samples
+        origin = sc.triangle_corners[sc.tside_triangle, 0]
+        self.receiving_tsides = np.nonzero(np.any([light.in_front(origin, sc.tside_normal) for light in self.lights],
+                                            axis=0))[0] if n_l else np.zeros(0, np.int64)
+        # initial_samples per side, shared out over a cluster's triangles by area
+        counts = sc.tside_samples(initial_samples)[self.receiving_tsides]
+        for r in range(initial_samples if len(self.receiving_tsides) else 0):
+            todo = self.receiving_tsides[counts > r]
+            step = 1 << 18                                # bounded temporaries on big scenes
+            for lo in range(0, len(todo), step):
+                self._add(todo[lo:lo + step])
+
+    @property
+    def n_lights(self):
+        return len(self.lights)
+
+    def _add(self, tri):
+        """One new sample on each tside in ``tri`` (distinct ids); updates E and direction."""
+        sc = self.scene
+        u = self.rng.random((len(tri), 2))
+        pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[tri]], u[:, 0], u[:, 1])
+        nrm = sc.tside_normal[tri]
+        old = self._e_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
+        old_d = self._d_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
+        for li, light in enumerate(self.lights):
+            e, travel, _ = self.direct.light_samples_at(pts, nrm, light, self.rng.random((len(tri), 3)))
+            self._e_sum[tri, li] += e
+            self._d_sum[tri, li] += e.sum(axis=1, keepdims=True) * travel
+        self._count[tri] += 1
+        # side average = sum over its tsides of area * (tside mean) / side area
+        side = sc.tside_side[tri]
+        w = (sc.triangle_area[sc.tside_triangle[tri]] / self.receiving_area[side])[:, None, None]
+        new = self._e_sum[tri] / self._count[tri][:, None, None]
+        new_d = self._d_sum[tri] / self._count[tri][:, None, None]
+        np.add.at(self.E, side, w * (new - old))
+        np.add.at(self._d_patch, side, w * (new_d - old_d))
+        p = np.unique(side)
+        norm = np.linalg.norm(self._d_patch[p], axis=2, keepdims=True)
+        self.direction[p] = np.where(norm > 0, self._d_patch[p] / np.maximum(norm, 1e-300), 0.0)
+
+    def sums(self):
+        """Copies of the per-tside sums and counts ``(e_sum, d_sum, count)`` that ``E`` and
+        ``direction`` are formed from (what chains pool, :mod:`raybundle.app.chains`)."""
+        return self._e_sum.copy(), self._d_sum.copy(), self._count.copy()
+
+    def set_sums(self, e_sum, d_sum, count):
+        """Replace the per-tside sums and counts (e.g. those of several chains pooled,
+        :mod:`raybundle.app.chains`) and recompute ``E`` and ``direction`` from them."""
+        sc = self.scene
+        self._e_sum, self._d_sum, self._count = e_sum.copy(), d_sum.copy(), count.copy()
+        c = np.maximum(self._count, 1)[:, None, None]
+        a = sc.triangle_area[sc.tside_triangle]
+        w = (a / np.maximum(self.receiving_area[sc.tside_side], 1e-300))[:, None, None]
+        self.E = np.zeros_like(self.E)
+        self._d_patch = np.zeros_like(self._d_patch)
+        np.add.at(self.E, sc.tside_side, w * self._e_sum / c)
+        np.add.at(self._d_patch, sc.tside_side, w * self._d_sum / c)
+        norm = np.linalg.norm(self._d_patch, axis=2, keepdims=True)
+        self.direction = np.where(norm > 0, self._d_patch / np.maximum(norm, 1e-300), 0.0)
+
+    def refine(self, n_triangles):
+        """One more sample on the next ``n_triangles`` receiving tsides (round robin)."""
+        n_t = len(self.receiving_tsides)
+        if n_t == 0 or n_triangles <= 0:
+            return
+        k = (self._next + np.arange(min(n_triangles, n_t))) % n_t
+        self._next = int((self._next + len(k)) % n_t)
+        self._add(self.receiving_tsides[k])

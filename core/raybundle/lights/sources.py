@@ -1,0 +1,430 @@
+"""Light sources, each an object with ``sample(points, u)`` that returns light samples for
+shadow rays (see :class:`MeshLight`):
+
+* every emitting material whose emission is constant and whose area is at
+  most ``small_fraction`` of the scene's area (:func:`small_emitters`): a :class:`MeshLight`, a
+  Lambertian emitter on its front (and, for two-sided triangles, on its back too), sampled
+  by area where it looks small and by solid angle where it may look large, one
+  planar part at a time when its parts have convex outlines (so a lamp modelled as
+  a grid of many triangles is sampled as well as a single quad);
+* point and spot lights (:class:`PointLight`): ``E = I s(w) cos / r^2`` with
+  Cycles' spot attenuation s, and a disc of the light's radius for soft shadows;
+* Blender area lights (:class:`ShapeLight`): one-sided rectangles and ellipses
+  that are not geometry;
+* suns (:class:`SunLight`): ``E = E_sun cos`` from a cone of the sun's angle.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..tracing.sampling import (
+    frames_from_normals,
+    orthonormal_basis,
+    points_on_triangles,
+    sample_spherical_triangle,
+    triangle_solid_angle,
+)
+
+
+@dataclass
+class MeshLight:
+    """Triangles of one emitting material: ``triangles`` (K,), area-CDF, area [m^2],
+    radiance (3,), ``two_sided`` (K,) bool (the triangle emits from its back too)."""
+
+    material: int
+    triangles: np.ndarray
+    cdf: np.ndarray
+    area: float
+    radiance: np.ndarray
+    two_sided: np.ndarray
+    scene: object = None
+
+    #: triangles that may look larger than this [sr] are sampled by solid angle, others by area
+    MIN_SOLID_ANGLE = 0.5
+
+    def __post_init__(self):
+        c = self.scene.triangle_corners[self.triangles]
+        self._centroid = c.mean(axis=1)
+        self._radius = np.linalg.norm(c - self._centroid[:, None], axis=2).max(axis=1)
+        self.planes = light_planes(self)
+        self._fans = plane_fans(self)
+
+    def sample(self, points, u):
+        """One sample of the light for each point (N, 3) from uniforms ``u`` (N, 3).
+
+        Returns ``(y (N, 3), e (N, 3))``: the sampled point on the light and the
+        unshadowed irradiance estimate on a plane facing it: the caller
+        multiplies by ``cos_x`` (w = direction to y) and tests visibility.
+
+        A light whose planar parts have convex outlines (:func:`plane_fans`: a lamp
+        quad, a box, a lamp cut into a grid of many triangles) is sampled part by part:
+        part g with probability ``p_g = A_g / A``; where it looks small, a point uniform
+        on it (``e = Le cos_l A_g / (r^2 p_g)``); where it may look large, a direction
+        uniform in its whole solid angle (a fan triangle of its outline by its solid
+        angle, then Arvo's sampling in it: ``e = Le O_g / p_g``, bounded next to the
+        light however finely it is meshed).  Other lights: triangle by triangle
+        (:meth:`_sample_triangles`)."""
+        if self._fans is None:
+            return self._sample_triangles(points, u)
+        f = self._fans
+        g = np.minimum(np.searchsorted(f["cdf"], u[:, 0], side="right"), len(f["area"]) - 1)
+        lo = f["cdf"][g] - f["p"][g]
+        u0 = np.clip((u[:, 0] - lo) / f["p"][g], 0.0, 1.0 - 1e-12)
+        normal = f["normal"][g]
+        # far: a fan triangle by area, a point uniform on it
+        j = np.minimum(np.searchsorted(f["fan_key"], g + u0, side="right"), len(f["fan_key"]) - 1)
+        y = points_on_triangles(f["fan"][j], u[:, 1], u[:, 2])
+        v = y - points
+        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+        cos_l = -np.einsum("ij,ij->i", normal, v) / np.sqrt(r2)
+        e = cos_l * f["area"][g] / r2
+        near = self._part_near(g, points)
+        for gi in np.unique(g[near]):
+            idx = np.nonzero(near & (g == gi))[0]
+            rel, omega = self._fan_solid_angles(gi, points[idx])
+            total = omega.sum(axis=1)
+            cdf = np.cumsum(omega, axis=1) / np.maximum(total, 1e-300)[:, None]
+            k = np.minimum((cdf <= u0[idx, None]).sum(axis=1), omega.shape[1] - 1)
+            lo_k = np.where(k > 0, cdf[np.arange(len(idx)), np.maximum(k - 1, 0)], 0.0)
+            w_k = np.maximum(cdf[np.arange(len(idx)), k] - lo_k, 1e-300)
+            u1 = np.clip((u0[idx] - lo_k) / w_k, 0.0, 1.0)
+            tri = rel[np.arange(len(idx)), k]
+            d, _ = sample_spherical_triangle(tri[:, 0], tri[:, 1], tri[:, 2], u1, u[idx, 2])
+            nd = np.einsum("ij,ij->i", normal[idx], d)
+            t = np.einsum("ij,ij->i", normal[idx], tri[:, 0]) / np.where(nd != 0, nd, 1e-300)
+            y[idx] = points[idx] + t[:, None] * d
+            cos_l[idx] = -nd
+            e[idx] = total
+        lit = np.where(f["two_sided"][g], cos_l != 0, cos_l > 0)
+        return y, (np.abs(e) * lit / f["p"][g])[:, None] * self.radiance
+
+    def _part_near(self, g, points):
+        """(N,) bool: planar part ``g`` (N,) may look large from ``points`` (its solid angle
+        is not surely below :attr:`MIN_SOLID_ANGLE`): it is then sampled by solid angle."""
+        f = self._fans
+        gap = np.maximum(np.linalg.norm(f["centroid"][g] - points, axis=1) - f["radius"][g], 0.0)
+        return f["area"][g] >= self.MIN_SOLID_ANGLE * gap * gap
+
+    def _fan_solid_angles(self, gi, points):
+        """Part ``gi``'s fan triangles relative to ``points`` (n, F, 3, 3) and their solid angles (n, F)."""
+        f = self._fans
+        rel = f["fan"][f["fan_group"] == gi][None] - points[:, None, None, :]
+        return rel, triangle_solid_angle(rel[..., 0, :], rel[..., 1, :], rel[..., 2, :])
+
+    def _sample_triangles(self, points, u):
+        """:meth:`sample` triangle by triangle.  A triangle k is picked with probability p_k = A_k / A.  If it looks
+        small from the point (its solid angle is surely below :attr:`MIN_SOLID_ANGLE`:
+        ``A_k < MIN_SOLID_ANGLE d^2`` with d the distance to its bounding sphere) a point
+        uniform on it gives ``e = Le cos_l A_k / (r^2 p_k)``; if it looks large, a
+        direction uniform in its solid angle (Arvo's spherical triangle
+        sampling) gives ``e = Le O_k / p_k``.  Both are unbiased; the second keeps
+        the estimate bounded next to the light (a lamp 0.5 mm under a ceiling),
+        where sampling by area has a heavy tail.  Emits from the back only where
+        ``two_sided``."""
+        from ..tracing.sampling import sample_spherical_triangle
+
+        sc = self.scene
+        n_k = len(self.triangles)
+        k = np.minimum(np.searchsorted(self.cdf, u[:, 0] * self.cdf[-1], side="right"), n_k - 1)
+        tri = self.triangles[k]
+        p_k = sc.triangle_area[tri] / self.area
+        c = sc.triangle_corners[tri]
+        y = points_on_triangles(c, u[:, 1], u[:, 2])
+        normal = sc.triangle_normal[tri]
+        v = y - points
+        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+        cos_l = -np.einsum("ij,ij->i", normal, v) / np.sqrt(r2)
+        e = cos_l * sc.triangle_area[tri] / r2
+        gap = np.maximum(np.linalg.norm(self._centroid[k] - points, axis=1) - self._radius[k], 0.0)
+        near = np.nonzero(sc.triangle_area[tri] >= self.MIN_SOLID_ANGLE * gap * gap)[0]
+        if len(near):
+            rel = c[near] - points[near, None, :]
+            d, omega = sample_spherical_triangle(rel[:, 0], rel[:, 1], rel[:, 2], u[near, 1], u[near, 2])
+            nd = np.einsum("ij,ij->i", normal[near], d)
+            t = np.einsum("ij,ij->i", normal[near], rel[:, 0]) / np.where(nd != 0, nd, 1e-300)
+            y[near] = points[near] + t[:, None] * d
+            cos_l[near] = -nd
+            e[near] = omega
+        lit = np.where(self.two_sided[k], cos_l != 0, cos_l > 0)
+        return y, (np.abs(e) * lit / p_k)[:, None] * self.radiance
+
+    def pdf(self, points, k, y):
+        """Density [1/sr] with which :meth:`sample` draws, from ``points`` (N, 3), the
+        direction to ``y`` (N, 3) on the light's triangle ``triangles[k]`` (k (N,)):
+        ``p / O`` where the part (or triangle) looks large (solid-angle sampling), else
+        ``p r^2 / (A_part |cos_l|) = r^2 / (A |cos_l|)`` (area sampling)."""
+        sc = self.scene
+        if self._fans is not None:
+            f = self._fans
+            g = f["tri_group"][k]
+            v = y - points
+            r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+            cos_l = np.abs(np.einsum("ij,ij->i", f["normal"][g], v)) / np.sqrt(r2)
+            pdf = r2 / (np.maximum(cos_l, 1e-300) * self.area)
+            near = self._part_near(g, points)
+            for gi in np.unique(g[near]):
+                idx = np.nonzero(near & (g == gi))[0]
+                pdf[idx] = f["p"][gi] / np.maximum(self._fan_solid_angles(gi, points[idx])[1].sum(axis=1), 1e-300)
+            return pdf
+        tri = self.triangles[k]
+        area_k = sc.triangle_area[tri]
+        v = y - points
+        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+        cos_l = np.abs(np.einsum("ij,ij->i", sc.triangle_normal[tri], v)) / np.sqrt(r2)
+        pdf = r2 / (np.maximum(cos_l, 1e-300) * self.area)
+        gap = np.maximum(np.linalg.norm(self._centroid[k] - points, axis=1) - self._radius[k], 0.0)
+        near = np.nonzero(area_k >= self.MIN_SOLID_ANGLE * gap * gap)[0]
+        if len(near):
+            rel = sc.triangle_corners[tri[near]] - points[near, None, :]
+            omega = triangle_solid_angle(rel[:, 0], rel[:, 1], rel[:, 2])
+            pdf[near] = (area_k[near] / self.area) / np.maximum(omega, 1e-300)
+        return pdf
+
+    def in_front(self, origin, normal):
+        """(N,) bool: some point of the light lies in front of the planes (origin, normal) (N, 3)."""
+        c = self.scene.triangle_corners[self.triangles].reshape(-1, 3)
+        return _box_in_front(c.min(axis=0), c.max(axis=0), origin, normal)
+
+
+@dataclass
+class PointLight:
+    """A point or spot light (``PointLights`` row ``k``); see :meth:`MeshLight.sample`.
+
+    ``e = I s(travel) / r^2`` with ``s`` Cycles' spot attenuation.  A light with
+    a radius is sampled on the disc of that radius facing the point (soft
+    shadows; exact far from the light, where a sphere looks like that disc)."""
+
+    position: np.ndarray
+    intensity: np.ndarray
+    lights: object
+    k: int
+
+    def sample(self, points, u):
+        to_light = self.position - points
+        dist = np.maximum(np.linalg.norm(to_light, axis=1), 1e-300)
+        travel = -to_light / dist[:, None]
+        y = np.broadcast_to(self.position, points.shape)
+        radius = float(self.lights.radius[self.k])
+        if radius > 0:
+            a, b = frames_from_normals(travel)
+            r = radius * np.sqrt(u[:, 0])
+            phi = 2 * np.pi * u[:, 1]
+            y = y + (r * np.cos(phi))[:, None] * a + (r * np.sin(phi))[:, None] * b
+        v = y - points
+        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+        s = self.lights.spot_factor(self.k, travel)
+        return y, (s / r2)[:, None] * self.intensity
+
+    def in_front(self, origin, normal):
+        r = float(self.lights.radius[self.k])
+        return np.einsum("ij,ij->i", self.position - origin, normal) > -r
+
+
+@dataclass
+class ShapeLight:
+    """A Blender area light (``AreaLights`` row): a one-sided Lambertian rectangle
+    or ellipse that is not geometry.  ``e = Le cos_l A / r^2`` (pdf 1/A)."""
+
+    center: np.ndarray
+    axis_u: np.ndarray
+    axis_v: np.ndarray
+    normal: np.ndarray
+    ellipse: bool
+    area: float
+    radiance: np.ndarray
+
+    def sample(self, points, u):
+        if self.ellipse:
+            r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
+            a, b = r * np.cos(phi), r * np.sin(phi)
+        else:
+            a, b = 2 * u[:, 0] - 1, 2 * u[:, 1] - 1
+        y = self.center + a[:, None] * self.axis_u + b[:, None] * self.axis_v
+        v = y - points
+        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+        cos_l = np.maximum(-(v @ self.normal) / np.sqrt(r2), 0.0)
+        return y, (cos_l * self.area / r2)[:, None] * self.radiance
+
+    def in_front(self, origin, normal):
+        corners = [self.center + a * self.axis_u + b * self.axis_v for a in (-1, 1) for b in (-1, 1)]
+        return np.any([np.einsum("ij,ij->i", c - origin, normal) > 0 for c in corners], axis=0)
+
+
+@dataclass
+class SunLight:
+    """A distant light: travel directions uniform in the cone of half-angle
+    ``angle / 2`` around ``direction``; ``e = irradiance`` (no fall-off).  The
+    sample point lies ``far`` [m] away towards the sun (beyond the scene)."""
+
+    direction: np.ndarray
+    irradiance: np.ndarray
+    angle: float
+    far: float
+
+    def sample(self, points, u):
+        cos_max = np.cos(0.5 * self.angle)
+        cos_t = 1.0 - u[:, 0] * (1.0 - cos_max)
+        sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t * cos_t))
+        a, b = orthonormal_basis(self.direction)
+        phi = 2 * np.pi * u[:, 1]
+        travel = (cos_t[:, None] * self.direction + (sin_t * np.cos(phi))[:, None] * a
+                  + (sin_t * np.sin(phi))[:, None] * b)
+        return points - self.far * travel, np.broadcast_to(self.irradiance, points.shape).copy()
+
+    def in_front(self, origin, normal):
+        return -(normal @ self.direction) > -np.sin(0.5 * self.angle)
+
+
+def _box_in_front(lo, hi, origin, normal):
+    """(N,) bool: a corner of the box [lo, hi] lies in front of the planes (origin, normal)."""
+    corner = np.where(normal > 0, hi, lo)            # the corner furthest along each normal
+    return np.einsum("ij,ij->i", corner - origin, normal) > 0
+
+
+def _merge_collinear(vertices, directed):
+    """Directed boundary edges (B, 2) (vertex ids) -> edge end points (B', 2, 3), chains of
+    collinear edges merged into one (the outline of a light cut into a grid of triangles
+    has 4 edges, not 4 n: Lambert's sum over a straight edge does not depend on how it is
+    split).  Outlines whose loops cannot be walked (a vertex with two outgoing edges) stay as they are."""
+    nxt = {}
+    for a, b in directed.tolist():
+        if a in nxt:
+            return vertices[directed]
+        nxt[a] = b
+    out, seen = [], set()
+    for start in list(nxt):
+        if start in seen:
+            continue
+        loop = [start]
+        seen.add(start)
+        v = nxt[start]
+        while v != start and v in nxt and v not in seen:
+            loop.append(v)
+            seen.add(v)
+            v = nxt[v]
+        pts = vertices[loop]
+        d_in = pts - np.roll(pts, 1, axis=0)
+        d_out = np.roll(pts, -1, axis=0) - pts
+        cross = np.linalg.norm(np.cross(d_in, d_out), axis=1)
+        scale = np.linalg.norm(d_in, axis=1) * np.linalg.norm(d_out, axis=1)
+        corner = (cross > 1e-9 * scale) | (np.einsum("ij,ij->i", d_in, d_out) < 0)
+        keep = pts[corner] if corner.sum() >= 3 else pts
+        out.append(np.stack([keep, np.roll(keep, -1, axis=0)], axis=1))
+    return np.concatenate(out) if out else vertices[directed]
+
+
+#: mesh lights with more planar parts than this (a tessellated sphere) are sampled and
+#: integrated triangle by triangle
+MAX_PLANES = 64
+
+
+def light_planes(light):
+    """The planar parts of a mesh light: a list of (triangle rows into ``light.triangles``,
+    unit normal, a point of the plane, two-sided, bounding-box corners (8, 3), directed
+    boundary edges (B, 2, 3) or None when the triangles do not form a consistently
+    oriented, T-junction-free surface, whose outline cannot stand for them); None for a
+    light of more than :data:`MAX_PLANES` parts."""
+    sc = light.scene
+    tri = light.triangles
+    nrm = sc.triangle_normal[tri]
+    p0 = sc.triangle_corners[tri, 0]
+    _, r = sc.bounding_sphere
+    key = np.concatenate([np.round(nrm * 1e5), np.round((nrm * p0).sum(axis=1) / max(r * 1e-7, 1e-12))[:, None],
+                          light.two_sided[:, None]], axis=1).astype(np.int64)
+    _, label = np.unique(key, axis=0, return_inverse=True)
+    n_planes = int(label.max()) + 1 if len(label) else 0
+    if n_planes > MAX_PLANES:
+        return None
+    planes = []
+    for g in range(n_planes):
+        rows = np.nonzero(label.reshape(-1) == g)[0]
+        ids = sc.triangles[tri[rows]]
+        corners = sc.triangle_corners[tri[rows]]
+        lo, hi = corners.reshape(-1, 3).min(axis=0), corners.reshape(-1, 3).max(axis=0)
+        box = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        e = np.concatenate([ids[:, [0, 1]], ids[:, [1, 2]], ids[:, [2, 0]]])
+        und = np.sort(e, axis=1)
+        uniq, inv, cnt = np.unique(und, axis=0, return_inverse=True, return_counts=True)
+        inv = inv.reshape(-1)
+        edges = None
+        once = cnt[inv] == 1
+        twice_ok = np.all(cnt <= 2)
+        if twice_ok:
+            # interior edges must be traversed both ways (consistent winding)
+            fwd = (e[:, 0] == und[:, 0]).astype(int)
+            per = np.bincount(inv, fwd, minlength=len(uniq))
+            if np.all(per[cnt == 2] == 1):
+                edges = _merge_collinear(sc.vertices, e[once])      # (B, 2, 3)
+                # the outline's area vector must equal the triangles' total area (no T-junctions)
+                area_vec = 0.5 * np.cross(edges[:, 0], edges[:, 1]).sum(axis=0)
+                total = sc.triangle_area[tri[rows]].sum()
+                if abs(area_vec @ nrm[rows[0]] - total) > 1e-6 * total:
+                    edges = None
+        planes.append((rows, nrm[rows[0]], p0[rows[0]], bool(light.two_sided[rows[0]]), box, edges))
+    return planes
+
+
+def plane_fans(light):
+    """Sampling tables of a mesh light whose planar parts (``light.planes``) each
+    have one convex outline: per part its area, probability ``A_g / A`` and CDF, normal,
+    sidedness, bounding sphere, and the fan triangles of its outline (``fan`` (F, 3, 3),
+    ``fan_group``, ``fan_key`` = group + area CDF within it); ``tri_group`` maps the
+    light's triangles to parts.  None when a part's outline is not one convex loop (or
+    there are more than :data:`MAX_PLANES` parts): the light is then sampled triangle by triangle."""
+    planes = light.planes
+    if not planes:
+        return None
+    sc = light.scene
+    fans, fan_group, areas, normals, two, cents, radii = [], [], [], [], [], [], []
+    tri_group = np.zeros(len(light.triangles), np.int64)
+    for gi, (rows, nrm, _, two_sided, _, edges) in enumerate(planes):
+        if edges is None or len(edges) < 3 or not np.allclose(edges[:, 1], np.roll(edges[:, 0], -1, axis=0)):
+            return None
+        pts = edges[:, 0]
+        d = np.roll(pts, -1, axis=0) - pts
+        turn = np.cross(d, np.roll(d, -1, axis=0)) @ nrm
+        scale = np.linalg.norm(d, axis=1) * np.linalg.norm(np.roll(d, -1, axis=0), axis=1)
+        if not (np.all(turn >= -1e-9 * scale) or np.all(turn <= 1e-9 * scale)):
+            return None                                    # not convex
+        fan = np.stack([np.broadcast_to(pts[0], (len(pts) - 2, 3)), pts[1:-1], pts[2:]], axis=1)
+        fa = 0.5 * np.linalg.norm(np.cross(fan[:, 1] - fan[:, 0], fan[:, 2] - fan[:, 0]), axis=1)
+        area = float(sc.triangle_area[light.triangles[rows]].sum())
+        if abs(fa.sum() - area) > 1e-6 * area:
+            return None
+        fans.append(fan)
+        fan_group.append(np.full(len(fan), gi))
+        areas.append(area)
+        normals.append(nrm)
+        two.append(two_sided)
+        c = pts.mean(axis=0)
+        cents.append(c)
+        radii.append(float(np.linalg.norm(pts - c, axis=1).max()))
+        tri_group[rows] = gi
+    fan = np.concatenate(fans)
+    fan_group = np.concatenate(fan_group)
+    fa = 0.5 * np.linalg.norm(np.cross(fan[:, 1] - fan[:, 0], fan[:, 2] - fan[:, 0]), axis=1)
+    areas = np.array(areas)
+    within = np.zeros(len(fan))
+    for gi in range(len(areas)):
+        sel = fan_group == gi
+        within[sel] = np.cumsum(fa[sel]) / fa[sel].sum()
+    p = areas / areas.sum()
+    return {"area": areas, "p": p, "cdf": np.cumsum(p), "normal": np.array(normals), "two_sided": np.array(two),
+            "centroid": np.array(cents), "radius": np.array(radii), "fan": fan, "fan_group": fan_group,
+            "fan_key": fan_group + within, "tri_group": tri_group}
+
+
+def small_emitters(scene, small_fraction=0.1):
+    """Material ids (list) of the mesh emitters the first shot takes: constant emission (not
+    the furnaces' ``c (1 - a(w))``) over at most ``small_fraction`` of the scene's area."""
+    mats = scene.materials
+    total = scene.triangle_area.sum()
+    constant = ~np.any(mats.emission_albedo_complement > 0, axis=1) & np.any(mats.emission > 0, axis=1)
+    out = []
+    for m in np.nonzero(constant)[0]:
+        tri = scene.triangle_material == m
+        if tri.any() and scene.triangle_area[tri].sum() <= small_fraction * total:
+            out.append(int(m))
+    return out

@@ -1,0 +1,1 @@
+"""The solution methods, one per module, and their registry by name."""

@@ -1,0 +1,24 @@
+"""The methods by name: the registry the CLI, the bench and the add-on read.
+
+Patch solvers (images and bakes) share :class:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver`'s
+interface; image-only methods (``image_only = True``: :class:`~raybundle.methods.path_tracing.PathTracer`,
+:class:`~raybundle.methods.single_ray_iteration.SingleRayIteration`) render camera images and have no patch
+solution.  A module of its own so that every method can import the solver base class first.
+"""
+from .path_tracing import PathTracer
+from .point_collocation import PointCollocationSolver
+from .radiosity import RadiositySolver
+from .ray_bundle_walk import RayBundleWalk
+from .single_ray_iteration import SingleRayIteration
+from .stochastic_iteration import StochasticIterationSolver
+
+#: the methods by name
+SOLVERS = {StochasticIterationSolver.name: StochasticIterationSolver, RayBundleWalk.name: RayBundleWalk,
+           RadiositySolver.name: RadiositySolver, PointCollocationSolver.name: PointCollocationSolver,
+           PathTracer.name: PathTracer, SingleRayIteration.name: SingleRayIteration}
+
+
+def image_only(method):
+    """True for a method without a patch solution (it renders images, it does not bake and needs
+    no patch layout)."""
+    return bool(getattr(SOLVERS.get(method), "image_only", False))

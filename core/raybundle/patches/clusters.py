@@ -1,0 +1,206 @@
+"""Patches as clusters of triangles: the unknowns follow the lighting, not the mesh.
+
+Real meshes carry far more triangles than the lighting needs (tessellated curved
+surfaces, subdivided floors, sculpted detail).  A patch may hold any number of
+triangles of one material and one sidedness, planar or not, sharing one radiance
+variable per side.  The bundle transfer stays the Galerkin projection onto a constant
+per cluster: a bundle line picks the side of the triangle it meets by *that
+triangle's* normal, and its weight delta^2 is that triangle's projected area, so
+
+    E_i = (2 pi / A_i) sum_j S_j sum_{t in i} A(t, j, d) cos_t          [W/m^2]
+
+is the area mean over the cluster of each triangle's irradiance, whatever their
+orientation (``tests/test_clusters.py``: a furnace holding a tessellated sphere stays
+exact).  The first shot, the open area and the image work per triangle as before.
+What is approximated: inside the iteration a cluster's glossy lobe is evaluated
+about the cluster's mean normal (the normals of a cluster lie within the cell of a
+cube map with :data:`NORMAL_CELLS` x :data:`NORMAL_CELLS` cells per face, at most
+about 15 degrees from their mean); the image evaluates every lobe at the pixel's
+own triangle.
+
+:func:`make_patches` chooses the layout for a target patch count.  With a patch size
+h: triangles with an edge longer than h are cut (:func:`~raybundle.patches.layout.split_triangles`,
+then along contact lines), triangles smaller than h^2 / :data:`SMALL` (however long) are grouped
+into the cells of a grid h wide, split by normal direction (the cube-map cell),
+by offset along the normal (half-h slabs: a shelf does not share a patch with the floor under it),
+by material, by sidedness and by whether they lie in a gap narrower than 5% of h (the
+ceiling over a lamp hanging just under it: :func:`~raybundle.patches.contacts.gap_sides`), after the
+triangles that straddle such a gap are cut along the contact; the rest stay patches of their own.  It is a sort
+over the triangles: O(T log T), no per-triangle Python.
+
+:func:`tessellate` makes the stand-in for a finely meshed Blender scene the tests and
+the scale bench use: every reflecting face cut into many small triangles, each its
+own input face.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..scene.model import PatchScene
+from ..tracing.visibility import RayTracer
+from ..util.arrays import group_ids
+from .contacts import CONTACT_SHARE, gap_sides
+from .layout import cut_at_contacts, edge_for_patches, longest_edges, split_triangles, subdivide
+
+#: the patch count of a scene laid out without an explicit one (sides: 4,000 measured best at a
+#: fixed time on scenes from 42 to 4M triangles, issue 8; :mod:`raybundle.app.auto`)
+DEFAULT_PATCHES = 4000
+#: cube-map cells per face edge for the normal direction of a cluster (150 directions; odd, so
+#: that axis-aligned normals lie mid-cell, never on a border rounding could flip)
+NORMAL_CELLS = 5
+#: triangles with an area under h^2 / SMALL are grouped (h = the patch size)
+SMALL = 2.0
+
+
+def tessellate(scene: PatchScene, triangles) -> PatchScene:
+    """``scene`` with its reflecting faces cut into about ``triangles`` triangles in all,
+    each its own input face and patch (lamps made of emitting faces stay whole)."""
+    if scene.texture is not None:
+        raise ValueError("tessellate: scenes with textures are not supported")
+    fine, _, _ = split_triangles(scene, edge_for_patches(scene, triangles))
+    return replace(fine, triangle_source=np.arange(len(fine.triangles)))
+
+
+def normal_cells(normals, cells=NORMAL_CELLS):
+    """Cube-map cell (N,) int in [0, 6 cells^2) of unit ``normals`` (N, 3): the major axis
+    and its sign, then a cells x cells grid over the other two components divided by it."""
+    n = np.asarray(normals, float)
+    axis = np.argmax(np.abs(n), axis=1)
+    major = np.take_along_axis(n, axis[:, None], 1)[:, 0]
+    others = np.array([(1, 2), (0, 2), (0, 1)])[axis]
+    uv = np.take_along_axis(n, others, 1) / np.maximum(np.abs(major), 1e-300)[:, None]   # in [-1, 1]
+    iuv = np.clip(((uv + 1.0) * 0.5 * cells).astype(np.int64), 0, cells - 1)
+    return ((axis * 2 + (major > 0)) * cells + iuv[:, 0]) * cells + iuv[:, 1]
+
+
+class _Grouping:
+    """What the cluster keys need of a scene's triangles ``rows`` (default: all), computed
+    once (``lo``: the grid's origin, the scene's lowest corner by default)."""
+
+    def __init__(self, scene: PatchScene, lo=None, rows=None):
+        self.scene = scene
+        if rows is None:
+            self.rows = np.arange(len(scene.triangles))
+            corners, self.area, normal = scene.triangle_corners, scene.triangle_area, scene.triangle_normal
+        else:
+            self.rows = np.asarray(rows, np.int64)
+            corners = scene.vertices[scene.triangles[self.rows]]
+            cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+            self.area = 0.5 * np.linalg.norm(cross, axis=1)
+            normal = cross / np.maximum(2.0 * self.area, 1e-300)[:, None]
+        self.centroid = corners.mean(axis=1)
+        self.lo = scene.vertices.min(axis=0) if lo is None else lo
+        self.edge = longest_edges(corners)
+        self.normal = normal
+        self.cell = normal_cells(normal)
+        # offset along the triangle's own normal: constant over a plane
+        self.offset = np.einsum("ij,ij->i", normal, self.centroid - self.lo)
+
+    def small(self, h):
+        """(T,) bool: triangles to group at patch size ``h``."""
+        return self.area < h * h / SMALL
+
+    def clusters(self, h, small, gap=None):
+        """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``;
+        ``gap`` (S, 2) bool: the triangle lies in a gap on its front / back
+        (:func:`~raybundle.patches.contacts.gap_sides`), which a cluster does not straddle."""
+        sc, idx = self.scene, np.nonzero(small)[0]
+        rows = self.rows[idx]
+        cell = np.floor((self.centroid[idx] - self.lo) / h).astype(np.int64)
+        slab = np.floor(self.offset[idx] / (0.5 * h)).astype(np.int64)
+        keys = [cell[:, 0], cell[:, 1], cell[:, 2], self.cell[idx], slab,
+                sc.triangle_material[rows], sc.triangle_two_sided[rows]]
+        if gap is not None:
+            keys.append(gap[:, 0] * 2 + gap[:, 1])
+        return group_ids(keys)
+
+    def count(self, h):
+        """Patches at size ``h``: k^2 per triangle cut, one per cluster, one per other triangle."""
+        small = self.small(h)
+        reflects = self.scene.materials.reflects[self.scene.triangle_material[self.rows]]
+        k = np.where(reflects & ~small, np.maximum(1, np.ceil(self.edge / h - 1e-9)), 1.0)
+        n_clusters = int(self.clusters(h, small).max()) + 1 if small.any() else 0
+        return int((k[~small] ** 2).sum()) + n_clusters
+
+
+def patch_size(scene: PatchScene, patches, grouping=None, steps=12):
+    """The patch size h [m] whose patch count is closest to ``patches`` (within ~10% where
+    the count allows).  The count falls with h, but in jumps: where triangles stop being
+    grouped, each is cut into k^2 instead, so h is bracketed and bisected in log h, each
+    step a secant guess inside the bracket, and the best count seen wins."""
+    grouping = grouping or _Grouping(scene)
+    h = np.sqrt(scene.triangle_area.sum() / patches)
+    best = (np.inf, h)
+    fine, coarse = None, None          # (log h, log count) with count above / below the target
+    for _ in range(steps):
+        n = max(grouping.count(h), 1)
+        best = min(best, (abs(np.log(n / patches)), h))
+        if abs(n - patches) <= 0.1 * patches:
+            break
+        if n > patches:
+            fine = (np.log(h), np.log(n))
+        else:
+            coarse = (np.log(h), np.log(n))
+        guess = np.log(h) + 0.5 * np.log(n / patches)          # a count falls as 1 / h^2
+        if fine is not None and coarse is not None:
+            lo, hi = fine[0], coarse[0]
+            if not lo + 0.05 * (hi - lo) < guess < hi - 0.05 * (hi - lo):
+                guess = 0.5 * (lo + hi)
+            if hi - lo < 1e-3:
+                break
+        h = float(np.exp(guess))
+    return best[1]
+
+
+def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> PatchScene:
+    """The patch layout of ``scene`` for about ``patches`` patches (or patch size ``size`` [m]):
+    large triangles cut, small ones grouped (module docstring).  A scene without triangles
+    smaller than a patch gets exactly :func:`~raybundle.patches.layout.subdivide`'s layout.  With
+    ``contacts``, patches follow contact lines (:func:`~raybundle.patches.layout.cut_at_contacts`)
+    and no cluster holds triangles both in and out of a gap narrower than 5% of a patch
+    (:func:`~raybundle.patches.contacts.gap_sides`)."""
+    if (patches is None) == (size is None):
+        raise ValueError("give exactly one of patches and size")
+    if patches is not None and patches >= len(scene.triangles):     # fewer triangles than patches: cut
+        return subdivide(scene, patches=patches, contacts=contacts)
+    grouping = _Grouping(scene)
+    h = float(size) if size is not None else patch_size(scene, patches, grouping)
+    if not h > 0:
+        raise ValueError("the patch size must be positive")
+    small = grouping.small(h)
+    if not small.any():
+        return subdivide(scene, max_edge=h, contacts=contacts)
+    fine, k, row = split_triangles(scene, h, whole=small)
+    tracer = RayTracer(fine) if contacts else None
+    try:
+        if contacts:
+            # cut the pieces of split faces and the triangles that straddle a contact; carry
+            # each new triangle's row in ``fine`` through the cut as its source
+            rows = replace(fine, triangle_source=np.arange(len(fine.triangles)))
+            cut = cut_at_contacts(rows, np.nonzero((k > 1) & ~small[row])[0], h, tracer=tracer)
+            row = row[cut.triangle_source]
+            fine = replace(cut, triangle_source=fine.triangle_source[cut.triangle_source])
+        fine_small = small[row]
+        grouped = _Grouping(fine, lo=grouping.lo, rows=np.nonzero(fine_small)[0])
+        gap = gap_sides(tracer, grouped.centroid, grouped.normal, CONTACT_SHARE * h) if contacts else None
+    finally:
+        if tracer is not None:
+            tracer.close()
+    ids = grouped.clusters(h, np.ones(int(fine_small.sum()), bool), gap)
+    n_clusters = int(ids.max()) + 1
+    patch = np.empty(len(fine.triangles), np.int64)
+    patch[fine_small] = ids
+    others = np.unique(fine.triangle_patch[~fine_small], return_inverse=True)[1].reshape(-1)
+    patch[~fine_small] = n_clusters + others
+    return replace(fine, triangle_patch=patch)
+
+
+def triangle_patches(scene: PatchScene) -> PatchScene:
+    """One patch per triangle (``--patches 0``), but cut along contact lines as
+    :func:`make_patches` cuts them (gaps under 5% of the median edge count as contact):
+    a triangle reaching from under a lamp into the room would leak the light trapped there."""
+    edge = longest_edges(scene.triangle_corners)
+    one = replace(scene, triangle_patch=np.arange(len(scene.triangles)))
+    return cut_at_contacts(one, np.zeros(0, np.int64), float(np.median(edge)) if len(edge) else 1.0)

@@ -1,0 +1,470 @@
+"""Patches that conform to contact lines.
+
+Where one surface touches or pierces another (a box standing on a floor, a
+lamp 0.5 mm under a ceiling, a post through a floor), a patch that straddles
+the contact line has one radiance variable for two parts that see different
+worlds: the part under the box sees only the box's inside, the part of the
+ceiling over the lamp sees only the lamp's back.  A constant over the patch
+mixes them, so light leaks through the contact (the light trapped between a
+two-sided lamp and the ceiling comes out as a bright ceiling patch; a room's
+light leaks into a box and back).  This is the finite-element error of
+*discontinuity meshing* (Heckbert 1992; Lischinski, Tampieri & Greenberg 1992):
+the cure is to make patch edges follow the lines where the surface's
+visibility jumps.  Contact lines are the strongest of those and cheap to find.
+
+:func:`contact_segments` finds, for every plane holding subdivided faces, the
+segments where other surfaces meet it: edges lying within ``tol`` of the plane
+(the box's bottom edges, the outline of a lamp hanging just under a ceiling;
+edges shared by two faces that both lie in the gap are inner edges and are
+dropped), and the lines where triangles cross it.  :func:`split_at_contacts`
+cuts every patch that such a segment crosses along the segment's line into
+convex pieces; each piece is a patch of its own (one or more triangles).
+Pieces smaller than ``min_fraction`` (0.5%) of the patch are not cut off (their
+leak is that small).  Corners that lie on a contact segment get a *weld tag*
+naming the segment's line and the side of it the triangle lies on, so that
+smooth interpolation of patch values does not blend across the contact but
+does along it; triangles that touch a contact without being cut keep their
+patch and only get the tags.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..tracing.sampling import orthonormal_basis
+
+
+def _plane_groups(scene, faces):
+    """Group triangle ids ``faces`` by their plane: list of (ids, normal, offset).
+    Planes closer than 1e-6 of the scene radius are one plane."""
+    n = scene.triangle_normal[faces]
+    p0 = scene.triangle_corners[faces, 0]
+    # canonical orientation: two-sided faces with flipped normals share a plane
+    first = np.argmax(np.abs(n) > 1e-6, axis=1)
+    sign = np.where(n[np.arange(len(n)), first] < 0, -1.0, 1.0)
+    n = n * sign[:, None]
+    off = np.einsum("ij,ij->i", n, p0)
+    _, r = scene.bounding_sphere
+    key = np.concatenate([np.round(n * 1e4), np.round(off / max(r * 1e-6, 1e-12))[:, None]], axis=1).astype(np.int64)
+    _, label = np.unique(key, axis=0, return_inverse=True)
+    label = label.reshape(-1)
+    order = np.argsort(label, kind="stable")
+    cuts = np.nonzero(np.diff(label[order]))[0] + 1
+    return [(faces[g], n[g[0]], float(off[g[0]])) for g in np.split(order, cuts)]
+
+
+def contact_segments(scene, faces, tol):
+    """Contact segments on the planes of triangles ``faces`` (ids into ``scene``).
+
+    Returns a list of ``(group, origin, e1, e2, segments)``: ``group`` the
+    triangle ids in one plane, ``origin`` (3,) and ``e1, e2`` (3,) that plane's
+    2D frame [m], ``segments`` (K, 2, 2) the contact segments in it.  Other
+    triangles meet the plane where their edges lie within ``tol`` [m] of it,
+    or where they cross it.
+    """
+    out = []
+    if len(faces) == 0:
+        return out
+    corners = scene.triangle_corners
+    lo_all, hi_all = corners.min(axis=1), corners.max(axis=1)
+    _, r = scene.bounding_sphere
+    weld = np.round(scene.vertices / max(r * 1e-7, 1e-12)).astype(np.int64)
+    _, vid = np.unique(weld, axis=0, return_inverse=True)
+    vid = vid.reshape(-1)
+    for group, n, off in _plane_groups(scene, faces):
+        c = corners[group]
+        lo, hi = c.reshape(-1, 3).min(axis=0) - tol, c.reshape(-1, 3).max(axis=0) + tol
+        cand = np.nonzero(np.all((hi_all >= lo) & (lo_all <= hi), axis=1))[0]
+        cand = np.setdiff1d(cand, group)
+        d = corners[cand] @ n - off                                   # (C, 3) signed distances
+        cand_mask = (d.min(axis=1) <= tol) & (d.max(axis=1) >= -tol)
+        cand, d = cand[cand_mask], d[cand_mask]
+        e1, e2 = orthonormal_basis(n)
+        origin = n * off
+        if len(cand) == 0:
+            continue
+        p = corners[cand]
+        near = np.abs(d) <= tol
+        all_near = near.all(axis=1)
+        segs = []
+        # edges lying in the plane (within tol); inner edges of a surface lying in the gap are dropped
+        tv = vid[scene.triangles[cand]]
+        for i, j in ((0, 1), (1, 2), (2, 0)):
+            sel = near[:, i] & near[:, j]
+            key = np.sort(np.stack([tv[:, i], tv[:, j]], axis=1), axis=1)
+            segs.append((sel, p[:, i], p[:, j], key, all_near))
+        keys = np.concatenate([s[3][s[0]] for s in segs])
+        flat = np.concatenate([s[4][s[0]] for s in segs])
+        kk, inv, cnt = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+        inner_count = np.bincount(inv.reshape(-1), flat, minlength=len(kk))
+        drop = (cnt >= 2) & (inner_count >= 2)
+        keep = ~drop[inv.reshape(-1)]
+        a3 = np.concatenate([s[1][s[0]] for s in segs])[keep]
+        b3 = np.concatenate([s[2][s[0]] for s in segs])[keep]
+        # crossings: triangles with corners on both sides beyond tol
+        cross = ~all_near & ~(near.sum(axis=1) >= 2) & (d.max(axis=1) > tol) & (d.min(axis=1) < -tol)
+        if cross.any():
+            pc, dc, nc = p[cross], d[cross], near[cross]
+            pts = np.zeros((len(pc), 2, 3))
+            cnt_pts = np.zeros(len(pc), np.int64)
+            for i in range(3):                                   # a corner on the plane
+                s = nc[:, i]
+                rows = np.nonzero(s)[0]
+                pts[rows, np.minimum(cnt_pts[rows], 1)] = pc[rows, i]
+                cnt_pts[rows] += 1
+            for i, j in ((0, 1), (1, 2), (2, 0)):                # an edge through the plane
+                s = ~nc[:, i] & ~nc[:, j] & (np.sign(dc[:, i]) != np.sign(dc[:, j]))
+                rows = np.nonzero(s)[0]
+                t = dc[rows, i] / (dc[rows, i] - dc[rows, j])
+                pts[rows, np.minimum(cnt_pts[rows], 1)] = pc[rows, i] + t[:, None] * (pc[rows, j] - pc[rows, i])
+                cnt_pts[rows] += 1
+            ok = cnt_pts == 2
+            a3 = np.concatenate([a3, pts[ok, 0]])
+            b3 = np.concatenate([b3, pts[ok, 1]])
+        if len(a3) == 0:
+            continue
+        to2d = np.stack([e1, e2], axis=1)
+        seg = np.stack([(a3 - origin) @ to2d, (b3 - origin) @ to2d], axis=1)
+        length = np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1)
+        seg = seg[length > 1e-9 * max(r, 1e-12)]
+        # the same segment from several triangles counts once
+        q = np.round(np.sort(seg.reshape(len(seg), 4).reshape(-1, 2, 2), axis=1).reshape(len(seg), 4)
+                     / max(r * 1e-7, 1e-12)).astype(np.int64)
+        seg = seg[np.unique(q, axis=0, return_index=True)[1]]
+        if len(seg):
+            out.append((group, origin, e1, e2, seg))
+    return out
+
+
+def _split(poly, a, b, eps):
+    """Split the convex polygon ``poly`` (M, 2) by the line through a, b:
+    (left, right) polygons, either None when the line misses the interior."""
+    dvec = (b - a) / np.hypot(*(b - a))
+    s = dvec[0] * (poly[:, 1] - a[1]) - dvec[1] * (poly[:, 0] - a[0])        # signed distance [m]
+    s = np.where(np.abs(s) <= eps, 0.0, s)
+    if not (s > 0).any() or not (s < 0).any():
+        return None, None
+    left, right = [], []
+    m = len(poly)
+    for i in range(m):
+        j = (i + 1) % m
+        p, q, sp, sq = poly[i], poly[j], s[i], s[j]
+        if sp >= 0:
+            left.append(p)
+        if sp <= 0:
+            right.append(p)
+        if sp * sq < 0:
+            x = p + (sp / (sp - sq)) * (q - p)
+            left.append(x)
+            right.append(x)
+    return np.array(left), np.array(right)
+
+
+def _without_collinear(poly, eps):
+    """The convex polygon without corners lying on the line through their neighbours
+    (they would give zero-area fan triangles)."""
+    keep = []
+    m = len(poly)
+    for i in range(m):
+        a, p, b = poly[i - 1], poly[i], poly[(i + 1) % m]
+        ab = b - a
+        length = np.hypot(*ab)
+        if length > 0 and abs(ab[0] * (p[1] - a[1]) - ab[1] * (p[0] - a[0])) / length > eps:
+            keep.append(i)
+    return poly[keep]
+
+
+def _area(poly):
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def _cross2(u, v):
+    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+
+def _touching(tri2d, seg, eps):
+    """(F, K) bool: segment k meets triangle f along a piece of positive length
+    (crossing its interior or lying on an edge).  Cyrus-Beck clipping."""
+    a, b = seg[None, :, 0], seg[None, :, 1]                              # (1, K, 2)
+    t0 = np.zeros((len(tri2d), len(seg)))
+    t1 = np.ones_like(t0)
+    ccw = np.sign(_cross2(tri2d[:, 1] - tri2d[:, 0], tri2d[:, 2] - tri2d[:, 0]))[:, None]
+    for i in range(3):
+        p, q = tri2d[:, None, i], tri2d[:, None, (i + 1) % 3]             # (F, 1, 2)
+        e = q - p
+        # inside when ccw * cross(e, x - p) >= -eps
+        fa = ccw * _cross2(e, a - p)
+        fb = ccw * _cross2(e, b - p)
+        elen = np.linalg.norm(e, axis=2)
+        fa, fb = fa + eps * elen, fb + eps * elen
+        den = fa - fb
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = fa / den
+        out_both = (fa < 0) & (fb < 0)
+        t1 = np.where(out_both, -1.0, t1)
+        enter = (fa < 0) & (fb >= 0)
+        leave = (fa >= 0) & (fb < 0)
+        t0 = np.where(enter, np.maximum(t0, t), t0)
+        t1 = np.where(leave, np.minimum(t1, t), t1)
+    seg_len = np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1)[None]
+    return (t1 - t0) * seg_len > 4 * eps
+
+
+def split_at_contacts(scene, faces, tol, min_fraction=0.005):
+    """Cut the patches of triangles ``faces`` along contact lines (module docstring).
+
+    ``scene`` has one patch per triangle (as :func:`raybundle.patches.layout.subdivide`
+    makes); ``faces`` are the triangle ids that may be cut (the pieces of
+    subdivided input faces).  Returns ``(scene, n_cut)``: a new scene whose
+    cut patches consist of the convex pieces' fan triangles, and the number of
+    patches cut.  The new scene carries ``triangle_corner_tag`` (T, 3) int64
+    (0 = no contact at that corner).
+    """
+    from ..scene.model import PatchScene
+    from ..util.arrays import unique_rows
+
+    groups = contact_segments(scene, np.asarray(faces, np.int64), tol)
+    if not groups:
+        return scene, 0
+    _, r = scene.bounding_sphere
+    eps = 1e-9 * max(r, 1e-12)
+    T = len(scene.triangles)
+    replaced = np.zeros(T, bool)
+    corner_tag = (scene.triangle_corner_tag.copy() if scene.triangle_corner_tag is not None
+                  else np.zeros((T, 3), np.int64))
+    new_pts, new_tris, new_from, new_patch_local, new_tags = [], [], [], [], []
+    tag_ids: dict = {}
+    n_cut = 0
+    n_new_patches = 0
+    n_new_pts = 0
+    seg_base = 0
+    for group, origin, e1, e2, seg in groups:
+        to2d = np.stack([e1, e2], axis=1)
+        c2 = (scene.triangle_corners[group] - origin) @ to2d                 # (F, 3, 2)
+        touch = np.zeros((len(group), len(seg)), bool)
+        step = max(1, 4_000_000 // max(len(seg), 1))
+        for s in range(0, len(group), step):
+            touch[s:s + step] = _touching(c2[s:s + step], seg, eps) | _corner_on(c2[s:s + step], seg, eps)
+        touched = np.nonzero(touch.any(axis=1))[0]
+        # triangles no touching line cuts (every corner on one side of each): only their corners' tags
+        step = max(1, 1_000_000 // max(len(seg), 1))
+        whole = np.zeros(len(touched), bool)
+        for s in range(0, len(touched), step):
+            f = touched[s:s + step]
+            whole[s:s + step] = _uncut(c2[f], seg, touch[f], eps)
+        fast = touched[whole]
+        for s in range(0, len(fast), step):
+            f = fast[s:s + step]
+            corner_tag[group[f]] = _corner_tags_uncut(c2[f], seg, touch[f], seg_base, eps, tag_ids)
+        for f in touched[~whole]:
+            tri = group[f]
+            segs = np.nonzero(touch[f])[0]
+            polys = [c2[f]]
+            full = _area(c2[f])
+            for k in segs:
+                nxt = []
+                for poly in polys:
+                    lft, rgt = _split(poly, seg[k, 0], seg[k, 1], eps)
+                    if lft is None or min(_area(lft), _area(rgt)) < min_fraction * full:
+                        nxt.append(poly)
+                    else:
+                        nxt += [lft, rgt]
+                polys = nxt
+            polys = [_without_collinear(poly, eps) for poly in polys]
+            tags = [_corner_tags(poly, seg, segs, seg_base, eps, tag_ids) for poly in polys]
+            if len(polys) == 1:          # not cut: the triangle keeps its patch, its corners get their tags
+                if any(tags[0]):
+                    corner_tag[tri] = _tags_in_order(tags[0], polys[0], c2[f], eps)
+                continue
+            replaced[tri] = True
+            n_cut += len(polys) > 1
+            for poly, tg in zip(polys, tags):
+                m = len(poly)
+                base = n_new_pts
+                new_pts.append(origin + poly @ to2d.T)
+                n_new_pts += m
+                for i in range(1, m - 1):
+                    idx = (0, i, i + 1)               # pieces keep the triangle's winding
+                    new_tris.append([base + x for x in idx])
+                    new_tags.append([tg[x] for x in idx])
+                    new_from.append(tri)
+                    new_patch_local.append(n_new_patches)
+                n_new_patches += 1
+        seg_base += len(seg)
+    if not replaced.any() and not corner_tag.any():
+        return scene, 0
+    keep = np.nonzero(~replaced)[0]
+    pts = np.concatenate(new_pts) if new_pts else np.zeros((0, 3))
+    # weld the new corners that coincide, among themselves and with the corners of the
+    # triangles they replace (which their neighbours keep); the other vertices stay as they are
+    # (welding the whole scene again cost seconds at millions of triangles)
+    old_ids = np.unique(scene.triangles[replaced])
+    cand = np.concatenate([scene.vertices[old_ids], pts])
+    first, inv = unique_rows(np.round(cand / max(r * 1e-7, 1e-12)).astype(np.int64))
+    at_old = first < len(old_ids)
+    own = old_ids[np.minimum(first, len(old_ids) - 1)] if len(old_ids) else np.zeros(len(first), np.int64)
+    vertex_of = np.where(at_old, own, len(scene.vertices) + np.cumsum(~at_old) - 1)
+    v = np.concatenate([scene.vertices, cand[first[~at_old]]])
+    new_t = vertex_of[inv[len(old_ids):]][np.asarray(new_tris, np.int64).reshape(-1, 3)]
+    t = np.concatenate([scene.triangles[keep], new_t])
+    src = np.concatenate([keep, np.asarray(new_from, np.int64)])
+    tags = np.concatenate([corner_tag[keep], np.asarray(new_tags, np.int64).reshape(-1, 3)])
+    # patches: untouched triangles keep theirs (renumbered), pieces get new ids
+    old_patch = scene.triangle_patch[keep]
+    _, old_patch = np.unique(old_patch, return_inverse=True)
+    n_old = int(old_patch.max()) + 1 if len(old_patch) else 0
+    patch = np.concatenate([old_patch.reshape(-1), n_old + np.asarray(new_patch_local, np.int64)]).astype(np.int64)
+    # pieces that welding or a sliver cut flattened to zero area carry nothing (their
+    # normal would be NaN): drop them, and renumber the patches densely
+    c = v[new_t]
+    area2 = np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+    ok = np.concatenate([np.ones(len(keep), bool), area2 > (r * 1e-9) ** 2])
+    if not ok.all():
+        t, src, tags = t[ok], src[ok], tags[ok]
+        patch = np.unique(patch[ok], return_inverse=True)[1].reshape(-1).astype(np.int64)
+    out = PatchScene(v, t, scene.triangle_material[src], patch, scene.triangle_source[src], scene.materials,
+                     scene.point_lights, scene.camera, scene.analytic_radiance, scene.name,
+                     scene.dropped_triangles, scene.triangle_solid[src], scene.triangle_two_sided[src],
+                     scene.sun_lights, scene.area_lights, scene.environment, tags, texture=scene.texture)
+    return out, n_cut
+
+
+def _corner_on(tri2d, seg, eps):
+    """(F, K) bool: a corner of triangle f lies on segment k (a contact at one point)."""
+    a, b = seg[None, None, :, 0], seg[None, None, :, 1]                  # (1, 1, K, 2)
+    p = tri2d[:, :, None, :]                                            # (F, 3, 1, 2)
+    d = b - a
+    length = np.maximum(np.linalg.norm(d, axis=-1), 1e-300)
+    off = np.abs(_cross2(d, p - a)) / length
+    along = np.einsum("...i,...i->...", p - a, d) / length
+    return ((off <= 1e3 * eps) & (along >= -1e3 * eps) & (along <= length + 1e3 * eps)).any(axis=1)
+
+
+def _uncut(tri2d, seg, touch, eps):
+    """(F,) bool: no line of a touching segment (``touch`` (F, K)) has corners of triangle f
+    (``tri2d`` (F, 3, 2)) strictly on both of its sides, so :func:`_split` leaves it whole."""
+    a, d = seg[:, 0], seg[:, 1] - seg[:, 0]
+    u = d / np.hypot(d[:, 0], d[:, 1])[:, None]
+    s = u[None, None, :, 0] * (tri2d[:, :, None, 1] - a[None, None, :, 1]) \
+        - u[None, None, :, 1] * (tri2d[:, :, None, 0] - a[None, None, :, 0])           # (F, 3, K)
+    both = (s > eps).any(axis=1) & (s < -eps).any(axis=1)
+    return ~(both & touch).any(axis=1)
+
+
+def _corner_tags_uncut(tri2d, seg, touch, seg_base, eps, tag_ids):
+    """:func:`_corner_tags` of whole triangles ``tri2d`` (F, 3, 2), vectorised: (F, 3) tags
+    in corner order, from the same keys (so equal lines weld with the cut pieces)."""
+    a, d = seg[:, 0], seg[:, 1] - seg[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])
+    q = tri2d[:, :, None, :] - a[None, None]                                           # (F, 3, K, 2)
+    off = np.abs(_cross2(d[None, None], q)) / length
+    along = np.einsum("fckx,kx->fck", q, d) / length
+    on = (off <= 1e3 * eps) & (along >= -1e3 * eps) & (along <= length + 1e3 * eps) & touch[:, None, :]
+    u = d / length[:, None]
+    flip = (u[:, 0] < -1e-9) | ((np.abs(u[:, 0]) <= 1e-9) & (u[:, 1] < 0))             # one direction per line
+    u[flip] = -u[flip]
+    ur = np.round(u * 1e6).astype(np.int64)
+    offset = np.round((u[:, 0] * a[:, 1] - u[:, 1] * a[:, 0]) / (1e3 * eps)).astype(np.int64)
+    centroid = tri2d.mean(axis=1)
+    side = (u[None, :, 0] * (centroid[:, None, 1] - a[None, :, 1])
+            - u[None, :, 1] * (centroid[:, None, 0] - a[None, :, 0])) > 0               # (F, K)
+    out = np.zeros(tri2d.shape[:2], np.int64)
+    for f, c in zip(*np.nonzero(on.any(axis=2))):
+        key = {((seg_base, int(ur[k, 0]), int(ur[k, 1]), int(offset[k])), bool(side[f, k]))
+               for k in np.nonzero(on[f, c])[0]}
+        out[f, c] = tag_ids.setdefault(tuple(sorted(key)), len(tag_ids) + 1)
+    return out
+
+
+def _tags_in_order(tags, poly, tri2d, eps):
+    """Tags of the corners of an uncut triangle, in the triangle's corner order
+    (``_without_collinear`` may have rotated the polygon)."""
+    out = [0, 0, 0]
+    for tg, p in zip(tags, poly):
+        out[int(np.argmin(np.linalg.norm(tri2d - p, axis=1)))] = tg
+    return out
+
+
+def _corner_tags(poly, seg, segs, seg_base, eps, tag_ids):
+    """Weld tag per polygon corner: which contact lines the corner lies on, and on
+    which side of each the polygon lies (0 for none).  A line, not a segment: the
+    collinear segments of one contact (a floor's subdivided edge along a wall) weld
+    along it."""
+    centroid = poly.mean(axis=0)
+    out = []
+    for p in poly:
+        key = []
+        for k in segs:
+            a, b = seg[k]
+            d = b - a
+            length = np.hypot(*d)
+            off = abs(d[0] * (p[1] - a[1]) - d[1] * (p[0] - a[0])) / length
+            along = np.dot(p - a, d) / length
+            if off <= 1e3 * eps and -1e3 * eps <= along <= length + 1e3 * eps:
+                u = d / length
+                if u[0] < -1e-9 or (abs(u[0]) <= 1e-9 and u[1] < 0):     # one direction per line
+                    u = -u
+                line = (seg_base, *np.round(u * 1e6).astype(np.int64).tolist(),
+                        int(np.round((u[0] * a[1] - u[1] * a[0]) / (1e3 * eps))))
+                side = u[0] * (centroid[1] - a[1]) - u[1] * (centroid[0] - a[0]) > 0
+                key.append((line, bool(side)))
+        out.append(tag_ids.setdefault(tuple(sorted(set(key))), len(tag_ids) + 1) if key else 0)
+    return out
+
+
+#: gaps narrower than this share of the patch size count as contact
+#: (:func:`~raybundle.patches.layout.cut_at_contacts`, :func:`~raybundle.patches.clusters.make_patches`)
+CONTACT_SHARE = 0.05
+#: probe rays per chunk in :func:`gap_sides` (memory: about 100 bytes a ray)
+PROBE_CHUNK = 1 << 20
+
+
+def gap_sides(tracer, points, normals, tol):
+    """(N, 2) bool: another surface lies within ``tol`` [m] of ``points`` (N, 3) along
+    their unit ``normals`` (column 0) and against them (column 1).
+
+    A point in such a gap (the ceiling over a lamp hanging 0.5 mm under it, the floor
+    under a rug) sees only that surface on that side, a world apart from its neighbours
+    outside the gap: a patch must not hold both (module docstring)."""
+    points, normals = np.asarray(points, float), np.asarray(normals, float)
+    out = np.zeros((len(points), 2), bool)
+    eps = tracer.eps
+    for lo in range(0, len(points), PROBE_CHUNK // 2):
+        p, n = points[lo:lo + PROBE_CHUNK // 2], normals[lo:lo + PROBE_CHUNK // 2]
+        for col, sign in ((0, 1.0), (1, -1.0)):
+            d = sign * n
+            out[lo:lo + len(p), col] = tracer.occluded(p + eps * d, d, np.full(len(p), max(tol - eps, eps)))
+    return out
+
+
+def straddling(tracer, scene, faces, tol):
+    """(F,) bool: triangles ``faces`` part of which lies in a gap narrower than ``tol`` [m]
+    and part not: the triangles :func:`split_at_contacts` must cut.  :func:`gap_sides` at
+    every centroid first; where a triangle's flags differ from those of a triangle it shares
+    a corner with (or it shares none), at its three corners pulled 1% towards the centroid
+    too, and the triangle straddles where its four points disagree."""
+    faces = np.asarray(faces, np.int64)
+    if len(faces) == 0:
+        return np.zeros(0, bool)
+    c = scene.triangle_corners[faces]
+    flags = gap_sides(tracer, c.mean(axis=1), scene.triangle_normal[faces], tol)
+    code = flags[:, 0] * 2 + flags[:, 1]
+    corner = scene.triangles[faces]
+    lo = np.full(len(scene.vertices), 4)
+    hi = np.full(len(scene.vertices), -1)
+    users = np.zeros(len(scene.vertices), np.int64)
+    np.minimum.at(lo, corner, code[:, None])
+    np.maximum.at(hi, corner, code[:, None])
+    np.add.at(users, corner, 1)
+    near = np.any(lo[corner] != hi[corner], axis=1) | np.all(users[corner] == 1, axis=1)
+    out = np.zeros(len(faces), bool)
+    sel = np.nonzero(near)[0]
+    step = max(1, PROBE_CHUNK // 8)
+    for start in range(0, len(sel), step):
+        f = sel[start:start + step]
+        mid = c[f].mean(axis=1, keepdims=True)
+        pts = mid + 0.99 * (c[f] - mid)                                           # (F, 3, 3)
+        n = np.repeat(scene.triangle_normal[faces[f]], 3, axis=0)
+        at = gap_sides(tracer, pts.reshape(-1, 3), n, tol).reshape(len(f), 3, 2)
+        out[f] = (at != flags[f, None, :]).any(axis=(1, 2))
+    return out

@@ -1,0 +1,153 @@
+"""The patch layout by subdivision: triangles cut into similar triangles to a patch size
+(:func:`subdivide`, :func:`split_triangles`) and then cut along the lines where other surfaces
+touch or cross them (:func:`cut_at_contacts`, :mod:`raybundle.patches.contacts`).
+:func:`raybundle.patches.clusters.make_patches` also groups triangles much smaller than a patch."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..scene.model import PatchScene
+from ..util.arrays import unique_rows
+
+#: scenes with at most this many reflecting patch triangles have every one cut at contacts,
+#: larger ones only their subdivided faces (:func:`subdivide`)
+CONTACT_ALL_MAX = 10_000
+
+
+def subdivide(scene: PatchScene, max_edge=None, patches=None, contacts=True) -> PatchScene:
+    """Split every triangle into k^2 similar triangles so that edges are at most
+    ``max_edge`` [m] long, or so that there are about ``patches`` patches.
+
+    Each resulting triangle is its own patch.  k is chosen per triangle
+    (``k = ceil(longest edge / max_edge)``); neighbours with different k meet at
+    T-junctions, which are harmless here (patches are flat, visibility is traced).
+    Triangles that reflect nothing (a lamp's Emission shader, a black body) stay
+    whole: their outgoing radiance is known, and a light made of few triangles
+    is sampled with less variance.  With ``contacts``, the patches of subdivided faces (of
+    every reflecting face, up to :data:`CONTACT_ALL_MAX` triangles) are then cut along the
+    lines where other surfaces touch or cross them, gaps narrower than 5% of
+    ``max_edge`` counting as contact (:mod:`raybundle.patches.contacts`).
+    (:func:`raybundle.patches.clusters.make_patches` also groups triangles much smaller than a patch.)
+    """
+    if (max_edge is None) == (patches is None):
+        raise ValueError("give exactly one of max_edge and patches")
+    if patches is not None:
+        max_edge = edge_for_patches(scene, patches)
+    if not max_edge > 0:
+        raise ValueError("max_edge must be positive")
+    fine, k, _ = split_triangles(scene, max_edge)
+    if not contacts:
+        return fine
+    return cut_at_contacts(fine, np.nonzero(k > 1)[0], max_edge)
+
+
+def longest_edges(corners):
+    """(T,) the longest edge [m] of each triangle with ``corners`` (T, 3, 3)."""
+    return np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+
+
+def _split_edge(scene, whole=None):
+    """(T,) longest edge of each triangle [m], 0 for triangles kept whole: those that reflect
+    nothing and those in ``whole`` (T,) bool."""
+    corners = scene.triangle_corners
+    edge = longest_edges(corners)
+    split = scene.materials.reflects[scene.triangle_material]
+    if whole is not None:
+        split = split & ~whole
+    return np.where(split, edge, 0.0)
+
+
+def edge_for_patches(scene, patches):
+    """The ``max_edge`` [m] for which :func:`split_triangles` makes about ``patches`` patches
+    (the longest edge when there are more triangles than that: nothing is split)."""
+    split_edge = _split_edge(scene)
+    if patches < len(scene.triangles) or not split_edge.any():
+        corners = scene.triangle_corners
+        return float(longest_edges(corners).max()) * 1.0001
+    # bisection on the edge length for sum(k^2) ~ patches
+    lo, hi = 1e-9 * split_edge.max(), split_edge.max() * 1.0001
+    for _ in range(60):
+        mid = np.sqrt(lo * hi)
+        n = (np.maximum(1, np.ceil(split_edge / mid)) ** 2).sum()
+        lo, hi = (mid, hi) if n > patches else (lo, mid)
+    return hi
+
+
+def split_triangles(scene: PatchScene, max_edge, whole=None):
+    """Every reflecting triangle (but those in ``whole`` (T,) bool) cut into k^2 similar
+    ones, ``k = ceil(longest edge / max_edge)``, each its own patch (:func:`subdivide`
+    without contacts).  Returns ``(scene, k, row)``: ``k`` (T',) the k of the triangle
+    each new triangle came from and ``row`` (T',) that triangle's index."""
+    corners = scene.triangle_corners
+    k_all = np.maximum(1, np.ceil(_split_edge(scene, whole) / max_edge - 1e-9)).astype(np.int64)
+    verts, tris, mats, srcs = [scene.vertices], [], [], []
+    base = len(scene.vertices)
+    for k in np.unique(k_all):
+        sel = np.nonzero(k_all == k)[0]
+        mats.append(np.repeat(scene.triangle_material[sel], k * k))
+        srcs.append(np.repeat(scene.triangle_source[sel], k * k))
+        if k == 1:                  # whole triangles keep their corners
+            tris.append(scene.triangles[sel])
+            continue
+        # barycentric lattice points (i, j) with i + j <= k
+        ij = np.array([(i, j) for i in range(k + 1) for j in range(k + 1 - i)])
+        index = {tuple(p): n for n, p in enumerate(ij)}
+        up = [(index[i, j], index[i + 1, j], index[i, j + 1]) for i in range(k) for j in range(k - i)]
+        down = [(index[i + 1, j], index[i + 1, j + 1], index[i, j + 1])
+                for i in range(k) for j in range(k - 1 - i)]
+        local = np.array(up + down, dtype=np.int64)
+        c = corners[sel]
+        b1, b2 = ij[:, 0] / k, ij[:, 1] / k
+        pts = (c[:, None, 0] + b1[None, :, None] * (c[:, None, 1] - c[:, None, 0])
+               + b2[None, :, None] * (c[:, None, 2] - c[:, None, 0]))
+        verts.append(pts.reshape(-1, 3))
+        offs = base + np.arange(len(sel))[:, None, None] * len(ij)
+        tris.append((local[None] + offs).reshape(-1, 3))
+        base += len(sel) * len(ij)
+    v = np.concatenate(verts)
+    t = np.concatenate(tris)
+    # weld coincident vertices so that triangles of one face share corners
+    _, r = scene.bounding_sphere
+    # (a vertex no triangle uses may be NaN: build_scene checks only those in use)
+    q = np.round(np.where(np.isfinite(v), v, 0.0) / max(r * 1e-7, 1e-12)).astype(np.int64)
+    first, inv = unique_rows(q)
+    used, t = np.unique(inv[t], return_inverse=True)     # only the corners in use
+    v, t = v[first[used]], t.reshape(-1, 3)
+    per_tri = [np.concatenate([np.repeat(a[np.nonzero(k_all == k)[0]], k * k) for k in np.unique(k_all)])
+               for a in (scene.triangle_solid, scene.triangle_two_sided, k_all, np.arange(len(k_all)))]
+    fine = PatchScene(v, t, np.concatenate(mats), np.arange(len(t)), np.concatenate(srcs),
+                      scene.materials, scene.point_lights, scene.camera, scene.analytic_radiance,
+                      scene.name, scene.dropped_triangles, *per_tri[:2], scene.sun_lights, scene.area_lights,
+                      scene.environment, texture=scene.texture)
+    return fine, per_tri[2], per_tri[3]
+
+
+def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene:
+    """The patches of triangles ``cut`` (the pieces of subdivided faces) cut along contact
+    lines (:mod:`raybundle.patches.contacts`, gaps under 5% of ``max_edge`` count as contact); so is
+    every reflecting triangle when there are at most :data:`CONTACT_ALL_MAX` of them, and
+    beyond that every one that straddles such a gap (:func:`~raybundle.patches.contacts.straddling`,
+    probed with ``tracer``, a :class:`~raybundle.tracing.visibility.RayTracer` over ``scene``, or
+    one built here)."""
+    from .contacts import CONTACT_SHARE, split_at_contacts, straddling
+    # faces the user meshed finer than the patches are cut too: a ceiling cut into a grid over
+    # a lamp hanging under it must still trap the lamp's upper light.  Up to CONTACT_ALL_MAX
+    # triangles all of them (crossings too: a post through a floor); beyond, the cut is a
+    # per-triangle loop (~0.5 ms a triangle), so only those found straddling a gap.
+    tol = CONTACT_SHARE * max_edge
+    todo = np.zeros(len(scene.triangles), bool)
+    todo[np.asarray(cut, np.int64)] = True
+    reflects = scene.materials.reflects[scene.triangle_material]
+    if reflects.sum() <= CONTACT_ALL_MAX:
+        todo |= reflects
+    else:
+        rest = np.nonzero(reflects & ~todo)[0]
+        if len(rest):
+            from ..tracing.visibility import RayTracer
+            probe = tracer if tracer is not None else RayTracer(scene)
+            try:
+                todo[rest[straddling(probe, scene, rest, tol)]] = True
+            finally:
+                if probe is not tracer:
+                    probe.close()
+    return split_at_contacts(scene, np.nonzero(todo)[0], tol=tol)[0]

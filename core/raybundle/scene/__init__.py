@@ -1,0 +1,1 @@
+"""The scene: triangles, materials, textures, camera, lights as records, its file format and the built-in scenes."""

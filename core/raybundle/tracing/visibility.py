@@ -1,0 +1,415 @@
+"""Ray casting through Embree, and global visibility for bundles of parallel rays.
+
+A *bundle* (thesis 3.1) is a grid of parallel rays with direction d covering
+the scene's bounding sphere.  Along each ray every surface hit is found (Embree
+first hits, re-shot just past each hit), and each pair of *consecutive* hits
+exchanges light in both directions between the sides that face each other
+(:meth:`~raybundle.scene.model.PatchScene.side_facing`; the black back of a one-sided
+triangle takes no part): the upstream side j sends along +d to the downstream
+side i, and i sends along -d to j.  With an environment (world) radiance the
+first hit of each ray also receives from the world along +d and the last hit
+along -d (sender :data:`ENVIRONMENT`).  Each ray
+stands for the area delta^2 of the plane perpendicular to d, so summed over a
+bundle the weight of a pair estimates ``P(i, j, d) = A(i, j, d) cos_i`` without
+bias when the grid gets a random sub-cell offset (and rotation) every time.
+
+Hits closer than ``eps`` along a ray are one hit (``eps`` = 1e-5 of the scene
+radius; Embree's hit distances carry errors of that order in single precision): a ray through a shared edge or vertex is counted once, and walls
+thinner than ``eps`` behave as one surface.
+
+``embreex`` traces one ray after another in C and releases the GIL, so every
+query is split into one chunk per core and run on a thread pool.
+"""
+from __future__ import annotations
+
+import os
+import warnings
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from .sampling import frames_from_normals, points_on_triangles, stratified_2d_sets
+
+_MAX_LAYERS = 10000
+#: sender id of light that comes from the environment (world) in a :class:`Bundle`
+ENVIRONMENT = -1
+
+
+@dataclass
+class Bundle:
+    """Transfers found by one bundle: one entry per ray segment that carries light.
+
+    Attributes
+    ----------
+    direction : (3,) float  the bundle direction d (unit)
+    cell_area : float  delta^2 [m^2], the cross-section each ray stands for
+    receiver, sender : (K,) int  side ids; light goes from sender to receiver
+        (sender :data:`ENVIRONMENT` = the world)
+    travel_sign : (K,) int8  +1 when the light travels along +d, -1 along -d
+    n_rays : int  rays in the grid (inside the bounding disc)
+    n_casts : int  Embree first-hit queries used (all layers; bundles traced together
+        share their total in proportion to their grid rays)
+    """
+
+    direction: np.ndarray
+    cell_area: float
+    receiver: np.ndarray
+    sender: np.ndarray
+    travel_sign: np.ndarray
+    n_rays: int
+    n_casts: int
+
+    def aggregated(self):
+        """Unique (receiver, sender, travel_sign) with weight = count * delta^2 [m^2]."""
+        key = np.stack([self.receiver, self.sender, self.travel_sign.astype(np.int64)], axis=1)
+        if len(key) == 0:
+            return np.zeros((0, 3), np.int64), np.zeros(0)
+        uniq, counts = np.unique(key, axis=0, return_counts=True)
+        return uniq, counts * self.cell_area
+
+
+class RayTracer:
+    """Embree acceleration structure over a :class:`~raybundle.scene.model.PatchScene`.
+
+    Queries are threaded over ``threads`` workers (default: all cores).
+    """
+
+    def __init__(self, scene, threads=None):
+        from embreex import rtcore_scene
+        from embreex.mesh_construction import TriangleMesh
+
+        self.scene = scene
+        self.center, self.radius = scene.bounding_sphere
+        self.eps = max(1e-5 * self.radius, 1e-9)
+        self._embree = rtcore_scene.EmbreeScene()
+        # Embree works in single precision: build it around the scene's centre so that
+        # scenes far from the world origin keep their precision (queries are shifted too)
+        TriangleMesh(self._embree, (scene.vertices - self.center).astype(np.float32),
+                     scene.triangles.astype(np.int32))
+        self._embree.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))  # commit now
+        self.threads = max(1, int(threads or os.cpu_count() or 1))
+        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+
+    def close(self):
+        if self._pool is not None:
+            self._pool.shutdown(wait=False)
+            self._pool = None
+
+    def _map_chunks(self, fn, n, min_chunk=2048, threaded=True):
+        """Run fn(start, stop) over [0, n) split into one chunk per thread; list of results."""
+        if self._pool is None or n < 2 * min_chunk or not threaded:
+            return [fn(0, n)]
+        bounds = np.linspace(0, n, self.threads + 1).astype(int)
+        return list(self._pool.map(fn, bounds[:-1], bounds[1:]))
+
+    # -------------------------------------------------------------- queries
+    def _run(self, origins, directions, **kw):
+        return self._embree.run(np.ascontiguousarray(origins - self.center, np.float32),
+                                np.ascontiguousarray(directions, np.float32), **kw)
+
+    def first_hit(self, origins, directions):
+        """Closest hits of rays (N, 3) from ``origins`` along unit ``directions``.
+
+        Returns ``(triangle, t, u, v)``: triangle id (-1 = miss), distance [m] and
+        Embree's barycentrics (hit = (1-u-v) v0 + u v1 + v v2).
+        """
+        origins = np.asarray(origins, float)
+        directions = np.broadcast_to(np.asarray(directions, float), origins.shape)
+
+        def work(a, b):
+            r = self._run(origins[a:b], directions[a:b], output=1)
+            return r["primID"], r["tfar"], r["u"], r["v"]
+
+        parts = self._map_chunks(work, len(origins))
+        tri = np.concatenate([p[0] for p in parts]).astype(np.int64)
+        tri[tri < 0] = -1
+        t = np.concatenate([p[1] for p in parts]).astype(float)
+        return tri, t, np.concatenate([p[2] for p in parts]), np.concatenate([p[3] for p in parts])
+
+    def occluded(self, origins, directions, distances):
+        """(N,) bool: is anything hit between ``origins`` and ``distances`` along ``directions``?"""
+        origins = np.asarray(origins, float)
+        directions = np.broadcast_to(np.asarray(directions, float), origins.shape)
+        dist = np.asarray(distances, np.float32)
+
+        def work(a, b):
+            return self._run(origins[a:b], directions[a:b], query="OCCLUDED",
+                             dists=np.ascontiguousarray(dist[a:b]))
+
+        return np.concatenate(self._map_chunks(work, len(origins))) != -1
+
+    def open_fraction(self, points_per_triangle=32, refine_points=512, seed=0):
+        """(TS,) fraction of each triangle side's area that is not buried inside a closed solid.
+
+        A point is buried when rays from it along its side's normal and along
+        three directions tilted 60 degrees from it all meet the inside of a
+        closed solid first (a back face of a :attr:`~raybundle.scene.model.PatchScene.triangle_solid`
+        triangle: a box standing on a floor buries
+        the floor under it; a one-sided shelf buries nothing).  Such area never
+        receives light, so side averages must not be divided by it (an FE error
+        otherwise: the visible rest of the patch comes out too dark).  Estimated
+        from ``points_per_triangle`` stratified points per side, shared out over its triangles
+        by area (:meth:`~raybundle.scene.model.PatchScene.tside_samples`); triangle sides found
+        partly or wholly buried (patches cut at a solid's footprint by
+        :mod:`raybundle.patches.contacts` are often wholly buried) get ``refine_points``
+        more (the receiving area divides E, so its error matters).  A side found wholly
+        buried keeps half a sample's area (its E is then never divided by zero).  A scene
+        without solids needs no rays: everything is open.
+        """
+        rng = np.random.default_rng([seed, 11])
+        sc = self.scene
+        n_t = len(sc.tside_triangle)
+        if not sc.triangle_solid.any():
+            return np.ones(n_t)
+        k = sc.tside_samples(points_per_triangle)
+        frac = self._open_fraction(np.arange(n_t), k, rng)
+        part = np.nonzero(frac < 1)[0]
+        if len(part) and refine_points:
+            k[part] = sc.tside_samples(refine_points)[part]
+            frac[part] = self._open_fraction(part, k[part], rng)
+        a = sc.triangle_area[sc.tside_triangle]
+        shut = np.bincount(sc.tside_side, a * frac, minlength=sc.n_sides)[sc.tside_side] <= 0
+        return np.where(shut, np.maximum(frac, 0.5 / k), frac)
+
+    def _open_fraction(self, tsides, k, rng, chunk=1 << 18):
+        """Open fractions (N,) of ``tsides`` (N,) from ``k`` (N,) stratified points each."""
+        out = np.zeros(len(tsides))
+        for kk in np.unique(k):
+            sel = np.nonzero(k == kk)[0]
+            step = max(1, chunk // int(kk))
+            for lo in range(0, len(sel), step):
+                s = sel[lo:lo + step]
+                out[s] = self._open_fraction_k(tsides[s], int(kk), rng)
+        return out
+
+    def _open_fraction_k(self, tsides, k, rng):
+        sc = self.scene
+        ts = np.repeat(tsides, k)
+        st = stratified_2d_sets(len(tsides), k, rng).reshape(-1, 2)
+        pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[ts]], st[:, 0], st[:, 1])
+        n = sc.tside_normal[ts]
+        t, b = frames_from_normals(n)
+        buried = np.ones(len(ts), bool)
+        s60, c60 = np.sin(np.pi / 3), np.cos(np.pi / 3)
+        phi0 = rng.random(len(ts)) * 2 * np.pi
+        for a in (None, 0, 2 * np.pi / 3, 4 * np.pi / 3):
+            live = np.nonzero(buried)[0]
+            if len(live) == 0:
+                break
+            nl = n[live]
+            if a is None:
+                d = nl
+            else:
+                phi = phi0[live] + a
+                d = c60 * nl + s60 * (np.cos(phi)[:, None] * t[live] + np.sin(phi)[:, None] * b[live])
+            hit, _, _, _ = self.first_hit(pts[live] + nl * self.eps, d)
+            safe = np.maximum(hit, 0)
+            back = ((hit >= 0) & sc.triangle_solid[safe]
+                    & (np.einsum("ij,ij->i", sc.triangle_normal[safe], d) > 0))
+            buried[live[~back]] = False
+        return 1.0 - buried.reshape(-1, k).mean(axis=1)
+
+    # --------------------------------------------------------------- bundle
+    def bundle_origins(self, direction, resolution, offset, rotation):
+        """Ray origins (N, 3) of a bundle grid.
+
+        The grid has ``resolution`` x ``resolution`` cells of side
+        ``delta = 2 R / resolution`` on the plane perpendicular to ``direction``
+        through the bounding sphere (centre c, radius R), shifted by ``offset``
+        in [0,1)^2 cells and rotated by ``rotation`` in [0,1) turns; rays outside
+        the disc of radius R miss everything and are dropped.  Origins sit
+        1.01 R upstream of the plane.  Returns ``(origins, delta)``.
+        """
+        origins, _, delta = self.grid_origins(np.asarray(direction, float)[None], resolution, [offset], [rotation])
+        return origins, delta
+
+    def grid_origins(self, directions, resolution, offsets, rotations):
+        """:meth:`bundle_origins` of K grids at once: ``(origins (N, 3), counts (K,), delta)``,
+        the origins of grid k following those of grids 0..k-1."""
+        d = np.asarray(directions, float)
+        t, b = frames_from_normals(d)
+        ang = 2 * np.pi * np.asarray(rotations, float)[:, None]
+        u, v = np.cos(ang) * t + np.sin(ang) * b, -np.sin(ang) * t + np.cos(ang) * b
+        r = self.radius * 1.0001 + self.eps
+        delta = 2.0 * r / resolution
+        g = (np.arange(resolution) + 0.5) * delta - r
+        off = (np.asarray(offsets, float) - 0.5) * delta                       # (K, 2)
+        x = (g[None, :, None] + off[:, 0, None, None]) + np.zeros((1, 1, resolution))
+        y = (g[None, None, :] + off[:, 1, None, None]) + np.zeros((1, resolution, 1))
+        x, y = x.reshape(len(d), -1), y.reshape(len(d), -1)
+        inside = x * x + y * y <= r * r
+        counts = inside.sum(axis=1)
+        x, y = x[inside], y[inside]
+        # grid k's rays follow grid k-1's: per-grid vectors repeat by count
+        o = (x[:, None] * np.repeat(u, counts, axis=0) + y[:, None] * np.repeat(v, counts, axis=0)
+             + np.repeat(self.center - 1.01 * r * d, counts, axis=0))
+        return o, counts, delta
+
+    def all_hit_pairs(self, origins, direction, ends=False):
+        """Consecutive hits along parallel rays: ``(upstream_tri, downstream_tri, ray, n_casts)``.
+
+        Every hit along every ray is found by re-shooting ``eps`` past the previous
+        hit; consecutive hits form one pair.  Triangle ids are Embree prim ids.
+        ``direction`` is one (3,) for all rays or one (N, 3) per ray.
+        With ``ends`` also returns the first and the last triangle hit by each ray
+        that hits anything (the surfaces that see the world along -d and +d).
+        """
+        up, down, ray, casts, first, _, last, _ = self._hit_layers(origins, direction, ends)
+        return (up, down, ray, casts) + ((first, last) if ends else ())
+
+    def _hit_layers(self, origins, direction, ends):
+        """:meth:`all_hit_pairs` with the ray ids of the first and last hits too:
+        ``(up, down, ray, casts, first, first_ray, last, last_ray)``."""
+        d32 = np.broadcast_to(np.asarray(direction, float), np.shape(origins)).astype(np.float32)
+        eps32 = np.float32(self.eps)
+
+        def work(a, b):
+            # active rays are kept compact: origin (float32, scene-centred), direction,
+            # start offset along it, ray index, and the last surface hit
+            o32 = (origins[a:b] - self.center).astype(np.float32)
+            dr = d32[a:b]
+            ray = np.arange(a, b)
+            start = np.zeros(len(o32), np.float32)
+            last = np.full(len(o32), -1, np.int64)
+            out = [[] for _ in range(7)]     # ups, downs, rays, firsts, first rays, lasts, last rays
+            casts = 0
+            for layer in range(_MAX_LAYERS):
+                if ray.size == 0:
+                    break
+                casts += ray.size
+                r = self._embree.run(o32 + start[:, None] * dr, dr, output=1)
+                prim = r["primID"].astype(np.int64)
+                hit = prim >= 0
+                if ends:
+                    if layer == 0:
+                        out[3].append(prim[hit])
+                        out[4].append(ray[hit])
+                    gone = ~hit & (last >= 0)
+                    out[5].append(last[gone])
+                    out[6].append(ray[gone])
+                o32, dr, ray, prim, prev = o32[hit], dr[hit], ray[hit], prim[hit], last[hit]
+                start = start[hit] + r["tfar"][hit] + eps32
+                new = prev != prim          # a re-hit of the same triangle is no new surface
+                pair = new & (prev >= 0)
+                out[0].append(prev[pair])
+                out[1].append(prim[pair])
+                out[2].append(ray[pair])
+                last = prim
+            else:
+                warnings.warn(f"a bundle ray met more than {_MAX_LAYERS} surfaces; it was cut off", stacklevel=4)
+            return [np.concatenate(x) if x else np.zeros(0, np.int64) for x in out], casts
+
+        parts = self._map_chunks(work, len(origins), min_chunk=1024)
+        cat = [np.concatenate([p[0][k] for p in parts]) for k in range(7)]
+        return (*cat[:3], sum(p[1] for p in parts), *cat[3:])
+
+    def bundle(self, direction, resolution, offset=(0.5, 0.5), rotation=0.0) -> Bundle:
+        """Global visibility in one direction: all light-carrying segments (see module doc)."""
+        return self.bundles(np.asarray(direction, float)[None], resolution, [offset], [rotation])[0]
+
+    def bundles(self, directions, resolution, offsets, rotations) -> list[Bundle]:
+        """:meth:`bundle` in each of ``directions`` (K, 3) with grid ``offsets`` (K, 2) and
+        ``rotations`` (K,), traced as one query: the rays of all K grids go to Embree
+        together, layer by layer, split over the threads (one small grid alone, a few
+        thousand rays, is not worth splitting)."""
+        dirs = np.asarray(directions, float)
+        dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+        origins, counts, delta = self.grid_origins(dirs, resolution, offsets, rotations)
+        bounds = np.concatenate([[0], np.cumsum(counts)])
+        world = bool(np.any(self.scene.environment > 0))
+        up, down, ray, casts, first, first_ray, last, last_ray = self._hit_layers(
+            origins, np.repeat(dirs, counts, axis=0), ends=world)
+        k_dirs = len(dirs)
+
+        def per_grid(rays, *arrays):
+            """``arrays`` split by the grid their ray belongs to (one counting sort)."""
+            grid = (np.searchsorted(bounds, rays, side="right") - 1).astype(np.uint16)
+            order = np.argsort(grid, kind="stable")
+            cuts = np.cumsum(np.bincount(grid, minlength=k_dirs))[:-1]
+            return [np.split(x[order], cuts) for x in arrays]
+        ups, downs = per_grid(ray, up, down)
+        if world:
+            (firsts,), (lasts,) = per_grid(first_ray, first), per_grid(last_ray, last)
+        out = []
+        for k in range(k_dirs):
+            ends = (firsts[k], lasts[k]) if world else ()
+            # Embree queries are shared out in proportion to the rays of each grid
+            out.append(bundle_from_hits(self.scene, dirs[k], delta, ups[k], downs[k],
+                                        int(counts[k]), int(round(casts * counts[k] / max(bounds[-1], 1))),
+                                        *ends))
+        return out
+
+
+def bundle_from_hits(scene, d, delta, up, down, n_rays, casts, first=None, last=None):
+    """The :class:`Bundle` of consecutive hit pairs ``up`` -> ``down`` (triangle ids)
+    along ``d``: the side of ``up`` facing +d and the side of ``down`` facing -d
+    exchange light both ways; with ``first``/``last`` (the first and last triangle
+    of each ray) the world sends to their sides facing -d and +d."""
+    s_up, s_down = scene.side_facing(up, d), scene.side_facing(down, -d)
+    ok = (s_up >= 0) & (s_down >= 0)
+    s_up, s_down = s_up[ok], s_down[ok]
+    k = len(s_up)
+    receiver, sender = [s_down, s_up], [s_up, s_down]
+    sign = [np.ones(k, np.int8), -np.ones(k, np.int8)]
+    if first is not None:
+        for tris, s in ((first, 1), (last, -1)):
+            side = scene.side_facing(tris, -s * d)
+            side = side[side >= 0]
+            receiver.append(side)
+            sender.append(np.full(len(side), ENVIRONMENT))
+            sign.append(np.full(len(side), s, np.int8))
+    return Bundle(d, delta * delta, receiver=np.concatenate(receiver), sender=np.concatenate(sender),
+                  travel_sign=np.concatenate(sign), n_rays=n_rays, n_casts=casts)
+
+
+# ------------------------------------------------------------ brute force twin
+def brute_force_hits(corners, origins, direction, eps):
+    """All hits of parallel rays with every triangle, by Moller-Trumbore in NumPy.
+
+    The obviously-correct twin of :meth:`RayTracer.all_hit_pairs` for small
+    scenes.  Returns, per ray, a list of ``(t, triangle)`` sorted by t, with
+    hits closer than ``eps`` merged (the first triangle index wins).
+    """
+    corners = np.asarray(corners, float)
+    d = np.asarray(direction, float)
+    e1 = corners[:, 1] - corners[:, 0]
+    e2 = corners[:, 2] - corners[:, 0]
+    p = np.cross(d, e2)                                   # (T, 3)
+    det = np.einsum("ij,ij->i", e1, p)
+    ok_tri = np.abs(det) > 1e-300
+    inv = np.where(ok_tri, 1.0 / np.where(ok_tri, det, 1.0), 0.0)
+    s = origins[:, None, :] - corners[None, :, 0]         # (N, T, 3)
+    u = np.einsum("ntk,tk->nt", s, p) * inv
+    q = np.cross(s, e1[None])
+    v = (q @ d) * inv
+    t = np.einsum("ntk,tk->nt", q, e2) * inv
+    tol = 1e-12
+    hit = ok_tri & (u >= -tol) & (v >= -tol) & (u + v <= 1 + tol) & (t > 0)
+    out = []
+    for n in range(len(origins)):
+        idx = np.nonzero(hit[n])[0]
+        order = np.lexsort((idx, t[n, idx]))
+        seq = []
+        for k in idx[order]:
+            if seq and t[n, k] - seq[-1][0] < eps:
+                continue
+            seq.append((float(t[n, k]), int(k)))
+        out.append(seq)
+    return out
+
+
+def brute_force_bundle(scene, origins, direction, delta, eps):
+    """The :class:`Bundle` of the same rays computed with :func:`brute_force_hits`."""
+    d = np.asarray(direction, float)
+    up, down, first, last = [], [], [], []
+    for seq in brute_force_hits(scene.triangle_corners, origins, d, eps):
+        for (_, a), (_, b) in zip(seq[:-1], seq[1:]):
+            up.append(a)
+            down.append(b)
+        if seq:
+            first.append(seq[0][1])
+            last.append(seq[-1][1])
+    ends = [np.array(first, np.int64), np.array(last, np.int64)] if np.any(scene.environment > 0) else []
+    return bundle_from_hits(scene, d, delta, np.array(up, np.int64), np.array(down, np.int64),
+                            len(origins), 0, *ends)

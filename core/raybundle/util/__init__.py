@@ -1,0 +1,1 @@
+"""Array helpers and image files: what every layer above uses."""
