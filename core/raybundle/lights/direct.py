@@ -7,10 +7,10 @@ radiance they create is computed first, by shadow rays, and the iteration then
 solves ``L~ = (Le_r + L1) + T L~`` with ``L1 = T Le_s`` as extra emission.
 
 :class:`DirectLighting` holds the first-shot lights of a scene
-(:mod:`raybundle.lights.sources.sources`) and estimates, per pixel at the visible point, the
+(:mod:`raybundle.lights.sources`) and estimates, per pixel at the visible point, the
 reflected direct radiance with fresh shadow rays every image pass, so shadows and glossy
 highlights are sharp (:meth:`DirectLighting.reflected_radiance`); per patch, the first shot
-is :class:`raybundle.lights.sources.first_shot.PatchFirstShot`.
+is :class:`raybundle.lights.first_shot.PatchFirstShot`.
 """
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 light l the side-average irradiance ``E_{i,l}`` [W/m^2] and its mean travel direction
 ``w_{i,l}``, so the first-shot radiance is ``L1_i(w) = sum_l E_{i,l} f_i(w_{i,l}, w)`` (only
 incoming values are stored, the BRDF is applied on the fly).  Its glossy reflections, the
-caustic first shot, are :mod:`raybundle.lights.sources.caustics`."""
+caustic first shot, are :mod:`raybundle.lights.caustics`."""
 from __future__ import annotations
 
 import numpy as np

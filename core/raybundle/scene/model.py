@@ -18,10 +18,10 @@ open area, first-shot samples, interpolation.  A side that no light reaches
 costs memory and nothing else.
 
 Lights that are not geometry are records here (:class:`PointLights`, :class:`SunLights`,
-:class:`AreaLights`: arrays in Blender's units); :mod:`raybundle.lights.sources.sources` samples them.
+:class:`AreaLights`: arrays in Blender's units); :mod:`raybundle.lights.sources` samples them.
 The scene is written and read as ``.npz`` (:meth:`PatchScene.save_npz`,
-:func:`raybundle.scene.model.npz.load_npz`) and made from arrays by
-:func:`raybundle.scene.model.build.build_scene`.
+:func:`raybundle.scene.npz.load_npz`) and made from arrays by
+:func:`raybundle.scene.build.build_scene`.
 """
 from __future__ import annotations
 

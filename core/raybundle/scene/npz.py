@@ -1,4 +1,4 @@
-"""Reading the ``.npz`` scene format (written by :meth:`~raybundle.scene.model.model.PatchScene.save_npz`
+"""Reading the ``.npz`` scene format (written by :meth:`~raybundle.scene.model.PatchScene.save_npz`
 and by the Blender add-on): every array checked, a bad file one line of :class:`SceneError`."""
 from __future__ import annotations
 
