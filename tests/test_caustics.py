@@ -98,7 +98,7 @@ def test_caustic_light_is_not_sent_twice():
 
 
 def test_caustic_splats_match_brute_force_per_pixel():
-    """The caustic light-traced into the pixels (Renderer.splat_caustics) against a
+    """The caustic light-traced into the pixels (imaging.caustic_splats.CausticSplats.splat) against a
     brute-force integral at the pixels' own points: per wall pixel (all of it wall), jittered
     primary rays find points x, and ``kd / pi E_c(x)`` with ``E_c(x) = integral over the
     floor of L_r(y -> x) cos_x cos_y / r^2 dA_y`` (nothing stands between floor and wall), L_r
@@ -107,16 +107,16 @@ def test_caustic_splats_match_brute_force_per_pixel():
     across a patch.  Tolerance: 4.5 combined standard errors from 10 and 4 batches."""
     sc = floor_and_wall()
     r = pipeline.make_renderer(sc, RenderSettings(seed=3))
-    assert r.splats_caustics
+    assert r.caustic_splats is not None
     cam, tracer, mats = r.camera, r.tracer, sc.materials
     n_pix = cam.width * cam.height
     batches = 10
     splat = []
     for _ in range(batches):
-        r.caustic_splat_sum[:] = 0.0
-        r.caustic_splat_samples = 0
-        r.splat_caustics(100_000)
-        splat.append(r.caustic_splat_sum[:, 0] / r.caustic_splat_samples)
+        r.caustic_splats.sum[:] = 0.0
+        r.caustic_splats.samples = 0
+        r.caustic_splats.splat(100_000)
+        splat.append(r.caustic_splats.sum[:, 0] / r.caustic_splats.samples)
     splat = np.array(splat)
     rng = np.random.default_rng(11)
     g = (np.arange(128) + 0.5) / 128 * 2 - 1
@@ -156,7 +156,7 @@ def test_caustic_splats_match_brute_force_per_pixel():
 
 
 def test_caustic_splat_filter_keeps_to_one_surface():
-    """The splats' one-pixel tent (Renderer.caustic_splat_image) averages only over pixels
+    """The splats' one-pixel tent (CausticSplats.image) averages only over pixels
     that see the same surface: a caustic that is 1 on every wall pixel and 0 on the floor's
     comes back unchanged (no light leaks across the edge), a lone splat spreads to its
     wall neighbours, and once the splats are many the image is the raw average."""
@@ -165,15 +165,15 @@ def test_caustic_splat_filter_keeps_to_one_surface():
     g = r.trace_gbuffer(np.full((len(r._pixel), 2), 0.5))
     wall = g.hit & (g.material == 1)
     assert 0 < wall.sum() < len(wall) - 16
-    r.caustic_splat_sum[:] = wall[:, None] * 1.0
-    r.caustic_splat_samples = 1
-    assert np.array_equal(r.caustic_splat_image(), r.caustic_splat_sum)
+    r.caustic_splats.sum[:] = wall[:, None] * 1.0
+    r.caustic_splats.samples = 1
+    assert np.array_equal(r.caustic_splats.image(), r.caustic_splats.sum)
     lone = np.nonzero(wall.reshape(r.camera.height, r.camera.width)[1:-1, 1:-1])
     p = (lone[0][len(lone[0]) // 2] + 1) * r.camera.width + lone[1][len(lone[0]) // 2] + 1
-    r.caustic_splat_sum[:] = 0.0
-    r.caustic_splat_sum[p] = 16.0
-    img = r.caustic_splat_image()[:, 0]
+    r.caustic_splats.sum[:] = 0.0
+    r.caustic_splats.sum[p] = 16.0
+    img = r.caustic_splats.image()[:, 0]
     assert 0 < img[p] < 16 and np.count_nonzero(img) > 1 and np.all(wall[img > 0])
-    r.caustic_splat_samples = r.CAUSTIC_FILTER_SAMPLES * len(r._pixel)
-    assert np.array_equal(r.caustic_splat_image(), r.caustic_splat_sum / r.caustic_splat_samples)
+    r.caustic_splats.samples = r.caustic_splats.FILTER_SAMPLES * len(r._pixel)
+    assert np.array_equal(r.caustic_splats.image(), r.caustic_splats.sum / r.caustic_splats.samples)
     r.tracer.close()

@@ -5,8 +5,7 @@ import numpy as np
 
 from raybundle.app import pipeline
 from raybundle.imaging.baking import locate_points
-from raybundle.imaging.gather import FinalGather, near_edge_tsides
-from raybundle.imaging.renderer import Renderer
+from raybundle.imaging.gather import EdgeGather, FinalGather, near_edge_tsides
 from raybundle.imaging.settings import RenderSettings
 from raybundle.lights.polygon import polygon_irradiance
 from raybundle.scene.build import build_scene
@@ -103,7 +102,7 @@ def test_a_furnace_image_with_the_gather_stays_exact():
     r = pipeline.make_renderer(pipeline.prepare(sc, patches=400), RenderSettings(seed=0, resolve_samples=4,
                                                                                  gather_rays=256))
     rel = r.run(iterations=150).image.reshape(-1, 3) / sc.analytic_radiance - 1
-    assert r.gathered_points > 1000
+    assert r.edge_gather.points > 1000
     assert np.all(np.abs(rel.mean(axis=0)) < 0.004), rel.mean(axis=0)
     assert rel.std() < 0.0056, rel.std()
     r.tracer.close()
@@ -130,7 +129,7 @@ def test_the_automatic_gather_runs_in_time_limited_runs_within_its_share():
         return res
 
     timed, plain = run(seconds=3.0), run(share=0.0, seconds=3.0)
-    assert timed.stats["gather_rays_per_pixel"] >= Renderer.MIN_GATHER_RAYS
+    assert timed.stats["gather_rays_per_pixel"] >= EdgeGather.MIN_GATHER_RAYS
     assert plain.stats["gather_rays_per_pixel"] == 0
     extra = timed.stats["resolve_seconds"] - plain.stats["resolve_seconds"]
     assert extra < 3 * 0.2 * 3.0 + 0.3, (extra, timed.stats, plain.stats)

@@ -19,8 +19,9 @@ The subpackages are layers; each imports only from those listed before it:
   (analytic irradiance), ``direct`` (direct light per point), ``first_shot`` (per patch),
   ``caustics`` (the first shot's glossy reflections);
 * :mod:`raybundle.imaging`: ``settings``, ``run`` (the one run loop and its budget),
-  ``renderer`` (camera images from a solution), ``splat`` (light tracing into pixels),
-  ``gather`` (the final gather), ``baking`` (radiance at bake points);
+  ``renderer`` (camera images from a solution: passes, direct light, resolve),
+  ``glossy_paths`` (the glossy lobe the eye sees), ``caustic_splats``, ``splat`` (light tracing
+  into pixels), ``gather`` (the final gather), ``baking`` (radiance at bake points);
 * :mod:`raybundle.methods`: ``stochastic_iteration`` (ray bundles, the patch methods' base),
   ``ray_bundle_walk``, ``radiosity``, ``point_collocation``, ``path_tracing``,
   ``single_ray_iteration``, and ``registry`` (the methods by name);

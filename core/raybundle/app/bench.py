@@ -375,8 +375,8 @@ def run_bench(args):
                 write_exr(os.path.join(out, f"{label(name)}-{method}.exr"), res.image)
             if args.cycles and not stop.is_set():
                 try:
-                    results[name]["cycles"] = rows = run_cycles(name, args.time, ref, halves, args.cycles, args.resolution,
-                                                                      log)
+                    rows = run_cycles(name, args.time, ref, halves, args.cycles, args.resolution, log)
+                    results[name]["cycles"] = rows
                     rows_scene += rows
                 except ValueError as e:
                     log(f"  {name} / cycles: not applicable: {e}")

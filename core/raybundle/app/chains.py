@@ -24,10 +24,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: renderer arrays that are sums over image passes (pooled by adding)
-_PASS_SUMS = ("pass_sum", "pass_sq_sum", "glossy_sum", "gather_sum", "emission_sum", "emission_count",
-              "caustic_splat_sum")
-
 
 @dataclass
 class ChainState:
@@ -62,11 +58,7 @@ def state(renderer_or_solver) -> ChainState:
     fs, cs = solver.first_shot, solver.caustic
     image = None
     if renderer is not None:
-        image = {k: getattr(renderer, k).copy() for k in _PASS_SUMS}
-        image.update(passes=renderer.passes, glossy_iterations=renderer.glossy_iterations,
-                     gather_passes=renderer.gather_passes,
-                     caustic_splat_samples=renderer.caustic_splat_samples,
-                     shadow_flags=renderer.shadow_flags.copy(), image_rays=renderer.image_rays)
+        image = renderer.sums()
     st = solver.stats
     return ChainState(solver.averaged, solver.mean_incoming.copy(),
                       fs.sums(), None if cs is None else cs.sums(),
@@ -87,8 +79,7 @@ def merge(states) -> ChainState:
         caustic = tuple(sum(s.caustic[k] for s in states) for k in range(3))
     image = None
     if all(s.image is not None for s in states):
-        image = {k: sum(s.image[k] for s in states) for k in _PASS_SUMS + ("passes", "glossy_iterations", "gather_passes",
-                                                                            "caustic_splat_samples", "image_rays")}
+        image = {k: sum(s.image[k] for s in states) for k in states[0].image if k != "shadow_flags"}
         image["shadow_flags"] = np.logical_or.reduce([s.image["shadow_flags"] for s in states])
     stats = {k: sum(s.stats.get(k, 0) for s in states) for k in states[0].stats}
     return ChainState(n, mean, first, caustic, image, stats, sum(s.chains for s in states))
@@ -108,12 +99,5 @@ def apply(merged: ChainState, renderer_or_solver):
     for k, v in merged.stats.items():
         setattr(solver.stats, k, v)
     if renderer is not None and merged.image is not None:
-        for k in _PASS_SUMS:
-            setattr(renderer, k, merged.image[k].copy())
-        renderer.passes = merged.image["passes"]
-        renderer.glossy_iterations = merged.image["glossy_iterations"]
-        renderer.gather_passes = merged.image["gather_passes"]
-        renderer.caustic_splat_samples = merged.image["caustic_splat_samples"]
-        renderer.image_rays = merged.image["image_rays"]
-        renderer.shadow_flags = merged.image["shadow_flags"].copy()
+        renderer.set_sums(merged.image)
     return renderer_or_solver

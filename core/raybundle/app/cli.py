@@ -202,7 +202,8 @@ def build_parser():
                         "tracing as a stochastic iteration, images only) or auto (chosen from what the scene holds; "
                         "the choice and its reason are printed and written to --stats)")
     r.add_argument("--sequence", choices=sorted(SEQUENCES),
-                   help=f"(default {DEFAULT_SEQUENCE}, or auto's choice) random numbers of the global directions (ray bundles); halton and sobol bias the "
+                   help=f"(default {DEFAULT_SEQUENCE}, or auto's choice) random numbers of the global directions "
+                        "(ray bundles); halton and sobol bias the "
                         "iterations (thesis 1.2, a warning says so); path-tracing takes halton as randomised "
                         "quasi-Monte Carlo, prng or stratified as the PRNG; single-ray-iteration the PRNG only")
     r.add_argument("--bundle-resolution", type=bounded_number(int, 0, 4096, "an integer in [0, 4096]"), default=0,

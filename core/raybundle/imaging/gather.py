@@ -30,6 +30,8 @@ images only where the patch values are not to be trusted
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from ..tracing.sampling import frames_from_normals, kronecker_alpha, uniform_triangle
@@ -178,3 +180,60 @@ def near_edge_tsides(scene, tracer, rng, tsides=None, probes=32, reach=1.0, chun
         blocked = tracer.occluded(p.reshape(-1, 3) + n * tracer.eps, w, reach_m)
         flag[sel] = blocked.reshape(len(ts), probes).any(axis=1)
     return flag
+
+
+class EdgeGather:
+    """A renderer's final gather where patch values are not to be trusted: which triangle
+    sides lie next to concave edges and contacts (:func:`near_edge_tsides`, each side probed
+    once, when a pixel first sees it), the pixels an automatic gather would serve, and how
+    many rays per pixel a budget of seconds buys (the cost per ray measured on a few of them);
+    ``points`` counts the points gathered."""
+
+    #: the fewest automatic gather rays per pixel worth their noise
+    MIN_GATHER_RAYS = 256
+
+    def __init__(self, scene, tracer, seed):
+        self.scene, self.tracer, self.seed = scene, tracer, seed
+        self._flags = np.full(len(scene.tside_triangle), -1, np.int8)      # -1: not probed yet
+        self.rng = np.random.default_rng([seed, 3])
+        self.points = 0
+
+    def near_edge(self, tsides):
+        """(N,) bool: :func:`~raybundle.imaging.gather.near_edge_tsides` for ``tsides`` (N,), each side
+        probed once, when a pixel first sees it."""
+        known = self._flags
+        new = np.unique(tsides[known[tsides] < 0])
+        if len(new):
+            known[new] = near_edge_tsides(self.scene, self.tracer, self.rng, new)
+        return known[tsides] > 0
+
+    def flagged(self, g):
+        """(F,) the pixels of G-buffer ``g`` whose front-facing point lies on a side
+        :func:`near_edge_tsides` flags: the points an automatic gather would serve."""
+        h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
+        return h[self.near_edge(g.tside[h])]
+
+    def affordable(self, g, gather_seconds):
+        """Whether the automatic gather has a budget (``gather_seconds``) and points to spend
+        it on: checked before the gather's vertex values are made, which on millions of
+        triangles take seconds."""
+        return bool(gather_seconds) and len(self.flagged(g)) > 0
+
+    def automatic_rays(self, final, g, k, gather_seconds):
+        """Gather rays per sub-pixel sample that ``gather_seconds`` buy for ``k``
+        sub-pixel samples (0 if fewer than :data:`MIN_GATHER_RAYS` per pixel): the cost per
+        ray and point timed on up to 512 of ``g``'s points on flagged sides,
+        which also give their count."""
+        f = self.flagged(g)
+        if len(f) == 0:
+            return 0
+        probe, probe_rays = f[:: max(1, len(f) // 512)], 16
+        t0 = time.perf_counter()
+        final.irradiance(g.point[probe], self.scene.tside_normal[g.tside[probe]], probe_rays,
+                         np.random.default_rng([self.seed, 4]), at=(g.tside[probe], g.bary[probe]))
+        cost = (time.perf_counter() - t0) / (len(probe) * probe_rays)          # seconds per ray and point
+        left = gather_seconds - (time.perf_counter() - t0)
+        per_pixel = left / (cost * len(f))
+        if per_pixel < self.MIN_GATHER_RAYS:
+            return 0
+        return int(min(per_pixel, 65536) // k)

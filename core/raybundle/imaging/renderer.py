@@ -37,10 +37,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..tracing.sampling import ShiftedKronecker, kronecker_alpha, stratified_2d
-from .gather import FinalGather, near_edge_tsides
+from .caustic_splats import CausticSplats
+from .gather import EdgeGather, FinalGather
+from .glossy_paths import GlossyEyePaths
 from .run import RunLoop
 from .settings import RenderSettings
-from .splat import splat_to_camera
 
 
 @dataclass
@@ -177,23 +178,21 @@ class Renderer(ProgressiveImage):
         self._emission_range = np.stack([np.full(n, np.inf), np.full(n, -np.inf)])   # min, max seen
         mats = scene.materials
         self.glossy_material = mats.is_glossy
-        # glossy lobes seen by the eye: light samples and the lobe's own ray share the mesh lights (MIS)
-        self._light_mis = bool(settings.glossy_gather and settings.glossy_mis)
         py, px = np.divmod(np.arange(n), camera.width)
         self._pixel = np.stack([px, py], axis=1).astype(float)
-        # near_edge_tsides of the sides the pixels have seen (-1: not asked yet)
-        self._gather_tsides = np.full(len(scene.tside_triangle), -1, np.int8)
-        self._gather_rng = np.random.default_rng([settings.seed, 3])
-        self.gathered_points = 0
+        # the glossy lobe the eye sees, by lobe-sampled eye paths (glossy_gather)
+        self.glossy_paths = GlossyEyePaths(scene, solver, direct, self.tracer, settings, self.rng, self.surface_values)
+        # the final gather next to concave edges and contacts
+        self.edge_gather = EdgeGather(scene, self.tracer, settings.seed)
         self.gather_rays_used = 0                         # rays per pixel of the last resolve's gather
         # per pixel: some earlier shadow ray reached a light / was blocked (both: a penumbra)
         self.shadow_flags = np.zeros((n, 2), bool)
-        # the caustic first shot on the surfaces seen, light-traced into the pixels
-        self.splats_caustics = solver.caustic is not None and settings.caustic_splats > 0
-        self.caustic_splat_sum = np.zeros((n, 3))
-        self.caustic_splat_samples = 0
-        self._caustic_rng = np.random.default_rng([settings.seed, 6])
-        self._pixel_surface = None                        # caustic_splat_image's same-surface test
+        # the caustic first shot on the surfaces seen, light-traced into the pixels (None: read
+        # from the patches as the rest of the diffuse indirect light)
+        self.caustic_splats = None
+        if solver.caustic is not None and settings.caustic_splats > 0:
+            self.caustic_splats = CausticSplats(scene, camera, self.tracer, direct, solver.caustic, settings.seed,
+                                                self._pixel, lambda: self.trace_gbuffer(np.full((n, 2), 0.5)))
 
     # --------------------------------------------------------------- passes
     def trace_gbuffer(self, jitter, pixels=None):
@@ -276,8 +275,11 @@ class Renderer(ProgressiveImage):
         self.gather_passes += 1
         y = (value + gathered).sum(axis=1)
         self.pass_sq_sum += y * y
-        if self.splats_caustics:
-            self.splat_caustics(int(np.ceil(self.settings.caustic_splats * n)))
+        if self.caustic_splats is not None:
+            cs = self.caustic_splats
+            before = cs.rays
+            cs.splat(int(np.ceil(self.settings.caustic_splats * n)))
+            self.image_rays += cs.rays - before
         if self.passes == 0:
             self._setup_rays = self.image_rays - before_pass
         self.passes += 1
@@ -299,60 +301,6 @@ class Renderer(ProgressiveImage):
         if self.glossy_iterations > 1:
             self.glossy_sum[:] = 0.0
             self.glossy_iterations = 0
-
-    def splat_caustics(self, n_samples):
-        """Light-trace ``n_samples`` samples of the caustic first shot (light -> glossy side
-        -> surface, :meth:`~raybundle.lights.caustics.CausticShot.sample`) into the pixels: the
-        diffuse lobe of the surface they reach, towards the eye (:func:`splat_to_camera`),
-        averaged over all samples drawn.  Read from the patches, the caustic is a side
-        average, interpolated: sharp caustics (a glossy floor throwing the lamp onto the
-        walls, with the shadow of a block in it) came out blurred over a patch or two,
-        most of the glossy box's bias (its 8 x 8-pixel blocks 1.8% off -> 1.2% at 30 s)."""
-        cs, sc = self.solver.caustic, self.scene
-        before = self.direct.rays
-        h = cs.sample(n_samples, self._caustic_rng)
-        normals = sc.tside_normal[sc.seen_tside(h.triangles, h.travel)]
-        pix, value, rays = splat_to_camera(sc, self.camera, self.tracer, h.points, normals, h.triangles,
-                                           h.travel, h.power, glossy=False)
-        for k in range(3):
-            self.caustic_splat_sum[:, k] += np.bincount(pix, value[:, k], minlength=len(self.caustic_splat_sum))
-        self.caustic_splat_samples += n_samples
-        self.image_rays += h.rays + rays + self.direct.rays - before
-
-    #: :meth:`caustic_splat_image` filters the splats until they average this many per pixel
-    CAUSTIC_FILTER_SAMPLES = 1024
-
-    def caustic_splat_image(self):
-        """(N, 3) the caustic splats' average per pixel [W m^-2 sr^-1], filtered, until the
-        splats average ``CAUSTIC_FILTER_SAMPLES`` per pixel, by a tent one pixel wide,
-        (1, 2, 1) x (1, 2, 1), over the neighbours that see the same surface (material,
-        normal, plane) through their centres, normalised by the weights used: a density
-        estimate whose kernel shrinks to a pixel once the samples are many (consistent).
-        A photon lands in one pixel, so unfiltered the splats are a pixel-sized Poisson
-        count (``cornell-glossy`` at 120 s: 2.2% against 2.0% filtered, seeds 3, 4)."""
-        n = len(self._pixel)
-        img = self.caustic_splat_sum / max(self.caustic_splat_samples, 1)
-        if self.caustic_splat_samples >= self.CAUSTIC_FILTER_SAMPLES * n:
-            return img
-        if self._pixel_surface is None:
-            g = self.trace_gbuffer(np.full((n, 2), 0.5))
-            depth = np.where(g.hit, np.linalg.norm(g.point - self.camera.position, axis=1), 0.0)
-            self._pixel_surface = (np.where(g.hit, g.material, -1), g.normal, g.point, depth)
-        mat, nrm, pts, depth = self._pixel_surface
-        w_img, h_img = self.camera.width, self.camera.height
-        py, px = self._pixel[:, 1].astype(np.int64), self._pixel[:, 0].astype(np.int64)
-        num, den = np.zeros_like(img), np.zeros(n)
-        for dy in (-1, 0, 1):
-            for dx in (-1, 0, 1):
-                ok = (px + dx >= 0) & (px + dx < w_img) & (py + dy >= 0) & (py + dy < h_img)
-                p = np.nonzero(ok)[0]
-                q = p + dy * w_img + dx
-                same = ((mat[q] == mat[p]) & (np.einsum("ij,ij->i", nrm[q], nrm[p]) > 0.99)
-                        & (np.abs(np.einsum("ij,ij->i", pts[q] - pts[p], nrm[p])) <= 0.01 * depth[p]))
-                w = (2 - abs(dx)) * (2 - abs(dy)) * same
-                num[p] += w[:, None] * img[q]
-                den[p] += w
-        return num / np.maximum(den, 1)[:, None]
 
     def _shade(self, g, u_lobe, u_light, pixels):
         """Per-pass radiance (N, 3) of the samples in G-buffer ``g`` taken in ``pixels``
@@ -378,7 +326,7 @@ class Renderer(ProgressiveImage):
         hf = h[front]
         if self.direct.n_lights and len(hf):
             before = self.direct.rays
-            mis = self.glossy_material[g.material[hf]] if self._light_mis else None
+            mis = self.glossy_material[g.material[hf]] if self.glossy_paths.light_mis else None
             flags = self.shadow_flags[pixels[hf]]
             start = self.passes == 0          # no earlier samples: every point is treated as a penumbra
             pen = flags.all(axis=1) | start
@@ -409,7 +357,9 @@ class Renderer(ProgressiveImage):
         gl = hf[self.glossy_material[g.material[hf]]]
         gathered = np.zeros_like(out)
         if self.settings.glossy_gather:
-            gathered[gl] = self.glossy_gather(g, gl, u_lobe[gl])
+            before = self.glossy_paths.rays
+            gathered[gl] = self.glossy_paths.gather(g, gl, u_lobe[gl])
+            self.image_rays += self.glossy_paths.rays - before
             gl = gl[:0]
         return out, gathered, gl
 
@@ -470,93 +420,6 @@ class Renderer(ProgressiveImage):
         pix = np.repeat(pixels, s * s)
         return pix, (np.tile(grid, (len(pixels), 1)) + self.rng.random((len(pix), 2))) / s
 
-    def glossy_gather(self, g, idx, u):
-        """Glossy lobe at pixels ``idx`` by one eye path each (the remedy for sharp lobes).
-
-        Sample ``w_i`` from the glossy lobes (GGX around the mirror of the eye
-        direction, :meth:`~raybundle.scene.materials.MaterialTable.sample_glossy`),
-        trace it to the surface it sees, and take that surface's outgoing
-        radiance from the solver: running-average diffuse part interpolated at
-        the hit, first shot, and, for its own glossy lobe, either the current
-        iterate ``E f(t, w)`` or, while fewer than ``glossy_gather_depth`` glossy
-        bounces were traced, one more lobe-sampled ray (the per-iteration term is
-        what makes glossy-to-glossy paths spiky).  Direct light of the first-shot
-        lights is left out of what the rays see: :meth:`DirectLighting.reflected_radiance`
-        and the first shot count it.  ``u`` (len(idx), 2): uniforms for the first
-        lobe sample.  Returns (len(idx), 3).
-        """
-        sc, solver = self.scene, self.solver
-        e = solver.indirect_incoming() + solver.first_shot.E.sum(axis=1)
-        vert = self.solver.reconstruction.averaged(e) if self.settings.smooth and len(idx) else None
-        m, n, wo = g.material[idx], g.normal[idx], g.w_eye[idx]
-        w_i, weight = sc.materials.sample_glossy(m, n, wo, u)
-        return self._trace_paths(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo) if self._light_mis else None)
-
-    def _trace_paths(self, pts, n, w_i, throughput, e, vert, light_mis=None):
-        """Radiance (N, 3) arriving at ``pts`` (N, 3) with normals ``n`` along ``w_i``
-        (N, 3), times ``throughput`` (N, 3), read from the solver where each ray lands
-        (:meth:`glossy_gather`): the hit's outgoing radiance from the side values ``e``
-        (S, 3) (the diffuse lobe's incoming radiance, interpolated with the vertex
-        values ``vert`` or flat when None); at glossy hits the path goes on along
-        the hit's glossy lobe, up to ``glossy_gather_depth`` rays in all.  With
-        ``light_mis = (materials, w_out)`` of the glossy lobes the rays were drawn from,
-        first rays that meet a first-shot mesh light add its emission, MIS-weighted
-        against the light samples (:meth:`~raybundle.lights.direct.DirectLighting.lobe_hits_light`)."""
-        sc, mats, solver = self.scene, self.scene.materials, self.solver
-        out = np.zeros((len(pts), 3))
-        pix = np.arange(len(pts))                     # which output row each path belongs to
-        m = wo = None
-        depth = max(1, int(self.settings.glossy_gather_depth))
-        for bounce in range(depth):
-            if len(pix) == 0:
-                break
-            if bounce:
-                w_i, weight = mats.sample_glossy(m, n, wo, self.rng.random((len(pix), 2)))
-                throughput = throughput * weight
-            live = np.nonzero(np.any(throughput > 0, axis=1))[0]
-            tri, t, bu, bv = self.tracer.first_hit(pts[live] + n[live] * self.tracer.eps, w_i[live])
-            self.image_rays += len(live)
-            hit = tri >= 0
-            if np.any(sc.environment > 0):      # paths that leave the scene see the world
-                gone = live[~hit]
-                np.add.at(out, pix[gone], throughput[gone] * sc.environment)
-            live, tri, t = live[hit], tri[hit], t[hit]
-            if light_mis is not None and len(live):      # the lobe's ray meets a mesh light (MIS)
-                m_from, wo_from = (light_mis[0], light_mis[1]) if bounce == 0 else (m, wo)
-                le = self.direct.lobe_hits_light(pts[live], m_from[live], n[live], wo_from[live], w_i[live], tri,
-                                                 pts[live] + t[:, None] * w_i[live], self.settings.light_samples)
-                out[live] += throughput[live] * le
-            bary = np.stack([1 - bu - bv, bu, bv], axis=1)[hit]
-            ts = sc.seen_tside(tri, w_i[live])
-            patch = sc.tside_side[ts]
-            e_hit = self.surface_values(e, vert, ts, bary)
-            hit_m = sc.triangle_material[tri]
-            hit_n = sc.tside_normal[ts]
-            w_back = -w_i[live]
-            go_on = (mats.is_glossy[hit_m] & (np.einsum("ij,ij->i", hit_n, w_back) > 0)
-                     if bounce + 1 < depth else np.zeros(len(live), bool))
-            L = solver.radiance(patch, w_back, diffuse_incoming=e_hit, first_shot_emission=False,
-                                glossy_iterate=False, first_shot_glossy=light_mis is None)
-            gi = np.nonzero(go_on)[0]
-            if light_mis is not None and len(gi):
-                # the lamps in the glossy lobe of a hit the path goes on from: light samples, MIS-weighted
-                # against the next ray (E1 f(w_mean, w) spiked where a sharp lobe lined up with w_mean)
-                hp = pts[live[gi]] + t[gi, None] * w_i[live[gi]]
-                L[gi] += self.direct.reflected_radiance(hp, hit_n[gi], hit_m[gi], w_back[gi], self.rng,
-                                                        self.settings.light_samples, mis=np.ones(len(gi), bool),
-                                                        diffuse_scale=np.zeros((len(gi), 3)))
-            stop = ~go_on
-            if stop.any():   # paths that end here use the iterate for the hit's own glossy lobe,
-                s_idx = np.nonzero(stop)[0]      # spread evenly once a lobe has been followed
-                L[s_idx] = solver.radiance(patch[s_idx], w_back[s_idx], diffuse_incoming=e_hit[s_idx],
-                                           first_shot_emission=False, glossy_as_diffuse=bounce > 0)
-            np.add.at(out, pix[live], throughput[live] * L)
-            pts = pts[live] + t[:, None] * w_i[live]
-            keep = np.nonzero(go_on)[0]
-            pix, m, n, wo = pix[live][keep], hit_m[keep], hit_n[keep], w_back[keep]
-            pts, throughput = pts[keep], throughput[live][keep]
-        return out
-
     def accumulate_glossy(self):
         """Add this iterate's glossy lobe per pixel: E_i f_glossy(t_i, w_eye) (+ Ec_i f_glossy(w_c, w_eye))."""
         self.glossy_iterations += 1
@@ -578,7 +441,8 @@ class Renderer(ProgressiveImage):
         Principled layer, 1 without), box-filtered with ``samples`` (default
         ``resolve_samples``) stratified sub-pixel samples.
 
-        ``e_bar`` (S, 3) defaults to the solver's :meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.indirect_incoming`.
+        ``e_bar`` (S, 3) defaults to the solver's
+        :meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.indirect_incoming`.
         With ``smooth``, the bundles' running average and the caustic first shot are
         interpolated by :meth:`~raybundle.patches.reconstruction.LinearReconstruction.smooth_and_sharp`.
         With ``gather`` (and ``e_bar`` the solver's own), points on the sides
@@ -586,23 +450,27 @@ class Renderer(ProgressiveImage):
         instead (:class:`~raybundle.imaging.gather.FinalGather`): ``gather_rays`` rays per pixel,
         spread over its sub-pixel samples as one stratified set.  With ``gather_rays`` = -1
         the count is what ``gather_seconds`` buy (the run loop gives ``gather_share`` of a timed
-        run's iteration seconds, :meth:`resolve`; none: no automatic gather), from the gather's cost per ray measured on a few of the last image pass's
-        points and the number of its points on flagged sides; below ``MIN_GATHER_RAYS`` per
-        pixel the gather's own noise would outweigh the bias it removes, and there is none.
+        run's iteration seconds, :meth:`resolve`; none: no automatic gather), from the gather's
+        cost per ray measured on a few of the last image pass's points and the number of its
+        points on flagged sides (:class:`~raybundle.imaging.gather.EdgeGather`); below
+        ``EdgeGather.MIN_GATHER_RAYS`` per pixel the gather's own noise would outweigh the bias it
+        removes, and there is none.
         """
         sc, solver = self.scene, self.solver
         n = len(self._pixel)
         out = np.zeros((n, 3))
         sharp = None
         final = None
-        caustic = solver.caustic is not None and not self.splats_caustics
+        caustic = solver.caustic is not None and self.caustic_splats is None
         if e_bar is None:
-            # a caustic light-traced into the pixels (splat_caustics) is left out here
+            # a caustic light-traced into the pixels (caustic_splats) is left out here
             e_bar = solver.indirect_incoming() if caustic else solver.mean_incoming
             sharp = solver.caustic.E if caustic else None
             self.gather_rays_used = 0
             rays = self.settings.gather_rays
-            if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and self._gather_affordable(gather_seconds))):
+            if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and gather_seconds and
+                                                                 self.edge_gather.affordable(self._probe_gbuffer(),
+                                                                                             gather_seconds))):
                 final = FinalGather(solver, caustic=caustic)
         if not np.any(e_bar) and final is None:
             return out
@@ -611,7 +479,8 @@ class Renderer(ProgressiveImage):
         k = max(1, int(samples or self.settings.resolve_samples))
         offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve
         if final is not None:
-            per_sample = -(-int(rays) // k) if rays > 0 else self._automatic_gather_rays(final, k, gather_seconds)
+            per_sample = (-(-int(rays) // k) if rays > 0 else
+                          self.edge_gather.automatic_rays(final, self._probe_gbuffer(), k, gather_seconds))
             self.gather_rays_used = per_sample * k
             if per_sample == 0:
                 final = None
@@ -621,29 +490,24 @@ class Renderer(ProgressiveImage):
             h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
             e = self.surface_values(e_bar, vert, g.tside[h], g.bary[h])
             if final is not None:
-                f = np.nonzero(self._near_edge(g.tside[h]))[0]
+                f = np.nonzero(self.edge_gather.near_edge(g.tside[h]))[0]
                 if len(f):
                     e[f] = final.irradiance(g.point[h[f]], sc.tside_normal[g.tside[h[f]]], per_sample,
                                             self._resolve_rng, shift=shift[h[f]], first=j * per_sample,
                                             at=(g.tside[h[f]], g.bary[h[f]]))
-                    self.gathered_points += len(f)
+                    self.edge_gather.points += len(f)
             m = g.material[h]
             w_d = sc.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]))
             scale = self.albedo_scale(g.triangle[h], g.point[h])
             out[h] += w_d * kd[m] / np.pi * e * (1.0 if scale is None else scale)
         return out / k
 
-    def _near_edge(self, tsides):
-        """(N,) bool: :func:`~raybundle.imaging.gather.near_edge_tsides` for ``tsides`` (N,), each side
-        probed once, when a pixel first sees it."""
-        known = self._gather_tsides
-        new = np.unique(tsides[known[tsides] < 0])
-        if len(new):
-            known[new] = near_edge_tsides(self.scene, self.tracer, self._gather_rng, new)
-        return known[tsides] > 0
-
-    #: the fewest automatic gather rays per pixel worth their noise
-    MIN_GATHER_RAYS = 256
+    def _probe_gbuffer(self):
+        """The G-buffer the automatic gather measures on: the last image pass's, or for a
+        renderer without a pass of its own (chains merged into it) the pixel centres'."""
+        if self.gbuffer is None:
+            self.gbuffer = self.trace_gbuffer(np.full((len(self._pixel), 2), 0.5))
+        return self.gbuffer
 
     def final_share(self):
         """The automatic final gather's share of a time-limited run (``gather_share``)."""
@@ -654,43 +518,6 @@ class Renderer(ProgressiveImage):
         automatic final gather may take ``final_seconds``."""
         return self.image(gather_seconds=final_seconds)
 
-    def _flagged_pass_points(self):
-        """(F,) the last image pass's pixels whose front-facing point lies on a side
-        :func:`~raybundle.imaging.gather.near_edge_tsides` flags: the points an automatic gather
-        would serve.  A renderer without a pass of its own (chains merged into it) traces the
-        pixel centres first."""
-        g = self.gbuffer
-        if g is None:
-            g = self.gbuffer = self.trace_gbuffer(np.full((len(self._pixel), 2), 0.5))
-        h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
-        return h[self._near_edge(g.tside[h])]
-
-    def _gather_affordable(self, gather_seconds):
-        """Whether the automatic gather has a budget (``gather_seconds``) and points to spend
-        it on: checked before the gather's vertex values are made, which on millions of
-        triangles take seconds."""
-        return bool(gather_seconds) and len(self._flagged_pass_points()) > 0
-
-    def _automatic_gather_rays(self, final, k, gather_seconds):
-        """Gather rays per sub-pixel sample that ``gather_seconds`` buy for ``k``
-        sub-pixel samples (0 if fewer than :data:`MIN_GATHER_RAYS` per pixel): the cost per
-        ray and point timed on up to 512 of the last image pass's points on flagged sides,
-        which also give their count."""
-        f = self._flagged_pass_points()
-        g = self.gbuffer
-        if len(f) == 0:
-            return 0
-        probe, probe_rays = f[:: max(1, len(f) // 512)], 16
-        t0 = time.perf_counter()
-        final.irradiance(g.point[probe], self.scene.tside_normal[g.tside[probe]], probe_rays,
-                         np.random.default_rng([self.settings.seed, 4]), at=(g.tside[probe], g.bary[probe]))
-        cost = (time.perf_counter() - t0) / (len(probe) * probe_rays)          # seconds per ray and point
-        left = gather_seconds - (time.perf_counter() - t0)
-        per_pixel = left / (cost * len(f))
-        if per_pixel < self.MIN_GATHER_RAYS:
-            return 0
-        return int(min(per_pixel, 65536) // k)
-
     def image(self, diffuse=None, preview=False, gather_seconds=None):
         """The current estimate (H, W, 3) float32; ``diffuse`` = precomputed diffuse
         indirect; ``preview``: resolve it with one sub-pixel sample (fast, aliased);
@@ -698,8 +525,8 @@ class Renderer(ProgressiveImage):
         img = self.pass_sum / max(self.passes, 1) + self.emission_sum / np.maximum(self.emission_count, 1)[:, None]
         if self.gather_passes:
             img = img + self.gather_sum / self.gather_passes
-        if self.caustic_splat_samples:
-            img = img + self.caustic_splat_image()
+        if self.caustic_splats is not None and self.caustic_splats.samples:
+            img = img + self.caustic_splats.image()
         if self.glossy_iterations:
             img = img + self.glossy_sum / self.glossy_iterations
         if diffuse is None:
@@ -736,6 +563,31 @@ class Renderer(ProgressiveImage):
         if self._since_pass * share * max(per_iter, 1) >= per_pass * (1 - share):
             self.image_pass()
             self._since_pass = 0
+
+    #: the arrays that are sums over image passes and iterations (:meth:`sums`)
+    SUMS = ("pass_sum", "pass_sq_sum", "glossy_sum", "gather_sum", "emission_sum", "emission_count")
+    COUNTS = ("passes", "glossy_iterations", "gather_passes", "image_rays")
+
+    def sums(self):
+        """Copies of the running sums and counts the image is formed from, by name (what
+        independent chains pool by adding, :mod:`raybundle.app.chains`; ``shadow_flags`` by or)."""
+        out = {k: getattr(self, k).copy() for k in self.SUMS}
+        out.update({k: getattr(self, k) for k in self.COUNTS}, shadow_flags=self.shadow_flags.copy())
+        if self.caustic_splats is not None:
+            cs = self.caustic_splats
+            out.update(caustic_splat_sum=cs.sum.copy(), caustic_splat_samples=cs.samples)
+        return out
+
+    def set_sums(self, sums):
+        """Hold ``sums`` (:meth:`sums` of a renderer on the same prepared scene, or of several pooled)."""
+        for k in self.SUMS:
+            setattr(self, k, sums[k].copy())
+        for k in self.COUNTS:
+            setattr(self, k, sums[k])
+        self.shadow_flags = sums["shadow_flags"].copy()
+        if self.caustic_splats is not None:
+            self.caustic_splats.sum = sums["caustic_splat_sum"].copy()
+            self.caustic_splats.samples = sums["caustic_splat_samples"]
 
     def stats(self, total_seconds, resolve_seconds=0.0, cancelled=False):
         """The run's figures as a plain dict (what the CLI, the add-on and the bench report)."""

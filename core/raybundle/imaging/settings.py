@@ -31,7 +31,8 @@ class RenderSettings:
     glossy lobe reflects are estimated by light samples and by the lobe's ray together
     (multiple importance sampling, power heuristic) instead of by light samples alone;
     ``glossy_send_rays``: lobe-sampled rays per glossy side and bundle direction that gather
-    what the side's glossy lobe sends (:meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.glossy_sent_radiance`);
+    what the side's glossy lobe sends
+    (:meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.glossy_sent_radiance`);
     ``gather_rays``: final-gather rays per pixel where the patch values are not to be trusted
     (next to concave edges and contacts, :mod:`raybundle.imaging.gather`), 0 = none, -1 = as many as
     ``gather_share`` of the run's seconds buys, in runs limited by time (none in runs of given

@@ -1,1 +1,2 @@
-"""Rays: the Embree ray tracer with its bundle (global-visibility) queries, and the random and quasi-random sequences."""
+"""Rays: the Embree ray tracer with its bundle (global-visibility) queries, and the random and
+quasi-random sequences."""

@@ -1,0 +1,112 @@
+"""Glossy eye paths: the glossy lobe the eye sees, by lobe-sampled rays read from the solution.
+
+At a pixel whose visible point is glossy, one eye path per image pass samples ``w_i`` from
+the glossy lobes and takes the outgoing radiance of the surface it reaches from the solver
+(running-average diffuse part, first shot, and either the current iterate ``E f(t, w)`` or,
+for up to ``glossy_gather_depth`` glossy bounces, one more lobe-sampled ray); the mesh lights
+the lobe reflects are shared with the light samples by multiple importance sampling
+(power heuristic) when ``glossy_mis`` is on.  Radiance in [W m^-2 sr^-1].
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+class GlossyEyePaths:
+    """The glossy eye paths of a renderer: its scene, solver, direct lighting, tracer,
+    settings and random numbers (shared with the renderer, whose draws they interleave);
+    ``surface_values`` reads side values at hit points; ``rays`` counts the rays traced."""
+
+    def __init__(self, scene, solver, direct, tracer, settings, rng, surface_values):
+        self.scene, self.solver, self.direct, self.tracer = scene, solver, direct, tracer
+        self.settings, self.rng, self.surface_values = settings, rng, surface_values
+        # light samples and the lobe's own ray share the mesh lights (MIS)
+        self.light_mis = bool(settings.glossy_gather and settings.glossy_mis)
+        self.rays = 0
+
+    def gather(self, g, idx, u):
+        """Glossy lobe at pixels ``idx`` by one eye path each (the remedy for sharp lobes).
+
+        Sample ``w_i`` from the glossy lobes (GGX around the mirror of the eye
+        direction, :meth:`~raybundle.scene.materials.MaterialTable.sample_glossy`),
+        trace it to the surface it sees, and take that surface's outgoing
+        radiance from the solver: running-average diffuse part interpolated at
+        the hit, first shot, and, for its own glossy lobe, either the current
+        iterate ``E f(t, w)`` or, while fewer than ``glossy_gather_depth`` glossy
+        bounces were traced, one more lobe-sampled ray (the per-iteration term is
+        what makes glossy-to-glossy paths spiky).  Direct light of the first-shot
+        lights is left out of what the rays see: :meth:`DirectLighting.reflected_radiance`
+        and the first shot count it.  ``u`` (len(idx), 2): uniforms for the first
+        lobe sample.  Returns (len(idx), 3).
+        """
+        sc, solver = self.scene, self.solver
+        e = solver.indirect_incoming() + solver.first_shot.E.sum(axis=1)
+        vert = solver.reconstruction.averaged(e) if self.settings.smooth and len(idx) else None
+        m, n, wo = g.material[idx], g.normal[idx], g.w_eye[idx]
+        w_i, weight = sc.materials.sample_glossy(m, n, wo, u)
+        return self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo) if self.light_mis else None)
+
+    def trace(self, pts, n, w_i, throughput, e, vert, light_mis=None):
+        """Radiance (N, 3) arriving at ``pts`` (N, 3) with normals ``n`` along ``w_i``
+        (N, 3), times ``throughput`` (N, 3), read from the solver where each ray lands
+        (:meth:`gather`): the hit's outgoing radiance from the side values ``e``
+        (S, 3) (the diffuse lobe's incoming radiance, interpolated with the vertex
+        values ``vert`` or flat when None); at glossy hits the path goes on along
+        the hit's glossy lobe, up to ``glossy_gather_depth`` rays in all.  With
+        ``light_mis = (materials, w_out)`` of the glossy lobes the rays were drawn from,
+        first rays that meet a first-shot mesh light add its emission, MIS-weighted
+        against the light samples (:meth:`~raybundle.lights.direct.DirectLighting.lobe_hits_light`)."""
+        sc, mats, solver = self.scene, self.scene.materials, self.solver
+        out = np.zeros((len(pts), 3))
+        pix = np.arange(len(pts))                     # which output row each path belongs to
+        m = wo = None
+        depth = max(1, int(self.settings.glossy_gather_depth))
+        for bounce in range(depth):
+            if len(pix) == 0:
+                break
+            if bounce:
+                w_i, weight = mats.sample_glossy(m, n, wo, self.rng.random((len(pix), 2)))
+                throughput = throughput * weight
+            live = np.nonzero(np.any(throughput > 0, axis=1))[0]
+            tri, t, bu, bv = self.tracer.first_hit(pts[live] + n[live] * self.tracer.eps, w_i[live])
+            self.rays += len(live)
+            hit = tri >= 0
+            if np.any(sc.environment > 0):      # paths that leave the scene see the world
+                gone = live[~hit]
+                np.add.at(out, pix[gone], throughput[gone] * sc.environment)
+            live, tri, t = live[hit], tri[hit], t[hit]
+            if light_mis is not None and len(live):      # the lobe's ray meets a mesh light (MIS)
+                m_from, wo_from = (light_mis[0], light_mis[1]) if bounce == 0 else (m, wo)
+                le = self.direct.lobe_hits_light(pts[live], m_from[live], n[live], wo_from[live], w_i[live], tri,
+                                                 pts[live] + t[:, None] * w_i[live], self.settings.light_samples)
+                out[live] += throughput[live] * le
+            bary = np.stack([1 - bu - bv, bu, bv], axis=1)[hit]
+            ts = sc.seen_tside(tri, w_i[live])
+            patch = sc.tside_side[ts]
+            e_hit = self.surface_values(e, vert, ts, bary)
+            hit_m = sc.triangle_material[tri]
+            hit_n = sc.tside_normal[ts]
+            w_back = -w_i[live]
+            go_on = (mats.is_glossy[hit_m] & (np.einsum("ij,ij->i", hit_n, w_back) > 0)
+                     if bounce + 1 < depth else np.zeros(len(live), bool))
+            L = solver.radiance(patch, w_back, diffuse_incoming=e_hit, first_shot_emission=False,
+                                glossy_iterate=False, first_shot_glossy=light_mis is None)
+            gi = np.nonzero(go_on)[0]
+            if light_mis is not None and len(gi):
+                # the lamps in the glossy lobe of a hit the path goes on from: light samples, MIS-weighted
+                # against the next ray (E1 f(w_mean, w) spiked where a sharp lobe lined up with w_mean)
+                hp = pts[live[gi]] + t[gi, None] * w_i[live[gi]]
+                L[gi] += self.direct.reflected_radiance(hp, hit_n[gi], hit_m[gi], w_back[gi], self.rng,
+                                                        self.settings.light_samples, mis=np.ones(len(gi), bool),
+                                                        diffuse_scale=np.zeros((len(gi), 3)))
+            stop = ~go_on
+            if stop.any():   # paths that end here use the iterate for the hit's own glossy lobe,
+                s_idx = np.nonzero(stop)[0]      # spread evenly once a lobe has been followed
+                L[s_idx] = solver.radiance(patch[s_idx], w_back[s_idx], diffuse_incoming=e_hit[s_idx],
+                                           first_shot_emission=False, glossy_as_diffuse=bounce > 0)
+            np.add.at(out, pix[live], throughput[live] * L)
+            pts = pts[live] + t[:, None] * w_i[live]
+            keep = np.nonzero(go_on)[0]
+            pix, m, n, wo = pix[live][keep], hit_m[keep], hit_n[keep], w_back[keep]
+            pts, throughput = pts[keep], throughput[live][keep]
+        return out
