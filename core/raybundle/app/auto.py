@@ -4,26 +4,25 @@
 glossy lobes carry, the glossy area that is nearly a mirror, the small emitters and lights
 the first shot takes, and the area that emits.  :func:`choose` turns those figures into a
 :class:`Choice` with a one-line reason, from what the methods bench measured
-(``python -m raybundle bench``, README):
+(``python -m raybundle bench``; the figures are in the README, 'Measured choices behind the defaults'):
 
 * no glossy lobe anywhere: the bundle iteration's view-independent path
-  (``stochastic-iteration``; on ``cornell`` at 60 s 1.3% against radiosity's 6.8% and path
-  tracing's 8.0%; on ``furnace`` 0.23% against 3.8%);
+  (``stochastic-iteration``), which measured ahead of radiosity and path tracing on ``cornell``
+  and ``furnace``;
 * glossy lobes carry more than :data:`GLOSSY_SHARE_LIMIT` of the reflected light *and* most of
   the area glows (:data:`EMITTING_SHARE_LIMIT`; no small light for the first shot to take):
   ``path-tracing`` as the randomised quasi-Monte Carlo walk, whose every path then gathers
-  emission at every bounce while the bundles' glossy transfer stays their noisiest part
-  (``furnace-glossy`` at 30 s, 64^2 pixels: 1.23% against 2.22%; the PRNG walk 1.61%);
+  emission at every bounce while the bundles' glossy transfer stays their noisiest part: it
+  measured ahead of the bundles there (``furnace-glossy``);
 * any other glossy scene: the bundle iteration with its glossy lobes, whose first shot takes
-  the small lights that make path tracing noisy (``cornell-glossy`` 5.0% against path tracing's
-  32% at 60 s; ``near-mirror`` 3.8% against 23% at 20 s; the unseen ``glossy-room-11``, 85%
-  of its reflection glossy, 6.5% against 8.3% at 30 s: a rule on the glossy share alone had
-  picked path tracing there).
+  the small lights that make path tracing noisy: it measured ahead of path tracing on
+  ``cornell-glossy``, ``near-mirror`` and the unseen ``glossy-room-11`` (85% of its reflection
+  glossy: a rule on the glossy share alone had picked path tracing there).
 
 The first shot is always on (``auto``: it takes the small emitters and lights and changes
-nothing without them); the patch count stays at the default (:data:`~raybundle.patches.clusters.DEFAULT_PATCHES`, 4,000 sides), which measured best at
-a fixed time on scenes from 42 to 4M triangles (finer layouts cost more per step than their
-smaller discretisation error gains, issue 8).
+nothing without them); the patch count stays at the default (:data:`~raybundle.patches.clusters.DEFAULT_PATCHES`,
+4,000 sides), which measured best at a fixed time across scene sizes (finer layouts cost more per
+step than their smaller discretisation error gains).
 """
 from __future__ import annotations
 
@@ -116,6 +115,6 @@ def choose(scene) -> Choice:
         why += (f"; {100 * f.near_mirror_share:.0f}% of the glossy reflection is near-mirror "
                 f"(roughness < {NEAR_MIRROR_ROUGHNESS}), seen through the camera's glossy bounces")
     # path tracing as the randomised quasi-Monte Carlo walk, which measured ahead of the PRNG's
-    # on every bench scene (furnace-glossy at 30 s: 1.23% against 1.61%)
+    # on every bench scene (README, 'Measured choices behind the defaults')
     sequence = "halton" if method == "path-tracing" else None
     return Choice(method, DEFAULT_PATCHES, "auto", f"{why}; {light}", f, sequence)

@@ -44,8 +44,8 @@ from ..util.arrays import group_ids
 from .contacts import CONTACT_SHARE, gap_sides
 from .layout import cut_at_contacts, edge_for_patches, longest_edges, split_triangles, subdivide
 
-#: the patch count of a scene laid out without an explicit one (sides: 4,000 measured best at a
-#: fixed time on scenes from 42 to 4M triangles, issue 8; :mod:`raybundle.app.auto`)
+#: the patch count of a scene laid out without an explicit one (sides; the count that measured best
+#: at a fixed time across scene sizes: README, 'Measured choices behind the defaults'; :mod:`raybundle.app.auto`)
 DEFAULT_PATCHES = 4000
 #: cube-map cells per face edge for the normal direction of a cluster (150 directions; odd, so
 #: that axis-aligned normals lie mid-cell, never on a border rounding could flip)

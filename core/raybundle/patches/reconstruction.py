@@ -30,8 +30,8 @@ functions, and, as ``c_s`` is the centroid, each fit keeps the cluster's mean.
 The image and the bakes read the diffuse indirect light through :meth:`projected` (the
 caustic first shot, sharp-edged, through :meth:`averaged`: :meth:`smooth_and_sharp`).  Tried and dropped: sending each diffuse
 side's first shot into the bundles from its projection at the point a bundle line leaves
-it (no change of the Cornell error at 600 iterations, 1.81% both ways; 40% more solver
-time): a patch-wide linear fit of a steep fall-off is no closer near the edge than the
+it (no change of the Cornell error, more solver time: README, 'Measured choices behind the
+defaults'): a patch-wide linear fit of a steep fall-off is no closer near the edge than the
 patch mean.
 """
 from __future__ import annotations
@@ -106,7 +106,8 @@ class LinearReconstruction:
     def smooth_and_sharp(self, side_values, sharp=None):
         """Side values (S, C) -> (V, C): :meth:`projected` of ``side_values - sharp`` plus
         :meth:`averaged` of ``sharp`` (S, C) (the caustic first shot: sharp-edged and
-        noisy, which a projection would ring on: 5.9% -> 7.6% on ``cornell-glossy``)."""
+        noisy, which a projection would ring on; projected, it measured worse on ``cornell-glossy``:
+        README, 'Measured choices behind the defaults')."""
         if sharp is None:
             return self.projected(side_values)
         return self.projected(side_values - sharp) + self.averaged(sharp)

@@ -294,8 +294,8 @@ class MaterialTable:
 
         By reciprocity this is also the hemispherical reflectance for light
         arriving from w_out.  The GGX part comes from a table in cos_out,
-        integrated once per distinct alpha (:func:`ggx_albedo`, about 0.5 s),
-        linearly interpolated.
+        integrated once per distinct alpha (:func:`ggx_albedo`, a quadrature worth caching:
+        README, 'Measured choices behind the defaults'), linearly interpolated.
         """
         mat = np.asarray(mat)
         mu = np.clip(np.asarray(cos_out, float), 0.0, 1.0)
@@ -427,7 +427,7 @@ class MaterialTable:
         ``glossy_albedo`` (K, 3) = C_g int F_g lobe cos_i (without g), ``glossy_scale``
         (K, 3) = C_g, ``layer_albedo`` (K, 3) = C_s int F_s lobe cos_i (without 1 - g),
         ``layer_scale`` (K, 3) = C_s, ``diffuse_weight`` (K,) = W_d; one quadrature
-        (:func:`ggx_fresnel_moments`, about 1 s) per distinct parameter set."""
+        (:func:`ggx_fresnel_moments`, a quadrature worth caching) per distinct parameter set."""
         alpha = float(self.alpha[m])
         eta = float(self.specular_ior[m]) if self.has_layer[m] else 0.0
         fres, ms = int(self.glossy_fresnel[m]), int(self.multiscatter[m])
@@ -562,7 +562,7 @@ def sample_ggx_reflection(alpha, normal, w_out, u):
     ``E[weight * L(w_i)]`` is the lobe's reflected radiance (untinted).  Drawing h from
     D(h) (n.h) instead gave ``G2 (h.w_out) / (cos_out cos_h)``, up to about 2 / alpha
     where the lobe is seen at grazing angles: eye paths off the side of a glossy block
-    carried 5-15 times the lamp's light into single pixels.
+    carried many times the lamp's light into single pixels (README, 'Where the method is weak').
     """
     from ..tracing.sampling import frames_from_normals
 
@@ -742,16 +742,12 @@ def principled_material(base_color, metallic=0.0, roughness=0.5, ior=1.5, specul
     roughness, anisotropy, thin film, alpha, normal maps.  Base color and tint are
     clamped to [0, 1] (Cycles clamps the conductor's F0 there too).
 
-    Measured against Cycles (bpy 5.0.1; plane under a white world, radiance =
-    directional albedo; error = (ours - Cycles) / Cycles per RGB channel; base
-    colors 1, 0.5, 0.05; metallic 0 and 1; roughness 0.2, 0.5, 0.8; view angles
-    0, 30, 60, 70, 80 degrees; both distributions): within 0.16% everywhere
-    (0.25% with a colored F82 tint, 0.4% at roughness 0.05 and 80 degrees), the
-    rest being Cycles' own lookup-table interpolation.  A plain Mix(Diffuse, Glossy
-    GGX) with fac = metallic + (1 - metallic) F0 is off by up to -87% (black-ish
-    metal, 80 deg), -56% (black-ish dielectric, 80 deg) and -44% (rough white metal,
-    head-on); even the best constant Mix per material misses by 7-77% for dark
-    bases.  ``tests/test_principled.py`` re-measures a dozen of these points.
+    Measured against Cycles (a plane under a white world, radiance = directional albedo),
+    the mapping matches it up to Cycles' own lookup-table interpolation, where a plain
+    Mix(Diffuse, Glossy GGX) with fac = metallic + (1 - metallic) F0, or even the best
+    constant Mix per material, is far off, most for dark bases (the figures: README,
+    'Measured choices behind the defaults').  ``tests/test_principled.py``
+    re-measures a dozen of these points.
     """
     base = np.clip(np.asarray(base_color, float)[:3], 0.0, 1.0)
     metallic = float(np.clip(metallic, 0.0, 1.0))
