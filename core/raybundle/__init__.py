@@ -22,9 +22,10 @@ The subpackages are layers; each imports only from those listed before it:
   ``renderer`` (camera images from a solution: passes, direct light, resolve),
   ``glossy_paths`` (the glossy lobe the eye sees), ``caustic_splats``, ``splat`` (light tracing
   into pixels), ``gather`` (the final gather), ``baking`` (radiance at bake points);
-* :mod:`raybundle.methods`: ``stochastic_iteration`` (ray bundles, the patch methods' base),
-  ``ray_bundle_walk``, ``radiosity``, ``point_collocation``, ``path_tracing``,
-  ``single_ray_iteration``, and ``registry`` (the methods by name);
+* :mod:`raybundle.methods`: ``base`` (what every method declares), ``stochastic_iteration``
+  (ray bundles, the patch methods' base), ``ray_bundle_walk``, ``radiosity``,
+  ``point_collocation``, ``path_tracing``, ``single_ray_iteration``, and ``registry`` (the
+  methods by name);
 * :mod:`raybundle.app`: ``plan`` (the one set-up decision), ``pipeline`` (building what
   a plan says), ``auto``, ``cli``, ``bench``, ``metrics`` (the image error), ``chains`` and
   ``distributed`` (independent chains merged, on Dask).

@@ -105,11 +105,11 @@ def _seconds(o):
 def _check_method(method, bake, chains):
     if bake and image_only(method):
         raise ValueError(f"{method} renders images only, it has no patch solution to bake; choose another method")
-    if chains and not getattr(SOLVERS[method], "merges_chains", False):
+    if chains and not SOLVERS[method].merges_chains:
         why = "renders images only, it has no patch solution to merge" if image_only(method) else \
             "cannot run as merged chains"
         raise ValueError(f"{method} {why}; chains take "
-                         f"{', '.join(n for n, c in SOLVERS.items() if getattr(c, 'merges_chains', False))}")
+                         f"{', '.join(n for n, c in SOLVERS.items() if c.merges_chains)}")
 
 
 def _settings(o, sequence):

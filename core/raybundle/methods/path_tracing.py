@@ -38,6 +38,7 @@ import numpy as np
 
 from ..imaging.renderer import ImagePasses, ProgressiveImage
 from ..tracing.sampling import frames_from_normals, halton_permutations, halton_points
+from .base import Method
 
 #: bounces before Russian roulette starts
 ROULETTE_DEPTH = 3
@@ -65,7 +66,7 @@ class _PassUniforms:
         return out
 
 
-class PathTracer(ProgressiveImage):
+class PathTracer(ProgressiveImage, Method):
     """Unidirectional path tracing with next-event estimation (module docstring).
 
     The same interface as :class:`~raybundle.imaging.renderer.Renderer` (``run``, ``step``,

@@ -1,9 +1,11 @@
 """The methods by name: the registry the CLI, the bench and the add-on read.
 
-Patch solvers (images and bakes) share :class:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver`'s
-interface; image-only methods (``image_only = True``: :class:`~raybundle.methods.path_tracing.PathTracer`,
-:class:`~raybundle.methods.single_ray_iteration.SingleRayIteration`) render camera images and have no patch
-solution.  A module of its own so that every method can import the solver base class first.
+Every method is a :class:`~raybundle.methods.base.Method` (its name and what it can do), one
+per module: patch solvers (images and bakes) share
+:class:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver`'s interface;
+image-only methods (:class:`~raybundle.methods.path_tracing.PathTracer`,
+:class:`~raybundle.methods.single_ray_iteration.SingleRayIteration`) render camera images and have
+no patch solution.
 """
 from .path_tracing import PathTracer
 from .point_collocation import PointCollocationSolver
@@ -21,4 +23,4 @@ SOLVERS = {StochasticIterationSolver.name: StochasticIterationSolver, RayBundleW
 def image_only(method):
     """True for a method without a patch solution (it renders images, it does not bake and needs
     no patch layout)."""
-    return bool(getattr(SOLVERS.get(method), "image_only", False))
+    return method in SOLVERS and SOLVERS[method].image_only

@@ -50,6 +50,7 @@ import numpy as np
 from ..imaging.renderer import ImagePasses, ProgressiveImage
 from ..imaging.splat import splat_to_camera
 from ..tracing.sampling import frames_from_normals, points_on_triangles, uniform_sphere
+from .base import Method
 
 
 def _cosine_directions(normal, u):
@@ -185,7 +186,7 @@ class LightEmission:
         return org, d, power
 
 
-class SingleRayIteration(ProgressiveImage):
+class SingleRayIteration(ProgressiveImage, Method):
     """Stochastic iteration with single rays, i.e. light tracing (module docstring).
 
     The interface of :class:`~raybundle.methods.path_tracing.PathTracer`: ``step`` advances every

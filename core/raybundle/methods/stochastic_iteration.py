@@ -61,6 +61,7 @@ from ..lights.caustics import CausticShot
 from ..lights.first_shot import PatchFirstShot
 from ..patches.reconstruction import LinearReconstruction
 from ..tracing.sampling import points_on_triangles, uniform_sphere, uniform_sphere_pdf
+from .base import Method
 
 
 @dataclass
@@ -72,7 +73,7 @@ class SolverStats:
     directions: int = 0     # global directions (bundles) used
 
 
-class StochasticIterationSolver:
+class StochasticIterationSolver(Method):
     """Stochastic iteration with ray bundles and incoming first shot (thesis 3.3, 3.4)."""
 
     name = "stochastic-iteration"

@@ -1,0 +1,21 @@
+"""What every method declares: the small base class the registry, the plan and the front-ends
+read (:mod:`raybundle.methods.registry`, :mod:`raybundle.app.plan`)."""
+from __future__ import annotations
+
+
+class Method:
+    """A solution method of the rendering equation, known by :attr:`name`.
+
+    Patch methods derive from :class:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver`
+    (a solution per patch side: images and bakes); image-only methods from
+    :class:`~raybundle.imaging.renderer.ProgressiveImage` too (camera images, no patches)."""
+
+    #: the name users give (``--method``, the add-on's method list)
+    name = ""
+    #: renders camera images only: no patch layout, no bake, no chains to merge
+    image_only = False
+    #: each step applies a random operator to the previous iterate, so the random numbers must
+    #: be completely uniformly distributed (thesis 1.2)
+    iterates = False
+    #: independent chains of it merge exactly (:mod:`raybundle.app.chains`)
+    merges_chains = False
