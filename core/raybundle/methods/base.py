@@ -2,6 +2,19 @@
 read (:mod:`raybundle.methods.registry`, :mod:`raybundle.app.plan`)."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
+
+@dataclass
+class SolverStats:
+    """What a method has done so far (image-only methods count their passes as iterations)."""
+
+    iterations: int = 0
+    seconds: float = 0.0
+    rays: int = 0           # Embree queries issued by the solver (bundles)
+    bundle_rays: int = 0    # grid rays (one per line of the bundles)
+    directions: int = 0     # global directions (bundles) used
+
 
 class Method:
     """A solution method of the rendering equation, known by :attr:`name`.

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..imaging.renderer import ImagePasses, ProgressiveImage
 from ..tracing.sampling import frames_from_normals, halton_permutations, halton_points
-from .base import Method
+from .base import Method, SolverStats
 
 #: bounces before Russian roulette starts
 ROULETTE_DEPTH = 3
@@ -81,8 +81,6 @@ class PathTracer(ProgressiveImage, Method):
     SEQUENCES = ("prng", "stratified", "halton")
 
     def __init__(self, scene, camera, tracer, direct, settings):
-        from .stochastic_iteration import SolverStats
-
         if camera is None:
             raise ValueError("the scene has no camera; give one (Camera.from_blender / Camera.look_at)")
         settings.validate()

@@ -50,7 +50,7 @@ import numpy as np
 from ..imaging.renderer import ImagePasses, ProgressiveImage
 from ..imaging.splat import splat_to_camera
 from ..tracing.sampling import frames_from_normals, points_on_triangles, uniform_sphere
-from .base import Method
+from .base import Method, SolverStats
 
 
 def _cosine_directions(normal, u):
@@ -205,8 +205,6 @@ class SingleRayIteration(ProgressiveImage, Method):
     BURN_IN = 8
 
     def __init__(self, scene, camera, tracer, direct, settings):
-        from .stochastic_iteration import SolverStats
-
         if camera is None:
             raise ValueError("the scene has no camera; give one (Camera.from_blender / Camera.look_at)")
         settings.validate()

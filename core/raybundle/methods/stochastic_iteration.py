@@ -53,7 +53,6 @@ the bundle resolution).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -61,16 +60,7 @@ from ..lights.caustics import CausticShot
 from ..lights.first_shot import PatchFirstShot
 from ..patches.reconstruction import LinearReconstruction
 from ..tracing.sampling import points_on_triangles, uniform_sphere, uniform_sphere_pdf
-from .base import Method
-
-
-@dataclass
-class SolverStats:
-    iterations: int = 0
-    seconds: float = 0.0
-    rays: int = 0           # Embree queries issued by the solver (bundles)
-    bundle_rays: int = 0    # grid rays (one per line of the bundles)
-    directions: int = 0     # global directions (bundles) used
+from .base import Method, SolverStats
 
 
 class StochasticIterationSolver(Method):
