@@ -198,7 +198,7 @@ DRIVER = textwrap.dedent(r'''
         sys.path.insert(0, tools)
         from cycles_reference import cycles_settings, exr_output
         import OpenEXR
-        from raybundle.io import read_exr                # the bundled core and OpenEXR read the EXRs
+        from raybundle.util.io import read_exr           # the bundled core and OpenEXR read the EXRs
         sc = bpy.context.scene
         sc.render.resolution_x = sc.render.resolution_y = 64
         sc.render.resolution_percentage = 100
