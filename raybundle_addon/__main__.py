@@ -125,14 +125,10 @@ def _main(argv, interrupted):
     from .properties import run_options
 
     try:
-        options = replace(run_options(scene), **{k: v for k, v in (("seed", args.seed), ("patches", args.patches))
-                                                  if v is not None})
+        options = replace(run_options(scene, seconds=args.time, iterations=args.iterations),
+                          **{k: v for k, v in (("seed", args.seed), ("patches", args.patches)) if v is not None})
     except ValueError as e:
         return _fail(str(e))
-    if args.time is not None:
-        options = replace(options, seconds=args.time, iterations=None)
-    if args.iterations is not None:
-        options = replace(options, seconds=None, iterations=args.iterations)
     if args.resolution_percentage is not None:
         scene.render.resolution_percentage = args.resolution_percentage
     if interrupted.is_set():

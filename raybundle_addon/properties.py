@@ -29,17 +29,20 @@ def _solver_items():
          "lobes carry most of the reflection, then path tracing; bakes take the bundle iteration")]
 
 
-def run_options(scene):
+def run_options(scene, seconds=None, iterations=None):
     """``scene.raybundle`` as the core's :class:`raybundle.app.plan.RunOptions`, field by field
-    name; Iterations 0 means the Time Limit rules (both 0 is an error)."""
+    name; Iterations 0 means the Time Limit rules (both 0 is an error).  ``seconds`` or
+    ``iterations`` given (the headless command line's) replace the file's budget."""
     from raybundle.app.plan import RunOptions
 
     rb = getattr(scene, "raybundle", None)
     if rb is None:
-        return RunOptions()
+        return RunOptions(seconds=seconds, iterations=iterations)
     names = {f.name for f in fields(RunOptions)} & set(rb.bl_rna.properties.keys())
     values = {name: getattr(rb, name) for name in names}
-    if not values["iterations"]:
+    if seconds is not None or iterations is not None:
+        values.update(seconds=seconds, iterations=iterations)
+    elif not values["iterations"]:
         if rb.time_limit == 0:
             raise ValueError("set a time limit (seconds) or an iteration count: both are 0")
         values.update(iterations=None, seconds=float(rb.time_limit))
