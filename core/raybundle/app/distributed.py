@@ -74,7 +74,7 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
     The plan's ``seconds`` are the budget from ``started`` (a ``time.perf_counter()`` reading,
     default now): the cluster's start and the scene's scattering count."""
     try:
-        from distributed import Client, LocalCluster, Variable, wait
+        from distributed import Client, LocalCluster
     except ImportError as e:           # pragma: no cover - depends on the extra being installed
         raise RuntimeError("chains on Dask need the distributed extra: pip install raybundle[distributed]") from e
     settings, seconds, iterations = plan.settings, plan.seconds, plan.iterations
@@ -112,31 +112,8 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
                                  allow_other_workers=False, pure=False, key=f"chain-{names[k]}")
                    for k in range(n)]
         end = None if deadline is None else deadline + grace_seconds
-        while True:
-            status = [f.status for f in futures]
-            alive = set(client.scheduler_info()["workers"])
-            lost = [st == "pending" and addresses[k % len(addresses)] not in alive for k, st in enumerate(status)]
-            reported = [client.get_metadata([name, "iterations"], None) for name in names]
-            if progress is not None:
-                progress("chains: " + ", ".join("lost" if lost[k] else "-" if reported[k] is None
-                                                else str(reported[k]) for k in range(n)))
-            running = any(st == "pending" and not lost[k] for k, st in enumerate(status))
-            if not running or (end is not None and time.time() > end) or (stop is not None and stop.is_set()):
-                break
-            try:
-                wait(futures, timeout=min(report_seconds, 1.0), return_when="ALL_COMPLETED")
-            except TimeoutError:
-                pass
-        latest = []
-        for k, f in enumerate(futures):
-            if f.status == "finished":
-                latest.append(f.result())
-            elif f.status == "error" and not lost[k]:
-                raise RuntimeError(f"chain {k} failed: {f.exception()!r}")
-            else:                        # lost (or past the deadline): its last report, if any
-                f.cancel()
-                got = client.get_metadata([names[k], "iterations"], None)
-                latest.append(Variable(names[k], client=client).get(timeout=30) if got is not None else None)
+        lost = _wait_for_chains(client, futures, names, addresses, end, stop, progress, report_seconds)
+        latest = _latest_states(client, futures, names, lost)
         states = [s for s in latest if s is not None]
         if not states and stop is not None and stop.is_set():
             from .pipeline import Cancelled
@@ -157,3 +134,45 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
             client.close()
             if cluster is not None:
                 cluster.close()
+
+
+def _wait_for_chains(client, futures, names, addresses, end, stop, progress, report_seconds):
+    """Poll the chains until none runs, ``end`` (a ``time.time()``) has passed or ``stop`` is
+    set, telling ``progress`` each chain's reported iterations; returns per chain whether its
+    worker was lost."""
+    from distributed import wait
+
+    n = len(futures)
+    while True:
+        status = [f.status for f in futures]
+        alive = set(client.scheduler_info()["workers"])
+        lost = [st == "pending" and addresses[k % len(addresses)] not in alive for k, st in enumerate(status)]
+        reported = [client.get_metadata([name, "iterations"], None) for name in names]
+        if progress is not None:
+            progress("chains: " + ", ".join("lost" if lost[k] else "-" if reported[k] is None
+                                            else str(reported[k]) for k in range(n)))
+        running = any(st == "pending" and not lost[k] for k, st in enumerate(status))
+        if not running or (end is not None and time.time() > end) or (stop is not None and stop.is_set()):
+            return lost
+        try:
+            wait(futures, timeout=min(report_seconds, 1.0), return_when="ALL_COMPLETED")
+        except TimeoutError:
+            pass
+
+
+def _latest_states(client, futures, names, lost):
+    """Each chain's final state, or for a chain lost or past the deadline its last report
+    (None if it never reported); a chain that failed raises RuntimeError."""
+    from distributed import Variable
+
+    latest = []
+    for k, f in enumerate(futures):
+        if f.status == "finished":
+            latest.append(f.result())
+        elif f.status == "error" and not lost[k]:
+            raise RuntimeError(f"chain {k} failed: {f.exception()!r}")
+        else:                        # lost (or past the deadline): its last report, if any
+            f.cancel()
+            got = client.get_metadata([names[k], "iterations"], None)
+            latest.append(Variable(names[k], client=client).get(timeout=30) if got is not None else None)
+    return latest
