@@ -42,7 +42,7 @@ endif
 $(STAMP): core/pyproject.toml pyproject.toml requirements-dev.txt
 	$(PYTHON) -m venv --clear $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -r requirements-dev.txt -e ./core -e .
+	$(PY) -m pip install --quiet --no-compile -r requirements-dev.txt -e ./core -e .
 	echo "$(PYTHON)" > $(VENV)/.python
 	touch $(STAMP)
 
@@ -50,7 +50,7 @@ $(OLDEST)/.installed: requirements-oldest.txt
 	$(if $(PY_OLDEST),,$(error no working Python 3.11 for the oldest Blender's environment (tools/find_python 3.11)))
 	$(PY_OLDEST) -m venv --clear $(OLDEST)
 	$(OLDEST)/bin/python -m pip install --quiet --upgrade pip
-	$(OLDEST)/bin/python -m pip install --quiet -r requirements-oldest.txt
+	$(OLDEST)/bin/python -m pip install --quiet --no-compile -r requirements-oldest.txt
 	touch $@
 
 demo: $(STAMP)

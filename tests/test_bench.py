@@ -29,60 +29,68 @@ def test_time_to_a_level_and_the_slope_are_exact_on_a_power_law():
     assert bench.slope(flat) > -0.4                             # a floor flattens the curve
 
 
-def test_bench_writes_curves_charts_and_a_summary(tmp_path):
-    """A short bench of two methods on a furnace (analytic reference) and the Cornell box
-    (reference halves path-traced once, then reused): one CSV and PNG per scene, summary.md
-    with a row per scene and method, errors that fall with time on the furnace."""
-    ref, out = tmp_path / "ref", tmp_path / "bench"
+@pytest.fixture(scope="module")
+def short_bench(tmp_path_factory):
+    """One short bench shared by the tests below: the bundle iteration and Cycles on a furnace
+    (analytic reference) and the Cornell box (reference halves path-traced once, then reused)."""
+    tmp = tmp_path_factory.mktemp("bench")
+    ref, out = tmp / "ref", tmp / "bench"
     cmd = [sys.executable, "-m", "raybundle", "bench", "--scenes", "furnace", "cornell", "--methods",
-           "stochastic-iteration", "path-tracing", "--time", "3", "--resolution", "24", "24", "--reference-time", "2",
-           "--reference-dir", str(ref), "--out", str(out)]
-    p = subprocess.run(cmd, capture_output=True, text=True)
+           "stochastic-iteration", "--time", "3", "--resolution", "24", "24", "--reference-time", "2",
+           "--reference-dir", str(ref), "--out", str(out), "--cycles", str(ROOT / "tools" / "cycles_reference.py")]
+    return cmd, ref, out, subprocess.run(cmd, capture_output=True, text=True)
+
+
+def test_bench_writes_curves_charts_and_a_summary(short_bench, tmp_path):
+    """One CSV and PNG per scene, summary.md with a row per scene and method, errors that fall
+    with time on the furnace; the reference halves are reused by a second run."""
+    cmd, ref, out, p = short_bench
     assert p.returncode == 0, p.stderr
     assert sorted(f.name for f in ref.iterdir()) == ["cornell-24x24-1.exr", "cornell-24x24-2.exr"]
     assert p.stderr.count("path tracing for") == 2
     for name in ("furnace", "cornell"):
         assert (out / f"{name}.png").stat().st_size > 0
         rows = list(csv.DictReader((out / f"{name}.csv").read_text().splitlines()))
-        assert {r["method"] for r in rows} == {"stochastic-iteration", "path-tracing"}
-        for method in ("stochastic-iteration", "path-tracing"):
-            err = [float(r["error"]) for r in rows if r["method"] == method]
-            t = [float(r["seconds"]) for r in rows if r["method"] == method]
-            assert len(err) >= 2 and t == sorted(t) and np.isfinite(err).all()
-            if name == "furnace":
-                assert err[-1] < err[0]                          # no noise in the analytic reference
+        assert {r["method"] for r in rows} == {"stochastic-iteration", "cycles"}
+        err = [float(r["error"]) for r in rows if r["method"] == "stochastic-iteration"]
+        t = [float(r["seconds"]) for r in rows if r["method"] == "stochastic-iteration"]
+        assert len(err) >= 2 and t == sorted(t) and np.isfinite(err).all()
+        if name == "furnace":
+            assert err[-1] < err[0]                              # no noise in the analytic reference
     md = (out / "summary.md").read_text()
     for name in ("furnace", "cornell"):
-        for method in ("stochastic-iteration", "path-tracing"):
+        for method in ("stochastic-iteration", "cycles"):
             assert f"| {name} | {method} |" in md
     # the halves are reused: no path tracing the second time
-    p = subprocess.run(cmd[:-2] + ["--out", str(tmp_path / "again"), "--scenes", "cornell"], capture_output=True,
-                       text=True)
+    again = [sys.executable, "-m", "raybundle", "bench", "--scenes", "cornell", "--methods", "stochastic-iteration",
+             "--time", "3", "--resolution", "24", "24", "--reference-time", "2", "--reference-dir", str(ref),
+             "--out", str(tmp_path / "again")]
+    p = subprocess.run(again, capture_output=True, text=True)
     assert p.returncode == 0 and "path tracing for" not in p.stderr, p.stderr
     p = subprocess.run([sys.executable, "-m", "raybundle", "bench", "--methods", "no-such-method", "--out", str(out)],
                        capture_output=True, text=True)
     assert p.returncode == 2 and "unknown method" in p.stderr
 
 
-def test_cycles_is_one_more_curve_where_it_can_build_the_scene(tmp_path):
+def test_cycles_is_one_more_curve_where_it_can_build_the_scene(short_bench, tmp_path):
     """``--cycles``: Cycles (through ``bpy`` in a subprocess, CPU, no denoising or clamping) at
     1, 2, 4, ... samples per pixel, each render timed from loading the scene to the EXR
     written, scored by the same error function: its error falls as samples double; a scene
-    it cannot build (emission that depends on the albedo) gets an n/a row with the reason."""
-    out = tmp_path / "bench"
-    p = subprocess.run([sys.executable, "-m", "raybundle", "bench", "--scenes", "cornell", "furnace-glossy",
-                        "--methods", "stochastic-iteration", "--time", "3", "--resolution", "16", "16",
-                        "--reference-time", "2", "--reference-dir", str(tmp_path / "ref"), "--out", str(out),
-                        "--cycles", str(ROOT / "tools" / "cycles_reference.py")], capture_output=True, text=True)
+    it cannot build (emission that depends on the albedo) is refused with the reason, which
+    the bench writes as an n/a row."""
+    _, _, out, p = short_bench
     assert p.returncode == 0, p.stderr
-    rows = [r for r in csv.DictReader((out / "cornell.csv").read_text().splitlines()) if r["method"] == "cycles"]
-    spp = [int(r["iterations"]) for r in rows]
-    err = [float(r["error"]) for r in rows]
-    assert len(rows) >= 2 and spp == [2 ** k for k in range(len(rows))], spp
-    assert np.isfinite(err).all() and err[-1] < err[0], err
-    md = (out / "summary.md").read_text()
-    assert "| cornell | cycles |" in md and "| furnace-glossy | cycles | n/a" in md
-    assert "emission that depends on the albedo" in md
+    for name in ("furnace", "cornell"):
+        rows = [r for r in csv.DictReader((out / f"{name}.csv").read_text().splitlines()) if r["method"] == "cycles"]
+        spp = [int(r["iterations"]) for r in rows]
+        err = [float(r["error"]) for r in rows]
+        assert len(rows) >= 2 and spp == [2 ** k for k in range(len(rows))], spp
+        assert np.isfinite(err).all() and err[-1] < err[0], err
+        assert f"| {name} | cycles |" in (out / "summary.md").read_text()
+    with pytest.raises(ValueError, match="emission that depends on the albedo"):
+        bench.run_cycles("furnace-glossy", 1.0, None, None, str(ROOT / "tools" / "cycles_reference.py"), (16, 16))
+    summary = bench.summary_table({"cornell": {}}, {"cornell": {"cycles": "emission that depends on the albedo"}})
+    assert "| cornell | cycles | n/a" in summary and "emission that depends on the albedo" in summary
 
 
 def test_bench_refuses_empty_pairs_and_references_without_time(tmp_path):

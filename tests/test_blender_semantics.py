@@ -56,7 +56,7 @@ def test_environment_furnace_is_exact_on_an_open_two_sided_scene():
     mats = MaterialTable.from_list([dict(name=f"m{k}", diffuse=a, emission=(le,) * 3) for k in range(4)])
     exact = le / (1 - a)
     sc = blender_cornell(flip=range(0, 32, 3), materials=mats, environment=exact)
-    imgs = [render(sc, seed, 400) for seed in (1, 2)]
+    imgs = [render(sc, seed, 250) for seed in (1, 2)]
     img = 0.5 * (imgs[0] + imgs[1])
     # noise from the two independent renders: se of the mean over pixels
     se = np.abs(imgs[0] - imgs[1]).reshape(-1, 3).mean(axis=0) / 2
@@ -70,7 +70,7 @@ def test_flipped_normals_render_the_same():
     the flipped render is as close to the original as a second seed of the original."""
     base = blender_cornell()
     flipped = blender_cornell(flip=range(0, 32, 2))
-    a, b, c = render(base, 1, 300), render(flipped, 1, 300), render(base, 2, 300)
+    a, b, c = render(base, 1, 150), render(flipped, 1, 150), render(base, 2, 150)
     mask = light_source_mask(base)
     same_scene = image_error(c, a, exclude=mask)["raw"]
     assert image_error(b, a, exclude=mask)["raw"] < 1.5 * same_scene + 0.005, same_scene

@@ -132,7 +132,7 @@ def bpy_only_python(tmp_path_factory):
     venv = tmp_path_factory.mktemp("venv-bpy-only")
     subprocess.run([sys.executable, "-m", "venv", "--clear", str(venv)], check=True, timeout=120)
     py = venv / "bin" / "python"
-    p = subprocess.run([str(py), "-m", "pip", "install", "--quiet", f"bpy=={version('bpy')}",
+    p = subprocess.run([str(py), "-m", "pip", "install", "--quiet", "--no-compile", f"bpy=={version('bpy')}",
                         f"numpy=={version('numpy')}"], capture_output=True, text=True, timeout=900, env=_clean_env())
     assert p.returncode == 0, f"creating the bpy-only venv failed:\n{p.stderr[-3000:]}"
     assert not _imports_ours(py), "the bpy-only venv can already import our packages: it would hide a broken zip"

@@ -25,6 +25,11 @@ import uuid
 
 from . import chains
 
+try:                                    # the distributed extra (not in the Blender extension)
+    import distributed
+except ImportError:                     # pragma: no cover - depends on the extra being installed
+    distributed = None
+
 
 def _run_chain(scene, method, settings_dict, seed, deadline, iterations, report_seconds, name):
     """On a worker: one chain, iterated by the run loop (:class:`~raybundle.imaging.run.RunLoop`) for
@@ -32,18 +37,13 @@ def _run_chain(scene, method, settings_dict, seed, deadline, iterations, report_
     state goes to the Variable ``name`` and its iteration count to the scheduler's metadata
     ``[name, "iterations"]`` (small, polled by the client for progress); returns the final
     state."""
-    try:
-        from distributed import Variable, get_client
-    except ImportError as e:           # pragma: no cover - only ever called on a Dask worker
-        raise RuntimeError("a chain runs on a Dask worker: pip install raybundle[distributed]") from e
-
     from ..imaging.run import RunLoop
     from ..imaging.settings import RenderSettings
     from .pipeline import make_renderer
 
     settings = RenderSettings(**dict(settings_dict, seed=seed))
     renderer = make_renderer(scene, settings, solver=method)
-    var, client = Variable(name), get_client()
+    var, client = distributed.Variable(name), distributed.get_client()
 
     def report():
         var.set(chains.state(renderer))
@@ -73,10 +73,8 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
     last report is merged (:class:`~raybundle.app.pipeline.Cancelled` if none has reported yet).
     The plan's ``seconds`` are the budget from ``started`` (a ``time.perf_counter()`` reading,
     default now): the cluster's start and the scene's scattering count."""
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError as e:           # pragma: no cover - depends on the extra being installed
-        raise RuntimeError("chains on Dask need the distributed extra: pip install raybundle[distributed]") from e
+    if distributed is None:             # pragma: no cover - depends on the extra being installed
+        raise RuntimeError("chains on Dask need the distributed extra: pip install raybundle[distributed]")
     settings, seconds, iterations = plan.settings, plan.seconds, plan.iterations
     from dataclasses import asdict
 
@@ -87,11 +85,11 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
     cluster = renderer = None
     if own:
         if scheduler:
-            client = Client(scheduler)
+            client = distributed.Client(scheduler)
         else:
-            cluster = LocalCluster(n_workers=int(workers or 2), threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
-            client = Client(cluster)
+            cluster = distributed.LocalCluster(n_workers=int(workers or 2), threads_per_worker=1, processes=True,
+                                               dashboard_address=None)
+            client = distributed.Client(cluster)
     try:
         addresses = sorted(client.scheduler_info()["workers"])
         n = int(chains_count or len(addresses))
@@ -140,8 +138,6 @@ def _wait_for_chains(client, futures, names, addresses, end, stop, progress, rep
     """Poll the chains until none runs, ``end`` (a ``time.time()``) has passed or ``stop`` is
     set, telling ``progress`` each chain's reported iterations; returns per chain whether its
     worker was lost."""
-    from distributed import wait
-
     n = len(futures)
     while True:
         status = [f.status for f in futures]
@@ -155,7 +151,7 @@ def _wait_for_chains(client, futures, names, addresses, end, stop, progress, rep
         if not running or (end is not None and time.time() > end) or (stop is not None and stop.is_set()):
             return lost
         try:
-            wait(futures, timeout=min(report_seconds, 1.0), return_when="ALL_COMPLETED")
+            distributed.wait(futures, timeout=min(report_seconds, 1.0), return_when="ALL_COMPLETED")
         except TimeoutError:
             pass
 
@@ -163,8 +159,6 @@ def _wait_for_chains(client, futures, names, addresses, end, stop, progress, rep
 def _latest_states(client, futures, names, lost):
     """Each chain's final state, or for a chain lost or past the deadline its last report
     (None if it never reported); a chain that failed raises RuntimeError."""
-    from distributed import Variable
-
     latest = []
     for k, f in enumerate(futures):
         if f.status == "finished":
@@ -174,5 +168,5 @@ def _latest_states(client, futures, names, lost):
         else:                        # lost (or past the deadline): its last report, if any
             f.cancel()
             got = client.get_metadata([names[k], "iterations"], None)
-            latest.append(Variable(names[k], client=client).get(timeout=30) if got is not None else None)
+            latest.append(distributed.Variable(names[k], client=client).get(timeout=30) if got is not None else None)
     return latest
