@@ -158,7 +158,7 @@ def _main(argv, interrupted):
     old = signal.signal(signal.SIGINT, on_interrupt)
     engine.observers.append(observe)
     try:
-        with engine.render_options(options):
+        with engine.render_options(scene.name, options):
             bpy.ops.render.render(write_still=False, scene=scene.name)
     except RuntimeError as e:                   # the engine's ERROR report
         bar.close()

@@ -350,7 +350,7 @@ class BakeJob:
             solver.tracer.close()
         t_done = time.perf_counter()
         st = solver.stats
-        note = self.loop.budget_note(t_done - self.t_start)
+        note = self.loop.budget_note(t0 - self.t_start)          # the budget covers the iterations, not the writing
         if note:
             self.warn(note)
         stats = {"iterations": st.iterations, "directions": st.directions, "patches": int(solver.scene.n_patches),

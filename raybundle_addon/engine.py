@@ -40,22 +40,22 @@ from .properties import LAST_RUN, run_options
 observers: list = []
 #: jobs running now (``cancel_all`` sets their stop flags)
 active_jobs: set = set()
-#: :class:`raybundle.app.plan.RunOptions` for the renders started while it is set, instead of the
-#: scene's settings: how the headless command line hands its options to a render that
-#: ``bpy.ops.render.render`` starts (:func:`render_options`)
-_options_override = None
+#: scene name -> :class:`raybundle.app.plan.RunOptions` for that scene's renders started while it
+#: is set, instead of its settings: how the headless command line hands its options to a render
+#: that ``bpy.ops.render.render`` starts (:func:`render_options`)
+_options_override: dict = {}
 
 
 @contextlib.contextmanager
-def render_options(options):
-    """Renders started inside the ``with`` block run ``options`` (a
-    :class:`raybundle.app.plan.RunOptions`), not the scene's settings; the ``.blend`` is not changed."""
-    global _options_override
-    _options_override = options
+def render_options(scene_name, options):
+    """Renders of the scene ``scene_name`` started inside the ``with`` block run ``options`` (a
+    :class:`raybundle.app.plan.RunOptions`), not its settings (other scenes, e.g. a compositor's
+    Render Layers of another scene, keep theirs); the ``.blend`` is not changed."""
+    _options_override[scene_name] = options
     try:
         yield
     finally:
-        _options_override = None
+        _options_override.pop(scene_name, None)
 
 
 def cancel_all():
@@ -88,7 +88,7 @@ class RenderJob:
         self.depsgraph = depsgraph
         #: :class:`raybundle.app.plan.RunOptions`: given, handed over (:func:`render_options`), or (None)
         #: the scene's, read when the job runs
-        self.options = options or _options_override
+        self.options = options or _options_override.get(depsgraph.scene.name)
         self.stop = stop if stop is not None else threading.Event()
         self.display, self.progress, self.stats_cb = display, progress, stats
         self.choice = None           # auto's Choice, when the method is auto

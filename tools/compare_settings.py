@@ -60,10 +60,11 @@ def main(argv=None):
         images = []
         for seed in a.seeds:
             r = make_renderer(prepared, RenderSettings(seed=seed, **v))
-            for k, x in solver_attrs.items():
-                setattr(r.solver, k, x)
-            for k, x in renderer_attrs.items():
-                setattr(r, k, x)
+            for target, attrs in ((r.solver, solver_attrs), (r, renderer_attrs)):
+                for k, x in attrs.items():
+                    if not hasattr(target, k):
+                        raise SystemExit(f"compare_settings: {type(target).__name__} has no attribute {k!r}")
+                    setattr(target, k, x)
             t0 = time.perf_counter()
             res = r.run(**run)
             img, st = res.image, res.stats

@@ -31,6 +31,7 @@ class ProgressBar:
     def __init__(self, stream=sys.stderr, width=30):
         self.stream, self.width, self._last = stream, width, 0.0
         self.enabled = stream.isatty() or os.environ.get("RAYBUNDLE_PROGRESS") == "1"
+        self._drawn = False                   # the bar is on the current line
 
     def __call__(self, fraction, info):
         now = time.perf_counter()
@@ -41,6 +42,14 @@ class ProgressBar:
         self.stream.write(f"\r[{'#' * n}{'.' * (self.width - n)}] {100 * fraction:5.1f}%  "
                           f"{info['iterations']} iterations  {info['seconds']:.1f} s ")
         self.stream.flush()
+        self._drawn = True
+
+    def end_line(self):
+        """End the bar's line, so that a message printed next starts on a line of its own."""
+        if self.enabled and self._drawn:
+            self.stream.write("\n")
+            self.stream.flush()
+            self._drawn = False
 
     def close(self):
         if self.enabled:
@@ -90,12 +99,14 @@ def cmd_render(args):
         print(f"raybundle: error: {e}", file=sys.stderr)
         return 2
 
+    bar = ProgressBar()
+
     def stage(text):
+        bar.end_line()
         print(f"raybundle: {text} ({time.perf_counter() - t_start:.1f} s)", file=sys.stderr, flush=True)
 
     stop = threading.Event()
     old = signal.signal(signal.SIGINT, lambda *_: stop.set())   # Ctrl-C: set-up stops, the iteration writes
-    bar = ProgressBar()
     chains = bool(args.workers or args.scheduler)
     options = RunOptions(method=args.method, iterations=args.iterations, seconds=args.time, seed=args.seed,
                          patches=args.patches, sequence=args.sequence, bundle_resolution=args.bundle_resolution,

@@ -155,7 +155,9 @@ def lay_out(scene, plan, stage=None, stop=None):
     ``stage(text)`` is told auto's choice and each set-up step; ``stop`` as in :func:`prepare`."""
     line = plan.describe()
     if line:
-        _step(stage, stop, line)
+        _step(None, stop, "the method's choice")
+        if stage is not None:
+            stage(line)
     return scene if plan.image_only else prepare(scene, patches=plan.patches, stage=stage, stop=stop)
 
 

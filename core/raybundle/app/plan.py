@@ -78,8 +78,10 @@ class Plan:
         """One line: auto's choice and why (None when the user named the method)."""
         if self.choice is None:
             return None
-        return f"auto: {self.method}, {self.patches:,} patches: {self.choice.reason}" + "".join(
-            f"; {n}" for n in self.notes)
+        if self.choice.method != self.method:        # a bake or chains overrode an image-only choice
+            return (f"auto chose {self.choice.method} ({self.choice.reason}); " + "; ".join(self.notes) +
+                    f", {self.patches:,} patches")
+        return f"auto: {self.method}, {self.patches:,} patches: {self.choice.reason}"
 
 
 def check(options: RunOptions, bake=False, chains=False):

@@ -52,7 +52,7 @@ class FinalGather:
         self.hit_size = np.sqrt(sc.patch_area[sc.triangle_patch])      # per triangle [m]
         # the first shot's glossy reflections arrive by the caustic shot, read where the gather
         # is (``caustic`` False: left out, for an image that light-traces it into its pixels,
-        # :meth:`~raybundle.imaging.renderer.Renderer.splat_caustics`)
+        # :meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`)
         self.first_shot_glossy = sharp is None
         self.vert_caustic = rec.averaged(sharp) if sharp is not None and caustic else None
 

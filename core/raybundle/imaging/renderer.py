@@ -110,8 +110,12 @@ class ProgressiveImage:
         while loop.advance(until=pending[0] if pending else None):
             pending.pop(0)
             t_snap = time.perf_counter()
-            img = self.resolve(loop.final_seconds())
-            on_snapshot(loop.elapsed() + time.perf_counter() - t_snap, loop.iterations, img)
+            try:
+                img = self.resolve(loop.final_seconds())
+                on_snapshot(loop.elapsed() + time.perf_counter() - t_snap, loop.iterations, img)
+            except KeyboardInterrupt:         # Ctrl-C while a snapshot forms: a stop, as in the loop
+                loop.cancelled = loop.finished = True
+                break
             loop.pause(time.perf_counter() - t_snap)
         if stage is not None:
             stage("forming the final image")

@@ -19,7 +19,7 @@ class RenderSettings:
     passes' eye paths also carry glossy lobes (:meth:`Renderer.step`); ``resolve_samples``: sub-pixel positions for
     the diffuse indirect part; ``smooth``: interpolate patch values;
     ``glossy_gather``: estimate the glossy lobe seen by the eye with one
-    importance-sampled eye ray per pixel and pass (see :meth:`Renderer.glossy_gather`)
+    importance-sampled eye ray per pixel and pass (see :meth:`~raybundle.imaging.glossy_paths.GlossyEyePaths.gather`)
     instead of the per-iteration ``E f(t, w_eye)``, following up to
     ``glossy_gather_depth`` glossy bounces; ``emission_edge_samples``:
     extra samples per pass (a jittered s x s grid, rounded to a square) for the
@@ -36,13 +36,13 @@ class RenderSettings:
     ``gather_rays``: final-gather rays per pixel where the patch values are not to be trusted
     (next to concave edges and contacts, :mod:`raybundle.imaging.gather`), 0 = none, -1 = as many as
     ``gather_share`` of the run's seconds buys, in runs limited by time (none in runs of given
-    iterations, which stay reproducible, nor in images formed outside :meth:`ProgressiveImage.run`):
+    iterations, which stay reproducible, nor in images formed without a budget of seconds):
     :meth:`Renderer.diffuse_indirect`;
     ``penumbra_samples``: shadow rays per light per pass for the pixels whose earlier
     samples found a light both seen and blocked (:meth:`Renderer._shade`);
     ``caustic_splats``: with a caustic first shot, its samples per pixel and image pass that
     light-trace the caustic on the surfaces the eye sees into the pixels
-    (:meth:`Renderer.splat_caustics`), 0 = read it from the patches as the rest of the
+    (:meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`), 0 = read it from the patches as the rest of the
     diffuse indirect light.
     """
 
