@@ -52,8 +52,36 @@ def _plane_groups(scene, faces):
     return [(faces[g], n[g[0]], float(off[g[0]])) for g in np.split(order, cuts)]
 
 
-def contact_segments(scene, faces, tol):
-    """Contact segments on the planes of triangles ``faces`` (ids into ``scene``).
+class _BoxQuery:
+    """The triangles whose bounding boxes ``lo``, ``hi`` (T, 3) overlap a query box, without
+    a pass over all of them per query (a real room has tens of thousands of planes):
+    sort and sweep on the widest axis.  Boxes no longer than the 99th percentile along it
+    are sorted by their low end, so those that can overlap ``[a, b]`` lie in the window of low
+    ends ``[a - longest, b]``; the longer ones (1%) are always tested."""
+
+    def __init__(self, lo, hi):
+        self.lo, self.hi = lo, hi
+        self.axis = int(np.argmax(hi.max(axis=0) - lo.min(axis=0))) if len(lo) else 0
+        ext = hi[:, self.axis] - lo[:, self.axis]
+        cut = np.quantile(ext, 0.99) if len(ext) else 0.0
+        short = np.nonzero(ext <= cut)[0]
+        self.long = np.nonzero(ext > cut)[0]
+        self.order = short[np.argsort(lo[short, self.axis], kind="stable")]
+        self.starts = lo[self.order, self.axis]
+        self.longest = float(ext[short].max()) if len(short) else 0.0
+
+    def __call__(self, lo, hi):
+        """Sorted ids of the boxes overlapping ``[lo, hi]`` (3,) (touching counts)."""
+        k = self.axis
+        a = np.searchsorted(self.starts, lo[k] - self.longest, side="left")
+        b = np.searchsorted(self.starts, hi[k], side="right")
+        pool = np.concatenate([self.order[a:b], self.long])
+        return np.sort(pool[np.all((self.hi[pool] >= lo) & (self.lo[pool] <= hi), axis=1)])
+
+
+def contact_segments(scene, faces, tol, min_plane_area=0.0):
+    """Contact segments on the planes of triangles ``faces`` (ids into ``scene``) whose
+    triangles add up to at least ``min_plane_area`` [m^2] in that plane.
 
     Returns a list of ``(group, origin, e1, e2, segments)``: ``group`` the
     triangle ids in one plane, ``origin`` (3,) and ``e1, e2`` (3,) that plane's
@@ -70,11 +98,13 @@ def contact_segments(scene, faces, tol):
     weld = np.round(scene.vertices / max(r * 1e-7, 1e-12)).astype(np.int64)
     _, vid = np.unique(weld, axis=0, return_inverse=True)
     vid = vid.reshape(-1)
+    overlapping = _BoxQuery(lo_all, hi_all)
     for group, n, off in _plane_groups(scene, faces):
+        if min_plane_area > 0 and scene.triangle_area[group].sum() < min_plane_area:
+            continue
         c = corners[group]
         lo, hi = c.reshape(-1, 3).min(axis=0) - tol, c.reshape(-1, 3).max(axis=0) + tol
-        cand = np.nonzero(np.all((hi_all >= lo) & (lo_all <= hi), axis=1))[0]
-        cand = np.setdiff1d(cand, group)
+        cand = np.setdiff1d(overlapping(lo, hi), group)
         d = corners[cand] @ n - off                                   # (C, 3) signed distances
         cand_mask = (d.min(axis=1) <= tol) & (d.max(axis=1) >= -tol)
         cand, d = cand[cand_mask], d[cand_mask]
@@ -144,16 +174,18 @@ def _split(poly, a, b, eps):
     if not (s > 0).any() or not (s < 0).any():
         return None, None
     left, right = [], []
-    m = len(poly)
+    pts, s = poly.tolist(), s.tolist()          # Python floats: the same arithmetic, without numpy's per-call cost
+    m = len(pts)
     for i in range(m):
         j = (i + 1) % m
-        p, q, sp, sq = poly[i], poly[j], s[i], s[j]
+        p, q, sp, sq = pts[i], pts[j], s[i], s[j]
         if sp >= 0:
             left.append(p)
         if sp <= 0:
             right.append(p)
         if sp * sq < 0:
-            x = p + (sp / (sp - sq)) * (q - p)
+            t = sp / (sp - sq)
+            x = [p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]
             left.append(x)
             right.append(x)
     return np.array(left), np.array(right)
@@ -173,9 +205,25 @@ def _without_collinear(poly, eps):
     return poly[keep]
 
 
+def _crosses(tri, segs, eps):
+    """(K,) bool: the line of each segment ``segs`` (K, 2, 2) has corners of the triangle
+    ``tri`` (3, 2) strictly on both sides (farther than ``eps``), as :func:`_split` decides."""
+    a, d = segs[:, 0], segs[:, 1] - segs[:, 0]
+    dvec = d / np.hypot(d[:, 0], d[:, 1])[:, None]
+    s = dvec[:, None, 0] * (tri[None, :, 1] - a[:, None, 1]) - dvec[:, None, 1] * (tri[None, :, 0] - a[:, None, 0])
+    return ((s > eps).any(axis=1)) & ((s < -eps).any(axis=1))
+
+
+_NEXT: dict = {}
+
+
 def _area(poly):
+    m = len(poly)
+    nxt = _NEXT.get(m)
+    if nxt is None:
+        nxt = _NEXT[m] = np.roll(np.arange(m), -1)
     x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+    return 0.5 * abs(np.dot(x, y[nxt]) - np.dot(y, x[nxt]))
 
 
 def _cross2(u, v):
@@ -210,12 +258,13 @@ def _touching(tri2d, seg, eps):
     return (t1 - t0) * seg_len > 4 * eps
 
 
-def split_at_contacts(scene, faces, tol, min_fraction=0.005):
+def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0):
     """Cut the patches of triangles ``faces`` along contact lines (module docstring).
 
     ``scene`` has one patch per triangle (as :func:`raybundle.patches.layout.subdivide`
     makes); ``faces`` are the triangle ids that may be cut (the pieces of
-    subdivided input faces).  Returns ``(scene, n_cut)``: a new scene whose
+    subdivided input faces); of those, planes holding less than ``min_plane_area`` [m^2] of
+    them are left whole.  Returns ``(scene, n_cut)``: a new scene whose
     cut patches consist of the convex pieces' fan triangles, and the number of
     patches cut.  The new scene carries ``triangle_corner_tag`` (T, 3) int64
     (0 = no contact at that corner).
@@ -223,7 +272,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
     from ..scene.model import PatchScene
     from ..util.arrays import unique_rows
 
-    groups = contact_segments(scene, np.asarray(faces, np.int64), tol)
+    groups = contact_segments(scene, np.asarray(faces, np.int64), tol, min_plane_area)
     if not groups:
         return scene, 0
     _, r = scene.bounding_sphere
@@ -260,8 +309,10 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
             tri = group[f]
             segs = np.nonzero(touch[f])[0]
             polys = [c2[f]]
+            # a line that leaves the triangle's corners on one side misses every piece of it
+            crossing = segs[_crosses(c2[f], seg[segs], eps)]
             full = _area(c2[f])
-            for k in segs:
+            for k in crossing:
                 nxt = []
                 for poly in polys:
                     lft, rgt = _split(poly, seg[k, 0], seg[k, 1], eps)
@@ -325,7 +376,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005):
     out = PatchScene(v, t, scene.triangle_material[src], patch, scene.triangle_source[src], scene.materials,
                      scene.point_lights, scene.camera, scene.analytic_radiance, scene.name,
                      scene.dropped_triangles, scene.triangle_solid[src], scene.triangle_two_sided[src],
-                     scene.sun_lights, scene.area_lights, scene.environment, tags, texture=scene.texture)
+                     scene.sun_lights, scene.area_lights, scene.world, tags, texture=scene.texture)
     return out, n_cut
 
 
@@ -389,26 +440,26 @@ def _corner_tags(poly, seg, segs, seg_base, eps, tag_ids):
     """Weld tag per polygon corner: which contact lines the corner lies on, and on
     which side of each the polygon lies (0 for none).  A line, not a segment: the
     collinear segments of one contact (a floor's subdivided edge along a wall) weld
-    along it."""
+    along it.  Vectorised over the segments ``segs`` (a floor triangle under a chair
+    may touch hundreds)."""
     centroid = poly.mean(axis=0)
+    segs = np.asarray(segs, np.int64)
+    a, b = seg[segs, 0], seg[segs, 1]
+    d = b - a
+    length = np.hypot(d[:, 0], d[:, 1])
+    u = d / length[:, None]
+    flip = (u[:, 0] < -1e-9) | ((np.abs(u[:, 0]) <= 1e-9) & (u[:, 1] < 0))      # one direction per line
+    u[flip] = -u[flip]
+    direction = np.round(u * 1e6).astype(np.int64)
+    offset = np.round((u[:, 0] * a[:, 1] - u[:, 1] * a[:, 0]) / (1e3 * eps)).astype(np.int64)
+    side = u[:, 0] * (centroid[1] - a[:, 1]) - u[:, 1] * (centroid[0] - a[:, 0]) > 0
     out = []
     for p in poly:
-        key = []
-        for k in segs:
-            a, b = seg[k]
-            d = b - a
-            length = np.hypot(*d)
-            off = abs(d[0] * (p[1] - a[1]) - d[1] * (p[0] - a[0])) / length
-            along = np.dot(p - a, d) / length
-            if off <= 1e3 * eps and -1e3 * eps <= along <= length + 1e3 * eps:
-                u = d / length
-                if u[0] < -1e-9 or (abs(u[0]) <= 1e-9 and u[1] < 0):     # one direction per line
-                    u = -u
-                line = (seg_base, *np.round(u * 1e6).astype(np.int64).tolist(),
-                        int(np.round((u[0] * a[1] - u[1] * a[0]) / (1e3 * eps))))
-                side = u[0] * (centroid[1] - a[1]) - u[1] * (centroid[0] - a[0]) > 0
-                key.append((line, bool(side)))
-        out.append(tag_ids.setdefault(tuple(sorted(set(key))), len(tag_ids) + 1) if key else 0)
+        off = np.abs(d[:, 0] * (p[1] - a[:, 1]) - d[:, 1] * (p[0] - a[:, 0])) / length
+        along = ((p[0] - a[:, 0]) * d[:, 0] + (p[1] - a[:, 1]) * d[:, 1]) / length
+        on = np.nonzero((off <= 1e3 * eps) & (-1e3 * eps <= along) & (along <= length + 1e3 * eps))[0]
+        key = {((seg_base, int(direction[k, 0]), int(direction[k, 1]), int(offset[k])), bool(side[k])) for k in on}
+        out.append(tag_ids.setdefault(tuple(sorted(key)), len(tag_ids) + 1) if key else 0)
     return out
 
 

@@ -12,6 +12,10 @@ from ..util.arrays import unique_rows
 #: scenes with at most this many reflecting patch triangles have every one cut at contacts,
 #: larger ones only their subdivided faces (:func:`subdivide`)
 CONTACT_ALL_MAX = 10_000
+#: a plane whose triangles add up to less than this share of ``max_edge^2`` (half a patch) is not
+#: cut at contacts: the facets of a curved mesh are such planes, tens of thousands of them in a
+#: furnished room, each costing a pass of its own while a leak through it is at most its area
+CONTACT_MIN_PLANE = 0.5
 
 
 def subdivide(scene: PatchScene, max_edge=None, patches=None, contacts=True) -> PatchScene:
@@ -118,7 +122,7 @@ def split_triangles(scene: PatchScene, max_edge, whole=None):
     fine = PatchScene(v, t, np.concatenate(mats), np.arange(len(t)), np.concatenate(srcs),
                       scene.materials, scene.point_lights, scene.camera, scene.analytic_radiance,
                       scene.name, scene.dropped_triangles, *per_tri[:2], scene.sun_lights, scene.area_lights,
-                      scene.environment, texture=scene.texture)
+                      scene.world, texture=scene.texture)
     return fine, per_tri[2], per_tri[3]
 
 
@@ -151,4 +155,4 @@ def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene
             finally:
                 if probe is not tracer:
                     probe.close()
-    return split_at_contacts(scene, np.nonzero(todo)[0], tol=tol)[0]
+    return split_at_contacts(scene, np.nonzero(todo)[0], tol=tol, min_plane_area=CONTACT_MIN_PLANE * max_edge ** 2)[0]
