@@ -32,9 +32,17 @@ Lights (Blender's units, as Cycles converts them; ``blender.md`` §4.4)
     dropped: area ``L = P / pi``, point/spot ``I = P r^2 / 4`` for radius r > 0, sun
     ``E = strength x pi tan^2(angle / 2)`` for angle > 0.
 
+    A light portal (an area light with Portal on) guides Cycles' sampling of the world and
+    emits nothing: it is left out (noted once), since bundles reach the world through the
+    openings without it.
+
+Materials override
+    The view layer's Material Override replaces every object's materials, emitters'
+    included, as in Cycles (a clay render).
+
 World
-    The Background node's color x strength as a constant environment radiance; a
-    textured world uses its mean color (warned); no world is black.
+    :mod:`.world`: a constant Background is read directly, any other node tree is
+    evaluated by Blender into an equirectangular image; no world is black.
 
 Camera
     Lens, sensor size and fit, shift, pixel aspect, clip start, resolution x
@@ -49,7 +57,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .shaders import MaterialConverter, world_radiance
+from .shaders import MaterialConverter
+from .world import export_world
 
 #: object types that become triangles (through their evaluated mesh)
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES_LEGACY"}
@@ -384,6 +393,8 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
     tuv, timg, tcol, images = [], [], [], {}    # albedo textures: corner UVs, image per triangle, corner colors
     objects = []
     lights = {"point": [], "sun": [], "area": []}
+    portals = []
+    override = getattr(depsgraph.view_layer, "material_override", None)
     n_vert = n_tri = 0
     for inst in depsgraph.object_instances:
         ob = inst.object
@@ -397,6 +408,9 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
             continue
         if kind == "LIGHT":
             if not (getattr(ob, "visible_diffuse", True) or getattr(ob, "visible_glossy", True)):
+                continue
+            if getattr(getattr(ob.data, "cycles", None), "is_portal", False):
+                portals.append(ob.original.name)
                 continue
             got = convert_light(ob.data, M, warn)
             if got is not None:
@@ -423,6 +437,8 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
                     cache[key] = arrays
             pos, tri, loops, tp, mi = arrays
             slots = [s.material for s in ob.material_slots] if len(ob.material_slots) else list(me.materials)
+            if override is not None:
+                slots = [override] * max(1, len(slots))
             textured = _texture_uvs(me, ob, slots, tp, mi, loops, converter, images, warn)
             info = ObjectInfo(ob.name, ob.original.name, me.name, bool(inst.is_instance),
                               inst.parent.name if inst.is_instance and inst.parent else None,
@@ -447,6 +463,10 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
         n_vert += len(pos)
         n_tri += len(tri)
 
+    if portals:
+        warn(f"light portal{'s' if len(portals) > 1 else ''} {', '.join(repr(p) for p in portals[:3])}"
+             f"{' ...' if len(portals) > 3 else ''}: a portal guides Cycles' sampling of the world and emits "
+             "nothing; left out (bundles reach the world through the openings without it)")
     if n_tri == 0:
         raise SceneError("nothing to render: the scene has no visible mesh objects")
     render = scene.render
@@ -456,7 +476,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
     if cam_ob is not None:
         cam_ob = cam_ob.evaluated_get(depsgraph)
     camera = export_camera(cam_ob, render, size, border, warn) if cam_ob is not None or require_camera else None
-    environment = world_radiance(scene.world, warn)
+    world = export_world(scene.world, warn)
     if render.use_motion_blur:
         warn("motion blur is not supported: the scene is rendered at the current frame")
     if render.film_transparent:
@@ -485,7 +505,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
         _warnings.simplefilter("always")
         sc = build_scene(v, t, m, mats, point_lights=group(PointLights, lights["point"]),
                          sun_lights=group(SunLights, lights["sun"]), area_lights=group(AreaLights, lights["area"]),
-                         environment=environment, camera=camera, two_sided=True,
+                         world=world, camera=camera, two_sided=True,
                          triangle_solid=np.zeros(len(t), bool),    # two-sided surfaces are never solids
                          name=name or scene.name, texture=texture)
     for w in caught:

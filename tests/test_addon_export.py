@@ -238,7 +238,7 @@ def test_node_trees_flatten_to_lambert_ggx(fresh):
     assert isinstance(mt, MaterialTable)
 
 
-def test_principled_image_texture_and_world(fresh):
+def test_principled_image_texture_and_world(fresh, tmp_path):
     add_camera((0, 0, 10))
     p = node_material("plastic", "principled", color=(0.5, 0.2, 0.1), roughness=0.4)
     bsdf = p.node_tree.nodes["Principled BSDF"]
@@ -268,16 +268,24 @@ def test_principled_image_texture_and_world(fresh):
     assert np.allclose(mt.diffuse[i["textured"]], 0.4)                        # the image's mean color
     assert any("coat is ignored" in x for x in ex.warnings)
     assert any("'checker'" in x and "mean color" in x for x in ex.warnings)
-    assert np.allclose(ex.scene.environment, (1.0, 0.5, 2.0))
+    assert ex.scene.world.is_constant and np.allclose(ex.scene.world.image[0, 0], (1.0, 0.5, 2.0))
     bpy.context.scene.world = None
-    assert np.allclose(export().scene.environment, 0)                  # no world: black
+    assert not export().scene.world.emits                       # no world: black
+    img.filepath_raw = str(tmp_path / "checker.exr")       # Blender evaluates the world from the saved file
+    img.file_format = "OPEN_EXR"
+    img.save()
     w.node_tree.nodes.new("ShaderNodeTexEnvironment").image = img
     env = w.node_tree.nodes["Environment Texture"]
     w.node_tree.links.new(env.outputs["Color"], w.node_tree.nodes["Background"].inputs["Color"])
     bpy.context.scene.world = w
     ex = export()
-    assert np.allclose(ex.scene.environment, 0.4 * 2.0)
-    assert any("environment texture" in x for x in ex.warnings)
+    # a textured world is evaluated by Blender into an image by direction: green is 0.4 x 2
+    # everywhere, red and blue change with the direction (the checker's columns)
+    world = ex.scene.world
+    assert not world.is_constant and world.image.shape[2] == 3
+    assert world.mean()[1] == pytest.approx(0.8, rel=1e-3) and np.allclose(world.image[..., 1], 0.8, rtol=1e-3)
+    assert world.image[..., 0].min() < 0.5 and world.image[..., 0].max() > 1.1
+    assert not any("world" in x for x in ex.warnings), ex.warnings
 
 
 def test_camera_resolution_border_and_ortho(fresh):
@@ -415,3 +423,51 @@ def test_what_cycles_renders_and_the_export_leaves_out_is_warned(fresh):
                      "object 'pts': point clouds", "material 'p': its displacement is not modeled",
                      "base color (1.5, 0.5, 0.5) is above 1"):
         assert text.count(expected) == 1, (expected, text)
+
+
+def test_world_is_evaluated_by_blender_in_the_cores_layout(fresh):
+    """A world whose color is its own direction (Texture Coordinate › Generated, mapped to
+    0.5 + 0.5 w) comes back as the directions of :func:`raybundle.scene.world.pixel_directions`:
+    Blender's render and the core's look-up agree on the layout."""
+    from raybundle.scene.world import pixel_directions
+
+    add_camera((0, 0, 10))
+    v, f = quad()
+    add_object("plate", v, f, [node_material("white")])
+    w = set_world((0, 0, 0), 1.0)
+    nt = w.node_tree
+    tc, vm = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeVectorMath")
+    vm.operation = "MULTIPLY_ADD"
+    vm.inputs[1].default_value = vm.inputs[2].default_value = (0.5, 0.5, 0.5)
+    nt.links.new(tc.outputs["Generated"], vm.inputs[0])
+    nt.links.new(vm.outputs[0], nt.nodes["Background"].inputs["Color"])
+    world = export().scene.world
+    h, wd = world.image.shape[:2]
+    got = 2.0 * world.image - 1.0
+    got /= np.linalg.norm(got, axis=2, keepdims=True)
+    angle = np.degrees(np.arccos(np.clip((got * pixel_directions(h, wd)).sum(axis=2), -1, 1)))
+    rows = slice(h // 8, h - h // 8)          # near the poles a pixel's mean direction is shorter
+    assert angle[rows].max() < 1.0, angle[rows].max()
+
+
+def test_material_override_and_portals(fresh):
+    """The view layer's Material Override replaces every material, the lamp's emission too
+    (Cycles' clay render); a light portal is no lamp."""
+    add_camera((0, 0, 10))
+    v, f = quad()
+    add_object("tex", v, f, [node_material("red", color=(0.8, 0.1, 0.1))])
+    add_object("lamp", v, f, [node_material("glow", "emission", color=(1, 1, 1), strength=5.0)], location=(2, 0, 0))
+    add_light("AREA", location=(0, 0, 3), size=1.0, energy=100.0)
+    portal = add_light("AREA", location=(0, 0, 2), size=1.0, energy=1000.0)
+    portal.data.cycles.is_portal = True
+    set_world((1, 1, 1), 1.0)
+    ex = export()
+    assert len(ex.scene.area_lights) == 1 and np.allclose(ex.scene.area_lights.radiance, 100 / np.pi)
+    assert any("portal" in x and repr(portal.name) in x for x in ex.warnings)
+    assert ex.scene.materials.is_emitter.any()
+    clay = node_material("clay", color=(0.8, 0.8, 0.8))
+    bpy.context.view_layer.material_override = clay
+    ex = export()
+    mt = ex.scene.materials
+    assert mt.names == ["clay"] and not mt.is_emitter.any()
+    assert np.allclose(mt.diffuse[0], 0.8)

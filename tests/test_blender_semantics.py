@@ -184,7 +184,7 @@ def test_npz_keeps_sides_lights_and_world(tmp_path):
     sc.save_npz(tmp_path / "s.npz")
     back = load_npz(tmp_path / "s.npz")
     assert back.triangle_two_sided.all() and back.n_sides == 2 * back.n_patches
-    assert np.allclose(back.environment, [0.1, 0.2, 0.3])
+    assert back.world.is_constant and np.allclose(back.world.image[0, 0], [0.1, 0.2, 0.3])
     for group in ("point_lights", "sun_lights", "area_lights"):
         for k, v in vars(getattr(sc, group)).items():
             assert np.allclose(getattr(getattr(back, group), k), v), (group, k)

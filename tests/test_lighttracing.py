@@ -90,7 +90,7 @@ def test_photons_carry_each_lights_emitted_power():
                     + 2 * np.pi * 2 * spot.mean() * sc.point_lights.intensity[0]
                     + np.pi * sc.area_lights.area[0] * sc.area_lights.radiance[0]
                     + np.pi * R ** 2 * sc.sun_lights.irradiance[0]
-                    + 4 * np.pi ** 2 * R ** 2 * sc.environment)
+                    + 4 * np.pi ** 2 * R ** 2 * sc.world.image[0, 0])
         mean, se = power.mean(axis=0), power.std(axis=0) / np.sqrt(n)
         assert np.all(np.abs(mean - expected) < 4.5 * se), (mean, expected, se)
     finally:

@@ -23,7 +23,7 @@ def test_jacobi_sweeps_reach_the_direct_solution_of_the_same_form_factors():
     n = len(s.area)
     E = s.sweep(400)
     s.incoming = np.zeros_like(E)
-    s0 = np.vstack([s.sent_radiance(s.normal), s.environment])     # Le and kd/pi E1 only
+    s0 = np.vstack([s.sent_radiance(s.normal), s.world.image[0, 0]])     # Le and kd/pi E1 only
     for c in range(3):
         a = np.eye(n) - G[:, :n] * s.kd_over_pi[:, c][None, :]
         exact = np.linalg.solve(a, G @ s0[:, c])

@@ -59,7 +59,7 @@ def test_bundle_equals_brute_force(name, rng):
         u = rng.random(5)
         d = uniform_sphere(u[0], u[1])
         origins, delta = tr.bundle_origins(d, 24, (u[2], u[3]), u[4])
-        world = bool(np.any(sc.environment > 0))
+        world = sc.world.emits
         up, down, _, _, *ends = tr.all_hit_pairs(origins, d, ends=world)
         fast = bundle_from_hits(sc, d, delta, up, down, len(origins), 0, *ends)
         slow = brute_force_bundle(sc, origins, d, delta, tr.eps)
@@ -79,7 +79,7 @@ def test_bundles_traced_together_equal_brute_force_one_by_one(name, rng):
     u = rng.random((k, 5))
     dirs = np.array([uniform_sphere(a, b) for a, b in u[:, :2]])
     together = tr.bundles(dirs, 24, u[:, 2:4], u[:, 4])
-    world = bool(np.any(sc.environment > 0))
+    world = sc.world.emits
     assert len(together) == k
     for j, b in enumerate(together):
         origins, delta = tr.bundle_origins(dirs[j], 24, u[j, 2:4], u[j, 4])

@@ -4,6 +4,8 @@ Usage (the bpy module is in the project's venv; about 15 minutes on 2 cores)::
 
     python tools/bench_blender.py demo_scenes/cornell_box.blend --out out/bench-blender
     python tools/bench_blender.py cornell --times 5 10 30 60 --out out/bench-cornell
+    python tools/bench_blender.py demo_scenes/interiors/living-room.blend --clay --resolution 320 180 \
+        --references demo_scenes/interiors/references --reference-samples 4096 --times 60 300 --out out/x
 
 The scene is a ``.blend`` (rendered by the RAYBUNDLE engine and by Cycles, each
 opening the file) or a built-in scene of the core (``cornell``, ``cornell-glossy``:
@@ -12,13 +14,18 @@ triangles, built in ``bpy`` by ``tools/cycles_reference.py``).
 
 1. A long Cycles reference (CPU, no denoising or clamping, box filter one pixel,
    Standard view): two independent halves with ``--reference-samples`` each
-   (seeds 1 and 2), kept in ``--out`` and reused.
+   (seeds 1 and 2), kept in ``--out`` (or ``--references``: committed ones, named
+   ``<file>-<clay|full>-<seed>.exr``) and reused.
+   ``--clay`` renders with the view layer's Material Override set to a white diffuse
+   material (albedo 0.8) in every engine; ``--resolution W H`` overrides the file's.
 2. RAYBUNDLE renders with ``--times`` seconds of iteration, and Cycles renders
    with 1, 2, 4, ... samples until its error is below every RAYBUNDLE error (or a
    render takes 8 times the longest RAYBUNDLE run, at most ``--max-cycles-seconds``).  Every render is timed from opening the ``.blend`` to the EXR written.
 3. The error of each, :func:`raybundle.app.metrics.image_error` (RMSE / mean of the
    reference over pixels at least 2 px from a directly seen light, with the
-   reference's own noise from its halves subtracted), and over all pixels.
+   reference's own noise from its halves subtracted), and over all pixels; for
+   RAYBUNDLE also the set-up's seconds (export, world, patches, first shot) and the
+   warnings of its run.
 
 Writes ``bench.csv``, ``summary.json`` and ``bench.png`` (error against seconds,
 log-log) into ``--out`` and prints, for every RAYBUNDLE time, Cycles' error at the
@@ -41,6 +48,11 @@ _TOOLS = os.path.dirname(os.path.abspath(__file__))
 sys.path[:0] = [_TOOLS, os.path.dirname(_TOOLS)]          # cycles_reference; raybundle_addon
 
 
+#: what every render of a run does right after opening the file: ``clay`` (the Material
+#: Override) and ``resolution`` (W, H or None), set by ``main``
+OPEN_SETTINGS = {"clay": False, "resolution": None}
+
+
 def _open(path):
     import bpy
 
@@ -49,7 +61,35 @@ def _open(path):
     if not hasattr(bpy.types.Scene, "raybundle"):
         raybundle_addon.register()
     bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path))
-    return bpy.context.scene
+    scene = bpy.context.scene
+    if OPEN_SETTINGS["resolution"]:
+        r = scene.render
+        r.resolution_x, r.resolution_y = OPEN_SETTINGS["resolution"]
+        r.resolution_percentage = 100
+    if OPEN_SETTINGS["clay"]:
+        bpy.context.view_layer.material_override = clay_material()
+    return scene
+
+
+def clay_material():
+    """A white diffuse material (Diffuse BSDF, albedo 0.8): the clay of an architectural render."""
+    import bpy
+    from cycles_reference import new_with_nodes
+
+    mat = new_with_nodes(bpy.data.materials, "raybundle bench clay")
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out, dif = nt.nodes.new("ShaderNodeOutputMaterial"), nt.nodes.new("ShaderNodeBsdfDiffuse")
+    dif.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
+    nt.links.new(dif.outputs["BSDF"], out.inputs["Surface"])
+    return mat
+
+
+def peak_memory_gb():
+    """This process's peak resident memory [GB] (every render of the run is in it)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
 
 
 def is_blend(scene):
@@ -91,7 +131,18 @@ def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None
     exr_output(path)
     bpy.ops.render.render(write_still=True)
     wall = time.perf_counter() - t0
+    if engine != "CYCLES":
+        from raybundle_addon.engine import LAST_RUN
+
+        run = LAST_RUN.get(scene.name, {})
+        LAST_RUN_FIGURES.clear()
+        LAST_RUN_FIGURES.update(setup_seconds=run.get("stats", {}).get("setup_seconds"),
+                                warnings=run.get("warnings", []))
     return read_exr(path), wall
+
+
+#: the set-up seconds and warnings of the last RAYBUNDLE render of a .blend
+LAST_RUN_FIGURES: dict = {}
 
 
 def light_mask(blend):
@@ -172,14 +223,24 @@ def main(argv=None):
     p.add_argument("--max-cycles-seconds", type=float, default=300.0,
                    help="stop the Cycles ladder after a render this long")
     p.add_argument("--patches", type=int, default=None, help="RAYBUNDLE target patch count (default: the file's)")
+    p.add_argument("--clay", action="store_true", help="render with the view layer's Material Override set to a "
+                   "white diffuse material (every engine)")
+    p.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="override the file's resolution")
+    p.add_argument("--references", help="folder of committed reference halves <file>-<clay|full>-<seed>.exr "
+                   "(rendered there when missing)")
     a = p.parse_args(argv)
+    OPEN_SETTINGS.update(clay=a.clay, resolution=a.resolution)
     from raybundle.app.metrics import image_error
     from raybundle.util.io import read_exr
 
     os.makedirs(a.out, exist_ok=True)
+    if a.references:
+        os.makedirs(a.references, exist_ok=True)
     halves = []
+    stem = os.path.splitext(os.path.basename(a.blend))[0]
     for seed in (1, 2):
-        path = os.path.join(a.out, f"reference-{seed}.exr")
+        path = (os.path.join(a.references, f"{stem}-{'clay' if a.clay else 'full'}-{seed}.exr") if a.references
+                else os.path.join(a.out, f"reference-{seed}.exr"))
         if not os.path.exists(path):
             print(f"Cycles reference half {seed}: {a.reference_samples} samples ...", flush=True)
             render(a.blend, path, "CYCLES", samples=a.reference_samples, seed=seed)
@@ -190,11 +251,13 @@ def main(argv=None):
     def row(engine, setting, img, wall):
         e = image_error(img, reference, reference_halves=halves, exclude=mask)
         full = image_error(img, reference, reference_halves=halves)
-        print(f"{engine} {setting:g}{' s' if engine == 'raybundle' else ' spp'}: {wall:.1f} s wall, "
+        setup = LAST_RUN_FIGURES.get("setup_seconds") if engine == "raybundle" else None
+        print(f"{engine} {setting:g}{' s' if engine == 'raybundle' else ' spp'}: {wall:.1f} s wall"
+              f"{'' if setup is None else f' (set-up {setup:.1f} s)'}, "
               f"error {e['error']:.4f} (all pixels {full['error']:.4f}), mean ratio {e['mean_ratio']:.4f}, "
               f"p99.9 {e['p99_9']:.3f}", flush=True)
         return dict(engine=engine, setting=setting, seconds=wall, error=e["error"], error_all_pixels=full["error"],
-                    mean_ratio=e["mean_ratio"], p99_9=e["p99_9"])
+                    mean_ratio=e["mean_ratio"], p99_9=e["p99_9"], setup_seconds=setup)
 
     noise = image_error(reference, reference, reference_halves=halves, exclude=mask)
     print(f"reference: noise {noise['reference_noise']:.4f} per pixel (relative RMSE), its own p99.9 "
@@ -204,6 +267,9 @@ def main(argv=None):
         img, wall = render(a.blend, os.path.join(a.out, f"raybundle-{t:g}s.exr"), "RAYBUNDLE", seconds=t,
                            seed=3, patches=a.patches)
         rows.append(row("raybundle", t, img, wall))
+    warnings = list(LAST_RUN_FIGURES.get("warnings", []))
+    for w in warnings:
+        print(f"raybundle warning: {w}")
     samples = 1
     while True:
         img, wall = render(a.blend, os.path.join(a.out, f"cycles-{samples}spp.exr"), "CYCLES", samples=samples,
@@ -221,12 +287,14 @@ def main(argv=None):
         w.writeheader()
         w.writerows(rows)
     with open(os.path.join(a.out, "summary.json"), "w") as f:
-        json.dump(dict(blend=a.blend, reference_samples_per_half=a.reference_samples,
+        json.dump(dict(blend=a.blend, clay=a.clay, resolution=a.resolution, warnings=warnings,
+                       peak_memory_gb=peak_memory_gb(), reference_samples_per_half=a.reference_samples,
                        reference_noise=noise["reference_noise"], reference_p99_9=noise["reference_p99_9"],
                        rows=rows, summary=summary,
                        time_to_error=targets),
                   f, indent=1)
-    chart(os.path.join(a.out, "bench.png"), rows, os.path.basename(a.blend))
+    chart(os.path.join(a.out, "bench.png"), rows, os.path.basename(a.blend) + (" (clay)" if a.clay else ""))
+    print(f"peak memory of the run {peak_memory_gb():.2f} GB")
     print(f"wrote {a.out}/bench.csv, summary.json, bench.png")
     return 0
 

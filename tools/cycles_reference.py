@@ -201,7 +201,7 @@ def unsupported(scene):
     materials and one-sided emission, under a black world), or None."""
     mt = scene.materials
     checks = [(len(scene.point_lights) + len(scene.sun_lights) + len(scene.area_lights) > 0, "lights"),
-              (np.any(scene.environment > 0), "a world that emits"),
+              (scene.world.emits, "a world that emits"),
               (np.any(scene.triangle_two_sided), "two-sided faces"),
               (np.any(mt.emission_albedo_complement > 0), "emission that depends on the albedo"),
               (np.any(mt.has_layer) or np.any(mt.is_layered), "Principled layers"),

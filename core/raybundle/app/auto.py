@@ -92,7 +92,7 @@ def inspect(scene) -> SceneFigures:
         emitting_share=share(per_mat[mats.is_emitter].sum(), total),
         small_emitters=len(small_emitters(scene)),
         lights=len(scene.point_lights) + len(scene.sun_lights) + len(scene.area_lights),
-        environment=bool(np.any(np.asarray(scene.environment) > 0)))
+        environment=scene.world.emits)
 
 
 def choose(scene) -> Choice:

@@ -34,7 +34,8 @@ class ChainState:
     ``caustic``: ``(sum, dsum, samples)`` of :class:`~raybundle.lights.caustics.CausticShot` or None;
     ``image``: the renderer's pass sums and counts (None for a solver alone);
     ``stats``: iterations, directions, rays and seconds added up; ``chains``: how many
-    chains were pooled."""
+    chains were pooled; ``mean_world_incoming`` (S, 3): the part of ``mean_incoming`` straight
+    from the world, averaged alike (zeros where the image does not take it apart)."""
 
     averaged: int
     mean_incoming: np.ndarray
@@ -43,6 +44,7 @@ class ChainState:
     image: dict | None = None
     stats: dict = field(default_factory=dict)
     chains: int = 1
+    mean_world_incoming: np.ndarray | None = None
 
 
 def _renderer_and_solver(renderer_or_solver):
@@ -63,7 +65,7 @@ def state(renderer_or_solver) -> ChainState:
     return ChainState(solver.averaged, solver.mean_incoming.copy(),
                       fs.sums(), None if cs is None else cs.sums(),
                       image, dict(iterations=st.iterations, directions=st.directions, rays=st.rays,
-                                  seconds=st.seconds))
+                                  seconds=st.seconds), mean_world_incoming=solver.mean_world_incoming.copy())
 
 
 def merge(states) -> ChainState:
@@ -82,7 +84,11 @@ def merge(states) -> ChainState:
         image = {k: sum(s.image[k] for s in states) for k in states[0].image if k != "shadow_flags"}
         image["shadow_flags"] = np.logical_or.reduce([s.image["shadow_flags"] for s in states])
     stats = {k: sum(s.stats.get(k, 0) for s in states) for k in states[0].stats}
-    return ChainState(n, mean, first, caustic, image, stats, sum(s.chains for s in states))
+    world = None
+    if all(s.mean_world_incoming is not None for s in states):
+        world = (sum(s.averaged * s.mean_world_incoming for s in states) / n) if n \
+            else states[0].mean_world_incoming.copy()
+    return ChainState(n, mean, first, caustic, image, stats, sum(s.chains for s in states), world)
 
 
 def apply(merged: ChainState, renderer_or_solver):
@@ -93,6 +99,8 @@ def apply(merged: ChainState, renderer_or_solver):
         raise ValueError("the state comes from another scene or patch layout")
     solver.averaged = merged.averaged
     solver.mean_incoming = merged.mean_incoming.copy()
+    if merged.mean_world_incoming is not None:
+        solver.mean_world_incoming = merged.mean_world_incoming.copy()
     solver.first_shot.set_sums(*merged.first_shot)
     if solver.caustic is not None and merged.caustic is not None:
         solver.caustic.set_sums(*merged.caustic)

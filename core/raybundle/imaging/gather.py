@@ -40,9 +40,12 @@ from ..tracing.sampling import frames_from_normals, kronecker_alpha, uniform_tri
 class FinalGather:
     """The gather of one solution state (its vertex values computed once)."""
 
-    def __init__(self, solver, near=1.0, near_light_samples=1, caustic=True):
+    def __init__(self, solver, near=1.0, near_light_samples=1, caustic=True, world=True):
         sc, rec = solver.scene, solver.reconstruction
         self.solver, self.scene, self.rec = solver, sc, rec
+        # rays that leave the scene read the world (``world`` False: left out, for an image
+        # that samples the world's direct light itself, :class:`~raybundle.lights.world_light.WorldLight`)
+        self.world = bool(world)
         indirect = solver.indirect_incoming()
         sharp = solver.caustic.E if solver.caustic is not None else None
         self.vert = rec.smooth_and_sharp(indirect + solver.first_shot.E.sum(axis=1), sharp)
@@ -105,8 +108,8 @@ class FinalGather:
                 L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False,
                                      glossy_iterate=False, first_shot_glossy=self.first_shot_glossy)
                 L[hit] += self.glossy_reflected(origin[hit] + w[hit] * dist[hit, None], ts, -w[hit], rng)
-            if np.any(sv.environment > 0):
-                L[tri < 0] = sv.environment
+            if self.world and sc.world.emits:
+                L[tri < 0] = sc.world.radiance(w[tri < 0])
             out[lo:hi] = np.pi * L.reshape(hi - lo, rays, 3).mean(axis=1)
         if caustic:
             out += rec.at(self.vert_caustic, at[0], at[1])
@@ -143,9 +146,9 @@ class FinalGather:
             L = sv.radiance(sc.tside_side[ts], -w_i[hit], diffuse_incoming=self.rec.at(self.vert, ts, bary),
                             first_shot_emission=False, glossy_as_diffuse=True)
             out[live[hit]] = weight[hit] * L
-        if np.any(sv.environment > 0):
+        if sc.world.emits:
             miss = np.nonzero(tri < 0)[0]
-            out[live[miss]] = weight[miss] * sv.environment
+            out[live[miss]] = weight[miss] * sc.world.radiance(w_i[miss])
         return out
 
 

@@ -71,9 +71,9 @@ class GlossyEyePaths:
             tri, t, bu, bv = self.tracer.first_hit(pts[live] + n[live] * self.tracer.eps, w_i[live])
             self.rays += len(live)
             hit = tri >= 0
-            if np.any(sc.environment > 0):      # paths that leave the scene see the world
+            if sc.world.emits:      # paths that leave the scene see the world
                 gone = live[~hit]
-                np.add.at(out, pix[gone], throughput[gone] * sc.environment)
+                np.add.at(out, pix[gone], throughput[gone] * sc.world.radiance(w_i[gone]))
             live, tri, t = live[hit], tri[hit], t[hit]
             if light_mis is not None and len(live):      # the lobe's ray meets a mesh light (MIS)
                 m_from, wo_from = (light_mis[0], light_mis[1]) if bounce == 0 else (m, wo)

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..lights.world_light import WorldLight
 from ..tracing.sampling import ShiftedKronecker, kronecker_alpha, stratified_2d
 from .caustic_splats import CausticSplats
 from .gather import EdgeGather, FinalGather
@@ -188,6 +189,10 @@ class Renderer(ProgressiveImage):
         self.glossy_paths = GlossyEyePaths(scene, solver, direct, self.tracer, settings, self.rng, self.surface_values)
         # the final gather next to concave edges and contacts
         self.edge_gather = EdgeGather(scene, self.tracer, settings.seed)
+        #: the world's direct light on the diffuse lobe, sampled at the visible points of every
+        #: pass (the patches then give the rest: :meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.image_incoming`)
+        self.world_light = (WorldLight(scene.world, self.tracer)
+                            if settings.world_samples > 0 and getattr(solver, "world_direct", False) else None)
         self.gather_rays_used = 0                         # rays per pixel of the last resolve's gather
         # per pixel: some earlier shadow ray reached a light / was blocked (both: a penumbra)
         self.shadow_flags = np.zeros((n, 2), bool)
@@ -217,7 +222,10 @@ class Renderer(ProgressiveImage):
         """Radiance (N, 3) that reaches the eye directly: emission of the surfaces
         seen, the world's radiance where nothing is hit; and (N,) bool, the
         pixels whose sample saw an emitting surface."""
-        out = np.broadcast_to(self.scene.environment, (len(g.triangle), 3)).copy()
+        out = np.zeros((len(g.triangle), 3))
+        miss = np.nonzero(~g.hit)[0]
+        if len(miss):
+            out[miss] = self.scene.world.radiance(-g.w_eye[miss], camera=True)
         h = np.nonzero(g.hit)[0]
         cos_eye = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h])
         out[h] = self.scene.materials.emitted_radiance(g.material[h], cos_eye)
@@ -358,6 +366,15 @@ class Renderer(ProgressiveImage):
             out[hf] += np.add.reduceat(value, first, axis=0) / reps[:, None]      # copies are contiguous
             np.logical_or.at(self.shadow_flags, pixels[hf], np.logical_or.reduceat(f, first, axis=0))
             self.image_rays += self.direct.rays - before
+        if self.world_light is not None and len(hf):
+            before = self.world_light.rays
+            e = self.world_light.irradiance(g.point[hf], g.normal[hf],
+                                            self.rng.random((len(hf), self.settings.world_samples, 3)))
+            m = g.material[hf]
+            w_d = self.scene.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[hf], g.w_eye[hf]))
+            scale = self.albedo_scale(g.triangle[hf], g.point[hf])
+            out[hf] += w_d * self.scene.materials.diffuse_reflectance[m] / np.pi * e * (1.0 if scale is None else scale)
+            self.image_rays += self.world_light.rays - before
         gl = hf[self.glossy_material[g.material[hf]]]
         gathered = np.zeros_like(out)
         if self.settings.glossy_gather:
@@ -468,14 +485,14 @@ class Renderer(ProgressiveImage):
         caustic = solver.caustic is not None and self.caustic_splats is None
         if e_bar is None:
             # a caustic light-traced into the pixels (caustic_splats) is left out here
-            e_bar = solver.indirect_incoming() if caustic else solver.mean_incoming
+            e_bar = solver.image_incoming(caustic=caustic, world=self.world_light is None)
             sharp = solver.caustic.E if caustic else None
             self.gather_rays_used = 0
             rays = self.settings.gather_rays
             if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and gather_seconds and
                                                                  self.edge_gather.affordable(self._probe_gbuffer(),
                                                                                              gather_seconds))):
-                final = FinalGather(solver, caustic=caustic)
+                final = FinalGather(solver, caustic=caustic, world=self.world_light is None)
         if not np.any(e_bar) and final is None:
             return out
         vert = solver.reconstruction.smooth_and_sharp(e_bar, sharp) if self.settings.smooth else None

@@ -43,7 +43,13 @@ class RenderSettings:
     ``caustic_splats``: with a caustic first shot, its samples per pixel and image pass that
     light-trace the caustic on the surfaces the eye sees into the pixels
     (:meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`), 0 = read it from the patches as the rest of the
-    diffuse indirect light.
+    diffuse indirect light;
+    ``world_samples``: shadow rays per visible point and image pass towards a world that
+    changes with direction, drawn by its brightness
+    (:class:`~raybundle.lights.world_light.WorldLight`), for the diffuse lobe's direct light
+    from the world; 0 = the patches carry it, as the rest of the diffuse light (the default:
+    seen from inside a room most such rays meet a wall, and the few through a window
+    make single pixels bright; README, 'Where the method is weak').
     """
 
     bundle_resolution: int = 0
@@ -65,6 +71,7 @@ class RenderSettings:
     gather_share: float = 0.1
     penumbra_samples: int = 8
     caustic_splats: float = 1.0
+    world_samples: int = 0
     threads: int | None = None
 
 
@@ -86,6 +93,8 @@ class RenderSettings:
             raise ValueError("glossy_send_rays must lie in [1, 64]")
         if not 1 <= int(self.penumbra_samples) <= 4096:
             raise ValueError("penumbra_samples must lie in [1, 4096]")
+        if not 0 <= int(self.world_samples) <= 4096:
+            raise ValueError("world_samples must lie in [0, 4096] (0 = the patches carry the world's direct light)")
         if not -1 <= int(self.gather_rays) <= 65536:
             raise ValueError("gather_rays must lie in [-1, 65536] (0 = no final gather, -1 = automatic)")
         if not 0.0 <= float(self.gather_share) < 1.0:

@@ -128,7 +128,6 @@ class PathTracer(ProgressiveImage, Method):
         out = np.zeros((len(org), 3))
         row = np.arange(len(org))                  # the output row of each live path
         throughput = np.ones((len(org), 3))
-        env = np.asarray(sc.environment, float)
         prev = None                                # (point, material, normal, w_out, glossy ray) left from
         for depth in range(MAX_DEPTH):
             if len(row) == 0:
@@ -136,8 +135,8 @@ class PathTracer(ProgressiveImage, Method):
             tri, t, _, _ = tr.first_hit(org, w)
             self.image_rays += len(row)
             hit = tri >= 0
-            if np.any(env > 0):
-                np.add.at(out, row[~hit], throughput[~hit] * env)
+            if sc.world.emits or (depth == 0 and np.any(sc.world.seen > 0)):   # the world, as the camera sees it
+                np.add.at(out, row[~hit], throughput[~hit] * sc.world.radiance(w[~hit], camera=depth == 0))
             h = np.nonzero(hit)[0]
             row, pix, tri, t, w, throughput = row[h], pix[h], tri[h], t[h], w[h], throughput[h]
             x = org[h] + t[:, None] * w

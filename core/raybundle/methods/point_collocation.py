@@ -67,6 +67,8 @@ class PointCollocationSolver(StochasticIterationSolver):
     """Stochastic iteration on vertex unknowns with linear basis functions (module docstring).
     The first shot, the image and the set-up are the bundle iteration's."""
 
+    SEPARATES_WORLD_DIRECT = False        # its own step: the world's light stays in its solution
+
     name = "point-collocation"
     #: its vertex averages are not in :class:`~raybundle.app.chains.ChainState`
     merges_chains = False
@@ -122,8 +124,8 @@ class PointCollocationSolver(StochasticIterationSolver):
             self.stats.rays += len(v)
             hit = tri >= 0
             L = np.zeros((len(v), 3))
-            if np.any(self.environment > 0):
-                L[~hit] = self.environment
+            if sc.world.emits:
+                L[~hit] = sc.world.radiance(up[~hit])
             h = np.nonzero(hit)[0]
             if len(h):
                 ts = sc.seen_tside(tri[h], up[h])

@@ -9,7 +9,8 @@ N directions
     G_ij = (2 pi / (N A_i)) sum_{lines j -> i} delta^2      [sr]
 
 is pi times the global-line estimate of the form factor from i to j (the world is one more
-sender column; sum_j G_ij = pi for a closed scene).  The incoming radiance then solves the diffuse rendering equation on these
+sender column, each of its lines carrying the world's radiance in its own direction; sum_j
+G_ij = pi for a closed scene).  The incoming radiance then solves the diffuse rendering equation on these
 form factors,
 
     E_i = sum_j G_ij S_j,     S_j = Le_j + kd_j / pi (E_j + E1_j)
@@ -35,6 +36,8 @@ class RadiositySolver(StochasticIterationSolver):
     """Global-line form factors and Jacobi sweeps (module docstring).  The first shot, the
     open area, the reconstruction and the image are the stochastic iteration's."""
 
+    SEPARATES_WORLD_DIRECT = False        # its own step: the world's light stays in its solution
+
     name = "radiosity"
     #: the directions integrate form factors; no random operator is iterated
     iterates = False
@@ -57,6 +60,7 @@ class RadiositySolver(StochasticIterationSolver):
             raise ValueError("radiosity handles diffuse scenes only; this scene has glossy surfaces "
                              "(use stochastic-iteration)")
         self.lines = np.zeros(n * (n + 1))            # sum of delta^2 per (receiver, sender), world last
+        self.world_lines = np.zeros((n, 3))           # sum of delta^2 L_w per receiver, the world's lines
         self.form_factor_directions = 0
 
     def work_rays(self):
@@ -80,8 +84,7 @@ class RadiositySolver(StochasticIterationSolver):
         lines = self.lines.reshape(n, n + 1)           # G = scale * lines, without an n^2 copy
         scale = 2.0 * np.pi / (max(self.form_factor_directions, 1) * np.maximum(self.area, 1e-300))
         for _ in range(int(sweeps)):
-            S = np.vstack([self.sent_radiance(self.normal), self.environment])
-            self.incoming = (lines @ S) * scale[:, None]
+            self.incoming = (lines[:, :n] @ self.sent_radiance(self.normal) + self.world_lines) * scale[:, None]
         return self.incoming
 
     def step(self):
@@ -98,6 +101,11 @@ class RadiositySolver(StochasticIterationSolver):
         for bundle in self.tracer.bundles(d, self.bundle_resolution, offsets=g[:, :2], rotations=g[:, 2]):
             sender = np.where(bundle.sender < 0, n, bundle.sender)
             np.add.at(self.lines, bundle.receiver * (n + 1) + sender, bundle.cell_area)
+            world = np.nonzero(bundle.sender < 0)[0]
+            if len(world):            # the world sends L_w(-d) along +d and L_w(d) along -d
+                along = self.world.radiance_along(bundle.direction)
+                np.add.at(self.world_lines, bundle.receiver[world],
+                          bundle.cell_area * along[(bundle.travel_sign[world] < 0).astype(int)])
             st.rays += bundle.n_casts
             st.bundle_rays += bundle.n_rays
         self.form_factor_directions += k_dirs

@@ -43,6 +43,8 @@ from .stochastic_iteration import StochasticIterationSolver
 class RayBundleWalk(StochasticIterationSolver):
     """Random walks of global ray bundles with Russian roulette (module docstring)."""
 
+    SEPARATES_WORLD_DIRECT = False        # its own step: the world's light stays in its solution
+
     name = "ray-bundle-walk"
     #: the range of the continuation probability q (the scene's mean albedo)
     Q_RANGE = (0.25, 0.95)
@@ -78,8 +80,8 @@ class RayBundleWalk(StochasticIterationSolver):
         """R^(k-1) of the glossy sides (G, 3) into ``send_dir`` (G, 3): the thesis' E f(t, s)."""
         return self._walk_sent(self.glossy_patches, send_dir)
 
-    def sent_environment(self):
-        return self.environment if self.walk_step == 0 else np.zeros(3)
+    def sent_environment(self, direction):
+        return super().sent_environment(direction) if self.walk_step == 0 else np.zeros((2, 3))
 
     def _walk_sent(self, patch, send_dir):
         if self.walk_step == 0:

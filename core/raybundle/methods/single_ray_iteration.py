@@ -107,7 +107,7 @@ class LightEmission:
         sl = scene.sun_lights
         for k in range(len(sl)):
             sources.append(("sun", k, np.pi * self.radius ** 2 * float(np.mean(sl.irradiance[k]))))
-        env = float(np.mean(scene.environment))
+        env = float(np.mean(scene.world.mean()))
         if env > 0:
             sources.append(("world", 0, 4 * np.pi ** 2 * self.radius ** 2 * env))
         sources = [s for s in sources if s[2] > 0]
@@ -176,7 +176,7 @@ class LightEmission:
                     power[i] = np.pi * R ** 2 * sl.irradiance[k]
                 else:
                     w = uniform_sphere(v[:, 0], v[:, 1])
-                    power[i] = 4 * np.pi ** 2 * R ** 2 * sc.environment
+                    power[i] = 4 * np.pi ** 2 * R ** 2 * sc.world.radiance(-w)    # arriving from -w
                 a, b = frames_from_normals(w)
                 r, phi = R * np.sqrt(v[:, 2]), 2 * np.pi * v[:, 3]
                 org[i] = (self.tracer.center - 1.01 * R * w + (r * np.cos(phi))[:, None] * a
@@ -228,7 +228,7 @@ class SingleRayIteration(ProgressiveImage, Method):
         self.burn_in = int(np.clip(np.ceil(np.log(0.01) / np.log(max(mean_albedo, 1e-3))), self.BURN_IN, 1000))
         py, px = np.divmod(np.arange(n_pix), camera.width)
         self._pixel = np.stack([px, py], axis=1).astype(float)
-        self._emits = bool(mats.is_emitter.any() or np.any(scene.environment > 0))
+        self._emits = bool(mats.is_emitter.any() or np.any(scene.world.seen > 0))
         self.mean_image = np.zeros((n_pix, 3))
         self.passes = 0                  # steps (iterates) so far
         self.averaged = 0
@@ -261,7 +261,7 @@ class SingleRayIteration(ProgressiveImage, Method):
         tri, _, _, _ = self.tracer.first_hit(org, w)
         self.image_rays += len(org)
         hit = tri >= 0
-        out[~hit] = sc.environment
+        out[~hit] = sc.world.radiance(w[~hit], camera=True)
         h = np.nonzero(hit)[0]
         nrm = sc.tside_normal[sc.seen_tside(tri[h], w[h])]
         out[h] = sc.materials.emitted_radiance(sc.triangle_material[tri[h]], -np.einsum("ij,ij->i", nrm, w[h]))

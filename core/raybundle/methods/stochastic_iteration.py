@@ -17,9 +17,11 @@ visible patches along +-d, and transfers::
     S_j   = Le_r,j(s_j) + L1_j(s_j) + E_j^{n-1} f_j(t_j^{n-1}, s_j)     (radiance sent)
     E_i^n = (2 pi / A_i) sum_j S_j P(i, j, d)                             [W/m^2]
 
-where ``i`` and ``j`` are sides (normal ``n`` of the side), the environment
-(world) radiance is one more sender ``j`` for the first and last hits of
-each bundle line, ``s_j = sign(n_j.d) d`` is the direction side j sends into,
+where ``i`` and ``j`` are sides (normal ``n`` of the side), the world is one
+more sender ``j`` for the first and last hits of each bundle line, sending the
+radiance ``L_w(-d)`` along +d and ``L_w(d)`` along -d (:mod:`raybundle.scene.world`:
+one look-up per direction for the whole bundle), ``s_j = sign(n_j.d) d`` is the
+direction side j sends into,
 ``t_i = -sign(n_i.d) d`` the travel direction patch i receives from (uniform
 on i's hemisphere, hence the 2 pi = 1/pdf), ``P(i,j,d) = A(i,j,d) cos_i`` the
 projected area of the rays linking them and ``L1`` the incoming first shot of
@@ -74,6 +76,8 @@ class StochasticIterationSolver(Method):
     merges_chains = True
     #: the fewest iterations left out of the running average (``burn_in``, set per scene)
     BURN_IN = 8
+    #: its step keeps the running average of the light straight from the world apart (:attr:`world_direct`)
+    SEPARATES_WORLD_DIRECT = True
 
     def __init__(self, scene, tracer, direct, sequence, bundle_resolution=0, seed=0, directions_per_step=1,
                  caustics=True, glossy_send_rays=2):
@@ -138,13 +142,20 @@ class StochasticIterationSolver(Method):
             self.caustic = None
         self.caustic_refine = (max(1024, len(np.unique(scene.tside_side[self.caustic.tsides])))
                                if self.caustic is not None else 0)
-        self.environment = np.asarray(scene.environment, float)
+        self.world = scene.world
+        #: the iterates' part that came straight from the world is kept apart
+        #: (:attr:`mean_world_incoming`), for an image that takes the world's direct light at its
+        #: visible points (:class:`~raybundle.lights.world_light.WorldLight`, ``world_samples``):
+        #: a world that changes with direction and a method whose step keeps that average
+        self.world_direct = self.SEPARATES_WORLD_DIRECT and self.world.emits and not self.world.is_constant
         n = scene.n_sides
         self._all_patches = np.arange(n)
         self.incoming = np.zeros((n, 3))
         self.glossy_incoming = self.incoming        # E_i(d_k) of glossy sides, received from t_i
         self.receive_direction = np.zeros((n, 3))   # t_i of the current iterate
         self.mean_incoming = np.zeros((n, 3))
+        self.world_incoming = np.zeros((n, 3))      # the iterate's part straight from the world
+        self.mean_world_incoming = np.zeros((n, 3))
         self.averaged = 0                           # iterations in mean_incoming
         self.direction = None
         self.stats = SolverStats()
@@ -197,8 +208,8 @@ class StochasticIterationSolver(Method):
             e = self.indirect_incoming() + self.first_shot.E.sum(axis=1)
             rows = np.nonzero(hit)[0][ok]
             got[rows] = self.radiance(xs[ok], back[ok], diffuse_incoming=e[xs[ok]], first_shot_emission=False)
-        if np.any(self.environment > 0):
-            got[~hit] = self.environment
+        if self.world.emits:
+            got[~hit] = self.world.radiance(w_i[live][~hit])
         gathered = np.zeros((len(gp_m), 3))
         gathered[live] = weight[live] * got
         return out + gathered.reshape(m, len(gp), 3).mean(axis=0)
@@ -225,6 +236,8 @@ class StochasticIterationSolver(Method):
         # that would otherwise fade only as fast as 1/n (3% after 100 iterations at albedo 0.7)
         self.averaged = st.iterations - (self.burn_in if st.iterations > self.burn_in else 0)
         self.mean_incoming += (E - self.mean_incoming) / self.averaged
+        if self.world_direct:
+            self.mean_world_incoming += (self.world_incoming - self.mean_world_incoming) / self.averaged
         st.rays += self.direct.rays - before
         st.seconds += time.perf_counter() - t0
         return bundles
@@ -237,9 +250,11 @@ class StochasticIterationSolver(Method):
             self.caustic.refine(self.caustic_refine)
             self.stats.rays += self.caustic.rays - rays
 
-    def sent_environment(self):
-        """Radiance (3,) the world sends into the bundle lines that leave the scene."""
-        return self.environment
+    def sent_environment(self, direction):
+        """Radiance (2, 3) the world sends into the bundle lines along ``direction`` that leave
+        the scene: travelling along -d (from the world at +d) and along +d (from -d)
+        (:meth:`~raybundle.scene.world.World.radiance_along`, reversed), one look-up per direction."""
+        return self.world.radiance_along(direction)[::-1]
 
     def transfer(self):
         """One random transport operator: ``directions_per_step`` directions d_k, one bundle
@@ -257,7 +272,8 @@ class StochasticIterationSolver(Method):
         # diffuse senders send the same radiance into every direction they face (a bundle
         # pairs only sides that face each other): one evaluation serves all K bundles, and
         # only glossy sides are evaluated per direction
-        s_fixed = np.vstack([self.sent_radiance(self.normal), self.sent_environment()])
+        s_fixed = np.vstack([self.sent_radiance(self.normal), np.zeros((2, 3))])
+        directional = not self.world.is_constant
         gp = self.glossy_patches
         E = np.zeros((n, 3))
         e_glossy = t_glossy = None
@@ -267,16 +283,25 @@ class StochasticIterationSolver(Method):
         st = self.stats
         for k, bundle in enumerate(bundles):
             side = np.sign(self.normal @ d[k])
-            # the last row is the world's radiance: sender ENVIRONMENT (-1) indexes it
-            S = s_fixed
+            # the last two rows are the world's radiance along -d and +d: sender ENVIRONMENT (-1)
+            # indexes the last, and travelling along -d the one before it
+            S = s_fixed                   # rows that change with d are set anew for each d
+            S[-2:] = self.sent_environment(d[k])
             if len(gp):
-                S = s_fixed.copy()
                 S[gp] = self.glossy_sent_radiance(side[gp, None] * d[k])
+            sender = bundle.sender
+            if directional:
+                sender = np.where((sender < 0) & (bundle.travel_sign < 0), -2, sender)
             # t_i is uniform on the receiver's hemisphere: pdf = 2 / (4 pi) = 1 / (2 pi)
             w = bundle.cell_area / (2.0 * uniform_sphere_pdf())
-            e_k = np.stack([np.bincount(bundle.receiver, S[bundle.sender, c], minlength=n) for c in range(3)],
+            e_k = np.stack([np.bincount(bundle.receiver, S[sender, c], minlength=n) for c in range(3)],
                            axis=1) * (w / self.area[:, None])
             E += e_k
+            if self.world_direct:
+                sky = np.nonzero(sender < 0)[0]
+                world_e = np.stack([np.bincount(bundle.receiver[sky], S[sender[sky], c], minlength=n)
+                                    for c in range(3)], axis=1) * (w / self.area[:, None])
+                self.world_incoming = world_e if k == 0 else self.world_incoming + world_e
             if not self.diffuse_only:
                 mine = self.glossy_patches[pick == k]
                 e_glossy[mine] = e_k[mine]
@@ -284,6 +309,8 @@ class StochasticIterationSolver(Method):
             st.rays += bundle.n_casts
             st.bundle_rays += bundle.n_rays
         E /= k_dirs
+        if self.world_direct:
+            self.world_incoming = self.world_incoming / k_dirs
         self.direction = d[-1]
         st.directions += k_dirs
         return E, e_glossy, t_glossy, bundles
@@ -374,6 +401,18 @@ class StochasticIterationSolver(Method):
         """(S, 3) [W/m^2] the view-independent incoming radiance an image resolves per
         pixel: the running average of the iterates plus the caustic first shot."""
         return self.mean_incoming if self.caustic is None else self.mean_incoming + self.caustic.E
+
+    def image_incoming(self, caustic=True, world=True):
+        """(S, 3) [W/m^2] what an image reads from the patches for the diffuse lobe at its
+        visible points: :meth:`indirect_incoming` (without the caustic shot when not
+        ``caustic``), less the running average of what came straight from the world when not
+        ``world`` (an image that samples that light itself; needs :attr:`world_direct`)."""
+        e = self.indirect_incoming() if caustic else self.mean_incoming
+        if world:
+            return e
+        if not self.world_direct:
+            raise ValueError(f"{self.name} keeps no separate average of the world's direct light")
+        return e - self.mean_world_incoming
 
     def _diffuse_weighted(self, diffuse, pm, cos):
         """``diffuse`` (N, 3) of sides with materials ``pm`` (N,) times W_d(cos) where a

@@ -8,12 +8,13 @@ import numpy as np
 
 from ..util.arrays import unique_rows
 from .model import AreaLights, PatchScene, PointLights, SceneError, SunLights
+from .world import World, split_sun
 
 
 def build_scene(vertices, triangles, triangle_material, materials, point_lights=None, camera=None,
                 triangle_patch=None, triangle_source=None, analytic_radiance=None, name="",
                 area_epsilon=1e-14, triangle_solid=None, two_sided=False,
-                sun_lights=None, area_lights=None, environment=None, texture=None) -> PatchScene:
+                sun_lights=None, area_lights=None, environment=None, texture=None, world=None) -> PatchScene:
     """Validate raw triangles and make a :class:`PatchScene`.
 
     ``texture``: a :class:`~raybundle.scene.textures.SurfaceTexture` whose faces are the
@@ -21,6 +22,11 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
 
     ``two_sided``: bool or (T,) bool, Blender's semantics when true (module
     docstring); the default, one-sided, is the core's own convention.
+
+    The world: ``world`` (a :class:`~raybundle.scene.world.World`) or ``environment``, a
+    constant radiance (3,) [W m^-2 sr^-1].  A sun inside the world's image is taken out as
+    a sun lamp (:func:`~raybundle.scene.world.split_sun`) once, when the world has no
+    separate camera image yet.
     Errors (:class:`SceneError`): non-finite vertices, bad indices, an empty
     scene, no light at all (no emitter, light or environment), invalid
     materials (albedo > 1, NaN...) or lights.  Zero-area triangles (area <=
@@ -83,19 +89,29 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
     sun_lights = SunLights() if sun_lights is None else SunLights(**vars(sun_lights))
     area_lights = AreaLights() if area_lights is None else AreaLights(**vars(area_lights))
     _check_lights(point_lights, sun_lights, area_lights)
-    env = np.zeros(3) if environment is None else np.broadcast_to(np.asarray(environment, float), (3,)).copy()
-    if not np.isfinite(env).all() or (env < 0).any():
-        raise SceneError(f"the environment (world) radiance must be finite and non-negative, got {env.tolist()}")
+    try:
+        if world is None:
+            world = World.constant(np.zeros(3) if environment is None else environment)
+        elif not isinstance(world, World):
+            world = World(world)
+    except ValueError as e:
+        raise SceneError(str(e)) from None
+    if world.camera_image is None:
+        world, sun = split_sun(world)
+        if sun is not None:
+            sun_lights = SunLights(np.vstack([sun_lights.direction, sun["direction"]]),
+                                   np.vstack([sun_lights.irradiance, sun["irradiance"]]),
+                                   np.append(sun_lights.angle, sun["angle"]))
     has_emitter = materials.is_emitter[np.unique(m)].any()
     has_light = any((np.asarray(x) > 0).any() for x in (point_lights.intensity, sun_lights.irradiance,
-                                                       area_lights.radiance, env))
+                                                       area_lights.radiance, world.image))
     if not has_emitter and not has_light:
         raise SceneError("the scene has no lights: no emitting material, no light and a black world "
                          "(add an Emission shader, a light or a world color)")
     ar = None if analytic_radiance is None else np.asarray(analytic_radiance, float).reshape(3)
     solid = None if triangle_solid is None else np.asarray(triangle_solid, bool).reshape(-1)[keep] & ~two
     return PatchScene(v, t, m, patch, src, materials, point_lights, camera, ar, name, dropped, solid,
-                      two, sun_lights, area_lights, env, texture=texture)
+                      two, sun_lights, area_lights, world, texture=texture)
 
 
 def coincident_triangles(v, t, m, two_sided, merge=True):

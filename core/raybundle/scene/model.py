@@ -33,8 +33,9 @@ import numpy as np
 from ..util.arrays import connected_components, group_ids, unique_rows
 from .camera import Camera
 from .materials import MaterialTable
+from .world import World
 
-NPZ_FORMAT_VERSION = 2
+NPZ_FORMAT_VERSION = 3
 
 
 #: corners of triangles whose normals differ by less than this weld (:attr:`PatchScene.smooth_vertex_ids`;
@@ -212,8 +213,8 @@ class PatchScene:
         (a closed two-sided mesh may be a room seen from inside).
     triangle_two_sided : (T,) bool  both sides shade and emit (module docstring)
     sun_lights, area_lights : SunLights, AreaLights
-    environment : (3,) float  constant radiance of the world around the scene
-        [W m^-2 sr^-1] (Blender's world color times strength)
+    world : :class:`~raybundle.scene.world.World`  the radiance arriving from around the
+        scene [W m^-2 sr^-1] by direction (Blender's World; a constant world is a 1 x 1 image)
     triangle_corner_tag : (T, 3) int or None  weld tags of corners on contact
         lines (:mod:`raybundle.patches.contacts`); corners weld only when their tags agree
     texture : :class:`~raybundle.scene.textures.SurfaceTexture` or None  image textures on
@@ -235,7 +236,7 @@ class PatchScene:
     triangle_two_sided: np.ndarray | None = None
     sun_lights: SunLights = field(default_factory=SunLights)
     area_lights: AreaLights = field(default_factory=AreaLights)
-    environment: np.ndarray | None = None
+    world: World | None = None
     triangle_corner_tag: np.ndarray | None = None
     texture: object = None
 
@@ -244,7 +245,10 @@ class PatchScene:
             self.triangle_two_sided = np.zeros(len(self.triangles), bool)
         if self.triangle_solid is None:
             self.triangle_solid = closed_solid_triangles(self.vertices, self.triangles) & ~self.triangle_two_sided
-        self.environment = np.zeros(3) if self.environment is None else np.asarray(self.environment, float)
+        if self.world is None:
+            self.world = World.constant()
+        elif not isinstance(self.world, World):
+            self.world = World.constant(self.world)
 
     def release_caches(self):
         """Forget the derived arrays (corners, normals, areas, sides...): they are made again
@@ -461,7 +465,8 @@ class PatchScene:
              "vertices": self.vertices, "triangles": self.triangles,
              "triangle_material": self.triangle_material, "triangle_patch": self.triangle_patch,
              "triangle_source": self.triangle_source, "triangle_solid": self.triangle_solid,
-             "triangle_two_sided": self.triangle_two_sided, "environment": self.environment}
+             "triangle_two_sided": self.triangle_two_sided}
+        d.update(self.world.to_arrays())
         d.update(self.point_lights.to_arrays())
         d.update(self.sun_lights.to_arrays())
         d.update(self.area_lights.to_arrays())

@@ -8,6 +8,7 @@ from .build import build_scene
 from .camera import Camera
 from .materials import MaterialTable
 from .model import NPZ_FORMAT_VERSION, AreaLights, PatchScene, PointLights, SceneError, SunLights
+from .world import World
 
 
 def load_npz(path) -> PatchScene:
@@ -16,7 +17,8 @@ def load_npz(path) -> PatchScene:
     Required arrays: ``vertices`` (V,3), ``triangles`` (T,3), ``triangle_material`` (T,)
     and the ``material_*`` table; ``triangle_patch``, ``triangle_source``,
     ``triangle_two_sided`` (T,) bool (absent: one-sided, as files of format 1),
-    ``point_light_*``, ``sun_light_*``, ``area_light_*``, ``environment`` (3,),
+    ``point_light_*``, ``sun_light_*``, ``area_light_*``, ``world_image`` (H, W, 3) and ``world_camera_image`` (or
+    the older constant ``environment`` (3,)),
     ``camera_*``, ``analytic_radiance`` and the ``texture_*`` arrays
     (:meth:`~raybundle.scene.textures.SurfaceTexture.to_arrays`) are optional.  A file that
     cannot be read or holds malformed arrays raises :class:`SceneError` (one line).
@@ -55,7 +57,7 @@ def _scene_from_arrays(path, d):
     lights = (PointLights.from_arrays(d), SunLights.from_arrays(d), AreaLights.from_arrays(d))
     return build_scene(d["vertices"], d["triangles"], d["triangle_material"],
                        MaterialTable.from_arrays(d), point_lights=lights[0], sun_lights=lights[1],
-                       area_lights=lights[2], environment=d.get("environment"),
+                       area_lights=lights[2], world=World.from_arrays(d),
                        camera=Camera.from_arrays(d), triangle_patch=d.get("triangle_patch"),
                        triangle_source=d.get("triangle_source"), triangle_solid=d.get("triangle_solid"),
                        two_sided=d.get("triangle_two_sided", False),

@@ -32,7 +32,8 @@ import numpy as np
 from .sampling import frames_from_normals, points_on_triangles, stratified_2d_sets
 
 _MAX_LAYERS = 10000
-#: sender id of light that comes from the environment (world) in a :class:`Bundle`
+#: sender id of light that comes from the environment (world) in a :class:`Bundle`: along
+#: ``travel_sign`` +1 it arrives from the world at -d, along -1 from the world at +d
 ENVIRONMENT = -1
 
 
@@ -317,7 +318,7 @@ class RayTracer:
         dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
         origins, counts, delta = self.grid_origins(dirs, resolution, offsets, rotations)
         bounds = np.concatenate([[0], np.cumsum(counts)])
-        world = bool(np.any(self.scene.environment > 0))
+        world = self.scene.world.emits
         up, down, ray, casts, first, first_ray, last, last_ray = self._hit_layers(
             origins, np.repeat(dirs, counts, axis=0), ends=world)
         k_dirs = len(dirs)
@@ -410,6 +411,6 @@ def brute_force_bundle(scene, origins, direction, delta, eps):
         if seq:
             first.append(seq[0][1])
             last.append(seq[-1][1])
-    ends = [np.array(first, np.int64), np.array(last, np.int64)] if np.any(scene.environment > 0) else []
+    ends = [np.array(first, np.int64), np.array(last, np.int64)] if scene.world.emits else []
     return bundle_from_hits(scene, d, delta, np.array(up, np.int64), np.array(down, np.int64),
                             len(origins), 0, *ends)

@@ -1,0 +1,138 @@
+"""A Blender World as the core's :class:`raybundle.scene.world.World`, evaluated by Blender.
+
+A world whose Background reads plain values (a color and a strength, or an RGB node) is a
+constant world, read directly.  Any other node tree (an Environment Texture with its
+Mapping and Texture Coordinate, a Sky Texture, gradients, Mix trees) is rendered by Cycles
+into an equirectangular image, ``EQUIRECT_WIDTH`` x ``EQUIRECT_WIDTH / 2`` pixels at
+``EQUIRECT_SAMPLES`` samples each (:mod:`.world_render`, in a process of its own: a render
+cannot start another render in the same process), so nothing of the node tree is
+reimplemented here.  The image is kept per world and node tree for the session.
+
+What is not modelled, warned: the world's volume; a Light Path node (the world lights the
+scene as the camera sees it); a failed evaluation falls back to the Background's own color.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+
+#: width of the equirectangular image a node-tree world is rendered into (pixels; height half of it)
+EQUIRECT_WIDTH = 512
+#: Cycles samples per pixel of that image (a small sun is a sub-pixel disk: its pixel's mean needs many)
+EQUIRECT_SAMPLES = 64
+#: seconds before the world's render is given up
+RENDER_TIMEOUT = 300.0
+
+_cache: dict = {}
+
+
+class WorldRenderError(RuntimeError):
+    """Blender could not render the world (one-line reason)."""
+
+
+def export_world(world, warn):
+    """The :class:`~raybundle.scene.world.World` of a bpy World (None: black)."""
+    from raybundle.scene.world import World
+
+    constant, fallback = _constant_radiance(world, warn)
+    if constant is not None:
+        return World.constant(constant)
+    try:
+        return World(render_world(world))
+    except WorldRenderError as e:
+        warn(f"world {world.name!r}: Blender could not evaluate it ({e}); using its Background color "
+             f"{_rgb(fallback)} from every direction")
+        return World.constant(fallback)
+
+
+def _constant_radiance(world, warn):
+    """``(radiance, fallback)``: (3,) radiance when the world is the same from every
+    direction and is read without Blender's help (radiance None otherwise); ``fallback``
+    the Background's own color x strength."""
+    from .shaders import _follow_reroutes
+
+    black = np.zeros(3)
+    if world is None:
+        return black, black
+    nt = world.node_tree
+    if nt is None:
+        color = np.array(world.color[:3], float)
+        return color, color
+    out = nt.get_output_node("CYCLES") or nt.get_output_node("ALL")
+    if out is not None and "Volume" in out.inputs and out.inputs["Volume"].is_linked:
+        warn(f"world {world.name!r}: its volume (fog, atmosphere) is not modeled: the scene is rendered "
+             "without it")
+    if out is None or not out.inputs["Surface"].is_linked:
+        return black, black
+    if any(n.type == "LIGHT_PATH" for n in nt.nodes):
+        warn(f"world {world.name!r}: a Light Path node may make what the camera sees differ from what "
+             "lights the scene; the scene is lit by the world as the camera sees it")
+    node = _follow_reroutes(out.inputs["Surface"].links[0].from_node)
+    if node is None:
+        return black, black
+    if node.type != "BACKGROUND":
+        return None, np.array(world.color[:3], float)
+    color_sock, strength_sock = node.inputs["Color"], node.inputs["Strength"]
+    color = np.array(color_sock.default_value[:3], float)
+    strength = max(float(strength_sock.default_value), 0.0)
+    fallback = color * strength
+    if strength_sock.is_linked:
+        return None, fallback
+    if color_sock.is_linked:
+        src = _follow_reroutes(color_sock.links[0].from_node)
+        if src is None or src.type != "RGB":
+            return None, fallback
+        color = np.array(src.outputs[0].default_value[:3], float)
+    return color * strength, color * strength
+
+
+def _rgb(c):
+    return "(" + ", ".join(f"{x:.3g}" for x in c) + ")"
+
+
+def render_world(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES):
+    """(width / 2, width, 3) float32 equirectangular radiance of the bpy World ``world``
+    (:mod:`raybundle.scene.world`'s layout), rendered by Cycles in a separate process.
+    Raises :class:`WorldRenderError`."""
+    import bpy
+
+    from raybundle.util.io import read_exr
+
+    with tempfile.TemporaryDirectory(prefix="raybundle-world-") as tmp:
+        library = os.path.join(tmp, "world.blend")
+        try:
+            bpy.data.libraries.write(library, {world}, path_remap="ABSOLUTE", fake_user=True)
+        except (RuntimeError, OSError) as e:
+            raise WorldRenderError(f"writing it failed: {e}") from None
+        with open(library, "rb") as f:
+            key = (world.name_full, width, samples, hashlib.sha1(f.read()).hexdigest())
+        if key in _cache:
+            return _cache[key]
+        out = os.path.join(tmp, "world.exr")
+        script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "world_render.py")
+        args = [library, world.name, out, str(int(width)), str(int(samples))]
+        binary = bpy.app.binary_path
+        if binary and os.path.basename(binary).lower().startswith("blender"):
+            cmd = [binary, "-b", "--factory-startup", "--python-exit-code", "1", "--python", script, "--", *args]
+        else:                                     # the bpy module: this Python imports bpy
+            cmd = [sys.executable, script, *args]
+        try:
+            run = subprocess.run(cmd, capture_output=True, text=True, timeout=RENDER_TIMEOUT,
+                                 stdin=subprocess.DEVNULL)
+        except (OSError, subprocess.TimeoutExpired) as e:
+            raise WorldRenderError(f"its render did not finish: {e}") from None
+        if run.returncode != 0 or not os.path.exists(out):
+            lines = [x for x in (run.stderr + run.stdout).splitlines() if x.strip()]
+            raise WorldRenderError(f"its render failed: {lines[-1] if lines else 'exit code ' + str(run.returncode)}")
+        img = read_exr(out)[..., :3].astype(np.float32)
+    if not np.isfinite(img).all():
+        img = np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0)
+    img = np.maximum(img, 0.0)
+    _cache.clear()                                # one world at a time is enough
+    _cache[key] = img
+    return img
