@@ -19,7 +19,7 @@ NO_NEWEST := the newest Blender's environment (no working Python 3.13: the suite
 NO_OLDEST := the oldest Blender's environment (no working Python 3.11: the zip was not installed into bpy 4.2, NumPy 1.26)
 SKIPPED := $(if $(PY_NEWEST),,$(NO_NEWEST))$(if $(PY_OLDEST),,$(NO_OLDEST))
 
-.PHONY: demo test test-newest test-oldest bench bench-blender bench-boxes bench-bake bench-scale \
+.PHONY: demo test test-newest test-oldest bench bench-blender bench-boxes bench-interiors bench-bake bench-scale \
         bench-invariance extension cycles-reference demo-scenes test-blender-versions golden golden-check clean FORCE
 
 ifeq ($(PYTHON),)
@@ -84,6 +84,16 @@ bench-blender: $(STAMP)
 bench-boxes: $(STAMP)
 	$(PY) tools/bench_blender.py cornell --times 5 10 30 60 120 --out out/bench-cornell --max-cycles-seconds 260
 	$(PY) tools/bench_blender.py cornell-glossy --times 5 10 30 60 120 --out out/bench-cornell-glossy --reference-samples 4096 --max-cycles-seconds 200
+
+# Real rooms (demo_scenes/interiors) in clay (the view layer's Material Override), RAYBUNDLE against
+# Cycles from the same file at 320 x 180, references committed (about 25 minutes a room on 2 cores)
+INTERIORS = living-room dining-room
+bench-interiors: $(STAMP)
+	for room in $(INTERIORS); do \
+	  $(PY) tools/bench_blender.py demo_scenes/interiors/$$room.blend --clay --resolution 320 180 \
+	    --references demo_scenes/interiors/references --reference-samples 4096 --times 60 300 \
+	    --max-cycles-seconds 400 --out out/bench-interiors/$$room || exit 1; \
+	done
 
 # The point-domain bake against Cycles' bake of the same 4,624 vertices, and a 1024^2 lightmap
 # (about 25 minutes on 2 cores the first time: the Cycles reference is cached in out/bench-bake)
