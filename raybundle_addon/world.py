@@ -37,6 +37,7 @@ class WorldRenderError(RuntimeError):
 
 def export_world(world, warn):
     """The :class:`~raybundle.scene.world.World` of a bpy World (None: black)."""
+    from raybundle.scene.materials import color_text
     from raybundle.scene.world import World
 
     constant, fallback = _constant_radiance(world, warn)
@@ -46,7 +47,7 @@ def export_world(world, warn):
         return World(render_world(world))
     except WorldRenderError as e:
         warn(f"world {world.name!r}: Blender could not evaluate it ({e}); using its Background color "
-             f"{_rgb(fallback)} from every direction")
+             f"{color_text(fallback)} from every direction")
         return World.constant(fallback)
 
 
@@ -89,10 +90,6 @@ def _constant_radiance(world, warn):
             return None, fallback
         color = np.array(src.outputs[0].default_value[:3], float)
     return color * strength, color * strength
-
-
-def _rgb(c):
-    return "(" + ", ".join(f"{x:.3g}" for x in c) + ")"
 
 
 def render_world(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES):

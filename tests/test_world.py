@@ -185,7 +185,7 @@ def test_image_takes_the_worlds_direct_light_once():
         s = pipeline.prepare(sc, patches=1)
         r = pipeline.make_renderer(s, RenderSettings(seed=seed, world_samples=4), cam)
         try:
-            assert r.world_light is not None and r.solver.world_direct
+            assert r.world_light is not None and r.solver.separates_world
             imgs.append(r.run(iterations=30).image.reshape(-1, 3).mean(axis=0))
         finally:
             r.tracer.close()

@@ -192,7 +192,8 @@ class Renderer(ProgressiveImage):
         #: the world's direct light on the diffuse lobe, sampled at the visible points of every
         #: pass (the patches then give the rest: :meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.image_incoming`)
         self.world_light = (WorldLight(scene.world, self.tracer)
-                            if settings.world_samples > 0 and getattr(solver, "world_direct", False) else None)
+                            if settings.world_samples > 0 and hasattr(solver, "separate_world")
+                            and solver.separate_world() else None)
         self.gather_rays_used = 0                         # rays per pixel of the last resolve's gather
         # per pixel: some earlier shadow ray reached a light / was blocked (both: a penumbra)
         self.shadow_flags = np.zeros((n, 2), bool)

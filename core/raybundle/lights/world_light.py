@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene.world import World
+from ..scene.world import World, pixel_of
 
 
 class WorldLight:
@@ -53,8 +53,6 @@ class WorldLight:
 
     def pdf(self, directions):
         """(N,) [1/sr] the density :meth:`sample` draws ``directions`` (N, 3) with."""
-        from ..scene.world import pixel_of
-
         row, col = pixel_of(np.asarray(directions, float), self.h, self.w)
         return self.p[row * self.w + col] / self.omega[row]
 

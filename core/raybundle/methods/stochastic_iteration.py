@@ -76,7 +76,7 @@ class StochasticIterationSolver(Method):
     merges_chains = True
     #: the fewest iterations left out of the running average (``burn_in``, set per scene)
     BURN_IN = 8
-    #: its step keeps the running average of the light straight from the world apart (:attr:`world_direct`)
+    #: its step can keep the running average of the light straight from the world apart (:attr:`world_direct`)
     SEPARATES_WORLD_DIRECT = True
     #: sides smaller than a bundle cell / TINY_SIDE send their running average (:meth:`step`)
     TINY_SIDE = 16.0
@@ -145,11 +145,12 @@ class StochasticIterationSolver(Method):
         self.caustic_refine = (max(1024, len(np.unique(scene.tside_side[self.caustic.tsides])))
                                if self.caustic is not None else 0)
         self.world = scene.world
-        #: the iterates' part that came straight from the world is kept apart
-        #: (:attr:`mean_world_incoming`), for an image that takes the world's direct light at its
-        #: visible points (:class:`~raybundle.lights.world_light.WorldLight`, ``world_samples``):
-        #: a world that changes with direction and a method whose step keeps that average
+        #: the method can keep the iterates' part that came straight from the world apart
+        #: (a world that changes with direction and a step that keeps that average)
         self.world_direct = self.SEPARATES_WORLD_DIRECT and self.world.emits and not self.world.is_constant
+        #: it does (:meth:`separate_world`): for an image that takes the world's direct light at
+        #: its visible points (:class:`~raybundle.lights.world_light.WorldLight`, ``world_samples``)
+        self.separates_world = False
         n = scene.n_sides
         self._all_patches = np.arange(n)
         self.incoming = np.zeros((n, 3))
@@ -247,9 +248,8 @@ class StochasticIterationSolver(Method):
             # by the next receivers (the living room of the interior bench, sides a thousandth of
             # a cell: the image 70 times too bright after 300 s); such sides send their running
             # average instead, which the iterates still feed without bias
-            self.incoming = E.copy()
-            self.incoming[self._tiny] = self.mean_incoming[self._tiny]
-        if self.world_direct:
+            self.incoming[self._tiny] = self.mean_incoming[self._tiny]       # E, already averaged
+        if self.separates_world:
             self.mean_world_incoming += (self.world_incoming - self.mean_world_incoming) / self.averaged
         st.rays += self.direct.rays - before
         st.seconds += time.perf_counter() - t0
@@ -310,7 +310,7 @@ class StochasticIterationSolver(Method):
             e_k = np.stack([np.bincount(bundle.receiver, S[sender, c], minlength=n) for c in range(3)],
                            axis=1) * (w / self.area[:, None])
             E += e_k
-            if self.world_direct:
+            if self.separates_world:
                 sky = np.nonzero(sender < 0)[0]
                 world_e = np.stack([np.bincount(bundle.receiver[sky], S[sender[sky], c], minlength=n)
                                     for c in range(3)], axis=1) * (w / self.area[:, None])
@@ -322,7 +322,7 @@ class StochasticIterationSolver(Method):
             st.rays += bundle.n_casts
             st.bundle_rays += bundle.n_rays
         E /= k_dirs
-        if self.world_direct:
+        if self.separates_world:
             self.world_incoming = self.world_incoming / k_dirs
         self.direction = d[-1]
         st.directions += k_dirs
@@ -419,13 +419,21 @@ class StochasticIterationSolver(Method):
         """(S, 3) [W/m^2] what an image reads from the patches for the diffuse lobe at its
         visible points: :meth:`indirect_incoming` (without the caustic shot when not
         ``caustic``), less the running average of what came straight from the world when not
-        ``world`` (an image that samples that light itself; needs :attr:`world_direct`)."""
+        ``world`` (an image that samples that light itself; needs :meth:`separate_world`)."""
         e = self.indirect_incoming() if caustic else self.mean_incoming
         if world:
             return e
-        if not self.world_direct:
+        if not self.separates_world:
             raise ValueError(f"{self.name} keeps no separate average of the world's direct light")
         return e - self.mean_world_incoming
+
+    def separate_world(self):
+        """Keep the running average of the light straight from the world apart from now on
+        (before the first step: the image then reads the rest, :meth:`image_incoming`); False
+        where the method cannot (:attr:`world_direct`)."""
+        if self.world_direct and self.stats.iterations == 0:
+            self.separates_world = True
+        return self.separates_world
 
     def _diffuse_weighted(self, diffuse, pm, cos):
         """``diffuse`` (N, 3) of sides with materials ``pm`` (N,) times W_d(cos) where a
