@@ -190,7 +190,7 @@ class Renderer(ProgressiveImage):
         # the final gather next to concave edges and contacts
         self.edge_gather = EdgeGather(scene, self.tracer, settings.seed)
         #: the world's direct light on the diffuse lobe, sampled at the visible points of every
-        #: pass (the patches then give the rest: :meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.image_incoming`)
+        #: pass (the patches then give the rest: the solver's ``image_incoming``)
         self.world_light = (WorldLight(scene.world, self.tracer)
                             if settings.world_samples > 0 and hasattr(solver, "separate_world")
                             and solver.separate_world() else None)
