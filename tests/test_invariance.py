@@ -75,10 +75,12 @@ def test_the_blend_subdivided_in_blender_is_the_blend():
     """The user's case, through the add-on's export: ``demo_scenes/cornell_box.blend`` with every
     mesh subdivided by Blender (Subdivide, 15 cuts: 8,192 triangles) against the file as it is
     (the old layout rendered it 21-26% brighter in every region)."""
-    import bmesh  # after bpy
+    import importlib
+
     from addon_helpers import ROOT, bpy, ensure_registered
 
     from raybundle_addon.export import export_scene
+    bmesh = importlib.import_module("bmesh")      # only once bpy is imported (by addon_helpers)
 
     ensure_registered()
     bpy.ops.wm.open_mainfile(filepath=f"{ROOT}/demo_scenes/cornell_box.blend")

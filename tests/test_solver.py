@@ -63,12 +63,15 @@ def assert_converged(samples, exact, max_se):
     return mean, se
 
 
-@pytest.mark.parametrize("glossy", [False, True], ids=["diffuse", "glossy"])
-@pytest.mark.parametrize("sequence,batches,per_batch,directions", [
-    ("prng", 12, 120, 1), ("stratified", 12, 120, 1), ("pi-powers", 10, 200, 1), ("stratified", 12, 40, 8)])
+@pytest.mark.parametrize("glossy,sequence,batches,per_batch,directions", [
+    (False, "prng", 12, 120, 1), (False, "stratified", 12, 120, 1), (False, "pi-powers", 10, 200, 1),
+    (False, "stratified", 12, 40, 8), (True, "pi-powers", 10, 200, 1), (True, "stratified", 12, 40, 8)],
+    ids=["prng-diffuse", "stratified-diffuse", "pi-powers-diffuse", "stratified-8-diffuse", "pi-powers-glossy",
+         "stratified-8-glossy"])
 def test_furnace_converges_to_analytic(glossy, sequence, batches, per_batch, directions):
     """Every sequence, and 8 directions per step (diffuse lobe: their mean; glossy lobe: one
-    drawn per side), converges to Le / (1 - a)."""
+    drawn per side), converges to Le / (1 - a); the glossy lobe with one sequence per
+    directions count (the sequence's own part is the diffuse runs')."""
     r = furnace_renderer(glossy, sequence, directions=directions)
     exact = r.scene.analytic_radiance
     patch, img = batch_means(r, batches, per_batch)

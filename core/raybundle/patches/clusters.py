@@ -13,20 +13,26 @@ is the area mean over the cluster of each triangle's irradiance, whatever their
 orientation (``tests/test_clusters.py``: a furnace holding a tessellated sphere stays
 exact).  The first shot, the open area and the image work per triangle as before.
 What is approximated: inside the iteration a cluster's glossy lobe is evaluated
-about the cluster's mean normal (the normals of a cluster lie within the cell of a
+about the cluster's mean normal (the normals of a glossy cluster lie within the cell of a
 cube map with :data:`NORMAL_CELLS` x :data:`NORMAL_CELLS` cells per face, at most
-about 15 degrees from their mean); the image evaluates every lobe at the pixel's
-own triangle.
+about 15 degrees from their mean; those of a diffuse detail cluster within one face);
+the image evaluates every lobe at the pixel's own triangle.
 
 :func:`make_patches` chooses the layout for a target patch count.  With a patch size
 h: triangles with an edge longer than h are cut (:func:`~raybundle.patches.layout.split_triangles`,
-then along contact lines), triangles smaller than h^2 / :data:`SMALL` (however long) are grouped
-into the cells of a grid h wide, split by normal direction (the cube-map cell),
+then along contact lines); triangles smaller than h^2 / :data:`SMALL` are grouped, and so are
+slivers (area under :data:`SLIVER` x their longest edge squared: a wall fanned out around a
+window), first halved along their length to pieces no longer than h
+(:func:`~raybundle.patches.layout.bisect_long`: a sliver grouped whole made a cluster metres long).
+They are grouped into the cells of a grid h wide, split by normal direction (the cube-map cell),
 by offset along the normal (half-h slabs: a shelf does not share a patch with the floor under it),
 by material, by sidedness and by whether they lie in a gap narrower than 5% of h (the
 ceiling over a lamp hanging just under it: :func:`~raybundle.patches.contacts.gap_sides`), after the
-triangles that straddle such a gap are cut along the contact; the rest stay patches of their own.  It is a sort
-over the triangles: O(T log T), no per-triangle Python.
+triangles that straddle such a gap are cut along the contact; the rest stay patches of their own.
+Clusters smaller than h^2 / :data:`DETAIL` (the facets of a plant or a chair's legs in a cell:
+in a furnished room they outnumbered the patches of walls and floor ten to one) are then
+grouped again, diffuse ones by the cube face of their normal instead of its cell, in half-h
+slabs along that face's axis.  It is a sort over the triangles: O(T log T), no per-triangle Python.
 
 :func:`tessellate` makes the stand-in for a finely meshed Blender scene the tests and
 the scale bench use: every reflecting face cut into many small triangles, each its
@@ -42,7 +48,7 @@ from ..scene.model import PatchScene
 from ..tracing.visibility import RayTracer
 from ..util.arrays import group_ids
 from .contacts import CONTACT_SHARE, gap_sides
-from .layout import cut_at_contacts, edge_for_patches, longest_edges, split_triangles, subdivide
+from .layout import bisect_long, cut_at_contacts, edge_for_patches, longest_edges, split_triangles, subdivide
 
 #: the patch count of a scene laid out without an explicit one (sides; the count that measured best
 #: at a fixed time across scene sizes: README, 'Measured choices behind the defaults'; :mod:`raybundle.app.auto`)
@@ -52,6 +58,11 @@ DEFAULT_PATCHES = 4000
 NORMAL_CELLS = 5
 #: triangles with an area under h^2 / SMALL are grouped (h = the patch size)
 SMALL = 2.0
+#: clusters under h^2 / DETAIL are merged by the cube face of their normals (:meth:`_Grouping.clusters`)
+DETAIL = 4.0
+#: triangles with an area under SLIVER x their longest edge squared are slivers (a right isosceles
+#: triangle has 1/4, a 2 m x 0.4 m one 1/10)
+SLIVER = 0.1
 
 
 def tessellate(scene: PatchScene, triangles) -> PatchScene:
@@ -93,35 +104,68 @@ class _Grouping:
         self.centroid = corners.mean(axis=1)
         self.lo = scene.vertices.min(axis=0) if lo is None else lo
         self.edge = longest_edges(corners)
+        edges = np.roll(corners, -1, axis=1) - corners
+        self.long = edges[np.arange(len(corners)), np.argmax(np.einsum("tij,tij->ti", edges, edges), axis=1)]
         self.normal = normal
         self.cell = normal_cells(normal)
+        self.face = normal_cells(normal, 1)
         # offset along the triangle's own normal: constant over a plane
         self.offset = np.einsum("ij,ij->i", normal, self.centroid - self.lo)
 
     def small(self, h):
-        """(T,) bool: triangles to group at patch size ``h``."""
-        return self.area < h * h / SMALL
+        """(T,) bool: triangles to group at patch size ``h``: smaller than h^2 / :data:`SMALL`, or
+        slivers (area under :data:`SLIVER` x the longest edge squared, which a cut into k^2
+        similar pieces would turn into k^2 slivers; they are halved along their length instead)."""
+        return self.area < np.maximum(h * h / SMALL, SLIVER * self.edge ** 2)
 
-    def clusters(self, h, small, gap=None):
+    def clusters(self, h, small, gap=None, spread=False):
         """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``;
         ``gap`` (S, 2) bool: the triangle lies in a gap on its front / back
-        (:func:`~raybundle.patches.contacts.gap_sides`), which a cluster does not straddle."""
+        (:func:`~raybundle.patches.contacts.gap_sides`), which a cluster does not straddle.
+        Triangles a patch wide or less are keyed by their centroid; ``spread`` keys a longer one
+        at ceil(edge / h) points along its longest edge instead, as its pieces will be
+        (:func:`~raybundle.patches.layout.bisect_long`): ids (P,) of those points then."""
         sc, idx = self.scene, np.nonzero(small)[0]
+        centroid, area = self.centroid[idx], self.area[idx]
+        if spread:
+            n = np.maximum(1, np.ceil(self.edge[idx] / h - 1e-9)).astype(np.int64)
+            idx = np.repeat(idx, n)
+            t = (np.arange(len(idx)) - np.repeat(np.cumsum(n) - n, n) + 0.5) / np.repeat(n, n) - 0.5
+            centroid = self.centroid[idx] + t[:, None] * self.long[idx]
+            area = self.area[idx] / np.repeat(n, n)
         rows = self.rows[idx]
-        cell = np.floor((self.centroid[idx] - self.lo) / h).astype(np.int64)
+        cell = np.floor((centroid - self.lo) / h).astype(np.int64)
         slab = np.floor(self.offset[idx] / (0.5 * h)).astype(np.int64)
         keys = [cell[:, 0], cell[:, 1], cell[:, 2], self.cell[idx], slab,
                 sc.triangle_material[rows], sc.triangle_two_sided[rows]]
         if gap is not None:
             keys.append(gap[:, 0] * 2 + gap[:, 1])
-        return group_ids(keys)
+        ids = group_ids(keys)
+        # detail: clusters under h^2 / DETAIL (the facets of a plant, a lamp, a chair's legs in one
+        # cell) join by the cube face of their normal instead
+        detail = np.bincount(ids, area)[ids] < h * h / DETAIL
+        if detail.any():
+            # diffuse ones by the cube face (the image evaluates lobes per triangle, the iteration a
+            # glossy one about the cluster's normal: glossy clusters keep their 15-degree normal cell),
+            # in half-h slabs along the face's axis (a shelf keeps off the floor under it)
+            glossy = sc.materials.is_glossy[sc.triangle_material[rows]]
+            axis = self.face[idx] // 2
+            height = np.take_along_axis(centroid - self.lo, axis[:, None], 1)[:, 0]
+            keys[3:5] = [np.where(glossy, self.cell[idx], -1 - self.face[idx]),
+                         np.floor(height / (0.5 * h)).astype(np.int64)]
+            merged = group_ids([k[detail] for k in keys])
+            kept = np.unique(ids[~detail], return_inverse=True)[1].reshape(-1)
+            ids[detail] = merged
+            ids[~detail] = int(merged.max()) + 1 + kept
+        return ids
 
     def count(self, h):
-        """Patches at size ``h``: k^2 per triangle cut, one per cluster, one per other triangle."""
+        """Patches at size ``h``: k^2 per triangle cut, one per cluster (a sliver's pieces
+        spread along it), one per other triangle."""
         small = self.small(h)
         reflects = self.scene.materials.reflects[self.scene.triangle_material[self.rows]]
         k = np.where(reflects & ~small, np.maximum(1, np.ceil(self.edge / h - 1e-9)), 1.0)
-        n_clusters = int(self.clusters(h, small).max()) + 1 if small.any() else 0
+        n_clusters = int(self.clusters(h, small, spread=True).max()) + 1 if small.any() else 0
         return int((k[~small] ** 2).sum()) + n_clusters
 
 
@@ -163,9 +207,9 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     (:func:`~raybundle.patches.contacts.gap_sides`)."""
     if (patches is None) == (size is None):
         raise ValueError("give exactly one of patches and size")
-    if patches is not None and patches >= len(scene.triangles):     # fewer triangles than patches: cut
-        return subdivide(scene, patches=patches, contacts=contacts)
     grouping = _Grouping(scene)
+    if patches is not None and patches >= len(scene.triangles) and not grouping.small(0.0).any():
+        return subdivide(scene, patches=patches, contacts=contacts)     # fewer triangles than patches, no slivers
     h = float(size) if size is not None else patch_size(scene, patches, grouping)
     if not h > 0:
         raise ValueError("the patch size must be positive")
@@ -173,6 +217,10 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     if not small.any():
         return subdivide(scene, max_edge=h, contacts=contacts)
     fine, k, row = split_triangles(scene, h, whole=small)
+    sliver = small[row] & fine.materials.reflects[fine.triangle_material] & (longest_edges(fine.triangle_corners) > h)
+    if sliver.any():            # long thin triangles: pieces no longer than a patch, grouped where they lie
+        fine, piece = bisect_long(fine, h, sliver)
+        k, row = k[piece], row[piece]
     tracer = RayTracer(fine) if contacts else None
     try:
         if contacts:

@@ -84,12 +84,11 @@ def split_triangles(scene: PatchScene, max_edge, whole=None):
     each new triangle came from and ``row`` (T',) that triangle's index."""
     corners = scene.triangle_corners
     k_all = np.maximum(1, np.ceil(_split_edge(scene, whole) / max_edge - 1e-9)).astype(np.int64)
-    verts, tris, mats, srcs = [scene.vertices], [], [], []
+    verts, tris, rows = [scene.vertices], [], []
     base = len(scene.vertices)
     for k in np.unique(k_all):
         sel = np.nonzero(k_all == k)[0]
-        mats.append(np.repeat(scene.triangle_material[sel], k * k))
-        srcs.append(np.repeat(scene.triangle_source[sel], k * k))
+        rows.append(np.repeat(sel, k * k))
         if k == 1:                  # whole triangles keep their corners
             tris.append(scene.triangles[sel])
             continue
@@ -108,22 +107,56 @@ def split_triangles(scene: PatchScene, max_edge, whole=None):
         offs = base + np.arange(len(sel))[:, None, None] * len(ij)
         tris.append((local[None] + offs).reshape(-1, 3))
         base += len(sel) * len(ij)
-    v = np.concatenate(verts)
-    t = np.concatenate(tris)
-    # weld coincident vertices so that triangles of one face share corners
+    row = np.concatenate(rows)
+    return _rebuilt(scene, np.concatenate(verts), np.concatenate(tris), row), k_all[row], row
+
+
+def bisect_long(scene: PatchScene, max_edge, which):
+    """The triangles ``which`` (T,) bool halved at the middle of their longest edge until no
+    edge is longer than ``max_edge`` [m], each half its own patch; the others kept.
+
+    Unlike :func:`split_triangles`' k^2 similar pieces, this refines a sliver (a long, thin
+    triangle: a wall fanned out around a window) only along its length: a needle L long makes
+    about 2 L / max_edge pieces, not (L / max_edge)^2, and a fat triangle about twice
+    (its area / max_edge^2); the smallest angle stays above half the triangle's own.  Returns
+    ``(scene, row)``: ``row`` (T',) the input triangle each new one came from."""
+    corners = scene.triangle_corners
+    keep = np.nonzero(~np.asarray(which, bool))[0]
+    todo = np.nonzero(which)[0]
+    c, origin = corners[todo], todo
+    pieces, rows = [], []
+    while len(c):
+        edge = np.linalg.norm(np.roll(c, -1, axis=1) - c, axis=2)          # edge j: corner j -> j + 1
+        j = np.argmax(edge, axis=1)
+        done = edge[np.arange(len(c)), j] <= max_edge
+        pieces.append(c[done])
+        rows.append(origin[done])
+        c, j, origin = c[~done], j[~done], origin[~done]
+        n = np.arange(len(c))
+        a, b, o = c[n, j], c[n, (j + 1) % 3], c[n, (j + 2) % 3]
+        m = 0.5 * (a + b)                                  # the same point from both triangles of an edge
+        c = np.concatenate([np.stack([a, m, o], axis=1), np.stack([m, b, o], axis=1)])
+        origin = np.concatenate([origin, origin])
+    c = np.concatenate(pieces) if pieces else np.zeros((0, 3, 3))
+    row = np.concatenate([keep] + rows)
+    tris = np.concatenate([scene.triangles[keep], len(scene.vertices) + np.arange(3 * len(c)).reshape(-1, 3)])
+    return _rebuilt(scene, np.concatenate([scene.vertices, c.reshape(-1, 3)]), tris, row), row
+
+
+def _rebuilt(scene: PatchScene, vertices, triangles, row) -> PatchScene:
+    """``scene`` made of new ``triangles`` (T', 3) over ``vertices`` (coincident ones welded,
+    unused ones dropped), each its own patch, with the material, source face, solidity and
+    sidedness of triangle ``row`` (T',) of ``scene``."""
     _, r = scene.bounding_sphere
     # (a vertex no triangle uses may be NaN: build_scene checks only those in use)
-    q = np.round(np.where(np.isfinite(v), v, 0.0) / max(r * 1e-7, 1e-12)).astype(np.int64)
+    q = np.round(np.where(np.isfinite(vertices), vertices, 0.0) / max(r * 1e-7, 1e-12)).astype(np.int64)
     first, inv = unique_rows(q)
-    used, t = np.unique(inv[t], return_inverse=True)     # only the corners in use
-    v, t = v[first[used]], t.reshape(-1, 3)
-    per_tri = [np.concatenate([np.repeat(a[np.nonzero(k_all == k)[0]], k * k) for k in np.unique(k_all)])
-               for a in (scene.triangle_solid, scene.triangle_two_sided, k_all, np.arange(len(k_all)))]
-    fine = PatchScene(v, t, np.concatenate(mats), np.arange(len(t)), np.concatenate(srcs),
-                      scene.materials, scene.point_lights, scene.camera, scene.analytic_radiance,
-                      scene.name, scene.dropped_triangles, *per_tri[:2], scene.sun_lights, scene.area_lights,
-                      scene.world, texture=scene.texture)
-    return fine, per_tri[2], per_tri[3]
+    used, t = np.unique(inv[triangles], return_inverse=True)     # only the corners in use
+    return PatchScene(vertices[first[used]], t.reshape(-1, 3), scene.triangle_material[row], np.arange(len(row)),
+                      scene.triangle_source[row], scene.materials, scene.point_lights, scene.camera,
+                      scene.analytic_radiance, scene.name, scene.dropped_triangles, scene.triangle_solid[row],
+                      scene.triangle_two_sided[row], scene.sun_lights, scene.area_lights, scene.world,
+                      texture=scene.texture)
 
 
 def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene:

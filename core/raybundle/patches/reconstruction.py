@@ -215,6 +215,9 @@ class ClusterFit:
         self._corner = np.nonzero(vrow[cv] >= 0)[0]              # flat tside corners 3 t + k
         self._corner_vertex = vrow[cv[self._corner]]
         self._weight = a                                          # per tside
+        # the pairs grouped by cluster: the limiter's reach (vertex_values)
+        self._by_cluster = np.argsort(r1, kind="stable")
+        self._cluster_start = np.searchsorted(r1[self._by_cluster], np.arange(len(self.sides)))
 
     def vertex_values(self, side_values):
         """Values (len(vertices), C) of :attr:`vertices` from side values (S, C)."""
@@ -224,6 +227,11 @@ class ClusterFit:
         rhs = np.stack([np.stack([np.bincount(r1, self.wd[:, i] * dv[:, c], minlength=len(self.sides))
                                   for c in range(v.shape[1])], axis=1) for i in range(3)], axis=1)   # (Sc, 3, C)
         g = np.einsum("sij,sjc->sic", self.inverse, rhs)
+        reach = np.zeros((len(self.sides), v.shape[1]))
+        if len(dv):
+            has = np.bincount(r1, minlength=len(self.sides)) > 0
+            most = np.maximum.reduceat(np.abs(dv[self._by_cluster]), self._cluster_start[has], axis=0)
+            reach[has] = most
         sc, nv, n_c = self._scene, len(self.vertices), v.shape[1]
         num, den = np.zeros((nv, n_c)), np.zeros(nv)
         step = 1 << 18                          # corners per chunk: bounded temporaries on big scenes
@@ -234,7 +242,10 @@ class ClusterFit:
             x = sc.triangle_corners[sc.tside_triangle[ts], k] - self.centroid[side]
             row, vert, w = self.row[side], self._corner_vertex[lo:lo + step], self._weight[ts]
             for ch in range(n_c):
-                pred = v[side, ch] + np.einsum("nk,nk->n", x, g[row, :, ch])
+                # limited: a fit departs from its side's value by no more than a neighbour does (exact
+                # on a linear function, whose corners lie closer than the farthest neighbour's centroid;
+                # a fit steepened by one noisy tiny neighbour, read far from the centroid, is not)
+                pred = v[side, ch] + np.clip(np.einsum("nk,nk->n", x, g[row, :, ch]), -reach[row, ch], reach[row, ch])
                 num[:, ch] += np.bincount(vert, w * pred, minlength=nv)
             den += np.bincount(vert, w, minlength=nv)
         return num / np.maximum(den, 1e-300)[:, None]
