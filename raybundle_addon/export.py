@@ -58,7 +58,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .shaders import MaterialConverter
-from .world import export_world
+from .world import camera_view, export_world
 
 #: object types that become triangles (through their evaluated mesh)
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES_LEGACY"}
@@ -476,7 +476,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
     if cam_ob is not None:
         cam_ob = cam_ob.evaluated_get(depsgraph)
     camera = export_camera(cam_ob, render, size, border, warn) if cam_ob is not None or require_camera else None
-    world = export_world(scene.world, warn)
+    world = export_world(scene.world, warn, camera_view(cam_ob, render, scene, camera, border))
     if render.use_motion_blur:
         warn("motion blur is not supported: the scene is rendered at the current frame")
     if render.film_transparent:

@@ -6,7 +6,11 @@ Mapping and Texture Coordinate, a Sky Texture, gradients, Mix trees) is rendered
 into an equirectangular image, ``EQUIRECT_WIDTH`` x ``EQUIRECT_WIDTH / 2`` pixels at
 ``EQUIRECT_SAMPLES`` samples each (:mod:`.world_render`, in a process of its own: a render
 cannot start another render in the same process), so nothing of the node tree is
-reimplemented here.  The image is kept per world and node tree for the session.
+reimplemented here.  Through a perspective camera the same process renders the world once
+more through that camera, at the render's size and with its pixel filter
+(:attr:`raybundle.scene.world.World.view`): what the camera sees of the world through a
+window is then Blender's own pixel, not a panorama's blur.  The images are kept per world,
+node tree and view for the session.
 
 What is not modelled, warned: the world's volume; a Light Path node (the world lights the
 scene as the camera sees it); a failed evaluation falls back to the Background's own color.
@@ -27,6 +31,10 @@ EQUIRECT_WIDTH = 512
 EQUIRECT_SAMPLES = 64
 #: seconds before the world's render is given up
 RENDER_TIMEOUT = 300.0
+#: Cycles samples per pixel of the camera's view of the world, at most (fewer on large renders:
+#: :data:`VIEW_SAMPLE_BUDGET` samples in all, at least 4 per pixel)
+VIEW_SAMPLES = 64
+VIEW_SAMPLE_BUDGET = 30_000_000
 
 _cache: dict = {}
 
@@ -35,8 +43,9 @@ class WorldRenderError(RuntimeError):
     """Blender could not render the world (one-line reason)."""
 
 
-def export_world(world, warn):
-    """The :class:`~raybundle.scene.world.World` of a bpy World (None: black)."""
+def export_world(world, warn, view=None):
+    """The :class:`~raybundle.scene.world.World` of a bpy World (None: black); ``view``:
+    :func:`camera_view`'s description of the render's camera, for :attr:`~raybundle.scene.world.World.view`."""
     from raybundle.scene.materials import color_text
     from raybundle.scene.world import World
 
@@ -44,7 +53,12 @@ def export_world(world, warn):
     if constant is not None:
         return World.constant(constant)
     try:
-        return World(render_world(world))
+        image, seen = render_world(world, view=None if view is None else view[0])
+        if seen is None:
+            return World(image)
+        camera, (x0, y0, bw, bh) = view[1], view[2]
+        top = seen.shape[0] - (y0 + bh)             # the border counts rows from the bottom
+        return World(image, view=seen[top:top + bh, x0:x0 + bw], view_camera=camera)
     except WorldRenderError as e:
         warn(f"world {world.name!r}: Blender could not evaluate it ({e}); using its Background color "
              f"{color_text(fallback)} from every direction")
@@ -92,10 +106,34 @@ def _constant_radiance(world, warn):
     return color * strength, color * strength
 
 
-def render_world(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES):
-    """(width / 2, width, 3) float32 equirectangular radiance of the bpy World ``world``
-    (:mod:`raybundle.scene.world`'s layout), rendered by Cycles in a separate process.
-    Raises :class:`WorldRenderError`."""
+def camera_view(cam_ob, render, scene, camera, border):
+    """What :mod:`.world_render` needs to render the world through the perspective camera
+    object ``cam_ob`` (evaluated) as ``render`` renders it, with the exported ``camera``
+    (:class:`~raybundle.scene.camera.Camera`) and render ``border`` (x0, y0, w, h) or None;
+    None for other cameras (an orthographic one sees one direction of the world)."""
+    from .export import render_size
+
+    if cam_ob is None or camera is None or cam_ob.data.type != "PERSP":
+        return None
+    cd = cam_ob.data
+    w, h = render_size(render)
+    cycles = getattr(scene, "cycles", None)
+    params = dict(matrix=[x for row in cam_ob.matrix_world for x in row], type=cd.type, lens=cd.lens,
+                  sensor_width=cd.sensor_width, sensor_height=cd.sensor_height, sensor_fit=cd.sensor_fit,
+                  shift_x=cd.shift_x, shift_y=cd.shift_y, ortho_scale=cd.ortho_scale, size=[w, h],
+                  pixel_aspect=[render.pixel_aspect_x, render.pixel_aspect_y],
+                  filter_type=getattr(cycles, "pixel_filter_type", "BLACKMAN_HARRIS"), filter_size=render.filter_size,
+                  samples=int(max(4, min(VIEW_SAMPLES, VIEW_SAMPLE_BUDGET // (w * h)))))
+    return params, camera, border or (0, 0, w, h)
+
+
+def render_world(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, view=None):
+    """``(image, seen)``: (width / 2, width, 3) float32 equirectangular radiance of the bpy World
+    ``world`` (:mod:`raybundle.scene.world`'s layout), rendered by Cycles in a separate process,
+    and with ``view`` (:func:`camera_view`'s parameters) the (h, w, 3) world that camera's
+    pixels see (None without).  Raises :class:`WorldRenderError`."""
+    import json
+
     import bpy
 
     from raybundle.util.io import read_exr
@@ -107,12 +145,16 @@ def render_world(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES):
         except (RuntimeError, OSError) as e:
             raise WorldRenderError(f"writing it failed: {e}") from None
         with open(library, "rb") as f:
-            key = (world.name_full, width, samples, hashlib.sha1(f.read()).hexdigest())
+            key = (world.name_full, width, samples, hashlib.sha1(f.read()).hexdigest(), json.dumps(view))
         if key in _cache:
             return _cache[key]
         out = os.path.join(tmp, "world.exr")
         script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "world_render.py")
         args = [library, world.name, out, str(int(width)), str(int(samples))]
+        if view is not None:
+            args.append(os.path.join(tmp, "view.json"))
+            with open(args[-1], "w") as f:
+                json.dump(dict(view, out=os.path.join(tmp, "view.exr")), f)
         binary = bpy.app.binary_path
         if binary and os.path.basename(binary).lower().startswith("blender"):
             cmd = [binary, "-b", "--factory-startup", "--python-exit-code", "1", "--python", script, "--", *args]
@@ -123,13 +165,20 @@ def render_world(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES):
                                  stdin=subprocess.DEVNULL)
         except (OSError, subprocess.TimeoutExpired) as e:
             raise WorldRenderError(f"its render did not finish: {e}") from None
-        if run.returncode != 0 or not os.path.exists(out):
+        seen_path = os.path.join(tmp, "view.exr")
+        if run.returncode != 0 or not os.path.exists(out) or (view is not None and not os.path.exists(seen_path)):
             lines = [x for x in (run.stderr + run.stdout).splitlines() if x.strip()]
             raise WorldRenderError(f"its render failed: {lines[-1] if lines else 'exit code ' + str(run.returncode)}")
-        img = read_exr(out)[..., :3].astype(np.float32)
+        images = [_radiance(read_exr(p)) for p in ([out, seen_path] if view is not None else [out])]
+    result = (images[0], images[1] if view is not None else None)
+    _cache.clear()                                # one world at a time is enough
+    _cache[key] = result
+    return result
+
+
+def _radiance(img):
+    """(H, W, 3) float32 radiance of an EXR's pixels: finite, non-negative."""
+    img = img[..., :3].astype(np.float32)
     if not np.isfinite(img).all():
         img = np.nan_to_num(img, nan=0.0, posinf=0.0, neginf=0.0)
-    img = np.maximum(img, 0.0)
-    _cache.clear()                                # one world at a time is enough
-    _cache[key] = img
-    return img
+    return np.maximum(img, 0.0)

@@ -2,8 +2,8 @@
 
 Usage (by :func:`raybundle_addon.world.render_world`, never imported by the add-on)::
 
-    python world_render.py LIBRARY.blend WORLD_NAME OUT.exr WIDTH SAMPLES
-    blender -b --factory-startup --python world_render.py -- LIBRARY.blend WORLD_NAME OUT.exr WIDTH SAMPLES
+    python world_render.py LIBRARY.blend WORLD_NAME OUT.exr WIDTH SAMPLES [VIEW.json]
+    blender -b --factory-startup --python world_render.py -- LIBRARY.blend WORLD_NAME OUT.exr WIDTH SAMPLES [VIEW.json]
 
 Loads the world ``WORLD_NAME`` from ``LIBRARY.blend`` into an empty scene and renders it
 through a panoramic equirectangular camera at rotation (90, 0, -90) degrees (the layout of
@@ -11,7 +11,14 @@ through a panoramic equirectangular camera at rotation (90, 0, -90) degrees (the
 ``WIDTH`` x ``WIDTH / 2`` pixels, box filter one pixel wide (each pixel the mean radiance of
 its cell), no denoising, Standard view, into a 32-bit float EXR.  Only the world is in the
 scene, so every camera ray sees it directly: Blender evaluates whatever its node tree holds.
+
+With ``VIEW.json`` it then renders the world once more through the scene's camera as the
+JSON describes it (``matrix`` 16 floats row by row, ``type``, ``lens``, ``sensor_width``,
+``sensor_height``, ``sensor_fit``, ``shift_x``, ``shift_y``, ``ortho_scale``, ``size`` [w, h],
+``pixel_aspect`` [x, y], ``filter_type``, ``filter_size``, ``samples``) into its ``out`` EXR:
+the world each pixel of the render sees, through the render's own pixel filter.
 """
+import json
 import math
 import sys
 
@@ -60,6 +67,27 @@ def main(argv):
     s.exr_codec = "ZIP"
     r.filepath = out
     bpy.ops.render.render(write_still=True)
+    if len(argv) > 5:
+        with open(argv[5]) as f:
+            view = json.load(f)
+        data = bpy.data.cameras.new("view")
+        data.type = view["type"]
+        for key in ("lens", "sensor_width", "sensor_height", "sensor_fit", "shift_x", "shift_y", "ortho_scale"):
+            setattr(data, key, view[key])
+        data.clip_start, data.clip_end = 1e-6, 1e30
+        cam = bpy.data.objects.new("view", data)
+        m = view["matrix"]
+        from mathutils import Matrix
+        cam.matrix_world = Matrix([m[0:4], m[4:8], m[8:12], m[12:16]])
+        sc.collection.objects.link(cam)
+        sc.camera = cam
+        r.resolution_x, r.resolution_y = view["size"]
+        r.pixel_aspect_x, r.pixel_aspect_y = view["pixel_aspect"]
+        r.filter_size = view["filter_size"]
+        c.pixel_filter_type = view["filter_type"]
+        c.samples = int(view["samples"])
+        r.filepath = view["out"]
+        bpy.ops.render.render(write_still=True)
 
 
 if __name__ == "__main__":

@@ -58,6 +58,8 @@ class GBuffer:
     material: np.ndarray
     w_eye: np.ndarray
     bary: np.ndarray
+    #: (N,) the pixel (row-major index) of each primary ray, None for other rays
+    pixel: np.ndarray | None = None
 
     @property
     def hit(self):
@@ -217,7 +219,8 @@ class Renderer(ProgressiveImage):
         sc = self.scene
         ts = sc.seen_tside(np.where(hit, tri, 0), dirs)
         return GBuffer(tri, ts, org + np.where(hit, t, 0.0)[:, None] * dirs, sc.tside_normal[ts],
-                       sc.triangle_material[sc.tside_triangle[ts]], -dirs, np.stack([1 - u - v, u, v], axis=1))
+                       sc.triangle_material[sc.tside_triangle[ts]], -dirs, np.stack([1 - u - v, u, v], axis=1),
+                       np.arange(len(self._pixel)) if pixels is None else np.asarray(pixels))
 
     def seen_radiance(self, g):
         """Radiance (N, 3) that reaches the eye directly: emission of the surfaces
@@ -226,7 +229,9 @@ class Renderer(ProgressiveImage):
         out = np.zeros((len(g.triangle), 3))
         miss = np.nonzero(~g.hit)[0]
         if len(miss):
-            out[miss] = self.scene.world.radiance(-g.w_eye[miss], camera=True)
+            view = self.scene.world.view_for(self.camera) if g.pixel is not None else None
+            out[miss] = (view[g.pixel[miss]] if view is not None
+                         else self.scene.world.radiance(-g.w_eye[miss], camera=True))
         h = np.nonzero(g.hit)[0]
         cos_eye = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h])
         out[h] = self.scene.materials.emitted_radiance(g.material[h], cos_eye)

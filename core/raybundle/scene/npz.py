@@ -18,7 +18,7 @@ def load_npz(path) -> PatchScene:
     and the ``material_*`` table; ``triangle_patch``, ``triangle_source``,
     ``triangle_two_sided`` (T,) bool (absent: one-sided, as files of format 1),
     ``point_light_*``, ``sun_light_*``, ``area_light_*``, ``world_image`` (H, W, 3) and ``world_camera_image`` (or
-    the older constant ``environment`` (3,)),
+    the older constant ``environment`` (3,)), ``world_view`` (h, w, 3) with ``world_view_camera_*``,
     ``camera_*``, ``analytic_radiance`` and the ``texture_*`` arrays
     (:meth:`~raybundle.scene.textures.SurfaceTexture.to_arrays`) are optional.  A file that
     cannot be read or holds malformed arrays raises :class:`SceneError` (one line).

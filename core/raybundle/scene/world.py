@@ -35,13 +35,24 @@ class World:
     """The world's radiance ``image`` (H, W, 3) [W m^-2 sr^-1] in the layout of the module
     docstring, the one bundles, gathers and paths that leave the scene read; and
     ``camera_image`` (same shape, or None for the same), the one camera rays see: it differs
-    where a sun was taken out of ``image`` as a lamp (:func:`split_sun`)."""
+    where a sun was taken out of ``image`` as a lamp (:func:`split_sun`); and ``view`` (h, w, 3)
+    or None, what the scene's camera sees of the world pixel for pixel (Blender renders it
+    through that camera, with its pixel filter: :meth:`view_for`), sharper than any
+    panorama can afford to be (a 512-pixel panorama has 1.4 pixels per degree, a 320-pixel
+    view 60 degrees wide 5.3)."""
 
     image: np.ndarray
     camera_image: np.ndarray | None = None
+    view: np.ndarray | None = None
+    #: the camera ``view`` was rendered through (a :class:`~raybundle.scene.camera.Camera`)
+    view_camera: object = None
 
     def __post_init__(self):
         self.image = _checked(self.image, "world image")
+        if self.view is not None:
+            self.view = _checked(self.view, "world view")
+            if self.view_camera is None or self.view.shape[:2] != (self.view_camera.height, self.view_camera.width):
+                raise ValueError("the world's view needs the camera it was rendered through, of its size")
         if self.camera_image is not None:
             self.camera_image = _checked(self.camera_image, "world camera image")
             if self.camera_image.shape != self.image.shape:
@@ -90,6 +101,17 @@ class World:
             return np.broadcast_to(img[0, 0], (len(d), 3)).copy()
         return img[pixel_of(d, h, w)]
 
+    def view_for(self, camera):
+        """(h * w, 3) radiance the ``camera``'s pixels see of the world (row-major from the
+        top left), or None when :attr:`view` was not rendered through this camera."""
+        c = self.view_camera
+        if self.view is None or camera is None or not (
+                (c.width, c.height, c.orthographic) == (camera.width, camera.height, camera.orthographic)
+                and np.allclose([c.fx, c.fy, c.cx, c.cy], [camera.fx, camera.fy, camera.cx, camera.cy])
+                and np.allclose(c.matrix_world, camera.matrix_world)):
+            return None
+        return self.view.reshape(-1, 3)
+
     def radiance_along(self, direction):
         """(2, 3): the radiance arriving travelling along +``direction`` (from the sky at
         ``-direction``) and along ``-direction`` (from ``+direction``), for a bundle of
@@ -101,13 +123,20 @@ class World:
         d = {"world_image": self.image}
         if self.camera_image is not None:
             d["world_camera_image"] = self.camera_image
+        if self.view is not None:
+            d["world_view"] = self.view
+            d.update(self.view_camera.to_arrays("world_view_camera_"))
         return d
 
     @classmethod
     def from_arrays(cls, d):
         """The world of a scene file: ``world_image`` (H, W, 3), or the older constant ``environment`` (3,)."""
         if d.get("world_image") is not None:
-            return cls(np.asarray(d["world_image"], float), d.get("world_camera_image"))
+            view, camera = d.get("world_view"), None
+            if view is not None:
+                from .camera import Camera
+                camera = Camera.from_arrays(d, "world_view_camera_")
+            return cls(np.asarray(d["world_image"], float), d.get("world_camera_image"), view, camera)
         env = d.get("environment")
         return cls.constant(np.zeros(3) if env is None else env)
 
@@ -199,4 +228,4 @@ def split_sun(world: World):
     light = img.copy()
     light[region] = fill
     sun = dict(direction=-centre, irradiance=irradiance, angle=2.0 * np.sqrt(2.0 * spread))
-    return World(light, world.seen), sun
+    return World(light, world.seen, world.view, world.view_camera), sun
