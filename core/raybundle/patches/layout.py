@@ -125,10 +125,12 @@ def bisect_long(scene: PatchScene, max_edge, which):
     todo = np.nonzero(which)[0]
     c, origin = corners[todo], todo
     pieces, rows = [], []
-    while len(c):
+    for level in range(128):            # each two levels at least halve the longest edge
+        if not len(c):
+            break
         edge = np.linalg.norm(np.roll(c, -1, axis=1) - c, axis=2)          # edge j: corner j -> j + 1
         j = np.argmax(edge, axis=1)
-        done = edge[np.arange(len(c)), j] <= max_edge
+        done = ~(edge[np.arange(len(c)), j] > max_edge) | (level == 127)
         pieces.append(c[done])
         rows.append(origin[done])
         c, j, origin = c[~done], j[~done], origin[~done]
