@@ -1,5 +1,6 @@
 """The patch layout by subdivision: triangles cut into similar triangles to a patch size
-(:func:`subdivide`, :func:`split_triangles`) and then cut along the lines where other surfaces
+(:func:`subdivide`, :func:`split_triangles`), slivers halved along their length instead
+(:func:`bisect_long`), and then cut along the lines where other surfaces
 touch or cross them (:func:`cut_at_contacts`, :mod:`raybundle.patches.contacts`).
 :func:`raybundle.patches.clusters.make_patches` also groups triangles much smaller than a patch."""
 from __future__ import annotations
