@@ -476,7 +476,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
     if cam_ob is not None:
         cam_ob = cam_ob.evaluated_get(depsgraph)
     camera = export_camera(cam_ob, render, size, border, warn) if cam_ob is not None or require_camera else None
-    world = export_world(scene.world, warn, camera_view(cam_ob, render, scene, camera, border))
+    world = export_world(scene.world, warn, camera_view(cam_ob, render, camera, border))
     if render.use_motion_blur:
         warn("motion blur is not supported: the scene is rendered at the current frame")
     if render.film_transparent:

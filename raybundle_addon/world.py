@@ -7,8 +7,8 @@ into an equirectangular image, ``EQUIRECT_WIDTH`` x ``EQUIRECT_WIDTH / 2`` pixel
 ``EQUIRECT_SAMPLES`` samples each (:mod:`.world_render`, in a process of its own: a render
 cannot start another render in the same process), so nothing of the node tree is
 reimplemented here.  Through a perspective camera the same process renders the world once
-more through that camera, at the render's size and with its pixel filter
-(:attr:`raybundle.scene.world.World.view`): what the camera sees of the world through a
+more through that camera, at the render's size, each pixel the mean over its area as
+raybundle's own pixels are (:attr:`raybundle.scene.world.World.view`): what the camera sees of the world through a
 window is then Blender's own pixel, not a panorama's blur.  The images are kept per world,
 node tree and view for the session.
 
@@ -106,7 +106,7 @@ def _constant_radiance(world, warn):
     return color * strength, color * strength
 
 
-def camera_view(cam_ob, render, scene, camera, border):
+def camera_view(cam_ob, render, camera, border):
     """What :mod:`.world_render` needs to render the world through the perspective camera
     object ``cam_ob`` (evaluated) as ``render`` renders it, with the exported ``camera``
     (:class:`~raybundle.scene.camera.Camera`) and render ``border`` (x0, y0, w, h) or None;
@@ -117,12 +117,11 @@ def camera_view(cam_ob, render, scene, camera, border):
         return None
     cd = cam_ob.data
     w, h = render_size(render)
-    cycles = getattr(scene, "cycles", None)
+    # a box one pixel wide: each pixel the mean over its own area, as raybundle's pixels are
     params = dict(matrix=[x for row in cam_ob.matrix_world for x in row], type=cd.type, lens=cd.lens,
                   sensor_width=cd.sensor_width, sensor_height=cd.sensor_height, sensor_fit=cd.sensor_fit,
                   shift_x=cd.shift_x, shift_y=cd.shift_y, ortho_scale=cd.ortho_scale, size=[w, h],
-                  pixel_aspect=[render.pixel_aspect_x, render.pixel_aspect_y],
-                  filter_type=getattr(cycles, "pixel_filter_type", "BLACKMAN_HARRIS"), filter_size=render.filter_size,
+                  pixel_aspect=[render.pixel_aspect_x, render.pixel_aspect_y], filter_type="BOX", filter_size=1.0,
                   samples=int(max(4, min(VIEW_SAMPLES, VIEW_SAMPLE_BUDGET // (w * h)))))
     return params, camera, border or (0, 0, w, h)
 

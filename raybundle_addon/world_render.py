@@ -16,7 +16,7 @@ With ``VIEW.json`` it then renders the world once more through the scene's camer
 JSON describes it (``matrix`` 16 floats row by row, ``type``, ``lens``, ``sensor_width``,
 ``sensor_height``, ``sensor_fit``, ``shift_x``, ``shift_y``, ``ortho_scale``, ``size`` [w, h],
 ``pixel_aspect`` [x, y], ``filter_type``, ``filter_size``, ``samples``) into its ``out`` EXR:
-the world each pixel of the render sees, through the render's own pixel filter.
+the world each pixel of the render sees (with a box filter one pixel wide: its mean over the pixel).
 """
 import json
 import math

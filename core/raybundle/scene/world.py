@@ -37,7 +37,7 @@ class World:
     ``camera_image`` (same shape, or None for the same), the one camera rays see: it differs
     where a sun was taken out of ``image`` as a lamp (:func:`split_sun`); and ``view`` (h, w, 3)
     or None, what the scene's camera sees of the world pixel for pixel (Blender renders it
-    through that camera, with its pixel filter: :meth:`view_for`), sharper than any
+    through that camera, each pixel the mean over its area: :meth:`view_for`), sharper than any
     panorama can afford to be (a 512-pixel panorama has 1.4 pixels per degree, a 320-pixel
     view 60 degrees wide 5.3)."""
 
