@@ -117,11 +117,10 @@ def camera_view(cam_ob, render, camera, border):
         return None
     cd = cam_ob.data
     w, h = render_size(render)
-    # a box one pixel wide: each pixel the mean over its own area, as raybundle's pixels are
     params = dict(matrix=[x for row in cam_ob.matrix_world for x in row], type=cd.type, lens=cd.lens,
                   sensor_width=cd.sensor_width, sensor_height=cd.sensor_height, sensor_fit=cd.sensor_fit,
                   shift_x=cd.shift_x, shift_y=cd.shift_y, ortho_scale=cd.ortho_scale, size=[w, h],
-                  pixel_aspect=[render.pixel_aspect_x, render.pixel_aspect_y], filter_type="BOX", filter_size=1.0,
+                  pixel_aspect=[render.pixel_aspect_x, render.pixel_aspect_y],
                   samples=int(max(4, min(VIEW_SAMPLES, VIEW_SAMPLE_BUDGET // (w * h)))))
     return params, camera, border or (0, 0, w, h)
 

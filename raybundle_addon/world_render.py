@@ -15,8 +15,9 @@ scene, so every camera ray sees it directly: Blender evaluates whatever its node
 With ``VIEW.json`` it then renders the world once more through the scene's camera as the
 JSON describes it (``matrix`` 16 floats row by row, ``type``, ``lens``, ``sensor_width``,
 ``sensor_height``, ``sensor_fit``, ``shift_x``, ``shift_y``, ``ortho_scale``, ``size`` [w, h],
-``pixel_aspect`` [x, y], ``filter_type``, ``filter_size``, ``samples``) into its ``out`` EXR:
-the world each pixel of the render sees (with a box filter one pixel wide: its mean over the pixel).
+``pixel_aspect`` [x, y], ``samples``) into its ``out`` EXR: the world each pixel of the render
+sees, with the same box filter one pixel wide (each pixel its mean over its area, as
+raybundle's own pixels are).
 """
 import json
 import math
@@ -83,8 +84,6 @@ def main(argv):
         sc.camera = cam
         r.resolution_x, r.resolution_y = view["size"]
         r.pixel_aspect_x, r.pixel_aspect_y = view["pixel_aspect"]
-        r.filter_size = view["filter_size"]
-        c.pixel_filter_type = view["filter_type"]
         c.samples = int(view["samples"])
         r.filepath = view["out"]
         bpy.ops.render.render(write_still=True)

@@ -153,6 +153,8 @@ class Renderer(ProgressiveImage):
             raise ValueError("the scene has no camera; give one (Camera.from_blender / Camera.look_at)")
         settings.validate()
         self.scene, self.camera, self.solver, self.direct = scene, camera, solver, direct
+        #: (pixels, 3) what each pixel sees of the world where nothing is hit, or None: by direction
+        self._world_view = scene.world.view_for(camera)
         self.tracer = solver.tracer
         self.settings = settings
         self.rng = np.random.default_rng([settings.seed, 1])
@@ -229,8 +231,7 @@ class Renderer(ProgressiveImage):
         out = np.zeros((len(g.triangle), 3))
         miss = np.nonzero(~g.hit)[0]
         if len(miss):
-            view = self.scene.world.view_for(self.camera) if g.pixel is not None else None
-            out[miss] = (view[g.pixel[miss]] if view is not None
+            out[miss] = (self._world_view[g.pixel[miss]] if self._world_view is not None and g.pixel is not None
                          else self.scene.world.radiance(-g.w_eye[miss], camera=True))
         h = np.nonzero(g.hit)[0]
         cos_eye = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h])
