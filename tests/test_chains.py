@@ -143,6 +143,17 @@ def test_cli_workers_writes_the_merged_image(tmp_path):
     assert img.shape == (12, 12, 3) and np.isfinite(img).all() and "chains: 10, 10" in p.stderr
 
 
+def test_the_chains_see_the_workers_whatever_the_clients_refresh_left(cluster):
+    """The client's periodic refresh of ``scheduler_info()`` asks for no workers: a poll that
+    read that cache took every chain for lost ("no chain reported any state", a CI flake)."""
+    from raybundle.app.distributed import _workers
+
+    lc, client = cluster
+    client.sync(client._update_scheduler_info)                   # what the periodic refresh does
+    assert client._scheduler_identity["workers"] == {}           # the cache the old poll could read
+    assert _workers(client) == set(lc.scheduler_info["workers"]) and len(_workers(client)) == 2
+
+
 def test_a_lost_worker_costs_only_its_last_segment(cluster):
     """Killing one worker mid-run: its chain's last report still counts, the other chain
     runs to the end, and the pooled furnace image is right (image mean within 5 SE of the
@@ -152,7 +163,7 @@ def test_a_lost_worker_costs_only_its_last_segment(cluster):
 
     lc, client = cluster
     sc = pipeline.prepare(scenes.furnace(resolution=(16, 16)), patches=200)
-    victim = sorted(client.scheduler_info()["workers"])[0]
+    victim = sorted(client.nthreads())[0]
 
     def kill():
         time.sleep(6.0)

@@ -91,7 +91,7 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
                                                dashboard_address=None)
             client = distributed.Client(cluster)
     try:
-        addresses = sorted(client.scheduler_info()["workers"])
+        addresses = sorted(_workers(client))
         n = int(chains_count or len(addresses))
         if n < 1 or not addresses:
             raise ValueError("no workers to run chains on")
@@ -134,6 +134,13 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
                 cluster.close()
 
 
+def _workers(client):
+    """The addresses of the cluster's workers, asked of the scheduler now.  Not
+    ``client.scheduler_info()``: the client's periodic refresh asks for no workers and
+    overwrites the same cache, so a poll racing it saw none and took every chain for lost."""
+    return set(client.nthreads())
+
+
 def _wait_for_chains(client, futures, names, addresses, end, stop, progress, report_seconds):
     """Poll the chains until none runs, ``end`` (a ``time.time()``) has passed or ``stop`` is
     set, telling ``progress`` each chain's reported iterations; returns per chain whether its
@@ -141,7 +148,7 @@ def _wait_for_chains(client, futures, names, addresses, end, stop, progress, rep
     n = len(futures)
     while True:
         status = [f.status for f in futures]
-        alive = set(client.scheduler_info()["workers"])
+        alive = _workers(client)
         lost = [st == "pending" and addresses[k % len(addresses)] not in alive for k, st in enumerate(status)]
         reported = [client.get_metadata([name, "iterations"], None) for name in names]
         if progress is not None:
