@@ -376,7 +376,8 @@ class Renderer(ProgressiveImage):
         if self.world_light is not None and len(hf):
             before = self.world_light.rays
             e = self.world_light.irradiance(g.point[hf], g.normal[hf],
-                                            self.rng.random((len(hf), self.settings.world_samples, 3)))
+                                            self.rng.random((len(hf), self.settings.world_samples, 3)),
+                                            self.solver.world_guide, self.scene.tside_side[g.tside[hf]])
             m = g.material[hf]
             w_d = self.scene.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[hf], g.w_eye[hf]))
             scale = self.albedo_scale(g.triangle[hf], g.point[hf])
@@ -508,7 +509,8 @@ class Renderer(ProgressiveImage):
         offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve
         if final is not None:
             per_sample = (-(-int(rays) // k) if rays > 0 else
-                          self.edge_gather.automatic_rays(final, self._probe_gbuffer(), k, gather_seconds))
+                          self.edge_gather.automatic_rays(final, self._probe_gbuffer(), k, gather_seconds,
+                                                          lambda ts, bary: self.surface_values(e_bar, vert, ts, bary)))
             self.gather_rays_used = per_sample * k
             if per_sample == 0:
                 final = None

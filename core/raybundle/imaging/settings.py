@@ -45,8 +45,8 @@ class RenderSettings:
     (:meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`), 0 = read it from the patches as the rest of the
     diffuse indirect light;
     ``world_samples``: shadow rays per visible point and image pass towards a world that
-    changes with direction, drawn by its brightness
-    (:class:`~raybundle.lights.world_light.WorldLight`), for the diffuse lobe's direct light
+    changes with direction, drawn by its brightness and by where the bundles found the sky
+    open from the point's side (:class:`~raybundle.lights.world_light.WorldLight`), for the diffuse lobe's direct light
     from the world; 0 = the patches carry it, as the rest of the diffuse light (the default:
     seen from inside a room most such rays meet a wall, and the few through a window
     make single pixels bright; README, 'Where the method is weak').

@@ -19,6 +19,36 @@ import numpy as np
 
 from ..scene.world import World, pixel_of
 
+#: the guide cells of the sky: bands of polar angle x sectors of azimuth, each a block of the
+#: world image's pixels (module docstring)
+GUIDE_ROWS, GUIDE_COLS = 16, 32
+GUIDE_CELLS = GUIDE_ROWS * GUIDE_COLS
+#: the share of a side's samples drawn by its guide (the rest by the world's brightness alone)
+GUIDE_SHARE = 0.8
+
+
+def guide_cell(directions, h, w):
+    """(N,) the guide cell (module docstring) of the unit ``directions`` (N, 3), towards the sky,
+    for a world image ``h`` x ``w``."""
+    row, col = pixel_of(directions, h, w)
+    return _pixel_cell(row, col, h, w)
+
+
+def _blurred(g):
+    """Guide sums (U, cells) spread over each cell and its eight neighbours (azimuth wraps
+    round, the poles do not): a cell next to where the bundles found the sky open is likely
+    open too, and a guide that leaves it out would weight its samples up to 1 / (1 - share)."""
+    g = g.reshape(len(g), GUIDE_ROWS, GUIDE_COLS)
+    a = g + np.roll(g, 1, axis=2) + np.roll(g, -1, axis=2)
+    out = a.copy()
+    out[:, 1:] += a[:, :-1]
+    out[:, :-1] += a[:, 1:]
+    return out.reshape(len(g), GUIDE_CELLS)
+
+
+def _pixel_cell(row, col, h, w):
+    return (row * GUIDE_ROWS // h) * GUIDE_COLS + col * GUIDE_COLS // w
+
 
 class WorldLight:
     """The world as a light to sample (module docstring), over a ray tracer of the scene."""
@@ -30,42 +60,100 @@ class WorldLight:
         self.h, self.w = h, w
         self.omega = world.pixel_solid_angles()[:, 0]                       # (H,) sr per pixel of a row
         weight = (img.max(axis=2) * self.omega[:, None]).reshape(-1)
-        total = weight.sum()
+        total = self.total = weight.sum()
         self.emits = total > 0
         self.p = weight / total if self.emits else weight
         self.cdf = np.cumsum(self.p)
         self.z_edges = np.cos(np.linspace(0.0, np.pi, h + 1))
+        # the pixels by guide cell: each cell's pixels contiguous in ``_order``, their
+        # brightness cumulated in ``_cum`` (brightness by cell: ``_cell_weight``)
+        rows, cols = np.divmod(np.arange(h * w), w)
+        self._pixel_cell = _pixel_cell(rows, cols, h, w)
+        self._order = np.argsort(self._pixel_cell, kind="stable")
+        self._cum = np.cumsum(weight[self._order])
+        counts = np.bincount(self._pixel_cell, minlength=GUIDE_CELLS)
+        self._cell_first = np.cumsum(counts) - counts
+        self._cell_last = self._cell_first + np.maximum(counts, 1) - 1
+        self._cell_weight = np.bincount(self._pixel_cell, weight, minlength=GUIDE_CELLS)
+        self._cell_before = np.cumsum(self._cell_weight) - self._cell_weight
+        self.weight = weight
         _, radius = tracer.scene.bounding_sphere
         self.far = 4.0 * radius + 1.0
         self.rays = 0
 
-    def sample(self, u):
-        """``(directions (N, 3), pdf (N,) [1/sr], radiance (N, 3))`` for uniforms ``u`` (N, 3)."""
+    def sample(self, u, guide=None, sides=None):
+        """``(directions (N, 3), pdf (N,) [1/sr], radiance (N, 3))`` for uniforms ``u`` (N, 3),
+        by brightness alone, or with ``guide`` (:meth:`guide_of`) for points on its ``sides``
+        (N,: places in the sides it was made for) by the mixture (module docstring; pdf the
+        mixture's)."""
         u = np.asarray(u, float)
-        k = np.minimum(np.searchsorted(self.cdf, u[:, 0] * self.cdf[-1], side="right"), len(self.p) - 1)
+        x = u[:, 0]
+        if guide is not None:
+            share, cdf, prob = guide
+            a = share[sides]
+            by_guide = x < a
+            x = np.where(by_guide, x, x - a) / np.where(by_guide, a, 1.0 - a)     # uniform again
+        k = np.minimum(np.searchsorted(self.cdf, x * self.cdf[-1], side="right"), len(self.p) - 1)
+        if guide is not None and by_guide.any():
+            i = np.nonzero(by_guide)[0]
+            side = sides[i]
+            # the side's cell: its row of the cdf, shifted by the side's index (rows stay sorted)
+            j = np.clip(np.searchsorted(cdf, side + x[i], side="right"), side * GUIDE_CELLS,
+                        (side + 1) * GUIDE_CELLS - 1)
+            c = j - side * GUIDE_CELLS
+            p_c = prob[j]
+            frac = np.clip((side + x[i] - (cdf[j] - p_c)) / np.maximum(p_c, 1e-300), 0.0, 1.0)   # uniform again
+            target = self._cell_before[c] + frac * self._cell_weight[c]
+            q = np.clip(np.searchsorted(self._cum, target, side="right"), self._cell_first[c], self._cell_last[c])
+            k[i] = self._order[q]
         row, col = np.divmod(k, self.w)
         z = self.z_edges[row] + (self.z_edges[row + 1] - self.z_edges[row]) * u[:, 1]
         phi = np.pi * (1.0 - 2.0 * (col + u[:, 2]) / self.w)
         s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
         d = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
         pdf = self.p[k] / self.omega[row]
+        if guide is not None:
+            cell = self._pixel_cell[k]
+            cw = self._cell_weight[cell]
+            g = prob[sides * GUIDE_CELLS + cell] / np.where(cw > 0, cw, 1.0) * self.total
+            pdf = pdf * (a * g + (1.0 - a))
         return d, pdf, self.world.image[row, col]
+
+    @staticmethod
+    def guide_of(guide_sums, sides):
+        """The ``guide`` of :meth:`sample` for ``sides`` (U,) from the solver's sums (cells, S):
+        per side its share (U,) and, flattened side by side, each cell's probability (U cells,)
+        and cumulative probability plus the side's place in ``sides`` (U cells,)."""
+        g = _blurred(guide_sums[:, sides].T.astype(float))
+        total = g.sum(axis=1)
+        has = total > 0
+        prob = g / np.where(has, total, 1.0)[:, None]
+        cdf = np.cumsum(prob, axis=1)
+        cdf[~has] = np.linspace(1.0 / GUIDE_CELLS, 1.0, GUIDE_CELLS)       # never drawn, kept sorted
+        cdf += np.arange(len(g))[:, None]
+        return np.where(has, GUIDE_SHARE, 0.0), cdf.ravel(), prob.ravel()
 
     def pdf(self, directions):
         """(N,) [1/sr] the density :meth:`sample` draws ``directions`` (N, 3) with."""
         row, col = pixel_of(np.asarray(directions, float), self.h, self.w)
         return self.p[row * self.w + col] / self.omega[row]
 
-    def irradiance(self, points, normals, u):
+    def irradiance(self, points, normals, u, guide_sums=None, sides=None):
         """(N, 3) [W/m^2] estimate of the direct irradiance from the world at ``points``
-        (N, 3) with unit ``normals`` (N, 3), with ``u`` (N, K, 3) uniforms: K samples each."""
+        (N, 3) with unit ``normals`` (N, 3), with ``u`` (N, K, 3) uniforms: K samples each;
+        ``guide_sums`` (cells, S): the solver's guide (module docstring) for points on ``sides``
+        (N,), or None (by brightness alone)."""
         points, normals = np.asarray(points, float), np.asarray(normals, float)
         n, k = u.shape[:2]
         out = np.zeros((n, 3))
         if not self.emits or n == 0:
             return out
-        d, pdf, L = self.sample(u.reshape(-1, 3))
         rep = np.repeat(np.arange(n), k)
+        guide = at = None
+        if guide_sums is not None:
+            seen, at = np.unique(np.asarray(sides), return_inverse=True)
+            guide, at = self.guide_of(guide_sums, seen), at[rep]
+        d, pdf, L = self.sample(u.reshape(-1, 3), guide, at)
         cos = np.einsum("ij,ij->i", normals[rep], d)
         live = np.nonzero((cos > 0) & (pdf > 0))[0]
         if len(live):

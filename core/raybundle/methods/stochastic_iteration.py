@@ -60,6 +60,7 @@ import numpy as np
 
 from ..lights.caustics import CausticShot
 from ..lights.first_shot import PatchFirstShot
+from ..lights.world_light import GUIDE_CELLS, guide_cell
 from ..patches.reconstruction import LinearReconstruction
 from ..tracing.sampling import points_on_triangles, uniform_sphere, uniform_sphere_pdf
 from .base import Method, SolverStats
@@ -159,6 +160,9 @@ class StochasticIterationSolver(Method):
         self.mean_incoming = np.zeros((n, 3))
         self.world_incoming = np.zeros((n, 3))      # the iterate's part straight from the world
         self.mean_world_incoming = np.zeros((n, 3))
+        #: (cells, S) or None: per side, the world light the bundles brought it from each guide cell
+        #: of the sky, summed over the iterations (:class:`~raybundle.lights.world_light.WorldLight`)
+        self.world_guide = None
         self._tiny = None                           # sides smaller than a bundle cell (set at the first step)
         self.averaged = 0                           # iterations in mean_incoming
         self.direction = None
@@ -315,6 +319,7 @@ class StochasticIterationSolver(Method):
                 world_e = np.stack([np.bincount(bundle.receiver[sky], S[sender[sky], c], minlength=n)
                                     for c in range(3)], axis=1) * (w / self.area[:, None])
                 self.world_incoming = world_e if k == 0 else self.world_incoming + world_e
+                self._guide(bundle, sender, S, d[k], w)
             if not self.diffuse_only:
                 mine = self.glossy_patches[pick == k]
                 e_glossy[mine] = e_k[mine]
@@ -327,6 +332,20 @@ class StochasticIterationSolver(Method):
         self.direction = d[-1]
         st.directions += k_dirs
         return E, e_glossy, t_glossy, bundles
+
+    def _guide(self, bundle, sender, S, d, w):
+        """Add what the bundle along ``d`` brought each side straight from the sky, by the sky's
+        guide cell (-d for sender -1, +d for -2): ``max_c L_w * cell_area * w / A_i``, the
+        brightest channel of its irradiance share, as the world light samples by."""
+        if self.world_guide is None:
+            self.world_guide = np.zeros((GUIDE_CELLS, len(self.area)), np.float32)
+        cells = guide_cell(np.stack([-d, d]), *self.world.image.shape[:2])
+        n = len(self.area)
+        for sender_id, cell in ((-1, cells[0]), (-2, cells[1])):
+            lum = S[sender_id].max()
+            if lum > 0:
+                got = np.bincount(bundle.receiver[sender == sender_id], minlength=n)
+                self.world_guide[cell] += (got * (lum * w) / self.area).astype(np.float32)
 
     # ------------------------------------------------------------- estimates
     def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True, glossy_iterate=True,
