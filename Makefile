@@ -87,7 +87,7 @@ bench-boxes: $(STAMP)
 
 # Real rooms (demo_scenes/interiors) in clay (the view layer's Material Override), RAYBUNDLE against
 # Cycles from the same file at 320 x 180, references committed (about 25 minutes a room on 2 cores)
-INTERIORS = living-room dining-room
+INTERIORS = living-room dining-room modern-hall
 bench-interiors: $(STAMP)
 	for room in $(INTERIORS); do \
 	  $(PY) tools/bench_blender.py demo_scenes/interiors/$$room.blend --clay --resolution 320 180 \

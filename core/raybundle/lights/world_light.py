@@ -76,7 +76,6 @@ class WorldLight:
         self._cell_last = self._cell_first + np.maximum(counts, 1) - 1
         self._cell_weight = np.bincount(self._pixel_cell, weight, minlength=GUIDE_CELLS)
         self._cell_before = np.cumsum(self._cell_weight) - self._cell_weight
-        self.weight = weight
         _, radius = tracer.scene.bounding_sphere
         self.far = 4.0 * radius + 1.0
         self.rays = 0
@@ -134,7 +133,7 @@ class WorldLight:
         return np.where(has, GUIDE_SHARE, 0.0), cdf.ravel(), prob.ravel()
 
     def pdf(self, directions):
-        """(N,) [1/sr] the density :meth:`sample` draws ``directions`` (N, 3) with."""
+        """(N,) [1/sr] the density :meth:`sample` draws ``directions`` (N, 3) with by brightness alone."""
         row, col = pixel_of(np.asarray(directions, float), self.h, self.w)
         return self.p[row * self.w + col] / self.omega[row]
 
