@@ -196,11 +196,8 @@ class EdgeGather:
     #: small against their noise: :meth:`automatic_rays`)
     MIN_GATHER_RAYS = 32
     #: how many times ``v / b^2`` rays the gather needs to pay (:meth:`automatic_rays`): 16 rays
-    #: per point miss the rare bright ones (a ray landing next to a lamp), so ``v`` comes out low.
-    #: Calibrated: ``cornell`` at 5 s measures ``v / b^2`` = 35 and its 32 rays took the error from
-    #: 2.95% to 4.57% (seeds 3, 4), at 30 s about 200 rays left it at 1.5%; the interior bench's
-    #: rooms measure 18 (living room) and 25 (dining room), and 144-160 rays took them from 10.1%
-    #: to 6.3% and from 6.3% to 5.2% at 60 s
+    #: per point miss the rare bright ones (a ray landing next to a lamp), so ``v`` comes out low;
+    #: calibrated on ``cornell`` and the interior bench (README, 'final gather')
     NOISE_MARGIN = 3.0
 
     def __init__(self, scene, tracer, seed):

@@ -484,10 +484,9 @@ class Renderer(ProgressiveImage):
         points on flagged sides (:class:`~raybundle.imaging.gather.EdgeGather`), and none where
         the gather's own noise would outweigh the bias it removes
         (:meth:`~raybundle.imaging.gather.EdgeGather.automatic_rays`).  Behind its pace (sides
-        first seen by a sub-pixel sample are probed for edges then, which on a room of 270k
-        triangles took the dining room's 60 s run to 62 s), the automatic gather gives the
-        remaining sub-pixel samples fewer rays, or none: each sample's gather is unbiased
-        whatever its count.
+        first seen by a sub-pixel sample are probed for edges then, unbudgeted), the automatic
+        gather gives the remaining sub-pixel samples fewer rays, or none: each sample's gather
+        is unbiased whatever its count.
         """
         t_start = time.perf_counter()
         sc, solver = self.scene, self.solver
