@@ -98,14 +98,14 @@ def test_patch_first_shot_matches_closed_form_under_lamp():
     sc = subdivide(lamp_scene(), max_edge=0.05)
     tr = RayTracer(sc)
     dl = DirectLighting(sc, tr)
-    fs = PatchFirstShot(dl, np.random.default_rng(0), initial_samples=400)
+    fs = PatchFirstShot(dl, np.random.default_rng(0), initial_samples=100)
     floor = np.nonzero(sc.patch_material == 0)[0]
     c = sc.patch_centroid[floor]
     sel = floor[np.linalg.norm(c[:, :2], axis=1) < 0.3]
     # patch average vs. centroid value: irradiance is smooth at 5 cm, 2nd-order error < 1%
     exact = np.array([rect_irradiance(*sc.patch_centroid[i, :2], -0.2, 0.2, -0.2, 0.2, 0.5, [1, 2, 3]) for i in sel])
     rel = fs.E[sel, 0, :] / exact - 1
-    assert abs(rel.mean()) < 0.01 and np.abs(rel).max() < 0.1
+    assert abs(rel.mean()) < 0.01 and np.abs(rel).max() < 0.05     # measured at 100 samples: 2.4% at most
     # the mean travel direction points down from the lamp
     assert np.all(fs.direction[sel, 0, 2] < -0.7)
     tr.close()

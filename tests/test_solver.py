@@ -65,7 +65,7 @@ def assert_converged(samples, exact, max_se):
 
 @pytest.mark.parametrize("glossy,sequence,batches,per_batch,directions", [
     (False, "prng", 12, 120, 1), (False, "stratified", 12, 120, 1), (False, "pi-powers", 10, 200, 1),
-    (False, "stratified", 12, 40, 8), (True, "pi-powers", 10, 200, 1), (True, "stratified", 12, 40, 8)],
+    (False, "stratified", 12, 40, 8), (True, "pi-powers", 10, 80, 1), (True, "stratified", 12, 16, 8)],
     ids=["prng-diffuse", "stratified-diffuse", "pi-powers-diffuse", "stratified-8-diffuse", "pi-powers-glossy",
          "stratified-8-glossy"])
 def test_furnace_converges_to_analytic(glossy, sequence, batches, per_batch, directions):

@@ -26,7 +26,7 @@ def walk_renderer(glossy, sequence, patches=300, seed=0):
                                   solver="ray-bundle-walk")
 
 
-@pytest.mark.parametrize("glossy,batches,per_batch", [(False, 8, 100), (True, 8, 100)],
+@pytest.mark.parametrize("glossy,batches,per_batch", [(False, 8, 100), (True, 8, 30)],
                          ids=["diffuse", "glossy"])
 def test_walk_furnace_converges_to_analytic(glossy, batches, per_batch):
     """Patch radiance and image mean within 4.5 SE of Le / (1 - a); the number of walks
