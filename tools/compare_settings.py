@@ -1,9 +1,11 @@
-"""Side-by-side settings on a built-in scene: error, noise and bias against a cached Cycles reference.
+"""Side-by-side settings on a scene: error, noise and bias against a cached Cycles reference.
 
 Each variant (a JSON object of :class:`raybundle.imaging.settings.RenderSettings` fields, plus
 ``"patches"``, ``"solver"``: attributes to set on the solver, e.g.
 ``{"solver": {"caustic_refine": 4096}}``, and ``"renderer"``: attributes to set on the
-renderer, e.g. ``{"renderer": {"NOISY_SHARE": 0.05}}``) renders the scene once per seed, for a fixed
+renderer, e.g. ``{"renderer": {"NOISY_SHARE": 0.05}}``, and ``"method"``: another method, e.g.
+``{"method": "path-tracing"}``, whose mean tells an error of the export from one of the
+bundles) renders the scene once per seed, for a fixed
 time or iteration count, and prints its error (``raybundle.app.metrics.image_error``: pixels >= 2 px from the lamp, the
 reference's own noise subtracted) and image mean against the reference.  With two seeds
 or more it splits the error into per-image noise (from the difference of two seeds) and
@@ -11,10 +13,16 @@ bias (what the mean of the seeds keeps): ``e^2 = bias^2 + noise^2``.
 
 The reference halves are ``OUT/reference-1.exr`` and ``reference-2.exr`` as
 ``tools/bench_blender.py`` writes them (``make bench-boxes`` caches them in
-``out/bench-cornell`` and ``out/bench-cornell-glossy``).  Example::
+``out/bench-cornell`` and ``out/bench-cornell-glossy``), or the two files ``--halves``.
+The scene is a built-in scene's name or a ``.npz`` file (``python -m raybundle_addon ROOM.blend
+--save-npz``; for the interior bench's clay, exported with the view layer's Material Override
+set as ``tools/bench_blender.py --clay`` sets it).  Examples::
 
     python tools/compare_settings.py cornell --seconds 20 --seeds 3,4 \\
         '{}' '{"image_ray_share": 0.5}' '{"patches": 6000}'
+    python tools/compare_settings.py living-clay.npz --seconds 60 --seeds 3 --halves \\
+        demo_scenes/interiors/references/living-room-clay-{1,2}.exr \\
+        '{}' '{"patches": 16000}' '{"method": "path-tracing"}'
 """
 from __future__ import annotations
 
@@ -28,7 +36,7 @@ import numpy as np
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("scene", help="a built-in scene name")
+    p.add_argument("scene", help="a built-in scene name or a .npz file")
     p.add_argument("variants", nargs="+", help="JSON objects of RenderSettings fields (and 'patches')")
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--seconds", type=float)
@@ -36,30 +44,38 @@ def main(argv=None):
     p.add_argument("--seeds", type=lambda t: [int(x) for x in t.split(",")], default=[3, 4],
                    help="comma-separated seeds (default 3,4)")
     p.add_argument("--reference", default=None, help="folder of reference-1/2.exr (default out/bench-SCENE)")
+    p.add_argument("--halves", nargs=2, metavar=("A", "B"), help="the reference's two halves (instead of --reference)")
     a = p.parse_args(argv)
 
     from raybundle.app.metrics import image_error, light_source_mask
     from raybundle.app.pipeline import make_renderer, prepare
     from raybundle.imaging.settings import RenderSettings
     from raybundle.patches.clusters import DEFAULT_PATCHES
+    from raybundle.methods.registry import image_only
     from raybundle.scene.builtin import load_scene
+    from raybundle.scene.npz import load_npz
     from raybundle.util.io import read_exr
 
     folder = a.reference or os.path.join("out", f"bench-{a.scene}")
-    halves = [read_exr(os.path.join(folder, f"reference-{k}.exr")) for k in (1, 2)]
+    files = a.halves or [os.path.join(folder, f"reference-{k}.exr") for k in (1, 2)]
+    halves = [read_exr(f)[..., :3] for f in files]
     ref = 0.5 * (halves[0] + halves[1])
-    scene = load_scene(a.scene)
+    scene = load_npz(a.scene) if a.scene.endswith(".npz") else load_scene(a.scene)
+    h, w = ref.shape[:2]
+    scene.camera = scene.camera.with_resolution(w, h)
     mask = light_source_mask(scene)
     keep = ~mask
     run = {"seconds": a.seconds} if a.seconds is not None else {"iterations": a.iterations}
     for text in a.variants:
         v = json.loads(text)
-        prepared = prepare(scene, v.pop("patches", DEFAULT_PATCHES))
+        method = v.pop("method", "stochastic-iteration")
+        patches = v.pop("patches", DEFAULT_PATCHES)
+        prepared = scene if image_only(method) else prepare(scene, patches)
         solver_attrs = v.pop("solver", {})
         renderer_attrs = v.pop("renderer", {})
         images = []
         for seed in a.seeds:
-            r = make_renderer(prepared, RenderSettings(seed=seed, **v))
+            r = make_renderer(prepared, RenderSettings(seed=seed, **v), solver=method)
             for target, attrs in ((r.solver, solver_attrs), (r, renderer_attrs)):
                 for k, x in attrs.items():
                     if not hasattr(target, k):
@@ -67,7 +83,7 @@ def main(argv=None):
                     setattr(target, k, x)
             t0 = time.perf_counter()
             res = r.run(**run)
-            img, st = res.image, res.stats
+            img, st = res.image[..., :3], res.stats
             wall = time.perf_counter() - t0
             r.tracer.close()
             images.append(img)
