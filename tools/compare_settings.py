@@ -50,8 +50,8 @@ def main(argv=None):
     from raybundle.app.metrics import image_error, light_source_mask
     from raybundle.app.pipeline import make_renderer, prepare
     from raybundle.imaging.settings import RenderSettings
-    from raybundle.patches.clusters import DEFAULT_PATCHES
     from raybundle.methods.registry import image_only
+    from raybundle.patches.clusters import DEFAULT_PATCHES
     from raybundle.scene.builtin import load_scene
     from raybundle.scene.npz import load_npz
     from raybundle.util.io import read_exr
