@@ -26,9 +26,12 @@ window), first halved along their length to pieces no longer than h
 (:func:`~raybundle.patches.layout.bisect_long`: a sliver grouped whole made a cluster metres long).
 They are grouped into the cells of a grid h wide, split by normal direction (the cube-map cell),
 by offset along the normal (half-h slabs: a shelf does not share a patch with the floor under it),
-by material, by sidedness and by whether they lie in a gap narrower than 5% of h (the
+by material, by sidedness, by whether they lie in a gap narrower than 5% of h (the
 ceiling over a lamp hanging just under it: :func:`~raybundle.patches.contacts.gap_sides`), after the
-triangles that straddle such a gap are cut along the contact; the rest stay patches of their own.
+triangles that straddle such a gap are cut along the contact, and, under a world that lights
+the scene, by how much of the world each side sees (:func:`world_view_classes`: the facets of a
+window's frame and reveal outside, in the sky, and inside, in the room's shade); the rest stay
+patches of their own.
 Clusters smaller than h^2 / :data:`DETAIL` (the facets of a plant or a chair's legs in a cell:
 in a furnished room they outnumbered the patches of walls and floor ten to one) are then
 grouped again, diffuse ones by the cube face of their normal instead of its cell, in half-h
@@ -45,9 +48,10 @@ from dataclasses import replace
 import numpy as np
 
 from ..scene.model import PatchScene
+from ..tracing.sampling import frames_from_normals
 from ..tracing.visibility import RayTracer
 from ..util.arrays import group_ids
-from .contacts import CONTACT_SHARE, gap_sides
+from .contacts import CONTACT_SHARE, PROBE_CHUNK, gap_sides
 from .layout import bisect_long, cut_at_contacts, edge_for_patches, longest_edges, split_triangles, subdivide
 
 #: the patch count of a scene laid out without an explicit one (sides; the count that measured best
@@ -63,6 +67,11 @@ DETAIL = 4.0
 #: triangles with an area under SLIVER x their longest edge squared are slivers (a right isosceles
 #: triangle has 1/4, a 2 m x 0.4 m one 1/10)
 SLIVER = 0.1
+#: the fraction of cosine-distributed rays from a side that leave the scene, cut into classes
+#: here (:func:`world_view_classes`): none of them, a little of the world, much of it
+WORLD_VIEW_CLASSES = (0.02, 0.2)
+#: cosine-distributed rays per triangle side that find its class
+WORLD_VIEW_RAYS = 16
 
 
 def tessellate(scene: PatchScene, triangles) -> PatchScene:
@@ -118,10 +127,12 @@ class _Grouping:
         similar pieces would turn into k^2 slivers; they are halved along their length instead)."""
         return self.area < np.maximum(h * h / SMALL, SLIVER * self.edge ** 2)
 
-    def clusters(self, h, small, gap=None, spread=False):
+    def clusters(self, h, small, gap=None, spread=False, world_view=None):
         """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``;
         ``gap`` (S, 2) bool: the triangle lies in a gap on its front / back
-        (:func:`~raybundle.patches.contacts.gap_sides`), which a cluster does not straddle.
+        (:func:`~raybundle.patches.contacts.gap_sides`), which a cluster does not straddle;
+        ``world_view`` (S, 2) int: the classes of how much of the world its front / back
+        sees (:func:`world_view_classes`), which a cluster does not mix either.
         Triangles a patch wide or less are keyed by their centroid; ``spread`` keys a longer one
         at ceil(edge / h) points along its longest edge instead, as its pieces will be
         (:func:`~raybundle.patches.layout.bisect_long`): ids (P,) of those points then."""
@@ -140,6 +151,8 @@ class _Grouping:
                 sc.triangle_material[rows], sc.triangle_two_sided[rows]]
         if gap is not None:
             keys.append(gap[:, 0] * 2 + gap[:, 1])
+        if world_view is not None:
+            keys += [world_view[:, 0], world_view[:, 1]]
         ids = group_ids(keys)
         # detail: clusters under h^2 / DETAIL (the facets of a plant, a lamp, a chair's legs in one
         # cell) join by the cube face of their normal instead
@@ -221,7 +234,8 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     if sliver.any():            # long thin triangles: pieces no longer than a patch, grouped where they lie
         fine, piece = bisect_long(fine, h, sliver)
         k, row = k[piece], row[piece]
-    tracer = RayTracer(fine) if contacts else None
+    lit_by_world = scene.world.emits
+    tracer = RayTracer(fine) if contacts or lit_by_world else None
     try:
         if contacts:
             # cut the pieces of split faces and the triangles that straddle a contact; carry
@@ -233,16 +247,48 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
         fine_small = small[row]
         grouped = _Grouping(fine, lo=grouping.lo, rows=np.nonzero(fine_small)[0])
         gap = gap_sides(tracer, grouped.centroid, grouped.normal, CONTACT_SHARE * h) if contacts else None
+        view = world_view_classes(tracer, grouped.centroid, grouped.normal) if lit_by_world else None
     finally:
         if tracer is not None:
             tracer.close()
-    ids = grouped.clusters(h, np.ones(int(fine_small.sum()), bool), gap)
+    ids = grouped.clusters(h, np.ones(int(fine_small.sum()), bool), gap, world_view=view)
     n_clusters = int(ids.max()) + 1
     patch = np.empty(len(fine.triangles), np.int64)
     patch[fine_small] = ids
     others = np.unique(fine.triangle_patch[~fine_small], return_inverse=True)[1].reshape(-1)
     patch[~fine_small] = n_clusters + others
     return replace(fine, triangle_patch=patch)
+
+
+def world_view_classes(tracer, points, normals, rays=WORLD_VIEW_RAYS, seed=0):
+    """(N, 2) int: how much of the world ``points`` (N, 3) see on the side their unit
+    ``normals`` (N, 3) face (column 0) and on the other (column 1): the fraction of
+    ``rays`` cosine-distributed rays that leave the scene, cut at :data:`WORLD_VIEW_CLASSES`.
+
+    A cluster is one unknown: the facets of a window's reveal out in the sky and those
+    inside the room share its mean irradiance, so the inner ones send the sky's light on
+    into the room, a finite-element leak that no patch count finer than the scene's frames
+    and reveals are thin removes (README, 'Real interiors').  Clusters therefore keep sides
+    of different classes apart (module docstring).  Fixed ``seed``: the same layout every
+    run; the points go to the tracer :data:`~raybundle.patches.contacts.PROBE_CHUNK` rays
+    at a time."""
+    points, normals = np.asarray(points, float), np.asarray(normals, float)
+    rng = np.random.default_rng([seed, 17])
+    out = np.zeros((len(points), 2), np.int64)
+    for lo in range(0, len(points), PROBE_CHUNK):
+        p, nrm = points[lo:lo + PROBE_CHUNK], normals[lo:lo + PROBE_CHUNK]
+        t, b = frames_from_normals(nrm)
+        for col, sign in ((0, 1.0), (1, -1.0)):
+            n = sign * nrm
+            leave = np.zeros(len(p))
+            for _ in range(rays):
+                u = rng.random((len(p), 2))
+                r, phi = np.sqrt(u[:, 0]), 2.0 * np.pi * u[:, 1]
+                d = (r * np.cos(phi))[:, None] * t + (r * np.sin(phi))[:, None] * b + np.sqrt(1.0 - u[:, :1]) * n
+                hit, _, _, _ = tracer.first_hit(p + tracer.eps * n, d)
+                leave += hit < 0
+            out[lo:lo + len(p), col] = np.digitize(leave / rays, WORLD_VIEW_CLASSES)
+    return out
 
 
 def triangle_patches(scene: PatchScene) -> PatchScene:
