@@ -53,14 +53,13 @@ def main(argv=None):
     from raybundle.methods.registry import image_only
     from raybundle.patches.clusters import DEFAULT_PATCHES
     from raybundle.scene.builtin import load_scene
-    from raybundle.scene.npz import load_npz
     from raybundle.util.io import read_exr
 
     folder = a.reference or os.path.join("out", f"bench-{a.scene}")
     files = a.halves or [os.path.join(folder, f"reference-{k}.exr") for k in (1, 2)]
     halves = [read_exr(f)[..., :3] for f in files]
     ref = 0.5 * (halves[0] + halves[1])
-    scene = load_npz(a.scene) if a.scene.endswith(".npz") else load_scene(a.scene)
+    scene = load_scene(a.scene)
     h, w = ref.shape[:2]
     scene.camera = scene.camera.with_resolution(w, h)
     mask = light_source_mask(scene)

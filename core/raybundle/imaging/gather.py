@@ -34,7 +34,7 @@ import time
 
 import numpy as np
 
-from ..tracing.sampling import frames_from_normals, kronecker_alpha, uniform_triangle
+from ..tracing.sampling import cosine_directions, frames_from_normals, kronecker_alpha, uniform_triangle
 
 
 class FinalGather:
@@ -88,9 +88,7 @@ class FinalGather:
             n = normals[lo:hi]
             t, b = frames_from_normals(n)
             u = (shift[lo:hi, None, :] + k) % 1                                # (P, R, 2)
-            r, phi = np.sqrt(u[..., 0]), 2 * np.pi * u[..., 1]
-            w = ((r * np.cos(phi))[..., None] * t[:, None] + (r * np.sin(phi))[..., None] * b[:, None]
-                 + np.sqrt(1 - u[..., :1]) * n[:, None]).reshape(-1, 3)
+            w = cosine_directions(u, t[:, None], b[:, None], n[:, None]).reshape(-1, 3)
             origin = np.repeat(points[lo:hi] + n * sv.tracer.eps, rays, axis=0)
             tri, dist, bu, bv = sv.tracer.first_hit(origin, w)
             L = np.zeros((len(w), 3))
@@ -177,8 +175,7 @@ def near_edge_tsides(scene, tracer, rng, tsides=None, probes=32, reach=1.0, chun
         n = np.repeat(scene.tside_normal[ts], probes, axis=0)
         t, b = frames_from_normals(n)
         u = rng.random((len(n), 2))
-        r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
-        w = (r * np.cos(phi))[:, None] * t + (r * np.sin(phi))[:, None] * b + np.sqrt(1 - u[:, :1]) * n
+        w = cosine_directions(u, t, b, n)
         reach_m = np.repeat(reach * np.sqrt(scene.patch_area[scene.triangle_patch[tri]]), probes)
         blocked = tracer.occluded(p.reshape(-1, 3) + n * tracer.eps, w, reach_m)
         flag[sel] = blocked.reshape(len(ts), probes).any(axis=1)

@@ -141,20 +141,20 @@ class DirectLighting:
         mt = self.scene.materials
         k = 0
         cv = np.nonzero(np.broadcast_to(analytic, len(points)))[0]
-        once = None
-        for light in self.light_list():
-            n_s = samples_per_light if isinstance(light, (MeshLight, ShapeLight)) else 1
-            exact = None
-            if len(cv) and isinstance(light, (MeshLight, ShapeLight)):
-                if once is None:
-                    # the exact irradiance once per distinct point: a caller's copies of one point
-                    # (penumbra samples) share it; f_d does not depend on the incoming direction
-                    first, inv = unique_rows(np.ascontiguousarray(np.column_stack([points[cv], normals[cv]]))
-                                             .view(np.int64))
-                    once = cv[first]
-                    f_d_cv = mt.brdf(mats[cv], normals[cv], -normals[cv], w_out[cv], glossy=False,
-                                     diffuse_scale=None if diffuse_scale is None else diffuse_scale[cv])
-                exact = light_polygon_irradiance(light, points[once], normals[once])
+        lights = self.light_list()
+        if len(cv) and any(isinstance(light, (MeshLight, ShapeLight)) for light in lights):
+            # the exact irradiance once per distinct point: a caller's copies of one point
+            # (penumbra samples) share it; f_d does not depend on the incoming direction
+            first, inv = unique_rows(np.ascontiguousarray(np.column_stack([points[cv], normals[cv]])).view(np.int64))
+            once = cv[first]
+            f_d_cv = mt.brdf(mats[cv], normals[cv], -normals[cv], w_out[cv], glossy=False,
+                             diffuse_scale=None if diffuse_scale is None else diffuse_scale[cv])
+        else:
+            cv = cv[:0]
+        for light in lights:
+            polygonal = isinstance(light, (MeshLight, ShapeLight))
+            n_s = samples_per_light if polygonal else 1
+            exact = light_polygon_irradiance(light, points[once], normals[once]) if polygonal and len(cv) else None
             if exact is not None:
                 exact = [x[inv] for x in exact]
                 f_d = np.zeros((len(points), 3))

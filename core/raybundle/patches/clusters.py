@@ -48,7 +48,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..scene.model import PatchScene
-from ..tracing.sampling import frames_from_normals
+from ..tracing.sampling import cosine_directions, frames_from_normals
 from ..tracing.visibility import RayTracer
 from ..util.arrays import group_ids
 from .contacts import CONTACT_SHARE, PROBE_CHUNK, gap_sides
@@ -282,9 +282,7 @@ def world_view_classes(tracer, points, normals, rays=WORLD_VIEW_RAYS, seed=0):
             n = sign * nrm
             leave = np.zeros(len(p))
             for _ in range(rays):
-                u = rng.random((len(p), 2))
-                r, phi = np.sqrt(u[:, 0]), 2.0 * np.pi * u[:, 1]
-                d = (r * np.cos(phi))[:, None] * t + (r * np.sin(phi))[:, None] * b + np.sqrt(1.0 - u[:, :1]) * n
+                d = cosine_directions(rng.random((len(p), 2)), t, b, n)
                 hit, _, _, _ = tracer.first_hit(p + tracer.eps * n, d)
                 leave += hit < 0
             out[lo:lo + len(p), col] = np.digitize(leave / rays, WORLD_VIEW_CLASSES)

@@ -71,6 +71,15 @@ def frames_from_normals(n):
     return t, bt
 
 
+def cosine_directions(u, t, b, n):
+    """Cosine-distributed unit directions (..., 3) about the unit normals ``n`` with tangents
+    ``t`` and bitangents ``b`` (:func:`frames_from_normals`; all broadcast against ``u``'s
+    leading axes) from ``u`` (..., 2): ``sqrt(u0)`` off the normal at azimuth ``2 pi u1``
+    (density cos / pi)."""
+    r, phi = np.sqrt(u[..., 0]), 2 * np.pi * u[..., 1]
+    return (r * np.cos(phi))[..., None] * t + (r * np.sin(phi))[..., None] * b + np.sqrt(1 - u[..., :1]) * n
+
+
 def uniform_triangle(u1, u2):
     """Barycentric weights (..., 3) uniform over a triangle (square-root map)."""
     s = np.sqrt(np.asarray(u1, float))
