@@ -195,6 +195,31 @@ def test_image_takes_the_worlds_direct_light_once():
     assert np.all(np.abs(mean - exact) < 4.5 * se + 1e-3 * exact), (mean, exact, se)
 
 
+def test_the_pixels_sample_the_world_where_it_is_the_only_light():
+    """``world_samples`` = -1 (the default) samples the world's direct light at the visible
+    points where a world that changes with direction lights the scene alone (the sky-lit
+    rooms of the interior bench), and leaves it to the patches beside a lamp or under a
+    constant world; a given count is kept."""
+    from raybundle.scene.camera import Camera
+    from raybundle.scene.model import PointLights
+
+    cam = Camera.look_at((0, 0, 3.0), (0, 0, 0), (0, 1, 0), 200.0, 36.0, (8, 8))
+    lamp = PointLights(np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 1.0, 1.0]]))
+    sky = World(sky_and_ground())
+    plate = tilted_plate(0.0, sky)
+    for scene, settings, want in [(plate, {}, 4), (plate, {"world_samples": 0}, 0), (plate, {"world_samples": 2}, 2),
+                                  (tilted_plate(0.0, World(np.ones((1, 1, 3)))), {}, 0),
+                                  (build_scene(plate.triangle_corners.reshape(-1, 3), [[0, 1, 2], [3, 4, 5]], [0, 0],
+                                               PLATE, point_lights=lamp, two_sided=True, world=sky,
+                                               triangle_patch=[0, 0]), {}, 0)]:
+        r = pipeline.make_renderer(pipeline.prepare(scene, patches=1), RenderSettings(seed=1, **settings), cam)
+        try:
+            assert r.world_samples == want and (r.world_light is not None) == (want > 0)
+        finally:
+            r.tracer.close()
+    assert RenderSettings().world_samples == -1
+
+
 def test_sides_much_smaller_than_a_bundle_cell_send_their_average():
     """A side far smaller than a bundle line's cross-section gets cell / area times its share
     when a line meets it; it sends its running average, not that spike (the living room of the

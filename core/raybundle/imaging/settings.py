@@ -47,9 +47,10 @@ class RenderSettings:
     ``world_samples``: shadow rays per visible point and image pass towards a world that
     changes with direction, drawn by its brightness and by where the bundles found the sky
     open from the point's side (:class:`~raybundle.lights.world_light.WorldLight`), for the diffuse lobe's direct light
-    from the world; 0 = the patches carry it, as the rest of the diffuse light (the default:
-    seen from inside a room most such rays meet a wall, and the few through a window
-    make single pixels bright; README, 'Where the method is weak').
+    from the world; 0 = the patches carry it, as the rest of the diffuse light; -1 (the
+    default) = 4 where the world is the only light, else 0
+    (:meth:`Renderer.automatic_world_samples`: beside a sun most such rays meet blinds and
+    walls, and the few through a window make single pixels bright).
     """
 
     bundle_resolution: int = 0
@@ -71,7 +72,7 @@ class RenderSettings:
     gather_share: float = 0.1
     penumbra_samples: int = 8
     caustic_splats: float = 1.0
-    world_samples: int = 0
+    world_samples: int = -1
     threads: int | None = None
 
 
@@ -93,8 +94,9 @@ class RenderSettings:
             raise ValueError("glossy_send_rays must lie in [1, 64]")
         if not 1 <= int(self.penumbra_samples) <= 4096:
             raise ValueError("penumbra_samples must lie in [1, 4096]")
-        if not 0 <= int(self.world_samples) <= 4096:
-            raise ValueError("world_samples must lie in [0, 4096] (0 = the patches carry the world's direct light)")
+        if not -1 <= int(self.world_samples) <= 4096:
+            raise ValueError("world_samples must lie in [-1, 4096] (0 = the patches carry the world's direct light, "
+                             "-1 = automatic)")
         if not -1 <= int(self.gather_rays) <= 65536:
             raise ValueError("gather_rays must lie in [-1, 65536] (0 = no final gather, -1 = automatic)")
         if not 0.0 <= float(self.gather_share) < 1.0:
