@@ -232,20 +232,24 @@ def main(argv=None):
     a = p.parse_args(argv)
     OPEN_SETTINGS.update(clay=a.clay, resolution=a.resolution)
     from raybundle.app.metrics import image_error
-    from raybundle.util.io import read_exr
+    from raybundle.util.io import read_exr, read_exr_header
 
     os.makedirs(a.out, exist_ok=True)
     if a.references:
         os.makedirs(a.references, exist_ok=True)
-    halves = []
+    halves, paths = [], []
     stem = os.path.splitext(os.path.basename(a.blend))[0]
     for seed in (1, 2):
         path = (os.path.join(a.references, f"{stem}-{'clay' if a.clay else 'full'}-{seed}.exr") if a.references
                 else os.path.join(a.out, f"reference-{seed}.exr"))
+        paths.append(path)
         if not os.path.exists(path):
             print(f"Cycles reference half {seed}: {a.reference_samples} samples ...", flush=True)
             render(a.blend, path, "CYCLES", samples=a.reference_samples, seed=seed)
         halves.append(read_exr(path))
+    # a committed half says its own samples (Cycles' header); the smaller of the two counts
+    samples = min(int(read_exr_header(path).get("cycles.ViewLayer.samples", a.reference_samples))
+                  for path in paths)
     reference = 0.5 * (halves[0] + halves[1])
     mask = light_mask(a.blend)
 
@@ -292,7 +296,7 @@ def main(argv=None):
         w.writerows(rows)
     with open(os.path.join(a.out, "summary.json"), "w") as f:
         json.dump(dict(blend=a.blend, clay=a.clay, resolution=a.resolution, warnings=warnings,
-                       peak_memory_gb=peak_memory_gb(), reference_samples_per_half=a.reference_samples,
+                       peak_memory_gb=peak_memory_gb(), reference_samples_per_half=samples,
                        reference_noise=noise["reference_noise"], reference_p99_9=noise["reference_p99_9"],
                        rows=rows, summary=summary,
                        time_to_error=targets),
