@@ -147,7 +147,7 @@ def _main(argv, interrupted):
             job.stop.set()
         if event == "export" and args.save_npz:
             job.export.scene.save_npz(args.save_npz)
-        if event == "image" and job.renderer is not None:
+        if event in ("progress", "image") and job.renderer is not None:
             bar(job.fraction, {"iterations": job.renderer.solver.stats.iterations,
                                "seconds": time.perf_counter() - job.t_start})
 

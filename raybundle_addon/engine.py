@@ -5,7 +5,8 @@ the evaluated depsgraph (:mod:`.export`), subdivides it into patches, runs the
 core's stochastic iteration and hands images to a ``display`` callback — a
 quick preview as soon as the first image pass is done (direct light only), then
 every few hundred milliseconds (at most ~1/5 of the time goes to previews), and
-the fully resolved image at the end.  It stops at the time limit, the iteration
+the fully resolved image at the end; in the background (``blender -b``, the bpy module),
+where nobody sees a preview, only the final image.  It stops at the time limit, the iteration
 count, or when its ``stop`` event is set; the engine sets that event when
 Blender's ``test_break()`` says so (Esc), tests and the command line set it
 directly.  The image so far is kept either way; a stop during set-up (export,
@@ -35,7 +36,7 @@ from .export import export_scene
 from .properties import LAST_RUN, run_options
 
 #: callables ``fn(job, event)`` told about every job: events "export" (after export),
-#: "image" (after each displayed image) and "done".  The command line uses it for its
+#: "progress" (as the run loop reports it), "image" (after each displayed image) and "done".  The command line uses it for its
 #: progress bar and Ctrl-C; tests use it to time the first image and to cancel.
 observers: list = []
 #: jobs running now (``cancel_all`` sets their stop flags)
@@ -94,7 +95,8 @@ class RenderJob:
         self.choice = None           # auto's Choice, when the method is auto
         self.user_break = user_break
         self.camera_object = camera_object
-        self.preview_interval = float(preview_interval)
+        #: seconds between preview images (None: none, only the final image)
+        self.preview_interval = None if preview_interval is None else float(preview_interval)
         self.t_start = None
         self.first_image_seconds = None
         self.images = 0
@@ -128,6 +130,8 @@ class RenderJob:
 
     def _preview(self):
         """Between iterations: a preview image when the last is old enough."""
+        if self.preview_interval is None:
+            return
         now = time.perf_counter()
         if self.images == 0 or now - self._last_push >= self._interval:
             img = self.renderer.image(preview=True)
@@ -138,6 +142,7 @@ class RenderJob:
 
     def _on_progress(self, fraction, info):
         self.fraction = fraction
+        self._notify("progress")
         if self.progress is not None:
             self.progress(fraction)
         now = time.perf_counter()
@@ -242,9 +247,10 @@ def render_with_engine(engine, depsgraph):
         rect.foreach_set(rgba.ravel())
         engine.update_result(res)
 
+    # in the background (``blender -b``, the bpy module) nobody sees a preview: its time goes to the image
     job = RenderJob(depsgraph, display=display, progress=engine.update_progress,
                     stats=lambda text: engine.update_stats("", text), user_break=engine.test_break,
-                    camera_object=engine.camera_override)
+                    camera_object=engine.camera_override, preview_interval=None if bpy.app.background else 0.3)
     try:
         outcome = job.run()
         for w in outcome.warnings[:8]:

@@ -361,7 +361,7 @@ def test_cancel_during_bpy_render_writes_the_partial_image(fresh, tmp_path):
     small_lit_scene()
 
     def cancel(job, event):
-        if event == "image":
+        if event == "progress":                         # in the background the one image is the last
             engine.cancel_all()                         # sets every running job's stop flag
     engine.observers.append(cancel)
     try:

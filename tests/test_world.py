@@ -195,6 +195,36 @@ def test_image_takes_the_worlds_direct_light_once():
     assert np.all(np.abs(mean - exact) < 4.5 * se + 1e-3 * exact), (mean, exact, se)
 
 
+def test_a_bake_sees_the_world_as_the_render_does():
+    """The plate under sky and ground, rendered from above (the world sampled at its pixels:
+    the renderer keeps the world's direct light apart in the solver) and then baked from the
+    same solver at its corners and inside: image and bake are both rho L_up, within 4.5
+    standard errors over seeds.  A bake that read what the image reads from the patches (the
+    rest after the world's direct light) would be black."""
+    from raybundle.imaging.baking import baked_radiance, locate_points
+    from raybundle.scene.camera import Camera
+
+    sc = tilted_plate(0.0, World(sky_and_ground()))
+    cam = Camera.look_at((0, 0, 3.0), (0, 0, 0), (0, 1, 0), 200.0, 36.0, (16, 16))     # sees only the plate
+    face = np.repeat([0, 1], 4)
+    bary = np.tile([[1, 0, 0], [0, 1, 0], [0, 0, 1], [1 / 3, 1 / 3, 1 / 3]], (2, 1))
+    imgs, bakes = [], []
+    for seed in (1, 2, 3, 4):
+        r = pipeline.make_renderer(pipeline.prepare(sc, patches=1), RenderSettings(seed=seed), cam)
+        try:
+            imgs.append(r.run(iterations=30).image.reshape(-1, 3).mean(axis=0))
+            assert r.solver.separates_world
+            pts = locate_points(sc, r.scene, r.tracer, face, bary)
+            assert pts.found.all() and np.allclose(pts.normal[:, 2], 1.0)
+            bakes.append(baked_radiance(r.solver, pts).mean(axis=0))
+        finally:
+            r.tracer.close()
+    exact = 0.5 * L_UP
+    for got in (np.array(imgs), np.array(bakes)):
+        mean, se = got.mean(axis=0), got.std(axis=0, ddof=1) / 2
+        assert np.all(np.abs(mean - exact) < 4.5 * se + 1e-3 * exact), (mean, exact, se)
+
+
 def test_the_pixels_sample_the_world_where_it_is_the_only_light():
     """``world_samples`` = -1 (the default) samples the world's direct light at the visible
     points where a world that changes with direction lights the scene alone (the sky-lit

@@ -137,13 +137,17 @@ def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None
 
         run = LAST_RUN.get(scene.name, {})
         LAST_RUN_FIGURES.clear()
-        LAST_RUN_FIGURES.update(setup_seconds=run.get("stats", {}).get("setup_seconds"),
-                                warnings=run.get("warnings", []))
+        stats = run.get("stats", {})
+        LAST_RUN_FIGURES.update(setup_seconds=stats.get("setup_seconds"), warnings=run.get("warnings", []),
+                                run=" ".join(f"{k} {stats[k]}" for k in RUN_FIGURES if k in stats))
     return read_exr(path), wall
 
 
-#: the set-up seconds and warnings of the last RAYBUNDLE render of a .blend
+#: the set-up seconds and warnings of the last RAYBUNDLE render of a .blend, and what its run did
 LAST_RUN_FIGURES: dict = {}
+#: the run's figures the bench prints beside its error
+RUN_FIGURES = ("export_seconds", "prepare_seconds", "patches", "iterations", "image_passes", "gather_rays_per_pixel",
+               "first_shot_lights", "world_samples")
 
 
 def light_mask(blend):
@@ -261,6 +265,8 @@ def main(argv=None):
               f"{'' if setup is None else f' (set-up {setup:.1f} s)'}, "
               f"error {e['error']:.4f} (all pixels {full['error']:.4f}), mean ratio {e['mean_ratio']:.4f}, "
               f"p99.9 {e['p99_9']:.3f}", flush=True)
+        if engine == "raybundle" and LAST_RUN_FIGURES.get("run"):
+            print(f"  run: {LAST_RUN_FIGURES['run']}", flush=True)
         return dict(engine=engine, setting=setting, seconds=wall, error=e["error"], error_all_pixels=full["error"],
                     mean_ratio=e["mean_ratio"], p99_9=e["p99_9"], setup_seconds=setup)
 
