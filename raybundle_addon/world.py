@@ -125,6 +125,12 @@ def camera_view(cam_ob, render, camera, border):
     return params, camera, border or (0, 0, w, h)
 
 
+def forget_rendered_worlds():
+    """Drop the cached renders of worlds (:func:`render_world`): the next export renders its
+    world again, as a fresh Blender session would (a benchmark's timed runs)."""
+    _cache.clear()
+
+
 def render_world(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, view=None):
     """``(image, seen)``: (width / 2, width, 3) float32 equirectangular radiance of the bpy World
     ``world`` (:mod:`raybundle.scene.world`'s layout), rendered by Cycles in a separate process,

@@ -124,6 +124,9 @@ def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None
     if engine == "CYCLES":
         cycles_settings(samples, seed, world_strength=None)
     else:
+        from raybundle_addon.world import forget_rendered_worlds
+
+        forget_rendered_worlds()          # timed as from a fresh session: the world's render included
         scene.render.engine = "RAYBUNDLE"
         rb = scene.raybundle
         rb.time_limit, rb.iterations, rb.seed = float(seconds), 0, seed
