@@ -255,7 +255,7 @@ def main(argv=None):
             render(a.blend, path, "CYCLES", samples=a.reference_samples, seed=seed)
         halves.append(read_exr(path))
     # a committed half says its own samples (Cycles' header); the smaller of the two counts
-    samples = min(int(read_exr_header(path).get("cycles.ViewLayer.samples", a.reference_samples))
+    reference_samples = min(int(read_exr_header(path).get("cycles.ViewLayer.samples", a.reference_samples))
                   for path in paths)
     reference = 0.5 * (halves[0] + halves[1])
     mask = light_mask(a.blend)
@@ -305,7 +305,7 @@ def main(argv=None):
         w.writerows(rows)
     with open(os.path.join(a.out, "summary.json"), "w") as f:
         json.dump(dict(blend=a.blend, clay=a.clay, resolution=a.resolution, warnings=warnings,
-                       peak_memory_gb=peak_memory_gb(), reference_samples_per_half=samples,
+                       peak_memory_gb=peak_memory_gb(), reference_samples_per_half=reference_samples,
                        reference_noise=noise["reference_noise"], reference_p99_9=noise["reference_p99_9"],
                        rows=rows, summary=summary,
                        time_to_error=targets),
