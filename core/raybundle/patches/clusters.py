@@ -275,17 +275,16 @@ def world_view_classes(tracer, points, normals, rays=WORLD_VIEW_RAYS, seed=0):
     points, normals = np.asarray(points, float), np.asarray(normals, float)
     rng = np.random.default_rng([seed, 17])
     out = np.zeros((len(points), 2), np.int64)
-    for lo in range(0, len(points), PROBE_CHUNK):
-        p, nrm = points[lo:lo + PROBE_CHUNK], normals[lo:lo + PROBE_CHUNK]
+    step = max(1, PROBE_CHUNK // rays)
+    for lo in range(0, len(points), step):
+        p, nrm = points[lo:lo + step], normals[lo:lo + step]
         t, b = frames_from_normals(nrm)
         for col, sign in ((0, 1.0), (1, -1.0)):
             n = sign * nrm
-            leave = np.zeros(len(p))
-            for _ in range(rays):
-                d = cosine_directions(rng.random((len(p), 2)), t, b, n)
-                hit, _, _, _ = tracer.first_hit(p + tracer.eps * n, d)
-                leave += hit < 0
-            out[lo:lo + len(p), col] = np.digitize(leave / rays, WORLD_VIEW_CLASSES)
+            d = cosine_directions(rng.random((len(p), rays, 2)), t[:, None], b[:, None], n[:, None]).reshape(-1, 3)
+            # a ray leaves the scene when nothing at all lies along it (Embree's any-hit query)
+            blocked = tracer.occluded(np.repeat(p + tracer.eps * n, rays, axis=0), d, np.full(len(d), np.inf))
+            out[lo:lo + len(p), col] = np.digitize((~blocked).reshape(len(p), rays).mean(axis=1), WORLD_VIEW_CLASSES)
     return out
 
 
