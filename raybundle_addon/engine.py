@@ -36,8 +36,9 @@ from .export import export_scene
 from .properties import LAST_RUN, run_options
 
 #: callables ``fn(job, event)`` told about every job: events "export" (after export),
-#: "progress" (as the run loop reports it), "image" (after each displayed image) and "done".  The command line uses it for its
-#: progress bar and Ctrl-C; tests use it to time the first image and to cancel.
+#: "progress" (as the run loop reports it), "image" (after each displayed image) and "done".
+#: The command line uses it for its progress bar and Ctrl-C; tests use it to time the first
+#: image and to cancel.
 observers: list = []
 #: jobs running now (``cancel_all`` sets their stop flags)
 active_jobs: set = set()
