@@ -9,8 +9,8 @@ sharpest:
   ray plus, where a pixel's earlier samples disagree (the edge of a visible
   light, a silhouette against a bright world), ``emission_edge_samples`` more
   rays per pass, continuing one low-discrepancy sequence per pixel, so light edges
-  antialias long before the rest has converged (a sample-count-weighted average whose weights depend on
-  earlier samples: consistent, its bias falls as 1/passes);
+  antialias long before the rest has converged (a sample-count-weighted average
+  whose weights depend on earlier samples: consistent, its bias falls as 1/passes);
 * **direct**: light reflected from the first-shot lights, evaluated per
   pixel at the visible point with shadow rays
   (:meth:`~raybundle.lights.direct.DirectLighting.reflected_radiance`).  Every
