@@ -185,7 +185,9 @@ class Renderer(ProgressiveImage):
         self.emission_sum = np.zeros((n, 3))             # emission seen: sum and count per pixel
         self.emission_count = np.zeros(n)
         self._emission_range = np.stack([np.full(n, np.inf), np.full(n, -np.inf)])   # min, max seen
-        self._edge_shift = self._edge_index = None      # the extra samples' sequences (_subpixel_sequence)
+        # the extra samples' sequences (_subpixel_sequence): a random shift and the next index per pixel
+        self._edge_shift = np.random.default_rng([settings.seed, 8]).random((n, 2))
+        self._edge_index = np.zeros(n, np.int64)
         mats = scene.materials
         self.glossy_material = mats.is_glossy
         py, px = np.divmod(np.arange(n), camera.width)
@@ -218,10 +220,9 @@ class Renderer(ProgressiveImage):
         """The world samples per visible point and pass: ``setting``, or for -1
         :data:`WORLD_ONLY_SAMPLES` where a world that changes with direction is the only light
         (no first-shot lights in ``direct``), else 0.  A sky through windows is then all the
-        direct light, which patches a window wide carry with their finite-element error (the
-        living room of the interior bench at 60 s: 4.86% without, 4.40% with, seeds 3 and 4);
+        direct light, which patches a window wide carry with their finite-element error;
         beside a sun (a lamp, or one split out of the world) the world is a small part whose
-        samples mostly meet the blinds and walls (the dining room: 5.50% without, 5.80% with)."""
+        samples mostly meet the blinds and walls (README, 'Real interiors')."""
         if setting >= 0:
             return int(setting)
         world = self.scene.world
@@ -467,9 +468,6 @@ class Renderer(ProgressiveImage):
         left the coverage of an edge noisy as n^-3/4: a window bar against a sky 20 times
         brighter than the room is mostly that coverage."""
         pixels = np.asarray(pixels, np.int64)
-        if self._edge_shift is None:
-            self._edge_shift = self.rng.random((len(self._pixel), 2))
-            self._edge_index = np.zeros(len(self._pixel), np.int64)
         pix = np.repeat(pixels, k)
         i = self._edge_index[pix] + np.tile(np.arange(k), len(pixels))
         self._edge_index[pixels] += k
