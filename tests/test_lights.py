@@ -299,3 +299,29 @@ def test_a_lamp_cut_into_a_grid_integrates_by_its_outline_like_the_whole_lamp():
     v = y - q
     est = e[:, 0] * np.maximum(np.einsum("ij,ij->i", nq, v) / np.linalg.norm(v, axis=1), 0)
     assert est.std() / exact > 2      # measured 5.6
+
+
+@pytest.mark.parametrize("height", [0.002, 0.05, 0.5, 6.0])
+def test_a_large_area_light_close_by_is_sampled_by_solid_angle(height):
+    """A 6 x 4 m rectangular Blender area light facing down, ``height`` above a point with a
+    tilted normal: the light-sample estimate ``e cos_x`` is unbiased against the analytic
+    irradiance (4.5 SE, fixed seed) and bounded (relative std below 1.2, measured 0.62, 0.60,
+    0.47 and 0.15).  By area alone (the old sampling) it was heavy-tailed close by: relative
+    std 27 at 2 mm, 3.8 at 5 cm, and biased in a finite sample at 2 mm (and through the image's control variate, negative fireflies in
+    the pixels next to a hall's large panels)."""
+    from raybundle.lights.polygon import light_polygon_irradiance
+    from raybundle.lights.sources import ShapeLight
+
+    light = ShapeLight(np.array([0.0, 0.0, 1.0]), np.array([3.0, 0, 0]), np.array([0, 2.0, 0]),
+                       np.array([0, 0, -1.0]), False, 24.0, np.array([1.0, 2.0, 3.0]))
+    n = 100_000
+    q = np.tile([2.1, -1.3, 1.0 - height], (n, 1))
+    nq = np.tile(np.array([0.3, 0.1, 1.0]) / np.linalg.norm([0.3, 0.1, 1.0]), (n, 1))
+    y, e = light.sample(q, np.random.default_rng(7).random((n, 3)))
+    assert np.allclose(y[:, 2], 1.0) and (np.abs(y[:, 0]) <= 3 + 1e-9).all() and (np.abs(y[:, 1]) <= 2 + 1e-9).all()
+    v = y - q
+    est = e * np.maximum(np.einsum("ij,ij->i", nq, v) / np.linalg.norm(v, axis=1), 0.0)[:, None]
+    exact = light_polygon_irradiance(light, q[:1], nq[:1])[0][0] * light.radiance
+    se = est.std(axis=0) / np.sqrt(n)
+    assert np.all(np.abs(est.mean(axis=0) - exact) < 4.5 * se), (est.mean(axis=0), exact, se)
+    assert est[:, 0].std() / exact[0] < 1.2, est[:, 0].std() / exact[0]
