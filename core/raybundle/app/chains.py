@@ -82,7 +82,7 @@ def merge(states) -> ChainState:
     image = None
     if all(s.image is not None for s in states):
         image = {k: sum(s.image[k] for s in states) for k in states[0].image if k != "shadow_flags"}
-        image["shadow_flags"] = np.logical_or.reduce([s.image["shadow_flags"] for s in states])
+        image["shadow_flags"] = np.bitwise_or.reduce([s.image["shadow_flags"] for s in states])
     stats = {k: sum(s.stats.get(k, 0) for s in states) for k in states[0].stats}
     world = None
     if all(s.mean_world_incoming is not None for s in states):

@@ -16,9 +16,30 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..util.arrays import unique_rows
+from ..tracing.sampling import kronecker_alpha
 from .polygon import light_polygon_irradiance
 from .sources import MeshLight, PointLight, ShapeLight, SunLight, small_emitters
+
+
+#: a light mask with every light's bit set (:func:`light_bits`)
+ALL_LIGHTS = np.uint64(0xFFFF_FFFF_FFFF_FFFF)
+
+
+def light_bits(n):
+    """(n,) uint64: the bit of each of ``n`` lights in per-light masks (shadow flags), light
+    ``l``'s bit ``min(l, 63)``: lights past the 64th share the last bit, which then stands
+    for any of them (a per-pixel mask stays 8 bytes, however many lamps)."""
+    return np.left_shift(np.uint64(1), np.minimum(np.arange(n), 63).astype(np.uint64))
+
+
+def _may_light(light, points, normals):
+    """(N,) bool: some sample of ``light`` may light ``points`` (N, 3) with unit ``normals``
+    (N, 3): part of the light lies above their tangent planes, and a one-sided area light
+    faces them.  Elsewhere every sample's ``e cos_x`` is 0."""
+    ok = light.in_front(points, normals)
+    if isinstance(light, ShapeLight):
+        ok &= (points - light.center) @ light.normal > 0
+    return ok
 
 
 class DirectLighting:
@@ -110,7 +131,7 @@ class DirectLighting:
         return samples_per_light * len(self.area_lights) + len(self.point_lights)
 
     def reflected_radiance(self, points, normals, mats, w_out, u, samples_per_light=1, mis=None, diffuse_scale=None,
-                           shadow_flags=None, analytic=False):
+                           shadow_flags=None, analytic=False, penumbra=None):
         """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
 
         Unbiased estimate with ``samples_per_light`` shadow rays per area light
@@ -123,11 +144,19 @@ class DirectLighting:
         densities of the sampled direction), so a sharp lobe reflecting a lamp is found by
         the lobe's ray, not by rare light samples with a huge BRDF value.
         ``diffuse_scale`` (N, 3): texture modulation of the diffuse reflectance.
-        ``shadow_flags`` (N, 2) bool, updated in place: column 0 set where a sample
-        reached its light, column 1 where one facing the point was blocked.
 
-        ``analytic`` (bool or (N,) bool): the diffuse lobe of polygonal lights
-        (:func:`light_polygon_irradiance`) with the exact unoccluded irradiance as a control variate,
+        Per-light masks are uint64 bit sets, light ``l``'s bit ``min(l, 63)``
+        (:func:`light_bits`).  ``shadow_flags`` (N, 2) uint64, updated in place: in column 0
+        the lights a sample reached, in column 1 those a sample facing them found blocked.
+
+        ``penumbra`` ``(mask (N,) uint64, count, shift (N, 3))`` or None: the lights in a
+        point's ``mask`` take ``count`` times as many samples there, on the randomly shifted
+        Kronecker (R_3) sequence ``(shift + j alpha) mod 1`` (j = c K + k for its c-th set
+        of the K = :meth:`samples_per_pass` samples), in place of those of ``u``: the
+        penumbra samples cost rays only for the lights whose shadow edge crosses the point.
+
+        ``analytic`` (bool, (N,) bool, or (N,) uint64 mask of lights): the diffuse lobe of
+        polygonal lights (:func:`light_polygon_irradiance`) with the exact unoccluded irradiance as a control variate,
         ``f_d (Le I(x) - mean_s (e_s - e_s V_s))``, ``e_s`` the sample's unshadowed
         estimate: still unbiased, and exact wherever the light is wholly seen or wholly
         hidden from the point's upper side (only which samples are blocked is random,
@@ -135,61 +164,88 @@ class DirectLighting:
         an umbra the plain estimate is exact (0) and the control variate is not, so a
         caller that knows where earlier samples were all blocked passes a mask.
         """
-        out = np.zeros((len(points), 3))
+        n = len(points)
+        out = np.zeros((n, 3))
+        n_k = self.samples_per_pass(samples_per_light)
         if isinstance(u, np.random.Generator):
-            u = u.random((len(points), self.samples_per_pass(samples_per_light), 3))
+            u = u.random((n, n_k, 3))
         mt = self.scene.materials
-        k = 0
-        cv = np.nonzero(np.broadcast_to(analytic, len(points)))[0]
         lights = self.light_list()
-        if len(cv) and any(isinstance(light, (MeshLight, ShapeLight)) for light in lights):
-            # the exact irradiance once per distinct point: a caller's copies of one point
-            # (penumbra samples) share it; f_d does not depend on the incoming direction
-            first, inv = unique_rows(np.ascontiguousarray(np.column_stack([points[cv], normals[cv]])).view(np.int64))
-            once = cv[first]
-            f_d_cv = mt.brdf(mats[cv], normals[cv], -normals[cv], w_out[cv], glossy=False,
-                             diffuse_scale=None if diffuse_scale is None else diffuse_scale[cv])
-        else:
-            cv = cv[:0]
-        for light in lights:
+        bits = light_bits(len(lights))
+        an = np.asarray(analytic)
+        an = np.where(np.broadcast_to(an, n), ALL_LIGHTS, np.uint64(0)) if an.dtype == bool else an.astype(np.uint64)
+        cv = np.nonzero(an)[0] if any(isinstance(light, (MeshLight, ShapeLight)) for light in lights) else []
+        if len(cv):
+            f_d_all = np.zeros((n, 3))     # f_d does not depend on the incoming direction
+            f_d_all[cv] = mt.brdf(mats[cv], normals[cv], -normals[cv], w_out[cv], glossy=False,
+                                  diffuse_scale=None if diffuse_scale is None else diffuse_scale[cv])
+        alpha = kronecker_alpha(3)
+        k = 0
+        for li, light in enumerate(lights):
+            bit = bits[li]
             polygonal = isinstance(light, (MeshLight, ShapeLight))
             n_s = samples_per_light if polygonal else 1
-            exact = light_polygon_irradiance(light, points[once], normals[once]) if polygonal and len(cv) else None
-            if exact is not None:
-                exact = [x[inv] for x in exact]
-                f_d = np.zeros((len(points), 3))
-                f_d[cv] = f_d_cv * exact[1][:, None]
-                out[cv] += f_d[cv] * exact[0][:, None] * np.asarray(light.radiance, float)
+            # the samples' points (repeated where the light takes penumbra samples) and weights
+            # (only the points the light can reach: the rest get nothing, and no shadow flag)
+            base = np.nonzero(_may_light(light, points, normals))[0]
+            if penumbra is None:
+                pt, copy = base, None
+                weight = np.full((len(pt), 1), 1.0 / n_s)
+            else:
+                mask, more, shift = penumbra
+                on = (mask[base] & bit) != 0
+                reps = np.where(on, int(more), 1)
+                pt = np.repeat(base, reps)
+                copy = np.arange(len(pt)) - np.repeat(np.cumsum(reps) - reps, reps)
+                kron = np.nonzero(np.repeat(on, reps))[0]
+                weight = (1.0 / (n_s * np.repeat(reps, reps)))[:, None]
+            p, nrm, m, wo = points[pt], normals[pt], mats[pt], w_out[pt]
+            scale = None if diffuse_scale is None else diffuse_scale[pt]
+            acc = np.zeros((len(pt), 3))
+            f_d = None
+            here = base[(an[base] & bit) != 0] if polygonal and len(cv) else []
+            if len(here):
+                exact = light_polygon_irradiance(light, points[here], normals[here])
+                if exact is not None:
+                    f_d1 = np.zeros((n, 3))
+                    f_d1[here] = f_d_all[here] * exact[1][:, None]
+                    out[here] += f_d1[here] * exact[0][:, None] * np.asarray(light.radiance, float)
+                    f_d = f_d1[pt]
             for _ in range(n_s):
-                if shadow_flags is None and exact is None:
-                    e, travel, cos_x = self.light_samples_at(points, normals, light, u[:, k])
+                uk = u[pt, k]
+                if copy is not None and len(kron):
+                    j = copy[kron] * n_k + k
+                    uk[kron] = (shift[pt[kron]] + j[:, None] * alpha) % 1.0
+                if shadow_flags is None and f_d is None:
+                    e, travel, cos_x = self.light_samples_at(p, nrm, light, uk)
                     live = np.any(e > 0, axis=1)
                 else:
-                    e, travel, cos_x, free = self.light_samples_at(points, normals, light, u[:, k], unshadowed=True)
+                    e, travel, cos_x, free = self.light_samples_at(p, nrm, light, uk, unshadowed=True)
                     live, blocked = self._seen_blocked(e, free)
                     if shadow_flags is not None:
-                        shadow_flags[:, 0] |= live
-                        shadow_flags[:, 1] |= blocked
-                    if exact is not None:
-                        out -= f_d * (free - e) / n_s
+                        shadow_flags[np.bincount(pt[live], minlength=n) > 0, 0] |= bit
+                        shadow_flags[np.bincount(pt[blocked], minlength=n) > 0, 1] |= bit
+                    if f_d is not None:
+                        acc -= weight * f_d * (free - e)
                 k += 1
                 if live.any():
-                    f = mt.brdf(mats[live], normals[live], travel[live], w_out[live],
-                                diffuse_scale=None if diffuse_scale is None else diffuse_scale[live])
-                    if exact is not None:                # the control variate took the diffuse part
+                    f = mt.brdf(m[live], nrm[live], travel[live], wo[live],
+                                diffuse_scale=None if scale is None else scale[live])
+                    if f_d is not None:                # the control variate took the diffuse part
                         f -= f_d[live]
                     if mis is not None and isinstance(light, MeshLight):
-                        sel = np.nonzero(mis[live])[0]
+                        sel = np.nonzero(mis[pt[live]])[0]
                         if len(sel):
                             i = np.nonzero(live)[0][sel]
                             c = int(np.argmax(light.radiance))
                             # e = Le cos_x / p_l for an unblocked sample (MeshLight.sample)
                             p_l = light.radiance[c] * cos_x[i] / e[i, c]
-                            p_g = mt.glossy_pdf(mats[i], normals[i], -travel[i], w_out[i])
+                            p_g = mt.glossy_pdf(m[i], nrm[i], -travel[i], wo[i])
                             w_l = 1.0 - self.mis_weight(p_g, n_s * p_l)
-                            f[sel] -= (1.0 - w_l)[:, None] * mt.brdf(mats[i], normals[i], travel[i], w_out[i],
-                                                                     diffuse=False)
-                    out[live] += e[live] * f / n_s
+                            f[sel] -= (1.0 - w_l)[:, None] * mt.brdf(m[i], nrm[i], travel[i], wo[i], diffuse=False)
+                    acc[live] += weight[live] * e[live] * f
+            for c in range(3):
+                out[:, c] += np.bincount(pt, acc[:, c], minlength=n)
         return out
 
     def irradiance(self, points, normals, rng, samples_per_light=16, penumbra_samples=None):
@@ -212,8 +268,6 @@ class DirectLighting:
         the bake's error (README, 'Measured choices behind the defaults'), and few points are
         in a penumbra.  A point's samples are a randomly shifted Kronecker (R_3) set,
         stratified over the light's triangles and their areas.  ``rng``: a Generator."""
-        from ..tracing.sampling import kronecker_alpha
-
         out = np.zeros((len(points), 3))
         alpha = kronecker_alpha(3)
         for light in self.light_list():
