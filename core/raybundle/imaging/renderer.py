@@ -382,7 +382,8 @@ class Renderer(ProgressiveImage):
                 g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], self._light_uniforms(u_light[hf]), n_s,
                 mis=mis, diffuse_scale=self.albedo_scale(g.triangle[hf], g.point[hf]), shadow_flags=f,
                 analytic=np.full(len(hf), ALL_LIGHTS) if start else flags[:, 0],
-                penumbra=(pen_lights, -(-int(self.settings.penumbra_samples) // n_s), self.rng.random((len(hf), 3))))
+                penumbra=(pen_lights, -(-int(self.settings.penumbra_samples) // n_s), self.rng.random((len(hf), 3))),
+                select=self.rng.random(len(hf)))
             out[hf] += value
             np.bitwise_or.at(self.shadow_flags, pixels[hf], f)
             self.image_rays += self.direct.rays - before

@@ -21,6 +21,8 @@ from .polygon import light_polygon_irradiance
 from .sources import MeshLight, PointLight, ShapeLight, SunLight, small_emitters
 
 
+#: the golden ratio's fraction: lamp l's selection uniform is (u + l phi) mod 1
+_GOLDEN = 0.6180339887498949
 #: a light mask with every light's bit set (:func:`light_bits`)
 ALL_LIGHTS = np.uint64(0xFFFF_FFFF_FFFF_FFFF)
 
@@ -126,12 +128,54 @@ class DirectLighting:
         seen = np.any(e > 0, axis=1)
         return seen, np.any(free > 0, axis=1) & ~seen
 
+    #: :meth:`_selection`: a lamp giving at least this share of all lamps' unoccluded light at a
+    #: point is always taken there; one giving less, with probability share / SELECT_SHARE ...
+    SELECT_SHARE = 0.05
+    #: ... but at least this (a rough estimate of the share must not make rare, heavy samples)
+    SELECT_MIN = 1.0 / 16.0
+    #: lamps chosen only up to this many (the estimates cost N x lamps; a light tree is the way beyond)
+    SELECT_MAX_LIGHTS = 64
+
+    def _selection(self, points, normals, reach, exact, select):
+        """Per light, the probability (one value per point in ``reach[l]``) that it is taken at
+        the points: ``clip(c_l / (SELECT_SHARE C), SELECT_MIN, 1)``, ``c_l`` the lamp's
+        unoccluded irradiance at the point (luminance: the exact ``Le I(x)`` where ``exact``
+        holds it, else one unshadowed sample at the middle of the lamp's sample space) and
+        ``C`` the sum over the lamps; None (every lamp always taken) for a single lamp or
+        more than :data:`SELECT_MAX_LIGHTS`.  Unbiased whatever the estimates: each lamp's
+        samples are weighted 1 / probability."""
+        lights = self.light_list()
+        if not 1 < len(lights) <= self.SELECT_MAX_LIGHTS:
+            return None
+        c = np.zeros((len(points), len(lights)))
+        for li, light in enumerate(lights):
+            base = reach[li]
+            if exact[li] is not None:
+                here, irr, ok = exact[li]
+                c[here[ok], li] = irr[ok] * float(np.mean(light.radiance))
+                base = np.setdiff1d(base, here[ok], assume_unique=True)
+            if len(base) == 0:
+                continue
+            if isinstance(light, ShapeLight):             # as a point at its centre (cheap)
+                y = np.broadcast_to(light.center, (len(base), 3))
+                w = y - points[base]
+                r2 = np.maximum(np.einsum("ij,ij->i", w, w), 1e-300)
+                e = (light.area * np.maximum(-(w @ light.normal), 0.0) / (r2 * np.sqrt(r2)))[:, None] * light.radiance
+            else:
+                y, e = light.sample(points[base], np.full((len(base), 3), 0.5))
+                w = y - points[base]
+            cos_x = np.einsum("ij,ij->i", normals[base], w) / np.maximum(np.linalg.norm(w, axis=1), 1e-300)
+            c[base, li] = e.mean(axis=1) * np.maximum(cos_x, 0.0)
+        total = c.sum(axis=1, keepdims=True)
+        chance = np.clip(c / np.maximum(self.SELECT_SHARE * total, 1e-300), self.SELECT_MIN, 1.0)
+        return [chance[reach[li], li] for li in range(len(lights))]
+
     def samples_per_pass(self, samples_per_light=1):
         """How many light samples :meth:`reflected_radiance` draws per point."""
         return samples_per_light * len(self.area_lights) + len(self.point_lights)
 
     def reflected_radiance(self, points, normals, mats, w_out, u, samples_per_light=1, mis=None, diffuse_scale=None,
-                           shadow_flags=None, analytic=False, penumbra=None):
+                           shadow_flags=None, analytic=False, penumbra=None, select=None):
         """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
 
         Unbiased estimate with ``samples_per_light`` shadow rays per area light
@@ -154,6 +198,11 @@ class DirectLighting:
         Kronecker (R_3) sequence ``(shift + j alpha) mod 1`` (j = c K + k for its c-th set
         of the K = :meth:`samples_per_pass` samples), in place of those of ``u``: the
         penumbra samples cost rays only for the lights whose shadow edge crosses the point.
+
+        ``select`` (N,) uniforms or None: lamps chosen by their contribution
+        (:meth:`_selection`): a lamp whose unoccluded contribution at a point is a small share of
+        all lamps' there is taken with probability ``P < 1`` (its samples weighted 1 / P), the
+        decision ``(select + l phi) mod 1 < P`` for lamp ``l`` (phi the golden ratio's fraction).
 
         ``analytic`` (bool, (N,) bool, or (N,) uint64 mask of lights): the diffuse lobe of
         polygonal lights (:func:`light_polygon_irradiance`) with the exact unoccluded irradiance as a control variate,
@@ -179,18 +228,33 @@ class DirectLighting:
             f_d_all = np.zeros((n, 3))     # f_d does not depend on the incoming direction
             f_d_all[cv] = mt.brdf(mats[cv], normals[cv], -normals[cv], w_out[cv], glossy=False,
                                   diffuse_scale=None if diffuse_scale is None else diffuse_scale[cv])
+        # per light: the points it can reach (the rest get nothing, and no shadow flag) and,
+        # where the control variate applies, its exact unoccluded irradiance there
+        reach, exact = [], []
+        for li, light in enumerate(lights):
+            base = np.nonzero(_may_light(light, points, normals))[0]
+            here = base[(an[base] & bits[li]) != 0] if len(cv) and isinstance(light, (MeshLight, ShapeLight)) else []
+            ex = light_polygon_irradiance(light, points[here], normals[here]) if len(here) else None
+            reach.append(base)
+            exact.append(None if ex is None else (here, ex[0], ex[1]))
+        chance = self._selection(points, normals, reach, exact, select) if select is not None else None
         alpha = kronecker_alpha(3)
         k = 0
         for li, light in enumerate(lights):
             bit = bits[li]
             polygonal = isinstance(light, (MeshLight, ShapeLight))
             n_s = samples_per_light if polygonal else 1
+            base, picked = reach[li], 1.0
+            if chance is not None:                 # the lamps chosen by their contribution
+                c_l = chance[li]
+                if mis is not None and isinstance(light, MeshLight):
+                    c_l = np.where(mis[base], 1.0, c_l)    # the lobe's MIS weight assumes it is always taken
+                keep = (select[base] + li * _GOLDEN) % 1.0 < c_l
+                base, picked = base[keep], 1.0 / c_l[keep]
             # the samples' points (repeated where the light takes penumbra samples) and weights
-            # (only the points the light can reach: the rest get nothing, and no shadow flag)
-            base = np.nonzero(_may_light(light, points, normals))[0]
             if penumbra is None:
                 pt, copy = base, None
-                weight = np.full((len(pt), 1), 1.0 / n_s)
+                weight = np.broadcast_to(picked / n_s, len(pt))[:, None]
             else:
                 mask, more, shift = penumbra
                 on = (mask[base] & bit) != 0
@@ -198,19 +262,17 @@ class DirectLighting:
                 pt = np.repeat(base, reps)
                 copy = np.arange(len(pt)) - np.repeat(np.cumsum(reps) - reps, reps)
                 kron = np.nonzero(np.repeat(on, reps))[0]
-                weight = (1.0 / (n_s * np.repeat(reps, reps)))[:, None]
+                weight = np.repeat(picked / (n_s * reps), reps)[:, None]
             p, nrm, m, wo = points[pt], normals[pt], mats[pt], w_out[pt]
             scale = None if diffuse_scale is None else diffuse_scale[pt]
             acc = np.zeros((len(pt), 3))
             f_d = None
-            here = base[(an[base] & bit) != 0] if polygonal and len(cv) else []
-            if len(here):
-                exact = light_polygon_irradiance(light, points[here], normals[here])
-                if exact is not None:
-                    f_d1 = np.zeros((n, 3))
-                    f_d1[here] = f_d_all[here] * exact[1][:, None]
-                    out[here] += f_d1[here] * exact[0][:, None] * np.asarray(light.radiance, float)
-                    f_d = f_d1[pt]
+            if exact[li] is not None:
+                here, irr, ok = exact[li]
+                f_d1 = np.zeros((n, 3))
+                f_d1[here] = f_d_all[here] * ok[:, None]
+                out[here] += f_d1[here] * irr[:, None] * np.asarray(light.radiance, float)
+                f_d = f_d1[pt]
             for _ in range(n_s):
                 uk = u[pt, k]
                 if copy is not None and len(kron):
