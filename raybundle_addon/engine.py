@@ -102,6 +102,7 @@ class RenderJob:
         self.first_image_seconds = None
         self.images = 0
         self.export = None
+        self.world_wait = 0.0        # seconds the set-up waited for Blender's render of the world
         self.last_image = None
         self.renderer = None
         self._interval = self.preview_interval
@@ -170,15 +171,22 @@ class RenderJob:
         try:
             if self.stats_cb is not None:
                 self.stats_cb("Ray Bundle GI | Exporting the scene")
-            self.export = export_scene(self.depsgraph, camera_object=self.camera_object)
+            # the world's render (where Blender must render it) runs on while the patches are laid out
+            self.export = export_scene(self.depsgraph, camera_object=self.camera_object, defer_world=True)
             t_export = time.perf_counter() - self.t_start
             self._notify("export")
             if self.stats_cb is not None:
                 self.stats_cb(f"Ray Bundle GI | Preparing {self.export.counts['triangles']} triangles")
             stage = None if self.stats_cb is None else (lambda text: self.stats_cb(f"Ray Bundle GI | {text}"))
-            p = plan(self.export.scene, self.options)
-            self.choice = p.choice
-            scene = pipeline.lay_out(self.export.scene, p, stage=stage, stop=self._stopped)
+            try:
+                p = plan(self.export.scene, self.options)
+                self.choice = p.choice
+                scene = pipeline.lay_out(self.export.scene, p, stage=stage, stop=self._stopped)
+                if self.export.world_render is not None and stage is not None:
+                    stage("Waiting for Blender's render of the world")
+                self.world_wait = self.export.attach_world(scene)
+            finally:
+                self.export.cancel_world()
             if scene is not self.export.scene:
                 self.export.scene.release_caches()          # the prepared copy renders
             self.renderer = pipeline.make_renderer(scene, p.settings, solver=p.method, stage=stage,
@@ -195,6 +203,7 @@ class RenderJob:
             active_jobs.discard(self)
         stats = dict(result.stats)
         stats.update(export_seconds=round(t_export, 4), prepare_seconds=round(t_prepared - t_export, 4),
+                     world_wait_seconds=round(self.world_wait, 4),
                      first_image_seconds=round(self.first_image_seconds, 4),
                      total_seconds=round(time.perf_counter() - self.t_start, 4),
                      warnings=len(self.export.warnings))

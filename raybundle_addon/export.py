@@ -58,7 +58,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .shaders import MaterialConverter
-from .world import camera_view, export_world
+from .world import camera_view, start_world_export
 
 #: object types that become triangles (through their evaluated mesh)
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES_LEGACY"}
@@ -120,6 +120,28 @@ class ExportResult:
     border: tuple | None = None
     seconds: float = 0.0
     counts: dict = field(default_factory=dict)
+    #: with ``defer_world``: the world's render under way (:class:`~raybundle_addon.world.PendingWorld`)
+    world_render: object = None
+
+    def attach_world(self, *scenes):
+        """Wait for the world's render (``export_scene(..., defer_world=True)``) and give the
+        world to :attr:`scene` and ``scenes`` (its laid-out copies), in place
+        (:func:`raybundle.scene.build.attach_world`).  Returns the seconds waited."""
+        from raybundle.scene.build import attach_world
+
+        pending, self.world_render = self.world_render, None
+        if pending is None:
+            return 0.0
+        world = pending.finish()
+        for sc in {id(s): s for s in (self.scene, *scenes)}.values():
+            attach_world(sc, world)
+        return pending.waited
+
+    def cancel_world(self):
+        """Stop the world's render, if one is under way (a cancelled or failed render)."""
+        pending, self.world_render = self.world_render, None
+        if pending is not None:
+            pending.cancel()
 
 
 class _Warnings(list):
@@ -360,8 +382,15 @@ def export_camera(cam_ob, render, size=None, border=None, warn=print):
 
 
 # -------------------------------------------------------------------- export
-def export_scene(depsgraph, camera_object=None, use_border=True, name=None, require_camera=True):
+def export_scene(depsgraph, camera_object=None, use_border=True, name=None, require_camera=True,
+                 defer_world=False):
     """Export the evaluated ``depsgraph`` (its scene and view layer) for rendering.
+
+    A world Blender must render (:mod:`.world`) starts rendering first, in a process of its
+    own.  With ``defer_world`` the export does not wait for it: the scene gets a stand-in world
+    (:meth:`raybundle.scene.world.World.stand_in_for_render`) and the result's
+    :meth:`ExportResult.attach_world` waits for the render and gives the world, so the patch
+    layout runs meanwhile (the render then takes one CPU thread, the layout the other).
 
     ``camera_object`` overrides the scene camera (e.g. ``RenderEngine.camera_override``);
     with ``require_camera`` False (bakes) a scene without a camera exports with
@@ -370,13 +399,36 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
     when there is nothing to render: no mesh, no light, no camera.
     Returns :class:`ExportResult`.
     """
+    t0 = time.perf_counter()
+    warn = _Warnings()
+    scene = depsgraph.scene
+    render = scene.render
+    size = render_size(render)
+    border = border_rect(render, size) if use_border else None
+    cam_ob = camera_object if camera_object is not None else scene.camera
+    if cam_ob is not None:
+        cam_ob = cam_ob.evaluated_get(depsgraph)
+    camera = export_camera(cam_ob, render, size, border, warn) if cam_ob is not None or require_camera else None
+    pending = start_world_export(scene.world, warn, camera_view(cam_ob, render, camera, border),
+                                 threads=1 if defer_world else 0)
+    try:
+        result = _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
+                                  pending.now if defer_world else pending.finish(), t0)
+    except BaseException:
+        pending.cancel()
+        raise
+    if defer_world:
+        result.world_render = pending
+    return result
+
+
+def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name, world, t0):
+    """:func:`export_scene`'s objects, lights and materials, with the camera and world made."""
     from raybundle.scene.build import build_scene
     from raybundle.scene.materials import MaterialTable
     from raybundle.scene.model import AreaLights, PointLights, SceneError, SunLights
 
-    t0 = time.perf_counter()
-    warn = _Warnings()
-    scene = depsgraph.scene
+    render = scene.render
     viewport = depsgraph.mode == "VIEWPORT"
     converter = MaterialConverter(warn)
     mat_index, mat_specs = {}, []
@@ -469,14 +521,6 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
              "nothing; left out (bundles reach the world through the openings without it)")
     if n_tri == 0:
         raise SceneError("nothing to render: the scene has no visible mesh objects")
-    render = scene.render
-    size = render_size(render)
-    border = border_rect(render, size) if use_border else None
-    cam_ob = camera_object if camera_object is not None else scene.camera
-    if cam_ob is not None:
-        cam_ob = cam_ob.evaluated_get(depsgraph)
-    camera = export_camera(cam_ob, render, size, border, warn) if cam_ob is not None or require_camera else None
-    world = export_world(scene.world, warn, camera_view(cam_ob, render, camera, border))
     if render.use_motion_blur:
         warn("motion blur is not supported: the scene is rendered at the current frame")
     if render.film_transparent:

@@ -22,6 +22,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import time
 
 import numpy as np
 
@@ -46,23 +47,74 @@ class WorldRenderError(RuntimeError):
 def export_world(world, warn, view=None):
     """The :class:`~raybundle.scene.world.World` of a bpy World (None: black); ``view``:
     :func:`camera_view`'s description of the render's camera, for :attr:`~raybundle.scene.world.World.view`."""
-    from raybundle.scene.materials import color_text
+    return start_world_export(world, warn, view).finish()
+
+
+def start_world_export(world, warn, view=None, threads=0):
+    """:func:`export_world` begun: a :class:`PendingWorld` whose Blender render (for a world
+    that needs one) runs in its own process, on ``threads`` CPU threads (0: all), while the
+    caller goes on."""
     from raybundle.scene.world import World
 
     constant, fallback = _constant_radiance(world, warn)
     if constant is not None:
-        return World.constant(constant)
+        return PendingWorld(World.constant(constant))
     try:
-        image, seen = render_world(world, view=None if view is None else view[0])
-        if seen is None:
-            return World(image)
-        camera, (x0, y0, bw, bh) = view[1], view[2]
-        top = seen.shape[0] - (y0 + bh)             # the border counts rows from the bottom
-        return World(image, view=seen[top:top + bh, x0:x0 + bw], view_camera=camera)
+        job = start_world_render(world, view=None if view is None else view[0], threads=threads)
     except WorldRenderError as e:
-        warn(f"world {world.name!r}: Blender could not evaluate it ({e}); using its Background color "
-             f"{color_text(fallback)} from every direction")
-        return World.constant(fallback)
+        return PendingWorld(_fallen_back(world, fallback, e, warn))
+    return PendingWorld(None, job, world.name, fallback, view, warn)
+
+
+class PendingWorld:
+    """A world being exported (:func:`start_world_export`): :attr:`now` is the world to build
+    the scene with at once (the final one, or while Blender renders it a stand-in,
+    :meth:`raybundle.scene.world.World.stand_in_for_render`); :meth:`finish` waits for the
+    render and gives the final world (Blender's failure: the Background's color, warned);
+    :meth:`cancel` stops the render."""
+
+    def __init__(self, world, job=None, name=None, fallback=None, view=None, warn=None):
+        from raybundle.scene.world import World
+
+        self._world, self._job, self._name, self._fallback, self._view, self._warn = \
+            world, job, name, fallback, view, warn
+        self.now = world if job is None else World.stand_in_for_render()
+        #: seconds :meth:`finish` waited for the render
+        self.waited = 0.0
+
+    def finish(self):
+        from raybundle.scene.world import World
+
+        if self._job is not None:
+            t0 = time.perf_counter()
+            try:
+                image, seen = self._job.result()
+                if seen is None:
+                    self._world = World(image)
+                else:
+                    camera, (x0, y0, bw, bh) = self._view[1], self._view[2]
+                    top = seen.shape[0] - (y0 + bh)             # the border counts rows from the bottom
+                    self._world = World(image, view=seen[top:top + bh, x0:x0 + bw], view_camera=camera)
+            except WorldRenderError as e:
+                self._world = _fallen_back(self._name, self._fallback, e, self._warn)
+            self._job = None
+            self.waited = time.perf_counter() - t0
+        return self._world
+
+    def cancel(self):
+        if self._job is not None:
+            self._job.cancel()
+            self._job = None
+
+
+def _fallen_back(name, fallback, error, warn):
+    from raybundle.scene.materials import color_text
+    from raybundle.scene.world import World
+
+    name = getattr(name, "name", name)
+    warn(f"world {name!r}: Blender could not evaluate it ({error}); using its Background color "
+         f"{color_text(fallback)} from every direction")
+    return World.constant(fallback)
 
 
 def _constant_radiance(world, warn):
@@ -136,48 +188,94 @@ def render_world(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, view=Non
     ``world`` (:mod:`raybundle.scene.world`'s layout), rendered by Cycles in a separate process,
     and with ``view`` (:func:`camera_view`'s parameters) the (h, w, 3) world that camera's
     pixels see (None without).  Raises :class:`WorldRenderError`."""
+    return start_world_render(world, width, samples, view).result()
+
+
+def start_world_render(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, view=None, threads=0):
+    """:func:`render_world` begun in its own process, on ``threads`` CPU threads (0: all): a
+    :class:`WorldRender` (its ``result()`` waits).  A world rendered before in this session
+    (the same node tree and view) is not rendered again."""
     import json
 
     import bpy
 
-    from raybundle.util.io import read_exr
+    tmp = tempfile.TemporaryDirectory(prefix="raybundle-world-")
+    library = os.path.join(tmp.name, "world.blend")
+    try:
+        bpy.data.libraries.write(library, {world}, path_remap="ABSOLUTE", fake_user=True)
+    except (RuntimeError, OSError) as e:
+        tmp.cleanup()
+        raise WorldRenderError(f"writing it failed: {e}") from None
+    with open(library, "rb") as f:
+        key = (world.name_full, width, samples, hashlib.sha1(f.read()).hexdigest(), json.dumps(view))
+    if key in _cache:
+        tmp.cleanup()
+        return WorldRender(key, result=_cache[key])
+    out = os.path.join(tmp.name, "world.exr")
+    script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "world_render.py")
+    args = [library, world.name, out, str(int(width)), str(int(samples)), str(int(threads))]
+    seen = None
+    if view is not None:
+        seen = os.path.join(tmp.name, "view.exr")
+        args.append(os.path.join(tmp.name, "view.json"))
+        with open(args[-1], "w") as f:
+            json.dump(dict(view, out=seen), f)
+    binary = bpy.app.binary_path
+    if binary and os.path.basename(binary).lower().startswith("blender"):
+        cmd = [binary, "-b", "--factory-startup", "--python-exit-code", "1", "--python", script, "--", *args]
+    else:                                     # the bpy module: this Python imports bpy
+        cmd = [sys.executable, script, *args]
+    try:
+        # the render's log to a file: a pipe nobody reads while the caller works would fill and stall it
+        with open(os.path.join(tmp.name, "log.txt"), "w") as log:
+            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+    except OSError as e:
+        tmp.cleanup()
+        raise WorldRenderError(f"its render did not start: {e}") from None
+    return WorldRender(key, proc, tmp, out, seen)
 
-    with tempfile.TemporaryDirectory(prefix="raybundle-world-") as tmp:
-        library = os.path.join(tmp, "world.blend")
+
+class WorldRender:
+    """A render of a world under way (:func:`start_world_render`), or one already known."""
+
+    def __init__(self, key, proc=None, tmp=None, out=None, seen=None, result=None):
+        self.key, self._proc, self._tmp, self._out, self._seen, self._result = key, proc, tmp, out, seen, result
+        self._started = time.perf_counter()
+
+    def result(self):
+        """``(image, seen)`` as :func:`render_world` returns them, once the render is done
+        (at most :data:`RENDER_TIMEOUT` seconds after it started).  Raises :class:`WorldRenderError`."""
+        from raybundle.util.io import read_exr
+
+        if self._result is not None:
+            return self._result
         try:
-            bpy.data.libraries.write(library, {world}, path_remap="ABSOLUTE", fake_user=True)
-        except (RuntimeError, OSError) as e:
-            raise WorldRenderError(f"writing it failed: {e}") from None
-        with open(library, "rb") as f:
-            key = (world.name_full, width, samples, hashlib.sha1(f.read()).hexdigest(), json.dumps(view))
-        if key in _cache:
-            return _cache[key]
-        out = os.path.join(tmp, "world.exr")
-        script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "world_render.py")
-        args = [library, world.name, out, str(int(width)), str(int(samples))]
-        if view is not None:
-            args.append(os.path.join(tmp, "view.json"))
-            with open(args[-1], "w") as f:
-                json.dump(dict(view, out=os.path.join(tmp, "view.exr")), f)
-        binary = bpy.app.binary_path
-        if binary and os.path.basename(binary).lower().startswith("blender"):
-            cmd = [binary, "-b", "--factory-startup", "--python-exit-code", "1", "--python", script, "--", *args]
-        else:                                     # the bpy module: this Python imports bpy
-            cmd = [sys.executable, script, *args]
-        try:
-            run = subprocess.run(cmd, capture_output=True, text=True, timeout=RENDER_TIMEOUT,
-                                 stdin=subprocess.DEVNULL)
-        except (OSError, subprocess.TimeoutExpired) as e:
-            raise WorldRenderError(f"its render did not finish: {e}") from None
-        seen_path = os.path.join(tmp, "view.exr")
-        if run.returncode != 0 or not os.path.exists(out) or (view is not None and not os.path.exists(seen_path)):
-            lines = [x for x in (run.stderr + run.stdout).splitlines() if x.strip()]
-            raise WorldRenderError(f"its render failed: {lines[-1] if lines else 'exit code ' + str(run.returncode)}")
-        images = [_radiance(read_exr(p)) for p in ([out, seen_path] if view is not None else [out])]
-    result = (images[0], images[1] if view is not None else None)
-    _cache.clear()                                # one world at a time is enough
-    _cache[key] = result
-    return result
+            try:
+                self._proc.wait(timeout=max(1.0, RENDER_TIMEOUT - (time.perf_counter() - self._started)))
+            except subprocess.TimeoutExpired:
+                self._proc.kill()
+                self._proc.wait()
+                raise WorldRenderError(f"its render did not finish in {RENDER_TIMEOUT:g} s") from None
+            paths = [self._out] + ([self._seen] if self._seen is not None else [])
+            if self._proc.returncode != 0 or not all(os.path.exists(p) for p in paths):
+                with open(os.path.join(self._tmp.name, "log.txt"), errors="replace") as f:
+                    lines = [x for x in f.read().splitlines() if x.strip()]
+                raise WorldRenderError(f"its render failed: {lines[-1] if lines else 'exit code ' + str(self._proc.returncode)}")
+            images = [_radiance(read_exr(p)) for p in paths]
+        finally:
+            self._tmp.cleanup()
+        self._result = (images[0], images[1] if self._seen is not None else None)
+        _cache.clear()                                # one world at a time is enough
+        _cache[self.key] = self._result
+        return self._result
+
+    def cancel(self):
+        """Stop the render (a cancelled or failed export) and remove its files."""
+        if self._proc is not None and self._proc.poll() is None:
+            self._proc.kill()
+            self._proc.wait()
+        if self._tmp is not None:
+            self._tmp.cleanup()
 
 
 def _radiance(img):

@@ -2,14 +2,15 @@
 
 Usage (by :func:`raybundle_addon.world.render_world`, never imported by the add-on)::
 
-    python world_render.py LIBRARY.blend WORLD_NAME OUT.exr WIDTH SAMPLES [VIEW.json]
-    blender -b --factory-startup --python world_render.py -- LIBRARY.blend WORLD_NAME OUT.exr WIDTH SAMPLES [VIEW.json]
+    python world_render.py LIBRARY.blend WORLD_NAME OUT.exr WIDTH SAMPLES THREADS [VIEW.json]
+    blender -b --factory-startup --python world_render.py -- LIBRARY.blend WORLD_NAME OUT.exr WIDTH SAMPLES THREADS [VIEW.json]
 
 Loads the world ``WORLD_NAME`` from ``LIBRARY.blend`` into an empty scene and renders it
 through a panoramic equirectangular camera at rotation (90, 0, -90) degrees (the layout of
 :mod:`raybundle.scene.world`: the image's centre looks along +X, its top row at the zenith),
 ``WIDTH`` x ``WIDTH / 2`` pixels, box filter one pixel wide (each pixel the mean radiance of
-its cell), no denoising, Standard view, into a 32-bit float EXR.  Only the world is in the
+its cell), no denoising, Standard view, on ``THREADS`` CPU threads (0: all), into a 32-bit
+float EXR.  Only the world is in the
 scene, so every camera ray sees it directly: Blender evaluates whatever its node tree holds.
 
 With ``VIEW.json`` it then renders the world once more through the scene's camera as the
@@ -27,7 +28,7 @@ import sys
 def main(argv):
     import bpy
 
-    library, name, out, width, samples = argv[0], argv[1], argv[2], int(argv[3]), int(argv[4])
+    library, name, out, width, samples, threads = argv[0], argv[1], argv[2], int(argv[3]), int(argv[4]), int(argv[5])
     bpy.ops.wm.read_factory_settings(use_empty=True)
     with bpy.data.libraries.load(library, link=False) as (src, dst):
         if name not in src.worlds:
@@ -50,6 +51,8 @@ def main(argv):
     r.resolution_x, r.resolution_y, r.resolution_percentage = width, max(1, width // 2), 100
     r.filter_size = 1.0
     r.film_transparent = False
+    if threads > 0:
+        r.threads_mode, r.threads = "FIXED", threads
     c = sc.cycles
     c.device = "CPU"
     c.samples = samples
@@ -68,8 +71,8 @@ def main(argv):
     s.exr_codec = "ZIP"
     r.filepath = out
     bpy.ops.render.render(write_still=True)
-    if len(argv) > 5:
-        with open(argv[5]) as f:
+    if len(argv) > 6:
+        with open(argv[6]) as f:
             view = json.load(f)
         data = bpy.data.cameras.new("view")
         data.type = view["type"]

@@ -237,6 +237,43 @@ def test_hdri_with_a_sun_lights_a_plate_and_a_box_as_in_cycles(fresh, tmp_path):
     assert not bad, report
 
 
+def test_the_world_renders_while_the_patches_are_laid_out(fresh, tmp_path):
+    """``export_scene(defer_world=True)`` (the F12 engine's) leaves Blender's render of the
+    world running in its process: the scene has a stand-in world, which lights it as far as
+    the layout's choices go and which no solver may read (``make_renderer`` refuses it);
+    ``attach_world`` then gives the exported and the laid-out scene the world a plain export
+    gives (the HDRI's sun taken out as a lamp, the camera's view); a cancelled export stops
+    the render's process."""
+    from raybundle.app import pipeline
+    from raybundle_addon.export import export_scene
+    from raybundle_addon.world import forget_rendered_worlds
+
+    sky_world(tmp_path, sun=((0.5, 0.3, 0.81), 3000.0))
+    add_object("plate", [(-1.5, -1.5, 0), (1.5, -1.5, 0), (1.5, 1.5, 0), (-1.5, 1.5, 0)], [(0, 1, 2, 3)],
+               [node_material("white", color=(0.8, 0.8, 0.8))])
+    add_camera((0, -3.0, 3.0), (math.radians(45), 0, 0), resolution=(40, 40), lens=35)
+    dg = bpy.context.evaluated_depsgraph_get()
+    plain = export_scene(dg)
+    forget_rendered_worlds()
+    ex = export_scene(dg, defer_world=True)
+    assert ex.scene.world.stand_in and ex.scene.world.emits and len(ex.scene.sun_lights) == 0
+    laid = pipeline.prepare(ex.scene, patches=50)
+    with pytest.raises(ValueError, match="stand-in"):
+        pipeline.make_renderer(laid)
+    ex.attach_world(laid)
+    for sc in (ex.scene, laid):
+        assert not sc.world.stand_in and len(sc.sun_lights) == 1
+        assert np.allclose(sc.sun_lights.irradiance, plain.scene.sun_lights.irradiance, rtol=1e-5)
+        assert np.allclose(sc.world.image, plain.scene.world.image, rtol=1e-5, atol=1e-7)
+        assert np.allclose(sc.world.view, plain.scene.world.view, rtol=1e-5, atol=1e-7)
+    pipeline.make_renderer(laid).tracer.close()
+    forget_rendered_worlds()
+    ex = export_scene(dg, defer_world=True)
+    proc = ex.world_render._job._proc
+    ex.cancel_world()
+    assert proc.poll() is not None and ex.world_render is None
+
+
 def test_a_room_lit_through_a_window_is_cycles_room_with_or_without_a_portal(fresh, tmp_path):
     """A 4 x 4 x 2.5 m room lit only by a sky through a 1.2 x 1 m window, seen from inside.
     A light portal in the window (1000 W, as users leave them) changes nothing: RAYBUNDLE's

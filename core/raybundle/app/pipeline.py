@@ -84,6 +84,13 @@ def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None, stage=None, stop=None
     return triangle_patches(scene)
 
 
+def _check_world(scene):
+    """ValueError where the scene's world is still a stand-in (its render not attached)."""
+    if scene.world.stand_in:
+        raise ValueError("the scene's world is a stand-in: attach its rendered image first "
+                         "(raybundle.scene.build.attach_world)")
+
+
 def make_solver(scene, settings: RenderSettings | None = None, solver=StochasticIterationSolver.name, stage=None,
                 stop=None):
     """Tracer + first shot + solver for a prepared scene (no camera needed: bakes);
@@ -91,6 +98,7 @@ def make_solver(scene, settings: RenderSettings | None = None, solver=Stochastic
     and ``stop`` as in :func:`prepare`."""
     settings = settings or RenderSettings()
     settings.validate()
+    _check_world(scene)
     if solver not in SOLVERS:
         raise ValueError(f"unknown method {solver!r}; choose one of {sorted(SOLVERS)}")
     if image_only(solver):
@@ -125,6 +133,7 @@ def make_renderer(scene, settings: RenderSettings | None = None, camera=None,
     """Tracer + first shot + solver + image accumulator for a prepared scene."""
     settings = settings or RenderSettings()
     if image_only(solver):
+        _check_world(scene)
         return _make_image_method(scene, settings, camera, solver, stage, stop)
     solver_obj = make_solver(scene, settings, solver, stage=stage, stop=stop)
     try:

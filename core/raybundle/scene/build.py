@@ -96,22 +96,44 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
             world = World(world)
     except ValueError as e:
         raise SceneError(str(e)) from None
-    if world.camera_image is None:
+    world, sun_lights = _world_and_suns(world, sun_lights)
+    _check_some_light(materials.is_emitter[np.unique(m)].any(), point_lights, sun_lights, area_lights, world)
+    ar = None if analytic_radiance is None else np.asarray(analytic_radiance, float).reshape(3)
+    solid = None if triangle_solid is None else np.asarray(triangle_solid, bool).reshape(-1)[keep] & ~two
+    return PatchScene(v, t, m, patch, src, materials, point_lights, camera, ar, name, dropped, solid,
+                      two, sun_lights, area_lights, world, texture=texture)
+
+
+def _world_and_suns(world, sun_lights):
+    """``(world, sun_lights)`` with a sun inside the world's image taken out as one more sun
+    lamp (:func:`~raybundle.scene.world.split_sun`), once: when the world has no separate
+    camera image yet."""
+    if world.camera_image is None and not world.stand_in:
         world, sun = split_sun(world)
         if sun is not None:
             sun_lights = SunLights(np.vstack([sun_lights.direction, sun["direction"]]),
                                    np.vstack([sun_lights.irradiance, sun["irradiance"]]),
                                    np.append(sun_lights.angle, sun["angle"]))
-    has_emitter = materials.is_emitter[np.unique(m)].any()
-    has_light = any((np.asarray(x) > 0).any() for x in (point_lights.intensity, sun_lights.irradiance,
-                                                       area_lights.radiance, world.image))
-    if not has_emitter and not has_light:
+    return world, sun_lights
+
+
+def _check_some_light(has_emitter, point_lights, sun_lights, area_lights, world):
+    if not has_emitter and not world.emits and not any(
+            (np.asarray(x) > 0).any() for x in (point_lights.intensity, sun_lights.irradiance, area_lights.radiance)):
         raise SceneError("the scene has no lights: no emitting material, no light and a black world "
                          "(add an Emission shader, a light or a world color)")
-    ar = None if analytic_radiance is None else np.asarray(analytic_radiance, float).reshape(3)
-    solid = None if triangle_solid is None else np.asarray(triangle_solid, bool).reshape(-1)[keep] & ~two
-    return PatchScene(v, t, m, patch, src, materials, point_lights, camera, ar, name, dropped, solid,
-                      two, sun_lights, area_lights, world, texture=texture)
+
+
+def attach_world(scene: PatchScene, world: World) -> PatchScene:
+    """Give ``scene`` (built with a stand-in world, :attr:`~raybundle.scene.world.World.stand_in`,
+    laid out or not) its ``world``, as :func:`build_scene` would have: a sun inside it
+    becomes a sun lamp.  Changes ``scene`` in place and returns it; raises
+    :class:`SceneError` when nothing lights the scene after all."""
+    world, suns = _world_and_suns(world, scene.sun_lights)
+    _check_some_light(scene.materials.is_emitter[np.unique(scene.triangle_material)].any(), scene.point_lights,
+                      suns, scene.area_lights, world)
+    scene.world, scene.sun_lights = world, suns
+    return scene
 
 
 def coincident_triangles(v, t, m, two_sided, merge=True):

@@ -46,6 +46,10 @@ class World:
     view: np.ndarray | None = None
     #: the camera ``view`` was rendered through (a :class:`~raybundle.scene.camera.Camera`)
     view_camera: object = None
+    #: a stand-in (:meth:`stand_in_for_render`) while the world's image is still being
+    #: rendered: the layout and the method's choice take it as a world that lights the scene;
+    #: nothing may read its light (:func:`~raybundle.scene.build.attach_world` replaces it)
+    stand_in: bool = False
 
     def __post_init__(self):
         self.image = _checked(self.image, "world image")
@@ -64,6 +68,11 @@ class World:
         """The world of one radiance ``rgb`` (3,) from every direction (Blender's world color x strength)."""
         return cls(np.broadcast_to(np.asarray(rgb, float), (3,)).reshape(1, 1, 3).copy())
 
+    @classmethod
+    def stand_in_for_render(cls):
+        """A black stand-in (:attr:`stand_in`) for a world whose image is still being rendered."""
+        return cls(np.zeros((1, 1, 3)), stand_in=True)
+
     @property
     def is_constant(self):
         return self.image.shape[:2] == (1, 1) and self.camera_image is None
@@ -72,7 +81,7 @@ class World:
     def emits(self):
         """The world sends light into the scene (its lighting image or a sun taken from it
         is not black; a world only the camera sees does not light)."""
-        return bool(np.any(self.image > 0))
+        return self.stand_in or bool(np.any(self.image > 0))
 
     @property
     def seen(self):
@@ -120,6 +129,8 @@ class World:
         return self.radiance(np.stack([-d, d]))
 
     def to_arrays(self):
+        if self.stand_in:
+            raise ValueError("the world is still being rendered: it has no image to save yet")
         d = {"world_image": self.image}
         if self.camera_image is not None:
             d["world_camera_image"] = self.camera_image
