@@ -228,8 +228,8 @@ class ShapeLight:
     or ellipse that is not geometry.  Sampled by area, ``e = Le cos_l A / r^2`` (pdf 1/A),
     except a rectangle where it may look large (as :class:`MeshLight`'s parts: area at
     least ``MeshLight.MIN_SOLID_ANGLE`` times the squared distance to its bounding sphere):
-    there a direction uniform in its solid angle O (one of its two triangles by solid
-    angle, then Arvo's sampling in it), ``e = Le O``, bounded however close the point is.
+    there a direction uniform in its solid angle O (:meth:`_sample_solid_angle`),
+    ``e = Le O``, bounded however close the point is.
     By area, a point a few centimetres from a 40 m^2 panel drew ``1 / r^2`` fireflies,
     negative ones through the control variate of :meth:`DirectLighting.reflected_radiance`."""
 
@@ -263,21 +263,35 @@ class ShapeLight:
 
     def _sample_solid_angle(self, points, u):
         """Points on the rectangle (N, 3) along directions uniform in its solid angle seen
-        from ``points`` (N, 3) in front of it, and that solid angle O (N,) [sr]."""
-        c = self.center + np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], float) @ np.stack([self.axis_u, self.axis_v])
-        rel = c[None] - points[:, None, :]                                       # (N, 4, 3)
-        o1 = triangle_solid_angle(rel[:, 0], rel[:, 1], rel[:, 2])
-        o2 = triangle_solid_angle(rel[:, 0], rel[:, 2], rel[:, 3])
-        total = o1 + o2
-        x = u[:, 0] * total
-        first = x < o1
-        u1 = np.clip(np.where(first, x / np.maximum(o1, 1e-300), (x - o1) / np.maximum(o2, 1e-300)), 0.0, 1.0)
-        third = np.where(first[:, None], rel[:, 2], rel[:, 3])
-        second = np.where(first[:, None], rel[:, 1], rel[:, 2])
-        d, _ = sample_spherical_triangle(rel[:, 0], second, third, u1, u[:, 2])
-        nd = d @ self.normal
-        t = (rel[:, 0] @ self.normal) / np.where(nd != 0, nd, -1e-300)
-        return points + t[:, None] * d, total
+        from ``points`` (N, 3) in front of it, and that solid angle O (N,) [sr]: the
+        area-preserving map of the unit square onto the spherical rectangle (Urena, Fajardo
+        and King, "An area-preserving parametrization for spherical rectangles", EGSR 2013),
+        from ``u[:, 0]`` and ``u[:, 1]``."""
+        lx, ly = 2.0 * np.linalg.norm(self.axis_u), 2.0 * np.linalg.norm(self.axis_v)
+        ex, ey = self.axis_u / (0.5 * lx), self.axis_v / (0.5 * ly)
+        ez = np.cross(ex, ey)
+        d = (self.center - self.axis_u - self.axis_v) - points           # to the corner, (N, 3)
+        x0, y0, z0 = d @ ex, d @ ey, d @ ez
+        flip = z0 > 0                                                     # the frame's z away from the light
+        z0 = np.where(flip, -z0, z0)
+        x1, y1 = x0 + lx, y0 + ly
+        # the z components of the unit normals of the four great circles through the edges
+        n0, n1 = -y0 / np.sqrt(z0 * z0 + y0 * y0), x1 / np.sqrt(z0 * z0 + x1 * x1)
+        n2, n3 = y1 / np.sqrt(z0 * z0 + y1 * y1), -x0 / np.sqrt(z0 * z0 + x0 * x0)
+        g0, g1 = np.arccos(np.clip(-n0 * n1, -1, 1)), np.arccos(np.clip(-n1 * n2, -1, 1))
+        g2, g3 = np.arccos(np.clip(-n2 * n3, -1, 1)), np.arccos(np.clip(-n3 * n0, -1, 1))
+        k = 2.0 * np.pi - g2 - g3
+        omega = np.maximum(g0 + g1 - k, 0.0)
+        au = u[:, 0] * omega + k
+        fu = (np.cos(au) * n0 - n2) / np.where(np.sin(au) != 0, np.sin(au), 1e-300)
+        cu = np.clip(np.sign(fu) / np.sqrt(fu * fu + n0 * n0), -1.0, 1.0)
+        xu = np.clip(-(cu * z0) / np.maximum(np.sqrt(1.0 - cu * cu), 1e-300), x0, x1)
+        dd = np.sqrt(xu * xu + z0 * z0)
+        h0, h1 = y0 / np.sqrt(dd * dd + y0 * y0), y1 / np.sqrt(dd * dd + y1 * y1)
+        hv = h0 + u[:, 1] * (h1 - h0)
+        yv = np.where(hv * hv < 1.0 - 1e-12, hv * dd / np.sqrt(np.maximum(1.0 - hv * hv, 1e-300)), y1)
+        zdir = np.where(flip[:, None], -ez, ez)
+        return points + xu[:, None] * ex + yv[:, None] * ey + z0[:, None] * zdir, omega
 
     def in_front(self, origin, normal):
         corners = [self.center + a * self.axis_u + b * self.axis_v for a in (-1, 1) for b in (-1, 1)]
