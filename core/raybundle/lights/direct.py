@@ -34,7 +34,7 @@ def light_bits(n):
     return np.left_shift(np.uint64(1), np.minimum(np.arange(n), 63).astype(np.uint64))
 
 
-def _may_light(light, points, normals):
+def may_light(light, points, normals):
     """(N,) bool: some sample of ``light`` may light ``points`` (N, 3) with unit ``normals``
     (N, 3): part of the light lies above their tangent planes, and a one-sided area light
     faces them.  Elsewhere every sample's ``e cos_x`` is 0."""
@@ -232,7 +232,7 @@ class DirectLighting:
         # where the control variate applies, its exact unoccluded irradiance there
         reach, exact = [], []
         for li, light in enumerate(lights):
-            base = np.nonzero(_may_light(light, points, normals))[0]
+            base = np.nonzero(may_light(light, points, normals))[0]
             here = base[(an[base] & bits[li]) != 0] if len(cv) and isinstance(light, (MeshLight, ShapeLight)) else []
             ex = light_polygon_irradiance(light, points[here], normals[here]) if len(here) else None
             reach.append(base)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..tracing.sampling import points_on_triangles
-from .direct import DirectLighting
+from .direct import DirectLighting, may_light
 
 
 class PatchFirstShot:
@@ -72,18 +72,22 @@ class PatchFirstShot:
         old = self._e_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
         old_d = self._d_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
         for li, light in enumerate(self.lights):
-            e, travel, _ = self.direct.light_samples_at(pts, nrm, light, self.rng.random((len(tri), 3)))
-            self._e_sum[tri, li] += e
-            self._d_sum[tri, li] += e.sum(axis=1, keepdims=True) * travel
+            u_l = self.rng.random((len(tri), 3))
+            at = np.nonzero(may_light(light, pts, nrm))[0]       # elsewhere the light gives nothing
+            if len(at) == 0:
+                continue
+            e, travel, _ = self.direct.light_samples_at(pts[at], nrm[at], light, u_l[at])
+            self._e_sum[tri[at], li] += e
+            self._d_sum[tri[at], li] += e.sum(axis=1, keepdims=True) * travel
         self._count[tri] += 1
         # side average = sum over its tsides of area * (tside mean) / side area
         side = sc.tside_side[tri]
         w = (sc.triangle_area[sc.tside_triangle[tri]] / self.receiving_area[side])[:, None, None]
         new = self._e_sum[tri] / self._count[tri][:, None, None]
         new_d = self._d_sum[tri] / self._count[tri][:, None, None]
-        np.add.at(self.E, side, w * (new - old))
-        np.add.at(self._d_patch, side, w * (new_d - old_d))
-        p = np.unique(side)
+        p, at = np.unique(side, return_inverse=True)
+        self.E[p] += _summed(at, len(p), w * (new - old))
+        self._d_patch[p] += _summed(at, len(p), w * (new_d - old_d))
         norm = np.linalg.norm(self._d_patch[p], axis=2, keepdims=True)
         self.direction[p] = np.where(norm > 0, self._d_patch[p] / np.maximum(norm, 1e-300), 0.0)
 
@@ -115,3 +119,13 @@ class PatchFirstShot:
         k = (self._next + np.arange(min(n_triangles, n_t))) % n_t
         self._next = int((self._next + len(k)) % n_t)
         self._add(self.receiving_tsides[k])
+
+
+def _summed(group, n, values):
+    """(n, ...) the sums of ``values`` (N, ...) by ``group`` (N,) in [0, n) (``np.add.at``'s
+    result, by one bincount per column: many times faster)."""
+    flat = values.reshape(len(values), -1)
+    out = np.empty((n, flat.shape[1]))
+    for c in range(flat.shape[1]):
+        out[:, c] = np.bincount(group, flat[:, c], minlength=n)
+    return out.reshape((n,) + values.shape[1:])
