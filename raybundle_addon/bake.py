@@ -179,25 +179,38 @@ class BakeJob:
             self.options = run_options(self.scene)
         check(self.options, bake=True)
         b.validate()
-        self.export = export_scene(self.depsgraph, require_camera=b.camera)
-        for w in self.export.warnings:
-            self.warn(w)
-        if b.color_attribute:
-            self._pick_attribute_targets()
-        if b.lightmaps:
-            self._pick_lightmap_targets()
-            if not self.lightmap_targets and not b.color_attribute and not b.camera:
-                raise ValueError("nothing to bake: no selected mesh has a UV map for a lightmap")
-        self.timings["export_seconds"] = time.perf_counter() - self.t_start
-        self.plan = plan(self.export.scene, self.options, bake=True)
-        if self.plan.notes:
-            self.warn(self.plan.describe())
-        _, runner = pipeline.build(self.export.scene, self.plan, image=b.camera, stop=self.stop)
+        # the world's render (where Blender must render it) runs on while the patches are laid out
+        self.export = export_scene(self.depsgraph, require_camera=b.camera, defer_world=True)
+        try:
+            for w in self.export.warnings:
+                self.warn(w)
+            if b.color_attribute:
+                self._pick_attribute_targets()
+            if b.lightmaps:
+                self._pick_lightmap_targets()
+                if not self.lightmap_targets and not b.color_attribute and not b.camera:
+                    raise ValueError("nothing to bake: no selected mesh has a UV map for a lightmap")
+            self.timings["export_seconds"] = time.perf_counter() - self.t_start
+            self.plan = plan(self.export.scene, self.options, bake=True)
+            if self.plan.notes:
+                self.warn(self.plan.describe())
+            _, runner = pipeline.build(self.export.scene, self.plan, image=b.camera, stop=self.stop,
+                                       attach=self._attach_world)
+        finally:
+            self.export.cancel_world()
         self.renderer = runner if b.camera else None
         self.solver = runner.solver if b.camera else runner
         self.timings["prepare_seconds"] = time.perf_counter() - self.t_start - self.timings["export_seconds"]
         self.loop = RunLoop(runner, self.plan.iterations, self.plan.seconds, started=self.t_start, stop=self.stop)
         return self
+
+    def _attach_world(self, scene):
+        """Wait for the world's render and give it to ``scene`` (the laid-out one), warning
+        what it warned."""
+        known = len(self.export.warnings)
+        self.timings["world_wait_seconds"] = self.export.attach_world(scene)
+        for w in self.export.warnings[known:]:
+            self.warn(w)
 
     def _corners(self, info):
         """Per corner of ``info``'s evaluated mesh: export triangle and barycentrics."""

@@ -104,7 +104,8 @@ class ExportResult:
     (not yet subdivided); ``scene.triangle_source`` indexes the export arrays
     ``triangle_object`` (T,) int32 (into ``objects``), ``triangle_polygon`` (T,)
     int32 and ``triangle_loops`` (T, 3) int32 (the object's evaluated mesh
-    polygon and corners); ``warnings`` are one-line messages for the user;
+    polygon and corners); ``warnings`` are one-line messages for the user (a deferred
+    world's render adds its own when :meth:`attach_world` finishes it);
     ``border`` is the render border ``(x0, y0, w, h)`` in pixels from the
     bottom-left (None = the full frame).
     """
@@ -561,6 +562,6 @@ def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
     counts = {"objects": len(objects), "triangles": int(len(sc.triangles)), "vertices": int(len(v)),
               "materials": len(mats), "point_lights": len(lights["point"]), "sun_lights": len(lights["sun"]),
               "area_lights": len(lights["area"])}
-    return ExportResult(sc, list(warn), objects, np.concatenate(tobj), np.concatenate(tpoly),
+    return ExportResult(sc, warn, objects, np.concatenate(tobj), np.concatenate(tpoly),
                         np.concatenate(tloops), list(mats.names), size, border,
                         time.perf_counter() - t0, counts)

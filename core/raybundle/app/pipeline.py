@@ -170,11 +170,15 @@ def lay_out(scene, plan, stage=None, stop=None):
     return scene if plan.image_only else prepare(scene, patches=plan.patches, stage=stage, stop=stop)
 
 
-def build(scene, plan, camera=None, image=True, stage=None, stop=None):
+def build(scene, plan, camera=None, image=True, stage=None, stop=None, attach=None):
     """``(prepared scene, runner)`` for ``scene`` (loaded, not laid out) and ``plan``: the
     layout (:func:`lay_out`), then with ``image`` a renderer (:func:`make_renderer`), else
-    the solver alone (:func:`make_solver`, bakes).  ``stage`` and ``stop`` as in :func:`lay_out`."""
+    the solver alone (:func:`make_solver`, bakes).  ``stage`` and ``stop`` as in :func:`lay_out`;
+    ``attach(laid-out scene)`` is called between the two (the add-on gives it the world
+    Blender rendered meanwhile, :func:`~raybundle.scene.build.attach_world`)."""
     scene = lay_out(scene, plan, stage, stop)
+    if attach is not None:
+        attach(scene)
     if image:
         return scene, make_renderer(scene, plan.settings, camera, solver=plan.method, stage=stage, stop=stop)
     return scene, make_solver(scene, plan.settings, solver=plan.method, stage=stage, stop=stop)

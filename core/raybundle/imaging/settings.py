@@ -38,8 +38,8 @@ class RenderSettings:
     ``gather_share`` of the run's seconds buys, in runs limited by time (none in runs of given
     iterations, which stay reproducible, nor in images formed without a budget of seconds):
     :meth:`Renderer.diffuse_indirect`;
-    ``penumbra_samples``: shadow rays per light per pass for the pixels whose earlier
-    samples found a light both seen and blocked (:meth:`Renderer._shade`);
+    ``penumbra_samples``: shadow rays per pass for a light at the pixels where its earlier
+    samples were both seen and blocked (:meth:`Renderer._shade`);
     ``caustic_splats``: with a caustic first shot, its samples per pixel and image pass that
     light-trace the caustic on the surfaces the eye sees into the pixels
     (:meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`), 0 = read it from the patches as the rest of the
