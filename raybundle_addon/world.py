@@ -10,7 +10,8 @@ reimplemented here.  Through a perspective camera the same process renders the w
 more through that camera, at the render's size, each pixel the mean over its area as
 raybundle's own pixels are (:attr:`raybundle.scene.world.World.view`): what the camera sees of the world through a
 window is then Blender's own pixel, not a panorama's blur.  The images are kept per world,
-node tree and view for the session.
+node tree and view for the session.  The render can run while the caller goes on
+(:func:`start_world_export`: the F12 engine and bakes lay out their patches meanwhile).
 
 What is not modelled, warned: the world's volume; a Light Path node (the world lights the
 scene as the camera sees it); a failed evaluation falls back to the Background's own color.
