@@ -67,8 +67,36 @@ def test_the_time_left_after_set_up_is_shared_with_the_final_image(scene):
         loop.advance()
         assert loop.elapsed() >= loop.loop_seconds and not loop.short
         assert abs(loop.final_seconds() - 0.25 * loop.elapsed()) < 0.01
+        # a final image that will not take its share (a gather that would not pay) gives it back
+        reserve, before = loop.final_seconds(), s.stats.iterations
+        loop.extend(reserve)
+        assert loop.advance() is False and s.stats.iterations > before
+        assert loop.elapsed() >= 1.5 / 1.25 + reserve and loop.final_seconds() == 0.0
     finally:
         s.tracer.close()
+
+
+def test_a_gather_that_would_not_pay_leaves_its_time_to_the_iterations():
+    """On a floor under a lamp no side lies next to a concave edge or contact, so the automatic
+    final gather has nothing to serve (``automatic_gather_pays`` is False) and ``Renderer.run``
+    gives the seconds it kept for it to iterations: none is gathered."""
+    from raybundle.scene.build import build_scene
+    from raybundle.scene.camera import Camera
+    from raybundle.scene.materials import MaterialTable
+
+    v = [[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0], [-0.2, -0.2, 1], [-0.2, 0.2, 1], [0.2, 0.2, 1], [0.2, -0.2, 1]]
+    mats = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.5, 0.5)), dict(name="lamp", emission=(5, 5, 5))])
+    cam = Camera.look_at([0, -3, 2], [0, 0, 0], [0, 0, 1], 35.0, 36.0, (16, 16))
+    sc = pipeline.prepare(build_scene(v, [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]], [0, 0, 1, 1], mats,
+                                      camera=cam), patches=40)
+    r = pipeline.make_renderer(sc, RenderSettings(seed=1, resolve_samples=1))
+    try:
+        r.run(iterations=4)
+        assert not r.automatic_gather_pays(10.0)
+        res = r.run(seconds=1.0)
+        assert res.stats["gather_rays_per_pixel"] == 0
+    finally:
+        r.tracer.close()
 
 
 def test_stop_and_ctrl_c_end_the_loop_with_what_was_done(scene):

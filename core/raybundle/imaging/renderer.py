@@ -121,10 +121,16 @@ class ProgressiveImage:
                 loop.cancelled = loop.finished = True
                 break
             loop.pause(time.perf_counter() - t_snap)
+        reserve = loop.final_seconds()
+        if reserve and not self.automatic_gather_pays(reserve):
+            loop.extend(reserve)                  # the time kept for a gather that would not pay: iterate on
+            while loop.advance():
+                pass
+            reserve = None
         if stage is not None:
             stage("forming the final image")
         t_res = time.perf_counter()
-        img = self.resolve(loop.final_seconds())
+        img = self.resolve(reserve)
         if not np.isfinite(img).all():
             raise FloatingPointError("the image has non-finite values; this is a bug, please report it")
         t_end = time.perf_counter()
@@ -562,6 +568,23 @@ class Renderer(ProgressiveImage):
             scale = self.albedo_scale(g.triangle[h], g.point[h])
             out[h] += w_d * kd[m] / np.pi * e * (1.0 if scale is None else scale)
         return out / k
+
+    def automatic_gather_pays(self, gather_seconds):
+        """Whether the automatic final gather (``gather_rays`` -1) would spend ``gather_seconds``
+        on the image (:meth:`diffuse_indirect` probes it the same way): a timed run whose gather
+        would not pay gives the seconds it kept for it to more iterations (:meth:`run`)."""
+        solver = self.solver
+        if self.settings.gather_rays != -1 or not gather_seconds or not self.scene.n_patches or \
+                not self.edge_gather.affordable(self._probe_gbuffer(), gather_seconds):
+            return False
+        caustic = solver.caustic is not None and self.caustic_splats is None
+        e_bar = solver.image_incoming(caustic=caustic, world=self.world_light is None)
+        vert = (solver.reconstruction.smooth_and_sharp(e_bar, solver.caustic.E if caustic else None)
+                if self.settings.smooth else None)
+        final = FinalGather(solver, caustic=caustic, world=self.world_light is None)
+        return self.edge_gather.automatic_rays(final, self._probe_gbuffer(), max(1, int(self.settings.resolve_samples)),
+                                               gather_seconds,
+                                               lambda ts, bary: self.surface_values(e_bar, vert, ts, bary)) > 0
 
     def _probe_gbuffer(self):
         """The G-buffer the automatic gather measures on: the last image pass's, or for a

@@ -125,6 +125,13 @@ class RunLoop:
         self.finished = True
         return False
 
+    def extend(self, seconds):
+        """Give the run ``seconds`` more of iteration, taken from the final image's share
+        (which is then none): :meth:`advance` goes on."""
+        self.loop_seconds = (self.loop_seconds or 0.0) + seconds
+        self.final_share = 0.0
+        self.finished = False
+
     def final_seconds(self):
         """What the final image may take [s]: ``final_share`` of the iteration time in a run
         limited by time that ran to its end; None in a run of given iterations (which stays
