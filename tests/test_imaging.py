@@ -163,6 +163,20 @@ def penumbra_scene(point_lights=None):
                                patches=200)
 
 
+def penumbra_reference(r):
+    """(256,) the direct light of the penumbra scene's pixels (:func:`penumbra_scene`, the floor's
+    kd 0.5) for renderer ``r``'s lamps: 4 x 4 points per pixel, 512 shadow rays each (ratio estimator)."""
+    n_pix = 16 * 16
+    ref = np.zeros(n_pix)
+    for a in (0.125, 0.375, 0.625, 0.875):
+        for b in (0.125, 0.375, 0.625, 0.875):
+            px, py = np.meshgrid(np.arange(16) + a, np.arange(16) + b)
+            pts = np.stack([0.81 + (px.ravel() - 8) / 16, (8 - py.ravel()) / 16, np.zeros(n_pix)], axis=1)
+            ref += r.direct.irradiance(pts, np.tile([0, 0, 1.0], (n_pix, 1)), np.random.default_rng(1),
+                                       512, 512)[:, 0] * 0.5 / np.pi / 16
+    return ref
+
+
 def test_penumbra_pixels_get_more_shadow_rays():
     """Floor under a 0.4 m lamp 1 m up, a wall 0.6 m high at x = 0.3 shading it: an
     orthographic camera looks down on x in [0.31, 1.31], umbra, penumbra and open floor.
@@ -180,15 +194,7 @@ def test_penumbra_pixels_get_more_shadow_rays():
             r.image_pass()
         images[n_pen] = (r.pass_sum / r.passes)[:, 0].reshape(16, 16)
         pen_flags = (r.shadow_flags[:, 0] & r.shadow_flags[:, 1] != 0).reshape(16, 16)
-    ref = np.zeros((16, 16))
-    for a in (0.125, 0.375, 0.625, 0.875):
-        for b in (0.125, 0.375, 0.625, 0.875):
-            px, py = np.meshgrid(np.arange(16) + a, np.arange(16) + b)
-            x = 0.81 + (px.ravel() - 8) / 16
-            y = (8 - py.ravel()) / 16
-            pts = np.stack([x, y, np.zeros_like(x)], axis=1)
-            ref += r.direct.irradiance(pts, np.tile([0, 0, 1.0], (len(pts), 1)), np.random.default_rng(1),
-                                       512, 512)[:, 0].reshape(16, 16) * 0.5 / np.pi / 16
+    ref = penumbra_reference(r).reshape(16, 16)
     pen = pen_flags & (ref > 0)
     assert pen.sum() >= 64
     err = {k: images[k][pen] - ref[pen] for k in images}
@@ -220,14 +226,7 @@ def test_penumbra_rays_go_to_the_lamp_whose_shadow_edge_crosses_the_pixel():
     n_pix = 16 * 16
     assert all(k <= 2 * n_pix + 7 * p for k, p in rays[:3]), rays[:3]
     assert rays[-1][1] >= 64
-    ref = np.zeros(n_pix)
-    for a in (0.125, 0.375, 0.625, 0.875):
-        for b in (0.125, 0.375, 0.625, 0.875):
-            px, py = np.meshgrid(np.arange(16) + a, np.arange(16) + b)
-            pts = np.stack([0.81 + (px.ravel() - 8) / 16, (8 - py.ravel()) / 16, np.zeros(n_pix)], axis=1)
-            ref += r.direct.irradiance(pts, np.tile([0, 0, 1.0], (n_pix, 1)), np.random.default_rng(1),
-                                       512, 512)[:, 0] * 0.5 / np.pi / 16
-    err = (r.pass_sum / r.passes)[:, 0] - ref
+    err = (r.pass_sum / r.passes)[:, 0] - penumbra_reference(r)
     assert abs(err.mean()) < 4.5 * err.std(ddof=1) / np.sqrt(n_pix), (err.mean(), err.std())
     r.tracer.close()
 
@@ -256,14 +255,7 @@ def test_faint_lamps_are_chosen_by_their_contribution():
         rays.append((r.direct.rays - before, pen))
     n_pix = 16 * 16
     assert all(k - 7 * p < 3 * n_pix for k, p in rays[:3]), rays[:3]
-    ref = np.zeros(n_pix)
-    for a in (0.125, 0.375, 0.625, 0.875):
-        for b in (0.125, 0.375, 0.625, 0.875):
-            px, py = np.meshgrid(np.arange(16) + a, np.arange(16) + b)
-            pts = np.stack([0.81 + (px.ravel() - 8) / 16, (8 - py.ravel()) / 16, np.zeros(n_pix)], axis=1)
-            ref += r.direct.irradiance(pts, np.tile([0, 0, 1.0], (n_pix, 1)), np.random.default_rng(1),
-                                       512, 512)[:, 0] * 0.5 / np.pi / 16
-    err = (r.pass_sum / r.passes)[:, 0] - ref
+    err = (r.pass_sum / r.passes)[:, 0] - penumbra_reference(r)
     assert abs(err.mean()) < 4.5 * err.std(ddof=1) / np.sqrt(n_pix), (err.mean(), err.std())
     r.tracer.close()
 
