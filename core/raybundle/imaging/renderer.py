@@ -188,6 +188,7 @@ class Renderer(ProgressiveImage):
         self._since_pass = 0                              # iterations since the last image pass (step)
         self.pass_seconds = 0.0                           # seconds spent in image passes
         self.gbuffer = None
+        self._planned = None                # automatic_gather_pays' plan for the next diffuse_indirect
         self._glossy_pixels = np.zeros(0, np.int64)   # pixels for accumulate_glossy
         self.emission_sum = np.zeros((n, 3))             # emission seen: sum and count per pixel
         self.emission_count = np.zeros(n)
@@ -514,34 +515,27 @@ class Renderer(ProgressiveImage):
         is unbiased whatever its count.
         """
         t_start = time.perf_counter()
-        sc, solver = self.scene, self.solver
+        sc = self.scene
         n = len(self._pixel)
         out = np.zeros((n, 3))
-        sharp = None
-        final = None
-        caustic = solver.caustic is not None and self.caustic_splats is None
+        k = max(1, int(samples or self.settings.resolve_samples))
+        final, per_sample, rays = None, 0, self.settings.gather_rays
         if e_bar is None:
-            # a caustic light-traced into the pixels (caustic_splats) is left out here
-            e_bar = solver.image_incoming(caustic=caustic, world=self.world_light is None)
-            sharp = solver.caustic.E if caustic else None
+            planned, self._planned = self._planned, None
+            if planned is not None and planned[0] == (gather_seconds, k):
+                e_bar, vert, final, per_sample = planned[1]
+                t_start -= planned[2]                 # the probe's time counts against the gather's budget
+            else:
+                e_bar, vert, final, per_sample = self._indirect_plan(gather, gather_seconds, k)
             self.gather_rays_used = 0
-            rays = self.settings.gather_rays
-            if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and gather_seconds and
-                                                                 self.edge_gather.affordable(self._probe_gbuffer(),
-                                                                                             gather_seconds))):
-                final = FinalGather(solver, caustic=caustic, world=self.world_light is None)
+        else:
+            vert = self.solver.reconstruction.smooth_and_sharp(e_bar, None) \
+                if self.settings.smooth and np.any(e_bar) else None
         if not np.any(e_bar) and final is None:
             return out
-        vert = solver.reconstruction.smooth_and_sharp(e_bar, sharp) if self.settings.smooth else None
         kd = sc.materials.diffuse_reflectance
-        k = max(1, int(samples or self.settings.resolve_samples))
         offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve
         if final is not None:
-            per_sample = (-(-int(rays) // k) if rays > 0 else
-                          self.edge_gather.automatic_rays(final, self._probe_gbuffer(), k, gather_seconds,
-                                                          lambda ts, bary: self.surface_values(e_bar, vert, ts, bary)))
-            if per_sample == 0:
-                final = None
             shift = self._resolve_rng.random((n, 2))
         t_loop = time.perf_counter()
         for j in range(k):
@@ -569,22 +563,45 @@ class Renderer(ProgressiveImage):
             out[h] += w_d * kd[m] / np.pi * e * (1.0 if scale is None else scale)
         return out / k
 
+    def _indirect_plan(self, gather, gather_seconds, k):
+        """What :meth:`diffuse_indirect` reads from the solver: ``(e_bar, vert, final,
+        per_sample)``, the solver's E_bar (S, 3) for the image, its vertex values (with
+        ``smooth``, else None), the :class:`~raybundle.imaging.gather.FinalGather` or None
+        and its rays per sub-pixel sample for ``k`` sub-pixel samples (the automatic count
+        is probed: :meth:`~raybundle.imaging.gather.EdgeGather.automatic_rays`)."""
+        solver = self.solver
+        caustic = solver.caustic is not None and self.caustic_splats is None
+        # a caustic light-traced into the pixels (caustic_splats) is left out here
+        e_bar = solver.image_incoming(caustic=caustic, world=self.world_light is None)
+        rays, final, per_sample = self.settings.gather_rays, None, 0
+        if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and gather_seconds and
+                                                             self.edge_gather.affordable(self._probe_gbuffer(),
+                                                                                         gather_seconds))):
+            final = FinalGather(solver, caustic=caustic, world=self.world_light is None)
+        vert = None
+        if self.settings.smooth and (final is not None or np.any(e_bar)):
+            vert = solver.reconstruction.smooth_and_sharp(e_bar, solver.caustic.E if caustic else None)
+        if final is not None:
+            per_sample = (-(-int(rays) // k) if rays > 0 else
+                          self.edge_gather.automatic_rays(final, self._probe_gbuffer(), k, gather_seconds,
+                                                          lambda ts, bary: self.surface_values(e_bar, vert, ts, bary)))
+            if per_sample == 0:
+                final = None
+        return e_bar, vert, final, per_sample
+
     def automatic_gather_pays(self, gather_seconds):
         """Whether the automatic final gather (``gather_rays`` -1) would spend ``gather_seconds``
-        on the image (:meth:`diffuse_indirect` probes it the same way): a timed run whose gather
-        would not pay gives the seconds it kept for it to more iterations (:meth:`run`)."""
-        solver = self.solver
+        on the image: a timed run whose gather would not pay gives the seconds it kept for it
+        to more iterations (:meth:`run`).  When it pays, the probe's plan is kept for the
+        :meth:`diffuse_indirect` that follows."""
         if self.settings.gather_rays != -1 or not gather_seconds or not self.scene.n_patches or \
                 not self.edge_gather.affordable(self._probe_gbuffer(), gather_seconds):
             return False
-        caustic = solver.caustic is not None and self.caustic_splats is None
-        e_bar = solver.image_incoming(caustic=caustic, world=self.world_light is None)
-        vert = (solver.reconstruction.smooth_and_sharp(e_bar, solver.caustic.E if caustic else None)
-                if self.settings.smooth else None)
-        final = FinalGather(solver, caustic=caustic, world=self.world_light is None)
-        return self.edge_gather.automatic_rays(final, self._probe_gbuffer(), max(1, int(self.settings.resolve_samples)),
-                                               gather_seconds,
-                                               lambda ts, bary: self.surface_values(e_bar, vert, ts, bary)) > 0
+        k = max(1, int(self.settings.resolve_samples))
+        t0 = time.perf_counter()
+        plan = self._indirect_plan(True, gather_seconds, k)
+        self._planned = ((gather_seconds, k), plan, time.perf_counter() - t0) if plan[2] is not None else None
+        return plan[2] is not None
 
     def _probe_gbuffer(self):
         """The G-buffer the automatic gather measures on: the last image pass's, or for a
@@ -633,6 +650,7 @@ class Renderer(ProgressiveImage):
         at 0.35, at 30 s 3.46% against 3.76% (0.45: 3.55%), the 99.9th percentile of the
         per-pixel error 0.20-0.23 against 0.26-0.27 on three of the seeds (0.36 on the fourth
         at both); at 120 s 2.03 / 1.78% (seeds 3, 4)."""
+        self._planned = None
         solver = self.solver
         if self.passes == 0:
             self.image_pass()

@@ -156,14 +156,8 @@ class DirectLighting:
                 base = np.setdiff1d(base, here[ok], assume_unique=True)
             if len(base) == 0:
                 continue
-            if isinstance(light, ShapeLight):             # as a point at its centre (cheap)
-                y = np.broadcast_to(light.center, (len(base), 3))
-                w = y - points[base]
-                r2 = np.maximum(np.einsum("ij,ij->i", w, w), 1e-300)
-                e = (light.area * np.maximum(-(w @ light.normal), 0.0) / (r2 * np.sqrt(r2)))[:, None] * light.radiance
-            else:
-                y, e = light.sample(points[base], np.full((len(base), 3), 0.5))
-                w = y - points[base]
+            y, e = light.estimate(points[base])
+            w = y - points[base]
             cos_x = np.einsum("ij,ij->i", normals[base], w) / np.maximum(np.linalg.norm(w, axis=1), 1e-300)
             c[base, li] = e.mean(axis=1) * np.maximum(cos_x, 0.0)
         total = c.sum(axis=1, keepdims=True)
@@ -269,10 +263,10 @@ class DirectLighting:
             f_d = None
             if exact[li] is not None:
                 here, irr, ok = exact[li]
-                f_d1 = np.zeros((n, 3))
-                f_d1[here] = f_d_all[here] * ok[:, None]
-                out[here] += f_d1[here] * irr[:, None] * np.asarray(light.radiance, float)
-                f_d = f_d1[pt]
+                out[here] += f_d_all[here] * (ok * irr)[:, None] * np.asarray(light.radiance, float)
+                taken = np.zeros(n, bool)
+                taken[here[ok]] = True
+                f_d = f_d_all[pt] * taken[pt, None]
             for _ in range(n_s):
                 uk = u[pt, k]
                 if copy is not None and len(kron):
@@ -285,8 +279,8 @@ class DirectLighting:
                     e, travel, cos_x, free = self.light_samples_at(p, nrm, light, uk, unshadowed=True)
                     live, blocked = self._seen_blocked(e, free)
                     if shadow_flags is not None:
-                        shadow_flags[np.bincount(pt[live], minlength=n) > 0, 0] |= bit
-                        shadow_flags[np.bincount(pt[blocked], minlength=n) > 0, 1] |= bit
+                        shadow_flags[pt[live], 0] |= bit      # repeated points all write the same value
+                        shadow_flags[pt[blocked], 1] |= bit
                     if f_d is not None:
                         acc -= weight * f_d * (free - e)
                 k += 1

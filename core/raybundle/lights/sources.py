@@ -28,8 +28,17 @@ from ..tracing.sampling import (
 )
 
 
+class _Light:
+    """What every light class shares: :meth:`estimate`."""
+
+    def estimate(self, points):
+        """One cheap unshadowed sample per point (N, 3), ``(y, e)`` as :meth:`sample`'s,
+        at the middle of the light's sample space: lamp selection's guess of its share."""
+        return self.sample(points, np.full((len(points), 3), 0.5))
+
+
 @dataclass
-class MeshLight:
+class MeshLight(_Light):
     """Triangles of one emitting material: ``triangles`` (K,), area-CDF, area [m^2],
     radiance (3,), ``two_sided`` (K,) bool (the triangle emits from its back too)."""
 
@@ -189,7 +198,7 @@ class MeshLight:
 
 
 @dataclass
-class PointLight:
+class PointLight(_Light):
     """A point or spot light (``PointLights`` row ``k``); see :meth:`MeshLight.sample`.
 
     ``e = I s(travel) / r^2`` with ``s`` Cycles' spot attenuation.  A light with
@@ -223,7 +232,7 @@ class PointLight:
 
 
 @dataclass
-class ShapeLight:
+class ShapeLight(_Light):
     """A Blender area light (``AreaLights`` row): a one-sided Lambertian rectangle
     or ellipse that is not geometry.  Sampled by area, ``e = Le cos_l A / r^2`` (pdf 1/A),
     except a rectangle where it may look large (as :class:`MeshLight`'s parts: area at
@@ -247,11 +256,7 @@ class ShapeLight:
             a, b = r * np.cos(phi), r * np.sin(phi)
         else:
             a, b = 2 * u[:, 0] - 1, 2 * u[:, 1] - 1
-        y = self.center + a[:, None] * self.axis_u + b[:, None] * self.axis_v
-        v = y - points
-        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
-        cos_l = np.maximum(-(v @ self.normal) / np.sqrt(r2), 0.0)
-        e = cos_l * self.area / r2
+        y, e = self._by_area(points, a, b)
         if not self.ellipse:
             radius = max(np.linalg.norm(self.axis_u + self.axis_v), np.linalg.norm(self.axis_u - self.axis_v))
             gap = np.maximum(np.linalg.norm(points - self.center, axis=1) - radius, 0.0)
@@ -260,6 +265,18 @@ class ShapeLight:
             if len(near):
                 y[near], e[near] = self._sample_solid_angle(points[near], u[near])
         return y, e[:, None] * self.radiance
+
+    def estimate(self, points):
+        """As a point at its centre, by area (cheap, no spherical rectangle)."""
+        y, e = self._by_area(points, np.zeros(len(points)), np.zeros(len(points)))
+        return y, e[:, None] * self.radiance
+
+    def _by_area(self, points, a, b):
+        """The point ``center + a axis_u + b axis_v`` (N, 3) and ``cos_l A / r^2`` (N,)."""
+        y = self.center + a[:, None] * self.axis_u + b[:, None] * self.axis_v
+        v = y - points
+        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+        return y, np.maximum(-(v @ self.normal) / np.sqrt(r2), 0.0) * self.area / r2
 
     def _sample_solid_angle(self, points, u):
         """Points on the rectangle (N, 3) along directions uniform in its solid angle seen
@@ -299,7 +316,7 @@ class ShapeLight:
 
 
 @dataclass
-class SunLight:
+class SunLight(_Light):
     """A distant light: travel directions uniform in the cone of half-angle
     ``angle / 2`` around ``direction``; ``e = irradiance`` (no fall-off).  The
     sample point lies ``far`` [m] away towards the sun (beyond the scene)."""
