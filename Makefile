@@ -63,7 +63,7 @@ test: test-newest test-oldest
 	@$(if $(SKIPPED),echo "make test: skipped $(SKIPPED)")
 
 test-newest: $(STAMP)
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q -n 2 --dist loadfile tests
 
 test-oldest:
 ifneq ($(PY_OLDEST),)
