@@ -37,6 +37,12 @@ RENDER_TIMEOUT = 300.0
 #: :data:`VIEW_SAMPLE_BUDGET` samples in all, at least 4 per pixel)
 VIEW_SAMPLES = 64
 VIEW_SAMPLE_BUDGET = 30_000_000
+#: the view is rendered at this many times the render's resolution in each axis (fewer where
+#: that would pass :data:`VIEW_MAX_PIXELS`), each pixel's samples shared out over its sub-pixels:
+#: where a window bar covers part of a pixel, the camera rays that miss it read the sky beside
+#: the bar, not the mean of the sky behind it too (:meth:`raybundle.scene.world.World.view_radiance`)
+VIEW_SUPERSAMPLE = 4
+VIEW_MAX_PIXELS = 4_000_000
 
 _cache: dict = {}
 
@@ -93,9 +99,10 @@ class PendingWorld:
                 if seen is None:
                     self._world = World(image)
                 else:
-                    camera, (x0, y0, bw, bh) = self._view[1], self._view[2]
-                    top = seen.shape[0] - (y0 + bh)             # the border counts rows from the bottom
-                    self._world = World(image, view=seen[top:top + bh, x0:x0 + bw], view_camera=camera)
+                    _, camera, (x0, y0, bw, bh), s = self._view
+                    top = seen.shape[0] - s * (y0 + bh)         # the border counts rows from the bottom
+                    self._world = World(image, view=seen[top:top + s * bh, s * x0:s * (x0 + bw)],
+                                        view_camera=camera.with_resolution(s * bw, s * bh))
             except WorldRenderError as e:
                 self._world = _fallen_back(self._name, self._fallback, e, self._warn)
             self._job = None
@@ -162,20 +169,23 @@ def _constant_radiance(world, warn):
 def camera_view(cam_ob, render, camera, border):
     """What :mod:`.world_render` needs to render the world through the perspective camera
     object ``cam_ob`` (evaluated) as ``render`` renders it, with the exported ``camera``
-    (:class:`~raybundle.scene.camera.Camera`) and render ``border`` (x0, y0, w, h) or None;
-    None for other cameras (an orthographic one sees one direction of the world)."""
+    (:class:`~raybundle.scene.camera.Camera`) and render ``border`` (x0, y0, w, h) or None, at
+    ``s`` times the render's resolution (:data:`VIEW_SUPERSAMPLE`): ``(params, camera, border,
+    s)``; None for other cameras (an orthographic one sees one direction of the world)."""
     from .export import render_size
 
     if cam_ob is None or camera is None or cam_ob.data.type != "PERSP":
         return None
     cd = cam_ob.data
     w, h = render_size(render)
+    s = next((s for s in range(VIEW_SUPERSAMPLE, 1, -1) if s * s * w * h <= VIEW_MAX_PIXELS), 1)
+    per_pixel = max(4, min(VIEW_SAMPLES, VIEW_SAMPLE_BUDGET // (w * h)))
     params = dict(matrix=[x for row in cam_ob.matrix_world for x in row], type=cd.type, lens=cd.lens,
                   sensor_width=cd.sensor_width, sensor_height=cd.sensor_height, sensor_fit=cd.sensor_fit,
-                  shift_x=cd.shift_x, shift_y=cd.shift_y, ortho_scale=cd.ortho_scale, size=[w, h],
+                  shift_x=cd.shift_x, shift_y=cd.shift_y, ortho_scale=cd.ortho_scale, size=[s * w, s * h],
                   pixel_aspect=[render.pixel_aspect_x, render.pixel_aspect_y],
-                  samples=int(max(4, min(VIEW_SAMPLES, VIEW_SAMPLE_BUDGET // (w * h)))))
-    return params, camera, border or (0, 0, w, h)
+                  samples=int(max(1, per_pixel // (s * s))))
+    return params, camera, border or (0, 0, w, h), s
 
 
 def forget_rendered_worlds():

@@ -5,6 +5,7 @@ Statistical tolerances: fixed seeds everywhere; the noise of each estimate was
 measured on this machine (2 cores) with two seeds and the bounds are ~4.5 times
 that plus the stated model error.  Runtimes are kept to a few seconds per render.
 """
+import dataclasses
 import math
 import threading
 
@@ -322,6 +323,65 @@ def test_a_room_lit_through_a_window_is_cycles_room_with_or_without_a_portal(fre
     assert abs(p / c - 1) < 4.5 * np.hypot(se / c, se_p / p)
 
 
+def checker_world(scale=120.0):
+    """A world of checks (2 and 0.1-0.4 W m^-2 sr^-1), ``scale`` of them per unit of Generated."""
+    world = set_world((0, 0, 0), 1.0)
+    nt = world.node_tree
+    coords, checker = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Scale"].default_value = scale
+    checker.inputs["Color1"].default_value = (2.0, 1.5, 1.0, 1.0)
+    checker.inputs["Color2"].default_value = (0.1, 0.2, 0.4, 1.0)
+    nt.links.new(coords.outputs["Generated"], checker.inputs["Vector"])
+    nt.links.new(checker.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+    return world
+
+
+def test_the_sky_beside_a_bar_thinner_than_a_pixel_is_the_sky_cycles_sees(fresh, tmp_path):
+    """Black bars a third of a pixel wide, slanted across a world of checks about a pixel
+    wide: in the pixels a bar partly covers, the sky is the part beside the bar, which the
+    world's view, rendered at 4 x 4 sub-pixels, gives (the window bars of a room against the
+    sky behind them).  Relative RMSE against Cycles over those pixels under 2.5 times Cycles'
+    noise (2.6%) plus 2%: measured 6.0% and 5.9% (seeds 3, 4; 5.3% at 200 iterations, the
+    floor of the two renders' noise).  With the pixel's mean of the sky behind the bar too,
+    as before: 12.3%."""
+    from raybundle.tracing.visibility import RayTracer
+    from raybundle_addon.export import export_scene
+
+    checker_world(60.0)
+    cam = add_camera((0, -0.5, 0.3), (math.radians(80), 0, math.radians(20)), resolution=(48, 48), lens=100)
+    bpy.context.view_layer.update()
+    m = np.array(cam.matrix_world)
+    right, up, back, eye = m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3]
+    d = 0.2
+    pix = d * 36.0 / 100.0 / 48                               # a pixel's width 0.2 m away (36 mm sensor)
+    black = node_material("black", color=(0.0, 0.0, 0.0))
+    for i, x in enumerate(np.arange(-20.0, 20.0, 3.7)):
+        c, w = eye - d * back + x * pix * right, pix / 3
+        v = [c - 30 * pix * up - 2 * pix * right, c - 30 * pix * up - 2 * pix * right + w * right,
+             c + 30 * pix * up + 2 * pix * right + w * right, c + 30 * pix * up + 2 * pix * right]
+        add_object(f"bar{i}", v, [(0, 1, 2, 3)], [black])
+    a = render_cycles(tmp_path / "c1.exr", samples=64, seed=1)
+    b = render_cycles(tmp_path / "c2.exr", samples=64, seed=2)
+    ex = export_scene(bpy.context.evaluated_depsgraph_get())
+    sc, k = ex.scene, 8
+    py, px = np.divmod(np.repeat(np.arange(48 * 48), k * k), 48)
+    grid = (np.arange(k) + 0.5) / k                               # k x k sub-pixel points per pixel
+    tr = RayTracer(sc)
+    try:
+        o, dirs = sc.camera.rays(px + np.tile(np.repeat(grid, k), 48 * 48), py + np.tile(grid, k * 48 * 48))
+        covered = (tr.first_hit(o, dirs)[0] >= 0).reshape(48, 48, k * k).mean(axis=2)
+    finally:
+        tr.close()
+    part = (covered > 0.1) & (covered < 0.9)
+    ours = render_raybundle(tmp_path / "rb.exr", iterations=64, seed=3)
+    cyc = 0.5 * (a + b)
+    mean = cyc[part].mean()
+    err = np.sqrt(((ours - cyc)[part] ** 2).mean()) / mean
+    noise = np.sqrt(((a - b)[part] ** 2).mean() / 4) / mean
+    print(f"\n{int(part.sum())} pixels partly covered: ours {err:.4f}, Cycles noise {noise:.4f}")
+    assert part.sum() > 100 and err < 0.02 + 2.5 * noise, (err, noise)
+
+
 def test_the_world_seen_by_the_camera_is_blenders_pixel_for_pixel(fresh, tmp_path):
     """A world of half-degree checks seen through a 100 mm lens (2.4 pixels per degree): each
     pixel that sees the world is Cycles' own (rendered through the camera with its filter),
@@ -329,28 +389,24 @@ def test_the_world_seen_by_the_camera_is_blenders_pixel_for_pixel(fresh, tmp_pat
     panorama (1.4 pixels per degree) the checks blurred and aliased: 30% and more."""
     from raybundle_addon.export import export_scene
 
-    world = set_world((0, 0, 0), 1.0)
-    nt = world.node_tree
-    coords, checker = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeTexChecker")
-    checker.inputs["Scale"].default_value = 120.0
-    checker.inputs["Color1"].default_value = (2.0, 1.5, 1.0, 1.0)
-    checker.inputs["Color2"].default_value = (0.1, 0.2, 0.4, 1.0)
-    nt.links.new(coords.outputs["Generated"], checker.inputs["Vector"])
-    nt.links.new(checker.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+    checker_world(120.0)
     add_object("plate", [(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], [(0, 1, 2, 3)],
                [node_material("white", color=(0.8, 0.8, 0.8))])
     add_camera((0, -0.5, 0.3), (math.radians(80), 0, math.radians(20)), resolution=(48, 48), lens=100)
     a = render_cycles(tmp_path / "c1.exr", samples=64, seed=1)
     b = render_cycles(tmp_path / "c2.exr", samples=64, seed=2)
     ex = export_scene(bpy.context.evaluated_depsgraph_get())
-    assert ex.scene.world.view_for(ex.scene.camera) is not None
-    assert ex.scene.world.view_for(ex.scene.camera.with_resolution(24, 24)) is None     # another camera: the panorama
+    assert ex.scene.world.view_for(ex.scene.camera)
+    cam = ex.scene.camera
+    assert ex.scene.world.view.shape[:2] == (4 * 48, 4 * 48)            # a view finer than the image
+    assert ex.scene.world.view_for(cam.with_resolution(24, 24))         # the same view at a lower resolution
+    assert not ex.scene.world.view_for(dataclasses.replace(cam, cx=cam.cx + 3))   # another camera: the panorama
     from raybundle.scene.npz import load_npz
     ex.scene.save_npz(tmp_path / "scene.npz")
     again = load_npz(tmp_path / "scene.npz")
-    assert np.array_equal(again.world.view_for(again.camera), ex.scene.world.view_for(ex.scene.camera))
+    assert again.world.view_for(again.camera) and np.array_equal(again.world.view, ex.scene.world.view)
     sky = erode(object_id_image(ex) < 0, 1)
-    ours = render_raybundle(tmp_path / "rb.exr", iterations=2, seed=3)
+    ours = render_raybundle(tmp_path / "rb.exr", iterations=16, seed=3)
     cyc = 0.5 * (a + b)
     mean = cyc[sky].mean()
     err = np.sqrt(((ours - cyc)[sky] ** 2).mean()) / mean

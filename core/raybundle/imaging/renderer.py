@@ -161,7 +161,10 @@ class Renderer(ProgressiveImage):
         settings.validate()
         self.scene, self.camera, self.solver, self.direct = scene, camera, solver, direct
         #: (pixels, 3) what each pixel sees of the world where nothing is hit, or None: by direction
-        self._world_view = scene.world.view_for(camera)
+        # camera rays that miss read the world's view: the pixel's mean, or where an earlier
+        # sample of the pixel hit geometry the view's sub-pixel they pass (seen_radiance)
+        self._view_means = scene.world.view_pixel_means(camera) if scene.world.view_for(camera) else None
+        self._hit_seen = np.zeros(camera.width * camera.height, bool)
         self.tracer = solver.tracer
         self.settings = settings
         self.rng = np.random.default_rng([settings.seed, 1])
@@ -255,12 +258,24 @@ class Renderer(ProgressiveImage):
     def seen_radiance(self, g):
         """Radiance (N, 3) that reaches the eye directly: emission of the surfaces
         seen, the world's radiance where nothing is hit; and (N,) bool, the
-        pixels whose sample saw an emitting surface."""
+        pixels whose sample saw an emitting surface.
+
+        The world comes from its view through this camera where there is one
+        (:attr:`~raybundle.scene.world.World.view`): the pixel's mean, or in a pixel an earlier
+        sample found partly covered (a window bar), the view's sub-pixel the ray passes
+        (:meth:`~raybundle.scene.world.World.view_radiance`): the sky beside the bar, not the
+        mean of the sky behind it too.  Which one depends on earlier samples only: consistent,
+        the pixel's first samples aside; exact in pixels that see only the world."""
         out = np.zeros((len(g.triangle), 3))
         miss = np.nonzero(~g.hit)[0]
-        if len(miss):
-            out[miss] = (self._world_view[g.pixel[miss]] if self._world_view is not None and g.pixel is not None
-                         else self.scene.world.radiance(-g.w_eye[miss], camera=True))
+        world = self.scene.world
+        if len(miss) and self._view_means is None:
+            out[miss] = world.radiance(-g.w_eye[miss], camera=True)
+        elif len(miss):
+            fine = self._hit_seen[g.pixel[miss]]
+            out[miss[~fine]] = self._view_means[g.pixel[miss[~fine]]]
+            out[miss[fine]] = world.view_radiance(-g.w_eye[miss[fine]])
+        self._hit_seen[g.pixel[g.hit]] = True
         h = np.nonzero(g.hit)[0]
         cos_eye = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h])
         out[h] = self.scene.materials.emitted_radiance(g.material[h], cos_eye)

@@ -37,9 +37,9 @@ class World:
     ``camera_image`` (same shape, or None for the same), the one camera rays see: it differs
     where a sun was taken out of ``image`` as a lamp (:func:`split_sun`); and ``view`` (h, w, 3)
     or None, what the scene's camera sees of the world pixel for pixel (Blender renders it
-    through that camera, each pixel the mean over its area: :meth:`view_for`), sharper than any
-    panorama can afford to be (a 512-pixel panorama has 1.4 pixels per degree, a 320-pixel
-    view 60 degrees wide 5.3)."""
+    through that camera, each pixel the mean over its area, at the camera's resolution or a
+    multiple of it: :meth:`view_radiance`), sharper than any panorama can afford to be (a
+    512-pixel panorama has 1.4 pixels per degree, a 320-pixel view 60 degrees wide 5.3)."""
 
     image: np.ndarray
     camera_image: np.ndarray | None = None
@@ -111,15 +111,37 @@ class World:
         return img[pixel_of(d, h, w)]
 
     def view_for(self, camera):
-        """(h * w, 3) radiance the ``camera``'s pixels see of the world (row-major from the
-        top left), or None when :attr:`view` was not rendered through this camera."""
+        """Whether :attr:`view` was rendered through ``camera``: the same pose and view, at
+        the camera's resolution or a whole multiple of it (a finer view keeps the sky's
+        detail inside a pixel: :meth:`view_radiance`)."""
         c = self.view_camera
-        if self.view is None or camera is None or not (
-                (c.width, c.height, c.orthographic) == (camera.width, camera.height, camera.orthographic)
-                and np.allclose([c.fx, c.fy, c.cx, c.cy], [camera.fx, camera.fy, camera.cx, camera.cy])
-                and np.allclose(c.matrix_world, camera.matrix_world)):
-            return None
-        return self.view.reshape(-1, 3)
+        if self.view is None or camera is None or c.orthographic != camera.orthographic or \
+                c.width % camera.width or c.height % camera.height or \
+                c.width // camera.width != c.height // camera.height:
+            return False
+        same = camera.with_resolution(c.width, c.height)
+        return bool(np.allclose([c.fx, c.fy, c.cx, c.cy], [same.fx, same.fy, same.cx, same.cy])
+                    and np.allclose(c.matrix_world, camera.matrix_world))
+
+    def view_pixel_means(self, camera):
+        """(h * w, 3) the mean of :attr:`view` over each of the ``camera``'s pixels (row-major
+        from the top left; :meth:`view_for` the camera)."""
+        h, w = camera.height, camera.width
+        s = self.view.shape[1] // w
+        return self.view.reshape(h, s, w, s, 3).mean(axis=(1, 3)).reshape(-1, 3)
+
+    def view_radiance(self, directions):
+        """(N, 3) radiance of :attr:`view` along camera rays of unit ``directions`` (N, 3)
+        (from the eye; :meth:`view_for` the camera): the view's pixel each passes through.
+        With a view finer than the image, a pixel that a window bar partly covers reads the
+        sky beside the bar, not the mean of the sky behind it."""
+        c = self.view_camera
+        eye = c.matrix_world[:3, 3]
+        px, py = c.project(eye + np.asarray(directions, float))[:2]
+        h, w = self.view.shape[:2]
+        col = np.clip(np.floor(px), 0, w - 1).astype(np.int64)
+        row = np.clip(np.floor(py), 0, h - 1).astype(np.int64)
+        return self.view[row, col]
 
     def radiance_along(self, direction):
         """(2, 3): the radiance arriving travelling along +``direction`` (from the sky at
