@@ -310,8 +310,9 @@ class Renderer(ProgressiveImage):
         n = len(g.triangle)
         emitted, _ = self.seen_radiance(g)
         before_pass = self.image_rays - len(g.triangle)
-        if self.passes == 0:                          # 4 samples find most edges at once
-            self._emission_samples(np.arange(n), 4)
+        if self.passes == 0:                          # find most edges at once
+            self._emission_samples(np.arange(n), max(4, min(self.FIRST_EDGE_SAMPLES,
+                                                            self.FIRST_EDGE_RAYS // max(n, 1))))
         # pixels whose earlier samples disagree (the edge of a visible light, which is
         # also where a lamp lights a narrow rim) get extra samples (one R_2 sequence per pixel)
         # for both the emission average and this pass's estimate, the mean of 1 + k
@@ -431,6 +432,13 @@ class Renderer(ProgressiveImage):
     #: the image passes' share of the traced rays when ``image_ray_share`` is 0 (:meth:`step`)
     DIFFUSE_IMAGE_SHARE = 0.2
     GLOSSY_IMAGE_SHARE = 0.55
+
+    #: the first pass's extra emission samples per pixel (at least 4; at most FIRST_EDGE_RAYS in
+    #: all): the edges of lights and window bars they find get samples of their own from then on
+    #: (:meth:`seen_radiance` reads the sky beside a bar only once a pixel is known to hold one;
+    #: README, 'Real interiors')
+    FIRST_EDGE_SAMPLES = 16
+    FIRST_EDGE_RAYS = 4_000_000
 
     #: :meth:`_noisy_pixels`: at most this share of the pixels, those whose squared standard
     #: error is above NOISY_CUT times the image's mean one
