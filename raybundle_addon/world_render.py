@@ -9,7 +9,8 @@ Loads the world ``WORLD_NAME`` from ``LIBRARY.blend`` into an empty scene and re
 through a panoramic equirectangular camera at rotation (90, 0, -90) degrees (the layout of
 :mod:`raybundle.scene.world`: the image's centre looks along +X, its top row at the zenith),
 ``WIDTH`` x ``WIDTH / 2`` pixels, box filter one pixel wide (each pixel the mean radiance of
-its cell), no denoising, Standard view, on ``THREADS`` CPU threads (0: all), into a 32-bit
+its cell), no denoising, Standard view, on ``THREADS`` CPU threads (0: all) at a lower priority
+(nice 10), into a 32-bit
 float EXR.  Only the world is in the
 scene, so every camera ray sees it directly: Blender evaluates whatever its node tree holds.
 
@@ -22,10 +23,13 @@ raybundle's own pixels are).
 """
 import json
 import math
+import os
 import sys
 
 
 def main(argv):
+    if hasattr(os, "nice"):         # below the caller, who lays out the patches meanwhile (on Windows: Popen's flag)
+        os.nice(10)
     import bpy
 
     library, name, out, width, samples, threads = argv[0], argv[1], argv[2], int(argv[3]), int(argv[4]), int(argv[5])
