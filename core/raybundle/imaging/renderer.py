@@ -310,9 +310,9 @@ class Renderer(ProgressiveImage):
         n = len(g.triangle)
         emitted, _ = self.seen_radiance(g)
         before_pass = self.image_rays - len(g.triangle)
-        if self.passes == 0:                          # find most edges at once
-            self._emission_samples(np.arange(n), max(4, min(self.FIRST_EDGE_SAMPLES,
-                                                            self.FIRST_EDGE_RAYS // max(n, 1))))
+        if self.passes == 0:                          # find most edges at once, a sample per pixel at a time
+            for _ in range(max(4, min(self.FIRST_EDGE_SAMPLES, self.FIRST_EDGE_RAYS // max(n, 1)))):
+                self._emission_samples(np.arange(n), 1)
         # pixels whose earlier samples disagree (the edge of a visible light, which is
         # also where a lamp lights a narrow rim) get extra samples (one R_2 sequence per pixel)
         # for both the emission average and this pass's estimate, the mean of 1 + k
