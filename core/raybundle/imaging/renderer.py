@@ -160,9 +160,9 @@ class Renderer(ProgressiveImage):
             raise ValueError("the scene has no camera; give one (Camera.from_blender / Camera.look_at)")
         settings.validate()
         self.scene, self.camera, self.solver, self.direct = scene, camera, solver, direct
-        #: (pixels, 3) what each pixel sees of the world where nothing is hit, or None: by direction
-        # camera rays that miss read the world's view: the pixel's mean, or where an earlier
-        # sample of the pixel hit geometry the view's sub-pixel they pass (seen_radiance)
+        #: (pixels, 3) the mean of the world's view over each pixel, or None (no view through this
+        #: camera: the world by direction); where an earlier sample of a pixel hit geometry
+        #: (``_hit_seen``), camera rays that miss read the view's sub-pixel they pass (seen_radiance)
         self._view_means = scene.world.view_pixel_means(camera) if scene.world.view_for(camera) else None
         self._hit_seen = np.zeros(camera.width * camera.height, bool)
         self.tracer = solver.tracer
