@@ -20,6 +20,7 @@ cores than one chain's threads use).
 """
 from __future__ import annotations
 
+import concurrent.futures
 import time
 import uuid
 
@@ -149,7 +150,9 @@ def _wait_for_chains(client, futures, names, addresses, end, stop, progress, rep
     while True:
         status = [f.status for f in futures]
         alive = _workers(client)
-        lost = [st == "pending" and addresses[k % len(addresses)] not in alive for k, st in enumerate(status)]
+        # a chain whose worker left, or that the scheduler cancelled (its inputs' data lost with a worker)
+        lost = [st == "cancelled" or (st == "pending" and addresses[k % len(addresses)] not in alive)
+                for k, st in enumerate(status)]
         reported = [client.get_metadata([name, "iterations"], None) for name in names]
         if progress is not None:
             progress("chains: " + ", ".join("lost" if lost[k] else "-" if reported[k] is None
@@ -159,7 +162,7 @@ def _wait_for_chains(client, futures, names, addresses, end, stop, progress, rep
             return lost
         try:
             distributed.wait(futures, timeout=min(report_seconds, 1.0), return_when="ALL_COMPLETED")
-        except TimeoutError:
+        except (TimeoutError, concurrent.futures.CancelledError):       # cancelled: lost, next poll
             pass
 
 
