@@ -154,29 +154,43 @@ def test_the_chains_see_the_workers_whatever_the_clients_refresh_left(cluster):
     assert _workers(client) == set(lc.scheduler_info["workers"]) and len(_workers(client)) == 2
 
 
+def furnace_chains_with(client, accident):
+    """Two 12 s chains of the furnace with ``accident()`` befalling them 6 s in (on a thread):
+    ``(scene, image, merged, iterations)`` as :func:`render_chains` returns them."""
+    from raybundle.app.distributed import render_chains
+    from raybundle.app.plan import Plan
+
+    sc = pipeline.prepare(scenes.furnace(resolution=(16, 16)), patches=200)
+
+    def later():
+        time.sleep(6.0)
+        accident()
+
+    thread = threading.Thread(target=later)
+    thread.start()
+    try:
+        image, merged, its = render_chains(sc, Plan("stochastic-iteration", 200, None, 12.0,
+                                                    RenderSettings(seed=2, **SETTINGS)), client=client,
+                                           report_seconds=0.5, grace_seconds=10.0)
+    finally:
+        thread.join()
+    return sc, image, merged, its
+
+
 def test_a_chain_the_scheduler_cancels_costs_only_its_last_segment(cluster):
     """A chain cancelled mid-run (as the scheduler cancels one whose inputs were lost with a
     worker, "lost dependencies"): its last report still counts and the other chain runs to the
     end, as for a lost worker.  Before, the cancellation escaped from the wait as
     FuturesCancelledError and the run ended with a traceback."""
     from distributed import Future
-    from raybundle.app.distributed import render_chains
-    from raybundle.app.plan import Plan
 
     lc, client = cluster
-    sc = pipeline.prepare(scenes.furnace(resolution=(16, 16)), patches=200)
 
     def cancel():
-        time.sleep(6.0)
         keys = sorted(k for k in list(client.futures) if str(k).startswith("chain-") and str(k).endswith("-0"))
         client.cancel([Future(k, client) for k in keys])
 
-    canceller = threading.Thread(target=cancel)
-    canceller.start()
-    image, merged, its = render_chains(sc, Plan("stochastic-iteration", 200, None, 12.0,
-                                                RenderSettings(seed=2, **SETTINGS)), client=client,
-                                       report_seconds=0.5, grace_seconds=10.0)
-    canceller.join()
+    sc, image, merged, its = furnace_chains_with(client, cancel)
     # (a task Dask cancels runs on in its worker's thread: the cancelled chain may report on)
     assert merged.chains == 2 and all(i is not None and i > 0 for i in its), its
     assert np.isfinite(image).all()
@@ -186,26 +200,16 @@ def test_a_lost_worker_costs_only_its_last_segment(cluster):
     """Killing one worker mid-run: its chain's last report still counts, the other chain
     runs to the end, and the pooled furnace image is right (image mean within 5 SE of the
     analytic radiance, SE from the pixel spread; each chain alone is unbiased)."""
-    from raybundle.app.distributed import render_chains
-    from raybundle.app.plan import Plan
-
     lc, client = cluster
-    sc = pipeline.prepare(scenes.furnace(resolution=(16, 16)), patches=200)
     victim = sorted(client.nthreads())[0]
 
     def kill():
-        time.sleep(6.0)
         try:
             client.run(lambda: os._exit(1), workers=[victim])
         except Exception:
             pass
 
-    killer = threading.Thread(target=kill)
-    killer.start()
-    image, merged, its = render_chains(sc, Plan("stochastic-iteration", 200, None, 12.0,
-                                                RenderSettings(seed=2, **SETTINGS)), client=client,
-                                       report_seconds=0.5, grace_seconds=10.0)
-    killer.join()
+    sc, image, merged, its = furnace_chains_with(client, kill)
     assert merged.chains == 2 and all(i is not None and i > 0 for i in its), its
     assert its[0] < its[1], its                          # the lost chain stopped early
     exact = sc.analytic_radiance
