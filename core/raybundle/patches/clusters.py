@@ -51,7 +51,7 @@ from ..scene.model import PatchScene
 from ..tracing.sampling import cosine_directions, frames_from_normals
 from ..tracing.visibility import RayTracer
 from ..util.arrays import group_ids
-from .contacts import CONTACT_SHARE, PROBE_CHUNK, gap_sides
+from .contacts import CONTACT_SHARE, PROBE_CHUNK, behind_pierced, gap_sides
 from .layout import bisect_long, cut_at_contacts, edge_for_patches, longest_edges, split_triangles, subdivide
 
 #: the patch count of a scene laid out without an explicit one (sides; the count that measured best
@@ -127,12 +127,14 @@ class _Grouping:
         similar pieces would turn into k^2 slivers; they are halved along their length instead)."""
         return self.area < np.maximum(h * h / SMALL, SLIVER * self.edge ** 2)
 
-    def clusters(self, h, small, gap=None, spread=False, world_view=None):
+    def clusters(self, h, small, gap=None, spread=False, world_view=None, behind=None):
         """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``;
         ``gap`` (S, 2) bool: the triangle lies in a gap on its front / back
         (:func:`~raybundle.patches.contacts.gap_sides`), which a cluster does not straddle;
         ``world_view`` (S, 2) int: the classes of how much of the world its front / back
-        sees (:func:`world_view_classes`), which a cluster does not mix either.
+        sees (:func:`world_view_classes`), which a cluster does not mix either; nor pieces
+        ``behind`` (S,) bool a surface their triangle pierced and those in front
+        (:func:`~raybundle.patches.contacts.behind_pierced`).
         Triangles a patch wide or less are keyed by their centroid; ``spread`` keys a longer one
         at ceil(edge / h) points along its longest edge instead, as its pieces will be
         (:func:`~raybundle.patches.layout.bisect_long`): ids (P,) of those points then."""
@@ -153,6 +155,8 @@ class _Grouping:
             keys.append(gap[:, 0] * 2 + gap[:, 1])
         if world_view is not None:
             keys += [world_view[:, 0], world_view[:, 1]]
+        if behind is not None:
+            keys.append(behind[idx].astype(np.int64))
         ids = group_ids(keys)
         # detail: clusters under h^2 / DETAIL (the facets of a plant, a lamp, a chair's legs in one
         # cell) join by the cube face of their normal instead
@@ -251,7 +255,8 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     finally:
         if tracer is not None:
             tracer.close()
-    ids = grouped.clusters(h, np.ones(int(fine_small.sum()), bool), gap, world_view=view)
+    behind = behind_pierced(fine.triangle_corner_tag[fine_small]) if fine.triangle_corner_tag is not None else None
+    ids = grouped.clusters(h, np.ones(int(fine_small.sum()), bool), gap, world_view=view, behind=behind)
     n_clusters = int(ids.max()) + 1
     patch = np.empty(len(fine.triangles), np.int64)
     patch[fine_small] = ids

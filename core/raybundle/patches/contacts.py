@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..tracing.sampling import orthonormal_basis
+from ..util.arrays import unique_rows
 
 
 def _plane_groups(scene, faces):
@@ -270,7 +271,6 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     (0 = no contact at that corner).
     """
     from ..scene.model import PatchScene
-    from ..util.arrays import unique_rows
 
     groups = contact_segments(scene, np.asarray(faces, np.int64), tol, min_plane_area)
     if not groups:
@@ -304,7 +304,8 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
         fast = touched[whole]
         for s in range(0, len(fast), step):
             f = fast[s:s + step]
-            corner_tag[group[f]] = _corner_tags_uncut(c2[f], seg, touch[f], seg_base, eps, tag_ids)
+            tg = _corner_tags_uncut(c2[f], seg, touch[f], seg_base, eps, tag_ids)
+            corner_tag[group[f]] = np.where(tg != 0, tg, corner_tag[group[f]])
         for f in touched[~whole]:
             tri = group[f]
             segs = np.nonzero(touch[f])[0]
@@ -486,6 +487,142 @@ def gap_sides(tracer, points, normals, tol):
             d = sign * n
             out[lo:lo + len(p), col] = tracer.occluded(p + eps * d, d, np.full(len(p), max(tol - eps, eps)))
     return out
+
+
+#: hits along a triangle's edge that :func:`piercing` looks past (neighbours, surfaces in the edge's plane)
+PIERCE_HITS = 4
+
+
+def piercing(tracer, scene, faces):
+    """``(own, other)`` (P,) int: triangles of ``faces`` that pierce another surface and, for
+    each, one triangle it pierces (a picture frame sunk into the wall it hangs on: the frame's
+    facets behind the wall see the sky, and one patch or one welded corner for both parts
+    carries that light into the room).
+
+    A triangle pierces another where one of its edges passes through it: each edge (once,
+    for the triangles that share it) is traced as a ray from corner to corner, ``eps`` short
+    of both ends and ``eps`` above one of the triangles; a hit counts unless the hit triangle shares a corner (welded) with the
+    edge or lies in the edge's plane (the ray then goes on past it, up to
+    :data:`PIERCE_HITS` hits).  Of a post through the middle of a floor triangle, the post's
+    triangles are found."""
+    faces = np.asarray(faces, np.int64)
+    _, r = scene.bounding_sphere
+    vid = unique_rows(np.round(scene.vertices / max(r * 1e-7, 1e-12)).astype(np.int64))[1]
+    eps = tracer.eps
+    own, other = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+    step = max(1, PROBE_CHUNK // 3)
+    for lo in range(0, len(faces), step):
+        f = faces[lo:lo + step]
+        corner = vid[scene.triangles[f]]                                              # (F, 3) welded
+        ends = np.sort(np.stack([corner, np.roll(corner, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+        # each edge once (edge 3 i + k of f[i] runs from corner k to k + 1), ``eps`` above its
+        # triangle (Embree reports a ray along a triangle's edge as hitting it again and again)
+        _, first, inv = np.unique(ends[:, 0] * (len(vid) + 1) + ends[:, 1], return_index=True, return_inverse=True)
+        tri_e, k = f[first // 3], first % 3
+        lift = eps * scene.triangle_normal[tri_e]
+        a = scene.vertices[scene.triangles[tri_e, k]] + lift
+        b = scene.vertices[scene.triangles[tri_e, (k + 1) % 3]] + lift
+        e = ends[first]
+        pierced = np.full(len(first), -1, np.int64)
+        length = np.linalg.norm(b - a, axis=1)
+        live = np.nonzero(length > 4 * eps)[0]
+        d = (b[live] - a[live]) / length[live, None]
+        start = np.full(len(live), eps)
+        for _ in range(PIERCE_HITS):                 # past hits that do not count (a neighbour, in plane)
+            tri, t, _, _ = tracer.first_hit(a[live] + start[:, None] * d, d)
+            t = t + start
+            hit = np.nonzero((tri >= 0) & (t < length[live] - 2 * eps))[0]
+            theirs = tri[hit]
+            shares = (vid[scene.triangles[theirs]][:, :, None] == e[live[hit]][:, None, :]).any(axis=(1, 2))
+            flat = np.abs(np.einsum("ij,ij->i", scene.triangle_normal[theirs], d[hit])) < 1e-3
+            keep = ~shares & ~flat
+            pierced[live[hit[keep]]] = theirs[keep]
+            go = hit[~keep]
+            live, d, start = live[go], d[go], t[go] + eps
+            if len(live) == 0:
+                break
+        # every triangle holding a piercing edge pierces
+        edge = np.nonzero(pierced[inv.reshape(-1)] >= 0)[0]
+        own.append(f[edge // 3])
+        other.append(pierced[inv.reshape(-1)[edge]])
+    own, at = np.unique(np.concatenate(own), return_index=True)               # one pierced triangle each
+    return own, np.concatenate(other)[at]
+
+
+def pierce_tag(plane, behind):
+    """The weld tag of a corner on the cut along pierced ``plane`` (int) on the piece in front
+    of it or ``behind`` it: negative, apart from :func:`split_at_contacts`'s positive ones."""
+    return -1 - 2 * np.asarray(plane, np.int64) - np.asarray(behind, np.int64)
+
+
+def behind_pierced(corner_tag):
+    """(T,) bool: triangles with a corner tagged (``corner_tag`` (T, 3)) on the behind side of a
+    pierced plane (:func:`cut_where_pierced`): pieces that must not share a patch with those in front."""
+    t = np.asarray(corner_tag)
+    return ((t < 0) & ((-1 - t) % 2 == 1)).any(axis=1)
+
+
+def cut_where_pierced(scene, own, other):
+    """``(scene, rows)``: ``scene`` with each triangle ``own`` (P,) cut by the plane of the triangle ``other``
+    (P,) it pierces (:func:`piercing`) into the piece in front of that plane and the piece
+    behind it (one triangle and two), vectorised.  The behind pieces get a patch of their
+    own (one per patch cut), and the new corners on the cut a weld tag per plane and side
+    (:func:`pierce_tag`), so the pieces share neither an unknown nor an
+    interpolated corner value; pieces in front of one plane weld along the cut.  Triangles
+    with a corner within ``1e-6`` of the scene radius of the plane are left whole."""
+    from ..scene.model import PatchScene
+    own, other = np.asarray(own, np.int64), np.asarray(other, np.int64)
+    _, r = scene.bounding_sphere
+    eps = 1e-6 * max(r, 1e-12)
+    n = scene.triangle_normal[other]
+    p0 = scene.triangle_corners[other, 0]
+    c = scene.triangle_corners[own]
+    d = np.einsum("fkc,fc->fk", c - p0[:, None], n)                                      # (P, 3) [m]
+    ok = (np.abs(d) > eps).all(axis=1) & (d.max(axis=1) > 0) & (d.min(axis=1) < 0)
+    own, other, n, p0, c, d = own[ok], other[ok], n[ok], p0[ok], c[ok], d[ok]
+    if len(own) == 0:
+        return scene, np.arange(len(scene.triangles))
+    pos = d > 0
+    lone = np.where(pos.sum(axis=1) == 1, np.argmax(pos, axis=1), np.argmin(pos, axis=1))
+    k = (lone[:, None] + np.arange(3)) % 3                                  # lone corner first, winding kept
+    idx = scene.triangles[own][np.arange(len(own))[:, None], k]                         # (P, 3) A, B, C
+    ca = np.take_along_axis(c, k[:, :, None], axis=1)
+    da = np.take_along_axis(d, k, axis=1)
+    pp = ca[:, 0] + (ca[:, 1] - ca[:, 0]) * (da[:, 0] / (da[:, 0] - da[:, 1]))[:, None]     # on AB
+    qq = ca[:, 0] + (ca[:, 2] - ca[:, 0]) * (da[:, 0] / (da[:, 0] - da[:, 2]))[:, None]     # on AC
+    m = len(own)
+    v0 = len(scene.vertices)
+    vp, vq = v0 + np.arange(m), v0 + m + np.arange(m)
+    a, b, cc = idx.T
+    tris = np.concatenate([np.stack([a, vp, vq], 1), np.stack([vp, b, cc], 1), np.stack([vp, cc, vq], 1)])
+    src = np.tile(own, 3)
+    # tags: the plane (its rounded normal and offset) and the side a piece lies on
+    off = np.einsum("ij,ij->i", n, p0)
+    plane = np.unique(np.concatenate([np.round(n * 1e4), np.round(off / eps)[:, None]], axis=1).astype(np.int64),
+                      axis=0, return_inverse=True)[1].reshape(-1)
+    old_tag = (scene.triangle_corner_tag if scene.triangle_corner_tag is not None
+               else np.zeros((len(scene.triangles), 3), np.int64))
+    lone_front = da[:, 0] > 0
+    t_lone = pierce_tag(plane, ~lone_front)
+    t_rest = pierce_tag(plane, lone_front)
+    ot = np.take_along_axis(old_tag[own], k, axis=1)
+    tags = np.concatenate([np.stack([ot[:, 0], t_lone, t_lone], 1), np.stack([t_rest, ot[:, 1], ot[:, 2]], 1),
+                           np.stack([t_rest, ot[:, 2], t_rest], 1)])
+    # patches: the pieces behind the plane get one new patch per patch cut
+    behind = np.concatenate([~lone_front, lone_front, lone_front])
+    n_patch = int(scene.triangle_patch.max(initial=-1)) + 1
+    patch = np.where(behind, n_patch + scene.triangle_patch[src], scene.triangle_patch[src])
+    keep = np.ones(len(scene.triangles), bool)
+    keep[own] = False
+    keep = np.nonzero(keep)[0]
+    rows = np.concatenate([keep, src])
+    patch = np.unique(np.concatenate([scene.triangle_patch[keep], patch]), return_inverse=True)[1].reshape(-1)
+    return PatchScene(np.concatenate([scene.vertices, pp, qq]), np.concatenate([scene.triangles[keep], tris]),
+                      scene.triangle_material[rows], patch.astype(np.int64), scene.triangle_source[rows],
+                      scene.materials, scene.point_lights, scene.camera, scene.analytic_radiance, scene.name,
+                      scene.dropped_triangles, scene.triangle_solid[rows], scene.triangle_two_sided[rows],
+                      scene.sun_lights, scene.area_lights, scene.world,
+                      np.concatenate([old_tag[keep], tags]), texture=scene.texture), rows
 
 
 def straddling(tracer, scene, faces, tol):

@@ -169,7 +169,7 @@ def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene
     beyond that every one that straddles such a gap (:func:`~raybundle.patches.contacts.straddling`,
     probed with ``tracer``, a :class:`~raybundle.tracing.visibility.RayTracer` over ``scene``, or
     one built here)."""
-    from .contacts import CONTACT_SHARE, split_at_contacts, straddling
+    from .contacts import CONTACT_SHARE, cut_where_pierced, piercing, split_at_contacts, straddling
     # faces the user meshed finer than the patches are cut too: a ceiling cut into a grid over
     # a lamp hanging under it must still trap the lamp's upper light.  Up to CONTACT_ALL_MAX
     # triangles all of them (crossings too: a post through a floor); beyond, the cut is a
@@ -178,6 +178,7 @@ def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene
     tol = CONTACT_SHARE * max_edge
     todo = np.zeros(len(scene.triangles), bool)
     todo[np.asarray(cut, np.int64)] = True
+    pierced = None
     reflects = scene.materials.reflects[scene.triangle_material]
     if reflects.sum() <= CONTACT_ALL_MAX:
         todo |= reflects
@@ -188,7 +189,13 @@ def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene
             probe = tracer if tracer is not None else RayTracer(scene)
             try:
                 todo[rest[straddling(probe, scene, rest, tol)]] = True
+                # and those that pierce another surface, cut along its plane first (a frame sunk
+                # into a wall); the cut's pieces need no tracer
+                pierced = piercing(probe, scene, rest)
             finally:
                 if probe is not tracer:
                     probe.close()
+    if pierced is not None and len(pierced[0]):
+        scene, rows = cut_where_pierced(scene, *pierced)
+        todo = todo[rows]
     return split_at_contacts(scene, np.nonzero(todo)[0], tol=tol, min_plane_area=CONTACT_MIN_PLANE * max_edge ** 2)[0]
