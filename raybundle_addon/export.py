@@ -155,7 +155,8 @@ class _Warnings(list):
 def _mesh_arrays(me):
     """Local arrays of an evaluated mesh: positions (V, 3) f32, triangle corners
     (T, 3) i32 (vertex ids), loops (T, 3) i32, triangle -> polygon (T,) i32,
-    polygon material index (P,) i32."""
+    polygon material index (P,) i32, corner normals (L, 3) f32 (Blender's shading normals:
+    smooth, auto smooth and custom normals; None where the API lacks them)."""
     nv = len(me.vertices)
     pos = np.empty(nv * 3, np.float32)
     pa = me.attributes.get("position")
@@ -182,7 +183,19 @@ def _mesh_arrays(me):
         mi_attr.data.foreach_get("value", mi)
     else:
         mi = np.zeros(len(me.polygons), np.int32)
-    return pos.reshape(-1, 3), tri.reshape(-1, 3), loops.reshape(-1, 3), tp, mi
+    cn = None
+    if hasattr(me, "corner_normals"):
+        cn = np.empty(len(me.loops) * 3, np.float32)
+        me.corner_normals.foreach_get("vector", cn)
+        cn = cn.reshape(-1, 3)
+    return pos.reshape(-1, 3), tri.reshape(-1, 3), loops.reshape(-1, 3), tp, mi, cn
+
+
+def world_normals(n, M):
+    """Normals ``n`` (..., 3) of an object with matrix ``M`` (4, 4) in world space, unit
+    length: by the inverse transpose of its 3 x 3 part (a non-uniform scale tilts them)."""
+    out = n @ np.linalg.pinv(M[:3, :3]).astype(np.float32)
+    return out / np.maximum(np.linalg.norm(out, axis=-1, keepdims=True), 1e-30)
 
 
 def _ray_visible(ob, warn):
@@ -330,6 +343,25 @@ def convert_light(ld, M, warn):
 
 
 # -------------------------------------------------------------------- camera
+#: coplanar overlaps smaller than this [m^2] are not warned about
+OVERLAP_MIN_AREA = 1e-3
+
+
+def _warn_overlaps(corners, tobj, objects, warn):
+    """One warning per pair of objects whose faces overlap in one plane, facing the same way
+    (:func:`raybundle.scene.overlaps.coplanar_overlaps`): Cycles renders such z-fighting
+    darker, raybundle as one surface."""
+    from raybundle.scene.overlaps import coplanar_overlaps
+
+    found = coplanar_overlaps(corners, tobj, OVERLAP_MIN_AREA)
+    for a, b, area in found[:3]:
+        warn(f"objects {objects[a].name!r} and {objects[b].name!r} overlap in one plane over {area:.2g} m^2 "
+             "(z-fighting): Cycles renders the overlap darker, each face shadowing the other; raybundle lights it "
+             "as one surface")
+    if len(found) > 3:
+        warn(f"{len(found) - 3} more pairs of objects overlap in one plane (z-fighting)")
+
+
 def render_size(render):
     """(W, H) pixels after the resolution percentage."""
     s = render.resolution_percentage / 100.0
@@ -427,6 +459,7 @@ def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
     from raybundle.scene.build import build_scene
     from raybundle.scene.materials import MaterialTable
     from raybundle.scene.model import AreaLights, PointLights, SceneError, SunLights
+    from raybundle.scene.shading import ShadingNormals
 
     render = scene.render
     viewport = depsgraph.mode == "VIEWPORT"
@@ -441,7 +474,7 @@ def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
         return mat_index[key]
 
     cache = {}
-    verts, tris, tmats, tobj, tpoly, tloops = [], [], [], [], [], []
+    verts, tris, tmats, tobj, tpoly, tloops, tnorm = [], [], [], [], [], [], []
     tuv, timg, tcol, images = [], [], [], {}    # albedo textures: corner UVs, image per triangle, corner colors
     objects = []
     lights = {"point": [], "sun": [], "area": []}
@@ -487,7 +520,7 @@ def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
                 arrays = _mesh_arrays(me)
                 if not temp:
                     cache[key] = arrays
-            pos, tri, loops, tp, mi = arrays
+            pos, tri, loops, tp, mi, cn = arrays
             slots = [s.material for s in ob.material_slots] if len(ob.material_slots) else list(me.materials)
             if override is not None:
                 slots = [override] * max(1, len(slots))
@@ -507,6 +540,7 @@ def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
         tobj.append(np.full(len(tri), len(objects), np.int32))
         tpoly.append(tp)
         tloops.append(loops)
+        tnorm.append(None if cn is None else world_normals(cn[loops], M))
         # untextured objects hold None: their zeros are made only if some object is textured
         tuv.append((len(tri), textured[0]) if textured else (len(tri), None))
         timg.append(textured[1] if textured else None)
@@ -547,13 +581,17 @@ def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
         texture = SurfaceTexture(maps, face_image, v[t], np.concatenate(tuv), np.concatenate(tcol))
     with _warnings.catch_warnings(record=True) as caught:
         _warnings.simplefilter("always")
+        shading = None
+        if all(x is not None for x in tnorm):
+            shading = ShadingNormals.of_faces(v[t], np.concatenate(tnorm))
         sc = build_scene(v, t, m, mats, point_lights=group(PointLights, lights["point"]),
                          sun_lights=group(SunLights, lights["sun"]), area_lights=group(AreaLights, lights["area"]),
                          world=world, camera=camera, two_sided=True,
                          triangle_solid=np.zeros(len(t), bool),    # two-sided surfaces are never solids
-                         name=name or scene.name, texture=texture)
+                         name=name or scene.name, texture=texture, shading=shading)
     for w in caught:
         warn(str(w.message))
+    _warn_overlaps(v[t], np.concatenate(tobj), objects, warn)
     far = float(np.sqrt(((v - camera.position) ** 2).sum(axis=1).max())) if camera is not None else 0.0
     if cam_ob is not None and far > cam_ob.data.clip_end:
         warn(f"camera {cam_ob.name!r}: geometry beyond the clip end ({cam_ob.data.clip_end:g} m) is rendered "

@@ -135,3 +135,45 @@ def test_patches_must_be_of_one_material_and_face_one_way():
         build_scene(v, QUAD_T, [0, 0], two, triangle_patch=[0, 0, 1])
     with pytest.raises(SceneError, match="point lights"):
         build_scene(v, QUAD_T, [0, 0], two, point_lights=PointLights(np.zeros((2, 3)), np.ones((1, 3))))
+
+
+def grid_triangles(x0, x1, y0, y1, step=0.1, down=False):
+    """(K, 3, 3) triangles covering the rectangle at z = 0 in squares ``step`` wide, facing +z
+    (or -z)."""
+    xs, ys = np.linspace(x0, x1, round((x1 - x0) / step) + 1), np.linspace(y0, y1, round((y1 - y0) / step) + 1)
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    p = np.stack([gx, gy, np.zeros_like(gx)], axis=-1)
+    a, b, c, d = p[:-1, :-1], p[1:, :-1], p[1:, 1:], p[:-1, 1:]
+    tri = np.concatenate([np.stack([a, b, c], axis=2).reshape(-1, 3, 3), np.stack([a, c, d], axis=2).reshape(-1, 3, 3)])
+    return tri[:, ::-1] if down else tri
+
+
+def test_coplanar_overlaps_are_found_between_objects_facing_the_same_way():
+    """Two objects' faces in one plane facing the same way over 4 m^2 (a strip of one mesh on
+    another's floor) are found, with about their area (4 points per triangle); a box's bottom
+    on the floor (facing the other way), a tile that only touches the floor, and one object's
+    own faces are not."""
+    from raybundle.scene.overlaps import coplanar_overlaps
+
+    parts = [grid_triangles(-2, 2, -2, 2), grid_triangles(1, 2, -2, 2, step=0.25),
+             grid_triangles(-1, 0, -1, 0, down=True), grid_triangles(2, 3, -2, 2)]
+    corners = np.concatenate(parts)
+    obj = np.repeat(np.arange(4), [len(x) for x in parts])
+    found = coplanar_overlaps(corners, obj)
+    assert [(a, b) for a, b, _ in found] == [(0, 1)]
+    assert found[0][2] == pytest.approx(4.0, rel=0.05)
+    assert coplanar_overlaps(corners, np.zeros(len(obj), int)) == []
+
+
+def test_shading_normals_interpolate_the_corner_normals():
+    """At a corner the shading normal is that corner's normal; inside, the normalised
+    barycentric mix (raybundle.scene.shading); a flat-shaded scene needs none."""
+    from raybundle.scene.shading import ShadingNormals
+
+    corners = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], float)
+    tilt = np.array([[0.6, 0, 0.8], [0, 0.6, 0.8], [0, 0, 1.0]])
+    sn = ShadingNormals.of_faces(corners, tilt[None])
+    got = sn.at(np.zeros(4, int), np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1 / 3, 1 / 3, 0]]))
+    mix = tilt.mean(axis=0) / np.linalg.norm(tilt.mean(axis=0))
+    assert np.allclose(got, [tilt[0], tilt[1], tilt[2], mix], atol=1e-6)
+    assert ShadingNormals.of_faces(corners, np.tile([0, 0, 1.0], (1, 3, 1))) is None

@@ -38,6 +38,7 @@ import numpy as np
 
 from ..lights.direct import ALL_LIGHTS
 from ..lights.world_light import WorldLight
+from ..scene.shading import seen_normals
 from ..tracing.sampling import ShiftedKronecker, kronecker_alpha, stratified_2d
 from .caustic_splats import CausticSplats
 from .gather import EdgeGather, FinalGather
@@ -49,8 +50,9 @@ from .settings import RenderSettings
 @dataclass
 class GBuffer:
     """Visible surface per pixel: triangle (-1 = nothing), the triangle side seen
-    ``tside`` (:meth:`~raybundle.scene.model.PatchScene.seen_tside`), point, that side's
-    normal, material, direction to the eye ``w_eye``, barycentrics (N, 3)."""
+    ``tside`` (:meth:`~raybundle.scene.model.PatchScene.seen_tside`), point, the normal it
+    is shaded with (that side's, on smooth-shaded faces the shading normal:
+    :func:`~raybundle.scene.shading.seen_normals`), material, direction to the eye ``w_eye``, barycentrics (N, 3)."""
 
     triangle: np.ndarray
     tside: np.ndarray
@@ -251,7 +253,12 @@ class Renderer(ProgressiveImage):
         hit = tri >= 0
         sc = self.scene
         ts = sc.seen_tside(np.where(hit, tri, 0), dirs)
-        return GBuffer(tri, ts, org + np.where(hit, t, 0.0)[:, None] * dirs, sc.tside_normal[ts],
+        point = org + np.where(hit, t, 0.0)[:, None] * dirs
+        normal = sc.tside_normal[ts]
+        if sc.shading is not None:               # smooth-shaded faces: Blender's shading normal
+            h = np.nonzero(hit)[0]
+            normal[h] = seen_normals(sc.shading, sc.triangle_source[tri[h]], point[h], normal[h], -dirs[h])
+        return GBuffer(tri, ts, point, normal,
                        sc.triangle_material[sc.tside_triangle[ts]], -dirs, np.stack([1 - u - v, u, v], axis=1),
                        np.arange(len(self._pixel)) if pixels is None else np.asarray(pixels))
 

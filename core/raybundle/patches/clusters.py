@@ -77,8 +77,8 @@ WORLD_VIEW_RAYS = 16
 def tessellate(scene: PatchScene, triangles) -> PatchScene:
     """``scene`` with its reflecting faces cut into about ``triangles`` triangles in all,
     each its own input face and patch (lamps made of emitting faces stay whole)."""
-    if scene.texture is not None:
-        raise ValueError("tessellate: scenes with textures are not supported")
+    if scene.texture is not None or scene.shading is not None:
+        raise ValueError("tessellate: scenes with textures or shading normals are not supported")
     fine, _, _ = split_triangles(scene, edge_for_patches(scene, triangles))
     return replace(fine, triangle_source=np.arange(len(fine.triangles)))
 

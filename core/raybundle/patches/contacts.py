@@ -377,7 +377,8 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     out = PatchScene(v, t, scene.triangle_material[src], patch, scene.triangle_source[src], scene.materials,
                      scene.point_lights, scene.camera, scene.analytic_radiance, scene.name,
                      scene.dropped_triangles, scene.triangle_solid[src], scene.triangle_two_sided[src],
-                     scene.sun_lights, scene.area_lights, scene.world, tags, texture=scene.texture)
+                     scene.sun_lights, scene.area_lights, scene.world, tags, texture=scene.texture,
+                     shading=scene.shading)
     return out, n_cut
 
 
@@ -622,7 +623,8 @@ def cut_where_pierced(scene, own, other):
                       scene.materials, scene.point_lights, scene.camera, scene.analytic_radiance, scene.name,
                       scene.dropped_triangles, scene.triangle_solid[rows], scene.triangle_two_sided[rows],
                       scene.sun_lights, scene.area_lights, scene.world,
-                      np.concatenate([old_tag[keep], tags]), texture=scene.texture), rows
+                      np.concatenate([old_tag[keep], tags]), texture=scene.texture,
+                      shading=scene.shading), rows
 
 
 def straddling(tracer, scene, faces, tol):

@@ -159,7 +159,7 @@ def _rebuilt(scene: PatchScene, vertices, triangles, row) -> PatchScene:
                       scene.triangle_source[row], scene.materials, scene.point_lights, scene.camera,
                       scene.analytic_radiance, scene.name, scene.dropped_triangles, scene.triangle_solid[row],
                       scene.triangle_two_sided[row], scene.sun_lights, scene.area_lights, scene.world,
-                      texture=scene.texture)
+                      texture=scene.texture, shading=scene.shading)
 
 
 def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene:
@@ -168,13 +168,15 @@ def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene
     every reflecting triangle when there are at most :data:`CONTACT_ALL_MAX` of them, and
     beyond that every one that straddles such a gap (:func:`~raybundle.patches.contacts.straddling`,
     probed with ``tracer``, a :class:`~raybundle.tracing.visibility.RayTracer` over ``scene``, or
-    one built here)."""
+    one built here), and every one that pierces another surface is first cut along that
+    surface's plane (:func:`~raybundle.patches.contacts.piercing`,
+    :func:`~raybundle.patches.contacts.cut_where_pierced`)."""
     from .contacts import CONTACT_SHARE, cut_where_pierced, piercing, split_at_contacts, straddling
     # faces the user meshed finer than the patches are cut too: a ceiling cut into a grid over
     # a lamp hanging under it must still trap the lamp's upper light.  Up to CONTACT_ALL_MAX
     # triangles all of them (crossings too: a post through a floor); beyond, the cut is a
     # per-triangle loop, too slow for every triangle of a large scene (README, 'Where the method
-    # is weak'), so only those found straddling a gap.
+    # is weak'), so only those found straddling a gap or piercing a surface.
     tol = CONTACT_SHARE * max_edge
     todo = np.zeros(len(scene.triangles), bool)
     todo[np.asarray(cut, np.int64)] = True

@@ -14,11 +14,13 @@ from .world import World, split_sun
 def build_scene(vertices, triangles, triangle_material, materials, point_lights=None, camera=None,
                 triangle_patch=None, triangle_source=None, analytic_radiance=None, name="",
                 area_epsilon=1e-14, triangle_solid=None, two_sided=False,
-                sun_lights=None, area_lights=None, environment=None, texture=None, world=None) -> PatchScene:
+                sun_lights=None, area_lights=None, environment=None, texture=None, world=None,
+                shading=None) -> PatchScene:
     """Validate raw triangles and make a :class:`PatchScene`.
 
     ``texture``: a :class:`~raybundle.scene.textures.SurfaceTexture` whose faces are the
-    input triangles (indexed like ``triangle_source``).
+    input triangles (indexed like ``triangle_source``); ``shading``: their
+    :class:`~raybundle.scene.shading.ShadingNormals`, the same way.
 
     ``two_sided``: bool or (T,) bool, Blender's semantics when true (module
     docstring); the default, one-sided, is the core's own convention.
@@ -101,7 +103,7 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
     ar = None if analytic_radiance is None else np.asarray(analytic_radiance, float).reshape(3)
     solid = None if triangle_solid is None else np.asarray(triangle_solid, bool).reshape(-1)[keep] & ~two
     return PatchScene(v, t, m, patch, src, materials, point_lights, camera, ar, name, dropped, solid,
-                      two, sun_lights, area_lights, world, texture=texture)
+                      two, sun_lights, area_lights, world, texture=texture, shading=shading)
 
 
 def _world_and_suns(world, sun_lights):

@@ -239,6 +239,8 @@ class PatchScene:
     world: World | None = None
     triangle_corner_tag: np.ndarray | None = None
     texture: object = None
+    #: :class:`~raybundle.scene.shading.ShadingNormals` of smooth-shaded faces, or None
+    shading: object = None
 
     def __post_init__(self):
         if self.triangle_two_sided is None:
@@ -477,6 +479,8 @@ class PatchScene:
             d["analytic_radiance"] = np.asarray(self.analytic_radiance, float)
         if self.texture is not None:
             d.update(self.texture.to_arrays())
+        if self.shading is not None:
+            d.update(self.shading.to_arrays())
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
                 np.savez_compressed(f, **d)

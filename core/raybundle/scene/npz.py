@@ -44,6 +44,7 @@ def load_npz(path) -> PatchScene:
 
 def _scene_from_arrays(path, d):
     """:func:`load_npz`'s scene from the file's arrays ``d``."""
+    from .shading import ShadingNormals
     from .textures import SurfaceTexture
 
     missing = [k for k in ("vertices", "triangles", "triangle_material", "material_names", "material_diffuse",
@@ -62,4 +63,4 @@ def _scene_from_arrays(path, d):
                        triangle_source=d.get("triangle_source"), triangle_solid=d.get("triangle_solid"),
                        two_sided=d.get("triangle_two_sided", False),
                        analytic_radiance=d.get("analytic_radiance"), name=str(d.get("name", "")),
-                       texture=SurfaceTexture.from_arrays(d))
+                       texture=SurfaceTexture.from_arrays(d), shading=ShadingNormals.from_arrays(d))

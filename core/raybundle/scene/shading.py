@@ -1,0 +1,82 @@
+"""Shading normals: the normals Blender interpolates over smooth-shaded faces.
+
+A smooth-shaded mesh (Shade Smooth, Auto Smooth, custom normals) is still flat triangles to
+every ray, but Cycles evaluates its materials about the *shading normal*: the face's corner
+normals (``Mesh.corner_normals``) interpolated linearly at the point and normalised,
+
+    n_s(x) = normalize(sum_k b_k(x) n_k)
+
+with ``b_k`` the point's barycentrics on its input face.  The cosine of the light a surface
+receives is then ``max(0, n_s . w)``: on a curved chair the sun's stripes fade towards
+its turned-away side instead of keeping the facet's one brightness.
+
+Raybundle shades the points the camera sees (direct light of lamps and the world, the glossy
+lobe) about ``n_s``; the patches keep their flat normals (a patch's irradiance is an area
+mean over its triangles).  Rays leave from and are offset along the side the geometry has.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class ShadingNormals:
+    """``face_corners`` (F, 3, 3) [m], float32: the input faces (indexed by
+    :attr:`~raybundle.scene.model.PatchScene.triangle_source`); ``corner_normals`` (F, 3, 3):
+    their unit corner normals, float32."""
+
+    face_corners: np.ndarray
+    corner_normals: np.ndarray
+
+    def __post_init__(self):
+        self.face_corners = np.asarray(self.face_corners, np.float32)
+        self.corner_normals = np.asarray(self.corner_normals, np.float32)
+
+    @classmethod
+    def of_faces(cls, face_corners, corner_normals, tol=1e-4):
+        """The shading normals of the faces, or None when every face's corner normals are its
+        own flat normal (within ``tol``): a flat-shaded scene needs none."""
+        c = np.asarray(face_corners, float)
+        n = np.asarray(corner_normals, float)
+        flat = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+        flat /= np.maximum(np.linalg.norm(flat, axis=1, keepdims=True), 1e-300)
+        cos = np.abs(np.einsum("fkc,fc->fk", n, flat))
+        if len(c) == 0 or np.all(cos > 1 - tol):
+            return None
+        return cls(c, n)
+
+    def at(self, face, points):
+        """Unit shading normals (N, 3) at ``points`` (N, 3) on input faces ``face`` (N,) (the
+        module docstring's ``n_s``), oriented as the input faces' corner normals."""
+        from ..tracing.sampling import triangle_barycentrics
+
+        face = np.asarray(face, np.int64)
+        b = triangle_barycentrics(self.face_corners[face], points)
+        n = np.einsum("nk,nkc->nc", b, self.corner_normals[face])
+        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+    def to_arrays(self):
+        """Arrays for a scene's ``.npz`` (``shading_*``)."""
+        return {"shading_face_corners": self.face_corners, "shading_corner_normals": self.corner_normals}
+
+    @classmethod
+    def from_arrays(cls, d):
+        """The shading normals of :meth:`to_arrays`' arrays in ``d``, or None."""
+        if "shading_corner_normals" not in d:
+            return None
+        return cls(d["shading_face_corners"], d["shading_corner_normals"])
+
+
+def seen_normals(shading, faces, points, flat, w_eye):
+    """The normals (N, 3) to shade the seen points with: the shading normal at ``points`` on
+    input ``faces``, turned to the side of the ``flat`` normals (N, 3) seen, where it still
+    faces the eye ``w_eye`` (N, 3); else the flat normal (a silhouette's smooth normal
+    turned away from the camera, which Cycles bends back towards it)."""
+    if shading is None or len(faces) == 0:
+        return flat
+    n = shading.at(faces, points)
+    n *= np.where(np.einsum("ij,ij->i", n, flat) < 0, -1.0, 1.0)[:, None]
+    ok = np.einsum("ij,ij->i", n, w_eye) > 1e-3
+    return np.where(ok[:, None], n, flat)
