@@ -192,3 +192,18 @@ def test_the_automatic_gather_runs_where_the_bias_it_removes_outweighs_its_noise
         assert r.edge_gather.last_needed < 64, r.edge_gather.last_needed
     finally:
         r.tracer.close()
+
+
+def test_a_gather_behind_its_pace_stops_rather_than_thinning():
+    """Past its budget, the automatic gather leaves the remaining sub-pixel samples to the
+    patch values; it never gives them a few rays each (which, on a machine slower than at the
+    probe, put the dining room's pixels beside the blinds at 0.4 to 0.8 against 0.56: 7.7% and
+    8.3% at 60 s, 4.7% with this rule).  With 8 of 16 samples left at 1 s each and 1 s of
+    budget, the old rule gave each of them ``per_sample * left / (rest at this pace)``, 4 of
+    its 32 rays; now the next one gets its 32 and the rest none."""
+    from raybundle.imaging.renderer import sample_gather_rays
+
+    assert sample_gather_rays(32, seconds_left=1.0, seconds_per_sample=0.5) == 32
+    assert sample_gather_rays(32, seconds_left=1.0, seconds_per_sample=1.0) == 32
+    assert sample_gather_rays(32, seconds_left=0.9, seconds_per_sample=1.0) == 0
+    assert sample_gather_rays(32, seconds_left=-0.1, seconds_per_sample=1.0) == 0

@@ -154,6 +154,14 @@ class ProgressiveImage:
         return self.image()
 
 
+def sample_gather_rays(per_sample, seconds_left, seconds_per_sample):
+    """The automatic gather's rays for the next sub-pixel sample: all ``per_sample`` while the
+    budget left holds a sample at the pace so far, else none (:meth:`Renderer.diffuse_indirect`).
+    Never a few: a gather thinned below what the probe found it needs adds more noise than
+    the bias it removes."""
+    return int(per_sample) if seconds_left >= seconds_per_sample else 0
+
+
 class Renderer(ProgressiveImage):
     """Runs a solver and forms the image.  See the module docstring."""
 
@@ -539,10 +547,12 @@ class Renderer(ProgressiveImage):
         cost per ray measured on a few of the last image pass's points and the number of its
         points on flagged sides (:class:`~raybundle.imaging.gather.EdgeGather`), and none where
         the gather's own noise would outweigh the bias it removes
-        (:meth:`~raybundle.imaging.gather.EdgeGather.automatic_rays`).  Behind its pace (sides
-        first seen by a sub-pixel sample are probed for edges then, unbudgeted), the automatic
-        gather gives the remaining sub-pixel samples fewer rays, or none: each sample's gather
-        is unbiased whatever its count.
+        (:meth:`~raybundle.imaging.gather.EdgeGather.automatic_rays`).  Once its budget is spent
+        (a machine slower than at the probe, sides first seen by a sub-pixel sample probed for
+        edges then), the automatic gather leaves the remaining sub-pixel samples to the patch
+        values: thinned to a few rays each, as before, a sample's gather is unbiased but its
+        noise outweighs the bias it removes (the probe's rule), and in a timed run on a loaded
+        machine the dining room's pixels beside the blinds came out at 0.4 to 0.8 against 0.56.
         """
         t_start = time.perf_counter()
         sc = self.scene
@@ -574,12 +584,9 @@ class Renderer(ProgressiveImage):
             e = self.surface_values(e_bar, vert, g.tside[h], g.bary[h])
             if final is not None:
                 rays_j = per_sample
-                if rays < 0 and j > 0:     # the automatic gather keeps to its budget: fewer rays if behind
+                if rays < 0 and j > 0:     # the automatic gather keeps to its budget: none once it is spent
                     now = time.perf_counter()
-                    ahead = (now - t_loop) / j * (k - j)                    # the rest at this pace
-                    left = gather_seconds - (now - t_start)
-                    if left < ahead:
-                        rays_j = int(per_sample * max(left, 0.0) / ahead)
+                    rays_j = sample_gather_rays(per_sample, gather_seconds - (now - t_start), (now - t_loop) / j)
                 f = np.nonzero(self.edge_gather.near_edge(g.tside[h]))[0] if rays_j else []
                 if len(f):
                     e[f] = final.irradiance(g.point[h[f]], sc.tside_normal[g.tside[h[f]]], rays_j,
