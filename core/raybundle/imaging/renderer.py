@@ -550,9 +550,7 @@ class Renderer(ProgressiveImage):
         (:meth:`~raybundle.imaging.gather.EdgeGather.automatic_rays`).  Once its budget is spent
         (a machine slower than at the probe, sides first seen by a sub-pixel sample probed for
         edges then), the automatic gather leaves the remaining sub-pixel samples to the patch
-        values: thinned to a few rays each, as before, a sample's gather is unbiased but its
-        noise outweighs the bias it removes (the probe's rule), and in a timed run on a loaded
-        machine the dining room's pixels beside the blinds came out at 0.4 to 0.8 against 0.56.
+        values (:func:`sample_gather_rays`; README, 'Real interiors').
         """
         t_start = time.perf_counter()
         sc = self.scene

@@ -30,8 +30,9 @@ by material, by sidedness, by whether they lie in a gap narrower than 5% of h (t
 ceiling over a lamp hanging just under it: :func:`~raybundle.patches.contacts.gap_sides`), after the
 triangles that straddle such a gap are cut along the contact, and, under a world that lights
 the scene, by how much of the world each side sees (:func:`world_view_classes`: the facets of a
-window's frame and reveal outside, in the sky, and inside, in the room's shade); the rest stay
-patches of their own.
+window's frame and reveal outside, in the sky, and inside, in the room's shade), and by whether
+a piece lies behind a surface its triangle pierces (:func:`~raybundle.patches.contacts.cut_where_pierced`);
+the rest stay patches of their own.
 Clusters smaller than h^2 / :data:`DETAIL` (the facets of a plant or a chair's legs in a cell:
 in a furnished room they outnumbered the patches of walls and floor ten to one) are then
 grouped again, diffuse ones by the cube face of their normal instead of its cell, in half-h

@@ -3,8 +3,7 @@ same area (a floor strip of the walls' mesh lying on the floor's own mesh).
 
 Such faces *z-fight*: Cycles starts each bounce and shadow ray on one of them and meets the
 other at a distance of about zero, which it counts as a hit, so the overlap comes out darker
-than either surface alone (in the dining room of the interior bench the sun's stripes vanish
-from such a strip and its indirect light falls to about 0.6).  Raybundle's tracer merges hits
+than either surface alone (a sunlit strip black: ``tests/test_addon_export.py``).  Raybundle's tracer merges hits
 closer than ``eps`` (:mod:`raybundle.tracing.visibility`) and lights the overlap as one
 surface.  Neither is modelled as the other: the export warns, naming the objects.
 
