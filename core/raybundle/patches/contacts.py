@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..tracing.sampling import orthonormal_basis
-from ..util.arrays import unique_rows
+from ..util.arrays import group_ids, unique_rows
 
 
 def _plane_groups(scene, faces):
@@ -599,8 +599,8 @@ def cut_where_pierced(scene, own, other):
     src = np.tile(own, 3)
     # tags: the plane (its rounded normal and offset) and the side a piece lies on
     off = np.einsum("ij,ij->i", n, p0)
-    plane = np.unique(np.concatenate([np.round(n * 1e4), np.round(off / eps)[:, None]], axis=1).astype(np.int64),
-                      axis=0, return_inverse=True)[1].reshape(-1)
+    q = np.round(n * 1e4).astype(np.int64)
+    plane = group_ids([q[:, 0], q[:, 1], q[:, 2], np.round(off / eps).astype(np.int64)])
     old_tag = (scene.triangle_corner_tag if scene.triangle_corner_tag is not None
                else np.zeros((len(scene.triangles), 3), np.int64))
     lone_front = da[:, 0] > 0
