@@ -184,6 +184,27 @@ def test_clusters_are_read_through_linear_fits_exact_on_a_linear_function():
     assert np.sqrt(((rec.projected(values)[:, 0] - f(position)) ** 2).mean()) > 0.05
 
 
+def test_several_value_sets_project_in_one_pass_as_each_alone():
+    """``smooth_and_sharp_many`` (the final gather's vertex values and the image's, in one
+    projection) gives each set what ``smooth_and_sharp`` gives it alone, on a scene with both
+    cluster fits (a tessellated sphere) and projected sides (the box), values that go below
+    zero where the projection clamps them, and a sharp part on one set."""
+    sc = pipeline.prepare(furnace_with_sphere(), patches=400)
+    r = pipeline.make_renderer(sc, RenderSettings(seed=1))
+    r.tracer.close()
+    rec = r.solver.reconstruction
+    assert rec._fit is not None and not rec._p_empty.all()
+    rng = np.random.default_rng(7)
+    a, b, sharp = rng.normal(1.0, 1.0, (3, sc.n_sides, 3))
+    c = rng.random((sc.n_sides, 1))
+    alone = [rec.smooth_and_sharp(a, np.abs(sharp)), rec.smooth_and_sharp(b), rec.smooth_and_sharp(c)]
+    together = rec.smooth_and_sharp_many([(a, np.abs(sharp)), (b, None), (c, None)])
+    assert [x.shape for x in together] == [x.shape for x in alone]
+    assert min(x.min() for x in alone) == 0.0                     # the clamp acts
+    for x, y in zip(together, alone):          # to the conjugate gradients' tolerance (values ~1)
+        np.testing.assert_allclose(x, y, rtol=0, atol=1e-4)
+
+
 def test_furnace_with_curved_clusters_stays_exact():
     """A tessellated sphere grouped into curved clusters (each triangle's side and cosine
     taken at each bundle line) converges to the furnace's L on the sphere's own sides."""

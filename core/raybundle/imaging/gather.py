@@ -40,7 +40,7 @@ from ..tracing.sampling import cosine_directions, frames_from_normals, kronecker
 class FinalGather:
     """The gather of one solution state (its vertex values computed once)."""
 
-    def __init__(self, solver, near=1.0, near_light_samples=1, caustic=True, world=True):
+    def __init__(self, solver, near=1.0, near_light_samples=1, caustic=True, world=True, image_values=None):
         sc, rec = solver.scene, solver.reconstruction
         self.solver, self.scene, self.rec = solver, sc, rec
         # rays that leave the scene read the world (``world`` False: left out, for an image
@@ -48,9 +48,15 @@ class FinalGather:
         self.world = bool(world)
         indirect = solver.indirect_incoming()
         sharp = solver.caustic.E if solver.caustic is not None else None
-        self.vert = rec.smooth_and_sharp(indirect + solver.first_shot.E.sum(axis=1), sharp)
         self.near = float(near) if solver.direct.n_lights else 0.0
-        self.vert_indirect = rec.smooth_and_sharp(indirect, sharp) if self.near > 0 else None
+        # the vertex values the rays read, and ``image_values`` (side values, sharp part) of the
+        # image's own reconstruction (``image_vert``), in one projection
+        pairs = [(indirect + solver.first_shot.E.sum(axis=1), sharp)] + \
+            ([(indirect, sharp)] if self.near > 0 else []) + ([image_values] if image_values is not None else [])
+        verts = rec.smooth_and_sharp_many(pairs)
+        self.vert = verts[0]
+        self.vert_indirect = verts[1] if self.near > 0 else None
+        self.image_vert = verts[-1] if image_values is not None else None
         self.near_light_samples = int(near_light_samples)
         self.hit_size = np.sqrt(sc.patch_area[sc.triangle_patch])      # per triangle [m]
         # the first shot's glossy reflections arrive by the caustic shot, read where the gather
@@ -194,9 +200,9 @@ class EdgeGather:
     MIN_GATHER_RAYS = 32
     #: how many times ``v / b^2`` rays the gather needs to pay (:meth:`automatic_rays`): 16 rays
     #: per point miss the rare bright ones (a ray landing next to a lamp), so ``v`` comes out low;
-    #: calibrated on ``cornell`` and the interior bench (README, 'final gather'): 3 left the hall's
-    #: gather out on the edge of the rule, where it pays
-    NOISE_MARGIN = 2.0
+    #: calibrated on ``cornell`` and the interior bench with ``gather_share`` 0.25 (README, 'final
+    #: gather'): 2 let a gather of twice ``v / b^2`` run on ``cornell`` at 10 s, where it did harm
+    NOISE_MARGIN = 3.0
 
     def __init__(self, scene, tracer, seed):
         self.scene, self.tracer, self.seed = scene, tracer, seed

@@ -612,9 +612,11 @@ class Renderer(ProgressiveImage):
         if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and gather_seconds and
                                                              self.edge_gather.affordable(self._probe_gbuffer(),
                                                                                          gather_seconds))):
-            final = FinalGather(solver, caustic=caustic, world=self.world_light is None)
-        vert = None
-        if self.settings.smooth and (final is not None or np.any(e_bar)):
+            final = FinalGather(solver, caustic=caustic, world=self.world_light is None,
+                                image_values=(e_bar, solver.caustic.E if caustic else None) if self.settings.smooth
+                                else None)
+        vert = final.image_vert if final is not None else None
+        if vert is None and self.settings.smooth and np.any(e_bar):
             vert = solver.reconstruction.smooth_and_sharp(e_bar, solver.caustic.E if caustic else None)
         if final is not None:
             per_sample = (-(-int(rays) // k) if rays > 0 else

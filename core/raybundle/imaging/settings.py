@@ -69,7 +69,7 @@ class RenderSettings:
     glossy_mis: bool = True
     glossy_send_rays: int = 2
     gather_rays: int = -1
-    gather_share: float = 0.1
+    gather_share: float = 0.25
     penumbra_samples: int = 8
     caustic_splats: float = 1.0
     world_samples: int = -1

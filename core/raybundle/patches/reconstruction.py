@@ -112,6 +112,20 @@ class LinearReconstruction:
             return self.projected(side_values)
         return self.projected(side_values - sharp) + self.averaged(sharp)
 
+    def smooth_and_sharp_many(self, pairs):
+        """:meth:`smooth_and_sharp` of each ``(side_values, sharp)`` in ``pairs``, as a list: one
+        projection of all their columns side by side (the same values: the projection and its
+        clamp act column by column), so the mesh's work is done once, not once per pair."""
+        pairs = [(np.asarray(v, float), s) for v, s in pairs]
+        stacked = np.concatenate([v if s is None else v - s for v, s in pairs], axis=1)
+        x = self.projected(stacked)
+        out, c = [], 0
+        for v, s in pairs:
+            part = x[:, c:c + v.shape[1]]
+            out.append(part if s is None else part + self.averaged(s))
+            c += v.shape[1]
+        return out
+
     def at(self, vertex_values, tside, bary):
         """Values (N, C) at points of triangle sides ``tside`` (N,) with barycentrics
         ``bary`` (N, 3), linear between the welded-vertex values (V, C)."""
