@@ -108,9 +108,7 @@ class LinearReconstruction:
         :meth:`averaged` of ``sharp`` (S, C) (the caustic first shot: sharp-edged and
         noisy, which a projection would ring on; projected, it measured worse on ``cornell-glossy``:
         README, 'Measured choices behind the defaults')."""
-        if sharp is None:
-            return self.projected(side_values)
-        return self.projected(side_values - sharp) + self.averaged(sharp)
+        return self.smooth_and_sharp_many([(side_values, sharp)])[0]
 
     def smooth_and_sharp_many(self, pairs):
         """:meth:`smooth_and_sharp` of each ``(side_values, sharp)`` in ``pairs``, as a list: one
