@@ -14,8 +14,9 @@ with ``kd(x)`` the diffuse reflectance at the point (a texture's texel there,
 interpolated linearly from the patch values (the image's reconstruction:
 :meth:`~raybundle.patches.reconstruction.LinearReconstruction.projected`, the caustic
 first shot by :meth:`~raybundle.patches.reconstruction.LinearReconstruction.averaged`),
-``E_dir`` the direct irradiance of the first-shot lights estimated *at the point*
-with ``light_samples`` shadow rays per area light
+``E_dir`` the direct irradiance of the first-shot lights estimated *at the point*, about
+its shading normal on smooth-shaded faces (:mod:`raybundle.scene.shading`, as Cycles' bake and
+the image), with ``light_samples`` shadow rays per area light
 (:meth:`~raybundle.lights.direct.DirectLighting.irradiance`), so shadows and the fall-off
 under a lamp are as sharp as the bake's resolution, and ``W_d`` the diffuse weight
 of a Principled layer seen along the normal.  Glossy lobes are view-dependent and
@@ -27,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..scene.shading import seen_normals
 from ..tracing.sampling import triangle_barycentrics
 from .gather import FinalGather
 
@@ -171,8 +173,9 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, ga
     else:
         e = np.zeros((len(idx), 3))
     direct = solver.direct
-    if direct.n_lights:
-        e = e + direct.irradiance(points.point[idx], n, rng, light_samples, penumbra_samples)
+    if direct.n_lights:         # about the shading normal of a smooth-shaded face, as the image's
+        n_s = seen_normals(sc.shading, sc.triangle_source[tri], points.point[idx], n, n)
+        e = e + direct.irradiance(points.point[idx], n_s, rng, light_samples, penumbra_samples)
     kd = mats.diffuse_reflectance[m]
     if sc.texture is not None:                  # the texel's albedo: texture detail stays sharp
         kd = kd * sc.texture.at(sc.triangle_source[tri], points.point[idx])
