@@ -184,11 +184,16 @@ def test_the_automatic_gather_runs_where_the_bias_it_removes_outweighs_its_noise
     r = pipeline.make_renderer(sc, RenderSettings(seed=5))
     try:
         r.run(iterations=40)
-        r.image(gather_seconds=2.0)
-        big = r.gather_rays_used
-        assert big > 256
-        r.image(gather_seconds=2.0 * 128 / big)                    # about 128 rays per pixel
-        assert 0 < r.gather_rays_used < 256, r.gather_rays_used
+        got = []
+        for _ in range(3):      # the budget is scaled from a timing: a machine under load (CI's two
+            r.image(gather_seconds=2.0)          # test processes) can slow between the two calls
+            big = r.gather_rays_used
+            assert big > 256
+            r.image(gather_seconds=2.0 * 128 / big)                # about 128 rays per pixel
+            got.append(r.gather_rays_used)
+            if 0 < got[-1] < 256:
+                break
+        assert 0 < got[-1] < 256, got
         assert r.edge_gather.last_needed < 64, r.edge_gather.last_needed
     finally:
         r.tracer.close()
