@@ -608,16 +608,16 @@ class Renderer(ProgressiveImage):
         caustic = solver.caustic is not None and self.caustic_splats is None
         # a caustic light-traced into the pixels (caustic_splats) is left out here
         e_bar = solver.image_incoming(caustic=caustic, world=self.world_light is None)
+        sharp = solver.caustic.E if caustic else None
         rays, final, per_sample = self.settings.gather_rays, None, 0
         if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and gather_seconds and
                                                              self.edge_gather.affordable(self._probe_gbuffer(),
                                                                                          gather_seconds))):
             final = FinalGather(solver, caustic=caustic, world=self.world_light is None,
-                                image_values=(e_bar, solver.caustic.E if caustic else None) if self.settings.smooth
-                                else None)
+                                image_values=(e_bar, sharp) if self.settings.smooth else None)
         vert = final.image_vert if final is not None else None
         if vert is None and self.settings.smooth and np.any(e_bar):
-            vert = solver.reconstruction.smooth_and_sharp(e_bar, solver.caustic.E if caustic else None)
+            vert = solver.reconstruction.smooth_and_sharp(e_bar, sharp)
         if final is not None:
             per_sample = (-(-int(rays) // k) if rays > 0 else
                           self.edge_gather.automatic_rays(final, self._probe_gbuffer(), k, gather_seconds,

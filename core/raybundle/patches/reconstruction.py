@@ -117,10 +117,13 @@ class LinearReconstruction:
         pairs = [(np.asarray(v, float), s) for v, s in pairs]
         stacked = np.concatenate([v if s is None else v - s for v, s in pairs], axis=1)
         x = self.projected(stacked)
+        averaged = {}                 # one average per distinct sharp part (pairs often share it)
         out, c = [], 0
         for v, s in pairs:
             part = x[:, c:c + v.shape[1]]
-            out.append(part if s is None else part + self.averaged(s))
+            if s is not None and id(s) not in averaged:
+                averaged[id(s)] = self.averaged(s)
+            out.append(part if s is None else part + averaged[id(s)])
             c += v.shape[1]
         return out
 
