@@ -11,7 +11,7 @@ from raybundle.scene import builtin as scenes
 from raybundle.scene.build import build_scene
 from raybundle.scene.camera import Camera
 from raybundle.scene.materials import MaterialTable
-from raybundle.scene.model import PointLights
+from raybundle.scene.model import PointLights, SunLights
 from raybundle.util.io import read_exr, read_exr_header, write_exr, write_png
 
 
@@ -282,3 +282,45 @@ def test_the_first_pass_is_exact_where_the_lamp_is_wholly_seen():
     got = r.pass_sum[open_floor, 0]
     assert np.allclose(got, want, rtol=1e-9, atol=0), np.abs(got / want - 1).max()
     r.tracer.close()
+
+
+def test_lit_edges_converge_faster_than_independent_jitter():
+    """A diffuse square (kd 0.5, rotated 20 degrees) lit by four suns straight down (E = 1
+    each, no shadows: every light sample is exact) seen by an orthographic camera over a
+    black world: a pixel's per-pass value is kd/pi 4 E times the fraction c of the pixel it
+    covers, so the passes' only noise is where their sub-pixel positions fall.  Over 32
+    passes the RMS error of the edge pixels (seeds 0-2) must be under 0.7 of what independent
+    uniform positions give, sqrt(mean c (1 - c) / 32) times the square's radiance: the
+    positions continue one randomly shifted R_2 sequence per pixel.  Measured 0.68, 0.65,
+    0.49 and 0.38 of it after 8, 16, 32 and 64 passes.  The earlier code took them from the
+    first two dimensions of an R_16 sequence (4 + 3 x 4 dimensions with four lamps), whose
+    generators are near 1, so that successive passes moved 4% and 8% of a pixel along one
+    line: 1.48, 1.32, 1.36 and 1.54 of it, worse than random (the hall's direct light at
+    fixed work: 4.84% noise per image against 3.47%)."""
+    c, s = np.cos(np.radians(20)), np.sin(np.radians(20))
+    sq = np.array([[-0.3, -0.3], [0.3, -0.3], [0.3, 0.3], [-0.3, 0.3]]) @ np.array([[c, s], [-s, c]])
+    v = np.column_stack([sq, np.zeros(4)])
+    mats = MaterialTable.from_list([dict(name="plate", diffuse=(0.5, 0.5, 0.5))])
+    suns = SunLights(np.tile([0.0, 0.0, -1.0], (4, 1)), np.ones((4, 3)), np.zeros(4))
+    m = np.eye(4)
+    m[2, 3] = 1.0                                         # 1 m above, looking down -z
+    cam = Camera(16, 16, 16.0, 16.0, 8.0, 8.0, m, orthographic=True)
+    cover = np.array([[clipped_area(np.array([[i - 8, 8 - j - 1], [i - 7, 8 - j - 1], [i - 7, 8 - j],
+                                              [i - 8, 8 - j]]) / 16.0, sq) * 256 for i in range(16)]
+                      for j in range(16)])
+    edge = (cover > 0) & (cover < 1)
+    radiance = 0.5 / np.pi * 4.0
+    passes, err = 32, []
+    for seed in range(3):
+        r = pipeline.make_renderer(build_scene(v, [[0, 1, 2], [0, 2, 3]], [0, 0], mats, camera=cam,
+                                               sun_lights=suns, two_sided=True), RenderSettings(seed=seed))
+        assert r.kronecker_light_samples == 4
+        for _ in range(passes):
+            r.image_pass()
+        img = (r.pass_sum[:, 0] / r.passes).reshape(16, 16)
+        r.tracer.close()
+        assert np.abs(img - radiance * cover)[~edge].max() < 1e-9      # inside and outside: exact
+        err.append((img - radiance * cover)[edge])
+    rms = np.sqrt(np.mean(np.concatenate(err) ** 2))
+    independent = radiance * np.sqrt(np.mean(cover[edge] * (1 - cover[edge])) / passes)
+    assert rms < 0.7 * independent, rms / independent

@@ -170,14 +170,16 @@ def kronecker_alpha(dim):
 
 
 class ShiftedKronecker:
-    """Per-pixel randomly shifted R_d sequences for the image passes.
+    """Per-pixel randomly shifted R_d sequences for the image passes' lobe and light samples.
 
     Pass k of pixel p uses ``frac(shift_p + k alpha)``: every single pass is
     uniformly distributed (so each pass is an unbiased sample of the pixel
-    integral) while successive passes fill [0,1)^d evenly, so pixel-filter
-    edges and penumbrae converge faster than with independent jitter.  (Image
-    passes are plain averages, not iterations: completely uniform distribution
-    is not needed here.)
+    integral) while successive passes fill [0,1)^d evenly in the long run.  For
+    large d the generators lie near 1, so over the first passes the low-dimensional
+    projections move little and along one line: the sub-pixel position, where a pixel
+    holds an edge, is therefore not taken from here but from an R_2 sequence of its
+    own (:meth:`~raybundle.imaging.renderer.Renderer.image_pass`).  (Image passes are
+    plain averages, not iterations: completely uniform distribution is not needed here.)
     """
 
     def __init__(self, n, dim, rng):
