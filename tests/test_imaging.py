@@ -80,6 +80,21 @@ def test_image_of_point_lit_plane_matches_closed_form():
     r.tracer.close()
 
 
+def square_seen_from_above():
+    """A 0.6 m square in z = 0 rotated 20 degrees, an orthographic 16 x 16 camera 1 m above it
+    looking down (1/16 m per pixel), and the fraction of each pixel the square covers (16, 16)
+    (exact, :func:`clipped_area`): returns ``(vertices (4, 3), camera, coverage)``."""
+    c, s = np.cos(np.radians(20)), np.sin(np.radians(20))
+    sq = np.array([[-0.3, -0.3], [0.3, -0.3], [0.3, 0.3], [-0.3, 0.3]]) @ np.array([[c, s], [-s, c]])
+    m = np.eye(4)
+    m[2, 3] = 1.0                                         # 1 m above, looking down -z
+    cam = Camera(16, 16, 16.0, 16.0, 8.0, 8.0, m, orthographic=True)
+    cover = np.array([[clipped_area(np.array([[i - 8, 8 - j - 1], [i - 7, 8 - j - 1], [i - 7, 8 - j],
+                                              [i - 8, 8 - j]]) / 16.0, sq) * 256 for i in range(16)]
+                      for j in range(16)])
+    return np.column_stack([sq, np.zeros(4)]), cam, cover
+
+
 def test_light_edges_converge_to_the_exact_pixel_coverage():
     """An emitting square (L = 1, rotated 20 degrees) seen by an orthographic camera
     over a black world: each pixel's value is exactly L times the fraction of the
@@ -91,16 +106,8 @@ def test_light_edges_converge_to_the_exact_pixel_coverage():
     After 100 passes the sequences' low discrepancy shows: RMS error over seeds 0-2 under
     0.0035 (measured 0.0024; 0.0052 with a fresh jittered 4 x 4 grid every pass, the
     earlier code, so this can fail)."""
-    c, s = np.cos(np.radians(20)), np.sin(np.radians(20))
-    sq = np.array([[-0.3, -0.3], [0.3, -0.3], [0.3, 0.3], [-0.3, 0.3]]) @ np.array([[c, s], [-s, c]])
-    v = np.column_stack([sq, np.zeros(4)])
+    v, cam, exact = square_seen_from_above()
     mats = MaterialTable.from_list([dict(name="lamp", emission=(1.0, 1.0, 1.0))])
-    m = np.eye(4)
-    m[2, 3] = 1.0                                         # 1 m above, looking down -z
-    cam = Camera(16, 16, 16.0, 16.0, 8.0, 8.0, m, orthographic=True)
-    exact = np.array([[clipped_area(np.array([[i - 8, 8 - j - 1], [i - 7, 8 - j - 1], [i - 7, 8 - j],
-                                              [i - 8, 8 - j]]) / 16.0, sq) * 256 for i in range(16)]
-                      for j in range(16)])
     edge = (exact > 0) & (exact < 1)
     assert edge.sum() > 20
 
@@ -297,17 +304,9 @@ def test_lit_edges_converge_faster_than_independent_jitter():
     generators are near 1, so that successive passes moved 4% and 8% of a pixel along one
     line: 1.48, 1.32, 1.36 and 1.54 of it, worse than random (the hall's direct light at
     fixed work: 4.84% noise per image against 3.47%)."""
-    c, s = np.cos(np.radians(20)), np.sin(np.radians(20))
-    sq = np.array([[-0.3, -0.3], [0.3, -0.3], [0.3, 0.3], [-0.3, 0.3]]) @ np.array([[c, s], [-s, c]])
-    v = np.column_stack([sq, np.zeros(4)])
+    v, cam, cover = square_seen_from_above()
     mats = MaterialTable.from_list([dict(name="plate", diffuse=(0.5, 0.5, 0.5))])
     suns = SunLights(np.tile([0.0, 0.0, -1.0], (4, 1)), np.ones((4, 3)), np.zeros(4))
-    m = np.eye(4)
-    m[2, 3] = 1.0                                         # 1 m above, looking down -z
-    cam = Camera(16, 16, 16.0, 16.0, 8.0, 8.0, m, orthographic=True)
-    cover = np.array([[clipped_area(np.array([[i - 8, 8 - j - 1], [i - 7, 8 - j - 1], [i - 7, 8 - j],
-                                              [i - 8, 8 - j]]) / 16.0, sq) * 256 for i in range(16)]
-                      for j in range(16)])
     edge = (cover > 0) & (cover < 1)
     radiance = 0.5 / np.pi * 4.0
     passes, err = 32, []

@@ -510,10 +510,10 @@ class Renderer(ProgressiveImage):
         """``k`` sub-pixel positions in each of ``pixels``, continuing one randomly shifted
         R_2 sequence per pixel (:func:`~raybundle.tracing.sampling.kronecker_alpha`) from
         pass to pass: returns (pixel ids (N k,), positions (N k, 2)).  Every position is
-        uniform in its pixel (the averages stay unbiased) and all of a pixel's samples
-        (the passes' own and the extra ones) together fill it with discrepancy O(log n / n), where fresh jittered grids every pass
-        left the coverage of an edge noisy as n^-3/4: a window bar against a sky 20 times
-        brighter than the room is mostly that coverage."""
+        uniform in its pixel (the averages stay unbiased) and all of a pixel's samples (the
+        passes' own and the extra ones) together fill it with discrepancy O(log n / n), where
+        fresh jittered grids every pass left the coverage of an edge noisy as n^-3/4: a
+        window bar against a sky 20 times brighter than the room is mostly that coverage."""
         pixels = np.asarray(pixels, np.int64)
         pix = np.repeat(pixels, k)
         i = self._edge_index[pix] + np.tile(np.arange(k), len(pixels))
