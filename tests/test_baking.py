@@ -64,8 +64,8 @@ def test_a_smooth_shaded_bake_takes_its_direct_light_about_the_shading_normal():
     """Cycles' bake shades a smooth-shaded face about its interpolated corner normals, as its
     render does (raybundle.scene.shading): the plane under the point light with corner normals
     bent outwards like a dome's bakes ``0.6 / pi * I max(0, n_s . w) / r^2`` with ``n_s`` the
-    shading normal at the point.  About the flat normal (the old bake) the corners were up
-    to 10% off."""
+    shading normal at the point.  About the flat normal (the old bake) the points were a
+    median 26% off, up to 240% where the shading normal turns away from the light."""
     from raybundle.scene.shading import ShadingNormals
 
     v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)

@@ -322,8 +322,7 @@ class Renderer(ProgressiveImage):
         samples), so a pixel's passes cover it evenly from the first ones on: an edge's
         coverage converges faster than with independent positions (the R_d sequence of the
         lobe and light samples, d up to 16, moved its first two coordinates only a few
-        percent of a pixel from pass to pass: ``modern-hall`` at fixed work, direct light
-        4.84% noise per image against 3.47% now).
+        percent of a pixel from pass to pass: README, the table of methods).
         Keeps the G-buffer for :meth:`accumulate_glossy`."""
         t0 = time.perf_counter()
         u = self.pass_sampler.next()

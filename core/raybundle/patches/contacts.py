@@ -174,6 +174,8 @@ def _split(poly, a, b, eps):
     ax, ay = float(a[0]), float(a[1])
     dx, dy = float(b[0]) - ax, float(b[1]) - ay
     h = float(np.hypot(dx, dy))
+    if not h > 0:                                # a point, not a line (on arrays: NaN, no split)
+        return None, None
     ux, uy = dx / h, dy / h
     pts = poly.tolist()
     s = [ux * (p[1] - ay) - uy * (p[0] - ax) for p in pts]                     # signed distance [m]

@@ -12,7 +12,8 @@ its turned-away side instead of keeping the facet's one brightness.
 
 Raybundle shades the points the camera sees (direct light of lamps and the world, the glossy
 lobe) and a bake's points (direct light of lamps) about ``n_s``; the patches keep their flat
-normals (a patch's irradiance is an area mean over its triangles).  Rays leave from and are offset along the side the geometry has.
+normals (a patch's irradiance is an area mean over its triangles).  Rays leave from and are
+offset along the side the geometry has.
 """
 from __future__ import annotations
 
