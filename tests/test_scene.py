@@ -177,3 +177,33 @@ def test_shading_normals_interpolate_the_corner_normals():
     mix = tilt.mean(axis=0) / np.linalg.norm(tilt.mean(axis=0))
     assert np.allclose(got, [tilt[0], tilt[1], tilt[2], mix], atol=1e-6)
     assert ShadingNormals.of_faces(corners, np.tile([0, 0, 1.0], (1, 3, 1))) is None
+
+
+def test_connected_components_match_a_graph_search():
+    """The welding's connected components (hooking and pointer jumping) against a breadth-first
+    search, on random graphs from sparse (many singletons) to dense, with long chains (a
+    tessellated sphere's corners link in rings); ids dense, in the order of each component's
+    smallest node."""
+    from collections import deque
+
+    from raybundle.util.arrays import connected_components
+    rng = np.random.default_rng(5)
+    cases = [(1, np.zeros((0, 2), np.int64)), (6, np.zeros((0, 2), np.int64)),
+             (2000, np.stack([np.arange(1999, 0, -1), np.arange(1998, -1, -1)], axis=1))]   # one chain, reversed
+    cases += [(n, rng.integers(0, n, (k, 2))) for n, k in ((50, 20), (500, 400), (3000, 2900), (200, 1000))]
+    for n, links in cases:
+        nbr = [[] for _ in range(n)]
+        for a, b in links.tolist():
+            nbr[a].append(b)
+            nbr[b].append(a)
+        want, c = np.full(n, -1), 0
+        for s in range(n):
+            if want[s] < 0:
+                want[s], todo = c, deque([s])
+                while todo:
+                    for v in nbr[todo.popleft()]:
+                        if want[v] < 0:
+                            want[v] = c
+                            todo.append(v)
+                c += 1
+        assert np.array_equal(connected_components(n, links), want), n

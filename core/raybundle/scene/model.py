@@ -314,7 +314,9 @@ class PatchScene:
     @cached_property
     def bounding_sphere(self):
         """(centre (3,), radius) of a sphere containing every vertex."""
-        used = self.vertices[np.unique(self.triangles)]
+        seen = np.zeros(len(self.vertices), bool)
+        seen[self.triangles.ravel()] = True
+        used = self.vertices[seen]
         lo, hi = used.min(axis=0), used.max(axis=0)
         c = 0.5 * (lo + hi)
         return c, float(np.linalg.norm(used - c, axis=1).max())

@@ -36,22 +36,21 @@ def group_ids(columns):
 
 
 def connected_components(n, links):
-    """Dense component ids (n,) of n nodes joined by ``links`` (K, 2): min-label propagation
-    with pointer jumping (targets sorted once; each round one reduceat)."""
-    label = np.arange(n)
-    if len(links) == 0:
-        return label
-    src = np.concatenate([links[:, 0], links[:, 1]])
-    dst = np.concatenate([links[:, 1], links[:, 0]])
-    order = np.argsort(dst, kind="stable")
-    src, dst = src[order], dst[order]
-    start = np.flatnonzero(np.r_[True, dst[1:] != dst[:-1]])
-    target = dst[start]
-    while True:
-        new = label.copy()
-        new[target] = np.minimum(new[target], np.minimum.reduceat(label[src], start))
-        new = new[new]
-        if np.array_equal(new, label):
-            break
-        label = new
-    return np.unique(label, return_inverse=True)[1].reshape(-1)
+    """Dense component ids (n,) of n nodes joined by ``links`` (K, 2), numbered in the order of
+    each component's smallest node: hooking and pointer jumping (Shiloach-Vishkin).  Each round
+    hooks the root of every link's larger end onto the smaller root it meets (``minimum.at``:
+    a root's parent only ever decreases, so no cycle forms), then jumps pointers until every
+    node points at its root."""
+    parent = np.arange(n)
+    a, b = np.asarray(links, np.int64).reshape(-1, 2).T
+    while len(a):
+        pa, pb = parent[a], parent[b]
+        apart = pa != pb
+        a, b, pa, pb = a[apart], b[apart], pa[apart], pb[apart]
+        np.minimum.at(parent, np.maximum(pa, pb), np.minimum(pa, pb))
+        while True:
+            jumped = parent[parent]
+            if np.array_equal(jumped, parent):
+                break
+            parent = jumped
+    return np.unique(parent, return_inverse=True)[1].reshape(-1)
