@@ -253,3 +253,37 @@ def test_no_light_leaks_along_a_shelf_sunk_through_a_wall(monkeypatch):
     assert e[sc.tside_side[room]].max() == 0.0
     vert = solver.reconstruction.smooth_and_sharp(e[:, None], None)
     assert np.abs(solver.reconstruction.at(vert, np.nonzero(room)[0], np.full((room.sum(), 3), 1 / 3))).max() == 0.0
+
+
+def test_a_contact_across_the_cut_of_a_pierced_wall_keeps_both_tags(monkeypatch):
+    """The shelf through the wall with a thin panel standing on it across the wall (at
+    y = 0.15, x 0.7 to 1.3): the shelf's triangles there pierce two surfaces, the wall and the
+    panel's foot.  They are cut along both planes (the pieces of the first cut again), the
+    corners where two cuts meet get tags of their own, a contact's cut keeps the pierce tags,
+    and no cluster holds shelf pieces from both sides of the wall.  So the light outside gives
+    the room's part exactly nothing, at the patches and at the corners the image
+    interpolates.  (The earlier code cut each triangle along one plane, here often the
+    panel's, and grouped shelf triangles from x = 0.74 to 1.03 into one patch: up to
+    2.5 W/m^2 on the room's part.)"""
+    from raybundle.patches import layout
+    from raybundle.patches.clusters import tessellate
+    monkeypatch.setattr(layout, "CONTACT_ALL_MAX", 0)
+    base = shelf_through_a_wall()
+    panel = np.array([[0.7, 0.15, 0.0], [1.3, 0.15, 0.0], [1.3, 0.15, 0.3], [0.7, 0.15, 0.3]])
+    v, t, m = _mesh([(panel, 0)])
+    sc0 = build_scene(np.concatenate([base.vertices, v]), np.concatenate([base.triangles, t + len(base.vertices)]),
+                      np.concatenate([base.triangle_material, m]), MATS, point_lights=base.point_lights,
+                      two_sided=True)
+    sc = pipeline.prepare(tessellate(sc0, 4200), patches=300)
+    solver = pipeline.make_solver(sc, RenderSettings(seed=5))
+    e = solver.first_shot.E.sum(axis=1)[:, 0]                        # (S,) per side
+    tri = sc.tside_triangle
+    shelf = np.abs(sc.triangle_corners[tri][:, :, 2]).max(axis=1) < 1e-12
+    x = sc.triangle_corners[tri][:, :, 0]
+    up = sc.tside_normal[:, 2] > 0.5
+    room, out = shelf & up & (x.max(axis=1) <= 1 + 1e-9), shelf & up & (x.min(axis=1) >= 1 - 1e-9)
+    assert room.sum() > 50 and out.sum() > 50
+    assert e[sc.tside_side[out]].mean() > 0.1
+    assert e[sc.tside_side[room]].max() == 0.0
+    vert = solver.reconstruction.smooth_and_sharp(e[:, None], None)
+    assert np.abs(solver.reconstruction.at(vert, np.nonzero(room)[0], np.full((room.sum(), 3), 1 / 3))).max() == 0.0

@@ -52,7 +52,7 @@ from ..scene.model import PatchScene
 from ..tracing.sampling import frames_from_normals
 from ..tracing.visibility import RayTracer
 from ..util.arrays import group_ids
-from .contacts import CONTACT_SHARE, PROBE_CHUNK, behind_pierced, gap_sides
+from .contacts import CONTACT_SHARE, PROBE_CHUNK, gap_sides, pierced_parts
 from .layout import bisect_long, cut_at_contacts, edge_for_patches, longest_edges, split_triangles, subdivide
 
 #: the patch count of a scene laid out without an explicit one (sides; the count that measured best
@@ -128,14 +128,15 @@ class _Grouping:
         similar pieces would turn into k^2 slivers; they are halved along their length instead)."""
         return self.area < np.maximum(h * h / SMALL, SLIVER * self.edge ** 2)
 
-    def clusters(self, h, small, gap=None, spread=False, world_view=None, behind=None):
+    def clusters(self, h, small, gap=None, spread=False, world_view=None, part=None, small_rows=None):
         """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``;
         ``gap`` (S, 2) bool: the triangle lies in a gap on its front / back
         (:func:`~raybundle.patches.contacts.gap_sides`), which a cluster does not straddle;
         ``world_view`` (S, 2) int: the classes of how much of the world its front / back
-        sees (:func:`world_view_classes`), which a cluster does not mix either; nor pieces
-        ``behind`` (S,) bool a surface their triangle pierced and those in front
-        (:func:`~raybundle.patches.contacts.behind_pierced`).
+        sees (:func:`world_view_classes`), which a cluster does not mix either; nor the two
+        sides of a plane that a surface pierces, ``part`` = (part (S,), tagged corners (K, 3)) of
+        :func:`~raybundle.patches.contacts.pierced_parts` over the scene's triangles, of which
+        ``small_rows`` (T,) bool are the grouping's (not with ``spread``).
         Triangles a patch wide or less are keyed by their centroid; ``spread`` keys a longer one
         at ceil(edge / h) points along its longest edge instead, as its pieces will be
         (:func:`~raybundle.patches.layout.bisect_long`): ids (P,) of those points then."""
@@ -156,8 +157,6 @@ class _Grouping:
             keys.append(gap[:, 0] * 2 + gap[:, 1])
         if world_view is not None:
             keys += [world_view[:, 0], world_view[:, 1]]
-        if behind is not None:
-            keys.append(behind[idx].astype(np.int64))
         ids = group_ids(keys)
         # detail: clusters under h^2 / DETAIL (the facets of a plant, a lamp, a chair's legs in one
         # cell) join by the cube face of their normal instead
@@ -175,6 +174,11 @@ class _Grouping:
             kept = np.unique(ids[~detail], return_inverse=True)[1].reshape(-1)
             ids[detail] = merged
             ids[~detail] = int(merged.max()) + 1 + kept
+        if part is not None:
+            own, corners = part
+            corners = corners[small_rows[corners[:, 0]]]
+            rank = np.cumsum(small_rows) - 1                      # a scene triangle's row in ``part``
+            ids = _sides_apart(ids, own[idx], rank[corners[:, 0]], corners[:, 1], corners[:, 2])
         return ids
 
     def count(self, h):
@@ -256,14 +260,48 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     finally:
         if tracer is not None:
             tracer.close()
-    behind = behind_pierced(fine.triangle_corner_tag[fine_small]) if fine.triangle_corner_tag is not None else None
-    ids = grouped.clusters(h, np.ones(int(fine_small.sum()), bool), gap, world_view=view, behind=behind)
+    part = pierced_parts(fine)
+    ids = grouped.clusters(h, np.ones(int(fine_small.sum()), bool), gap, world_view=view,
+                           part=None if part is None else (part[0][fine_small], part[1]), small_rows=fine_small)
     n_clusters = int(ids.max()) + 1
     patch = np.empty(len(fine.triangles), np.int64)
     patch[fine_small] = ids
     others = np.unique(fine.triangle_patch[~fine_small], return_inverse=True)[1].reshape(-1)
     patch[~fine_small] = n_clusters + others
     return replace(fine, triangle_patch=patch)
+
+
+def _sides_apart(ids, part, row, plane, behind):
+    """Cluster ids (S,) with each cluster that holds pieces on both sides of a pierced plane
+    split by side (:func:`~raybundle.patches.contacts.pierced_parts`: the ``part`` (S,) of each
+    triangle; per tagged corner its triangle ``row``, ``plane`` and side ``behind``).  A
+    triangle's side of its cluster's plane is that of its part (a part never crosses the cut);
+    triangles of no tagged part, or of a part that does not reach the plane, form a third group."""
+    trio = np.unique(np.stack([ids[row], plane, behind], axis=1), axis=0)
+    pair, n_sides = np.unique(trio[:, :2], axis=0, return_counts=True)
+    conflict = pair[n_sides > 1]
+    if len(conflict) == 0:
+        return ids
+    # one plane per cluster (the first), and each tagged part's side of it
+    c_ids, first = np.unique(conflict[:, 0], return_index=True)
+    c_plane = dict(zip(c_ids.tolist(), conflict[first, 1].tolist()))
+    in_conflict = np.zeros(int(ids.max()) + 1, bool)
+    in_conflict[c_ids] = True
+    split = np.flatnonzero(in_conflict[ids])
+    side_of = {}
+    for key in zip(part[row].tolist(), plane.tolist(), behind.tolist()):
+        side_of[key[:2]] = key[2] if side_of.get(key[:2], key[2]) == key[2] else 2   # a part on both sides: apart
+    side = np.array([2 if p < 0 else side_of.get((p, c_plane[c]), 2)
+                     for p, c in zip(part[split].tolist(), ids[split].tolist())], np.int64)
+    # each conflict cluster's first group keeps its id, the others get new ones: still dense
+    sub = group_ids([ids[split], side])
+    cluster = np.zeros(int(sub.max()) + 1, np.int64)
+    cluster[sub] = ids[split]
+    keep = np.r_[True, cluster[1:] != cluster[:-1]]
+    new_id = np.where(keep, cluster, int(ids.max()) + np.cumsum(~keep))
+    out = ids.copy()
+    out[split] = new_id[sub]
+    return out
 
 
 def world_view_classes(tracer, points, normals, rays=WORLD_VIEW_RAYS, seed=0):

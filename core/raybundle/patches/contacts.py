@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..tracing.sampling import orthonormal_basis
-from ..util.arrays import group_ids, unique_rows
+from ..util.arrays import connected_components, group_ids, unique_rows
 
 
 def _plane_groups(scene, faces):
@@ -312,7 +312,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
         for s in range(0, len(fast), step):
             f = fast[s:s + step]
             tg = _corner_tags_uncut(c2[f], seg, touch[f], seg_base, eps, tag_ids)
-            corner_tag[group[f]] = np.where(tg != 0, tg, corner_tag[group[f]])
+            corner_tag[group[f]] = _merged(corner_tag[group[f]], tg, tag_ids)
         for f in touched[~whole]:
             tri = group[f]
             segs = np.nonzero(touch[f])[0]
@@ -333,8 +333,11 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
             tags = [_corner_tags(poly, seg, segs, seg_base, eps, tag_ids) for poly in polys]
             if len(polys) == 1:          # not cut: the triangle keeps its patch, its corners get their tags
                 if any(tags[0]):
-                    corner_tag[tri] = _tags_in_order(tags[0], polys[0], c2[f], eps)
+                    corner_tag[tri] = _merged(corner_tag[tri], _tags_in_order(tags[0], polys[0], c2[f], eps), tag_ids)
                 continue
+            # the tags the triangle had (a cut where it pierces a surface) stay on its pieces' corners
+            tags = [_merged(_inherited_tags(poly, c2[f], corner_tag[tri], eps), tg, tag_ids)
+                    for poly, tg in zip(polys, tags)]
             replaced[tri] = True
             n_cut += len(polys) > 1
             for poly, tg in zip(polys, tags):
@@ -436,6 +439,48 @@ def _corner_tags_uncut(tri2d, seg, touch, seg_base, eps, tag_ids):
     return out
 
 
+#: :func:`_merged`: a pierce tag merged with a contact tag moves by multiples of twice this
+#: (beyond any pierce tag's magnitude), keeping its sign
+_MERGED_STEP = 1 << 32
+
+
+def _merged(old, new, tag_ids):
+    """Weld tags (int64 arrays of one shape) of corners that had ``old`` and get ``new``: the
+    one that is not 0, and where both are, one id per pair (from ``tag_ids``, as the contact
+    tags), so corners weld only where both tags agree.  A pierce tag (negative,
+    :func:`pierce_tag`) stays negative, as :func:`pierced_parts` reads it."""
+    old, new = np.asarray(old, np.int64), np.asarray(new, np.int64)
+    out = np.where(new == 0, old, new)
+    for i in zip(*np.nonzero((old != 0) & (new != 0))):
+        k = tag_ids.setdefault(("merged", int(old[i]), int(new[i])), len(tag_ids) + 1)
+        out[i] = old[i] - 2 * _MERGED_STEP * k if old[i] < 0 else k
+    return out
+
+
+def _inherited_tags(poly, tri2d, tags, eps):
+    """The tags (M,) the corners of ``poly`` (M, 2), a piece of the triangle ``tri2d`` (3, 2)
+    whose corners had ``tags`` (3,), keep from it: a corner's at the triangle's corners, and on
+    an edge whose two ends carry the same tag (a cut along a pierced plane runs along it) that
+    tag; else 0."""
+    out = np.zeros(len(poly), np.int64)
+    if not np.any(tags):
+        return out
+    tol = 1e3 * eps
+    for i, p in enumerate(poly):
+        d = np.linalg.norm(tri2d - p, axis=1)
+        if d.min() <= tol:
+            out[i] = tags[int(np.argmin(d))]
+            continue
+        for j in range(3):
+            a, b = tri2d[j], tri2d[(j + 1) % 3]
+            if tags[j] != 0 and tags[j] == tags[(j + 1) % 3]:
+                e = b - a
+                t = np.dot(p - a, e) / np.dot(e, e)
+                if 0.0 <= t <= 1.0 and np.linalg.norm(a + t * e - p) <= tol:
+                    out[i] = tags[j]
+    return out
+
+
 def _tags_in_order(tags, poly, tri2d, eps):
     """Tags of the corners of an uncut triangle, in the triangle's corner order
     (``_without_collinear`` may have rotated the polygon)."""
@@ -502,10 +547,11 @@ PIERCE_HITS = 4
 
 
 def piercing(tracer, scene, faces):
-    """``(own, other)`` (P,) int: triangles of ``faces`` that pierce another surface and, for
-    each, one triangle it pierces (a picture frame sunk into the wall it hangs on: the frame's
-    facets behind the wall see the sky, and one patch or one welded corner for both parts
-    carries that light into the room).
+    """``(own, other)`` (P,) int: triangles of ``faces`` that pierce another surface and the
+    triangles they pierce, a pair for each (a picture frame sunk into the wall it hangs on: the
+    frame's facets behind the wall see the sky, and one patch or one welded corner for both
+    parts carries that light into the room).  A triangle may pierce several surfaces (a
+    shelf through a wall, under a panel that stands across the wall on it).
 
     A triangle pierces another where one of its edges passes through it: each edge (once,
     for the triangles that share it) is traced as a ray from corner to corner, ``eps`` short
@@ -553,8 +599,8 @@ def piercing(tracer, scene, faces):
         edge = np.nonzero(pierced[inv.reshape(-1)] >= 0)[0]
         own.append(f[edge // 3])
         other.append(pierced[inv.reshape(-1)[edge]])
-    own, at = np.unique(np.concatenate(own), return_index=True)               # one pierced triangle each
-    return own, np.concatenate(other)[at]
+    pairs = np.unique(np.stack([np.concatenate(own), np.concatenate(other)], axis=1), axis=0)
+    return pairs[:, 0], pairs[:, 1]
 
 
 def pierce_tag(plane, behind):
@@ -563,31 +609,99 @@ def pierce_tag(plane, behind):
     return -1 - 2 * np.asarray(plane, np.int64) - np.asarray(behind, np.int64)
 
 
-def behind_pierced(corner_tag):
-    """(T,) bool: triangles with a corner tagged (``corner_tag`` (T, 3)) on the behind side of a
-    pierced plane (:func:`cut_where_pierced`): pieces that must not share a patch with those in front."""
-    t = np.asarray(corner_tag)
-    return ((t < 0) & ((-1 - t) % 2 == 1)).any(axis=1)
+def pierced_parts(scene):
+    """``(part (T,), corners (K, 3))`` int, or None when nothing was cut where it pierces
+    (:func:`cut_where_pierced`): the part of a pierced surface each triangle lies in (-1 for
+    triangles of no such part) and, per corner tagged on such a cut, its triangle, plane and
+    side (:func:`pierce_tag`).  Parts are the
+    connected components of triangles that share an edge whose two ends carry the same pierce
+    tags in both: a cut along a pierced plane tags its two sides apart, so the shelf's part in
+    the room and its part outside are two parts, and a cluster that holds pieces on both sides
+    of a plane is split by part (:mod:`raybundle.patches.clusters`), however fine the shelf's
+    triangles beside the wall are.  Parts holding no tagged piece are -1."""
+    tag = scene.triangle_corner_tag
+    if tag is None or not (tag < 0).any():
+        return None
+    _, r = scene.bounding_sphere
+    vid = unique_rows(np.round(scene.vertices / max(r * 1e-7, 1e-12)).astype(np.int64))[1].astype(np.int32)
+    a = vid[scene.triangles].ravel()                          # edge 3 t + k runs from corner k to k + 1
+    b = a.reshape(-1, 3)[:, [1, 2, 0]].ravel()
+    key = np.minimum(a, b).astype(np.int64) * (int(vid.max(initial=0)) + 1) + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    same = np.flatnonzero(key[1:] == key[:-1])
+    del key
+    lo, hi = order[same], order[same + 1]                     # edges of two triangles at one place
+    del order, same
+    # the two triangles' pierce tags at each end of the shared edge (their own corners at that
+    # position; a contact's tags, and a contact's share of a merged tag, left out: :func:`_merged`)
+    pierce = np.where(tag < 0, -(-tag % (2 * _MERGED_STEP)), 0)
+    check = np.nonzero(pierce.any(axis=1)[lo // 3] | pierce.any(axis=1)[hi // 3])[0]
+    el, eh = lo[check], hi[check]
+    t, tn = pierce.ravel(), pierce[:, [1, 2, 0]].ravel()
+    agree = np.ones(len(lo), bool)
+    agree[check] = np.where(a[el] == a[eh], (t[el] == t[eh]) & (tn[el] == tn[eh]), (t[el] == tn[eh]) & (tn[el] == t[eh]))
+    del a, b
+    part = connected_components(len(scene.triangles), np.stack([lo[agree] // 3, hi[agree] // 3], axis=1))
+    cut = np.zeros(int(part.max(initial=-1)) + 1, bool)
+    cut[part[(tag < 0).any(axis=1)]] = True
+    row, k = np.nonzero(pierce < 0)
+    plane, behind = np.divmod(-1 - pierce[row, k], 2)
+    return np.where(cut[part], part, -1).astype(np.int32), np.stack([row, plane, behind], axis=1)
 
 
 def cut_where_pierced(scene, own, other):
-    """``(scene, rows)``: ``scene`` with each triangle ``own`` (P,) cut by the plane of the triangle ``other``
-    (P,) it pierces (:func:`piercing`) into the piece in front of that plane and the piece
-    behind it (one triangle and two), vectorised.  The behind pieces get a patch of their
-    own (one per patch cut), and the new corners on the cut a weld tag per plane and side
-    (:func:`pierce_tag`), so the pieces share neither an unknown nor an
-    interpolated corner value; pieces in front of one plane weld along the cut.  Triangles
-    with a corner within ``1e-6`` of the scene radius of the plane are left whole."""
-    from ..scene.model import PatchScene
+    """``(scene, rows)``: ``scene`` with each triangle ``own`` (P,) cut by the plane of the triangle
+    ``other`` (P,) it pierces (:func:`piercing`) into the piece in front of that plane and the
+    piece behind it, and ``rows`` (T',) the row in ``scene`` of each new triangle.  A triangle
+    that pierces several planes is cut along each in turn, its pieces again (one plane per
+    triangle and round, vectorised; :func:`_cut_once`).  Triangles with a corner within
+    ``1e-6`` of the scene radius of a plane are left whole by it."""
     own, other = np.asarray(own, np.int64), np.asarray(other, np.int64)
     _, r = scene.bounding_sphere
     eps = 1e-6 * max(r, 1e-12)
     n = scene.triangle_normal[other]
     p0 = scene.triangle_corners[other, 0]
+    off = np.einsum("ij,ij->i", n, p0)
+    q = np.round(n * 1e4).astype(np.int64)
+    plane = group_ids([q[:, 0], q[:, 1], q[:, 2], np.round(off / eps).astype(np.int64)]) if len(own) else own
+    _, once = np.unique(np.stack([own, plane], axis=1), axis=0, return_index=True)        # a pair per plane
+    own, plane, n, p0 = own[once], plane[once], n[once], p0[once]
+    rows = np.arange(len(scene.triangles))
+    next_id, meet = int(plane.max(initial=-1)) + 1, {}     # ids where two cuts meet (:func:`_cut_once`)
+    while len(own):
+        _, first = np.unique(own, return_index=True)
+        scene, cut_rows = _cut_once(scene, own[first], n[first], p0[first], plane[first], eps, next_id, meet)
+        rows = rows[cut_rows]
+        # the planes left for a triangle apply to each of its pieces
+        rest = np.ones(len(own), bool)
+        rest[first] = False
+        own, plane, n, p0 = own[rest], plane[rest], n[rest], p0[rest]
+        order = np.argsort(cut_rows, kind="stable")
+        lo = np.searchsorted(cut_rows[order], own, side="left")
+        hi = np.searchsorted(cut_rows[order], own, side="right")
+        count = hi - lo
+        pair = np.repeat(np.arange(len(own)), count)
+        own = order[np.repeat(lo, count) + np.arange(len(pair)) - np.repeat(np.cumsum(count) - count, count)]
+        plane, n, p0 = plane[pair], n[pair], p0[pair]
+    return scene, rows
+
+
+def _cut_once(scene, own, n, p0, plane, eps, next_id, meet):
+    """``(scene, rows)``: :func:`cut_where_pierced` for distinct triangles ``own`` (P,),
+    each cut by one plane (unit normal ``n`` (P, 3) through ``p0`` (P, 3), id ``plane`` (P,))
+    into the piece in front of it and the piece behind it (one triangle and two).  The
+    behind pieces get a patch of their own (one per patch cut), and the new corners on the cut
+    a weld tag per plane and side (:func:`pierce_tag`), so the pieces share neither an unknown
+    nor an interpolated corner value; pieces in front of one plane weld along the cut.  A new
+    corner on an edge cut before (both ends tagged alike) lies where two cuts meet: it gets the
+    tag of a plane of its own, an id from ``next_id`` on per earlier tag, plane and side (kept
+    in ``meet``, a dict, through the rounds), so it welds only with pieces on its side of both."""
+    from ..scene.model import PatchScene
     c = scene.triangle_corners[own]
     d = np.einsum("fkc,fc->fk", c - p0[:, None], n)                                      # (P, 3) [m]
     ok = (np.abs(d) > eps).all(axis=1) & (d.max(axis=1) > 0) & (d.min(axis=1) < 0)
-    own, other, n, p0, c, d = own[ok], other[ok], n[ok], p0[ok], c[ok], d[ok]
+    own, plane, c, d = own[ok], plane[ok], c[ok], d[ok]
     if len(own) == 0:
         return scene, np.arange(len(scene.triangles))
     pos = d > 0
@@ -604,18 +718,22 @@ def cut_where_pierced(scene, own, other):
     a, b, cc = idx.T
     tris = np.concatenate([np.stack([a, vp, vq], 1), np.stack([vp, b, cc], 1), np.stack([vp, cc, vq], 1)])
     src = np.tile(own, 3)
-    # tags: the plane (its rounded normal and offset) and the side a piece lies on
-    off = np.einsum("ij,ij->i", n, p0)
-    q = np.round(n * 1e4).astype(np.int64)
-    plane = group_ids([q[:, 0], q[:, 1], q[:, 2], np.round(off / eps).astype(np.int64)])
     old_tag = (scene.triangle_corner_tag if scene.triangle_corner_tag is not None
                else np.zeros((len(scene.triangles), 3), np.int64))
-    lone_front = da[:, 0] > 0
-    t_lone = pierce_tag(plane, ~lone_front)
-    t_rest = pierce_tag(plane, lone_front)
     ot = np.take_along_axis(old_tag[own], k, axis=1)
-    tags = np.concatenate([np.stack([ot[:, 0], t_lone, t_lone], 1), np.stack([t_rest, ot[:, 1], ot[:, 2]], 1),
-                           np.stack([t_rest, ot[:, 2], t_rest], 1)])
+    lone_front = da[:, 0] > 0
+    # the tags of the new corners P (on AB) and Q (on AC), on the lone corner's piece and on the others
+    tag = {}
+    for name, end in (("p", 1), ("q", 2)):
+        crossed = np.nonzero((ot[:, 0] == ot[:, end]) & (ot[:, 0] < 0))[0]      # an earlier cut runs along the edge
+        for side, behind in (("lone", ~lone_front), ("rest", lone_front)):
+            ids = plane.copy()
+            for i in crossed:
+                ids[i] = meet.setdefault((int(ot[i, 0]), int(plane[i]), bool(behind[i])), next_id + len(meet))
+            tag[name, side] = pierce_tag(ids, behind)
+    tags = np.concatenate([np.stack([ot[:, 0], tag["p", "lone"], tag["q", "lone"]], 1),
+                           np.stack([tag["p", "rest"], ot[:, 1], ot[:, 2]], 1),
+                           np.stack([tag["p", "rest"], ot[:, 2], tag["q", "rest"]], 1)])
     # patches: the pieces behind the plane get one new patch per patch cut
     behind = np.concatenate([~lone_front, lone_front, lone_front])
     n_patch = int(scene.triangle_patch.max(initial=-1)) + 1
