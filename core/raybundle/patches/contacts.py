@@ -507,14 +507,15 @@ def _corner_tags(poly, seg, segs, seg_base, eps, tag_ids):
     direction = np.round(u * 1e6).astype(np.int64)
     offset = np.round((u[:, 0] * a[:, 1] - u[:, 1] * a[:, 0]) / (1e3 * eps)).astype(np.int64)
     side = u[:, 0] * (centroid[1] - a[:, 1]) - u[:, 1] * (centroid[0] - a[:, 0]) > 0
-    out = []
-    for p in poly:
-        off = np.abs(d[:, 0] * (p[1] - a[:, 1]) - d[:, 1] * (p[0] - a[:, 0])) / length
-        along = ((p[0] - a[:, 0]) * d[:, 0] + (p[1] - a[:, 1]) * d[:, 1]) / length
-        on = np.nonzero((off <= 1e3 * eps) & (-1e3 * eps <= along) & (along <= length + 1e3 * eps))[0]
-        key = {((seg_base, int(direction[k, 0]), int(direction[k, 1]), int(offset[k])), bool(side[k])) for k in on}
-        out.append(tag_ids.setdefault(tuple(sorted(key)), len(tag_ids) + 1) if key else 0)
-    return out
+    q = np.asarray(poly)[:, None, :] - a[None]                                  # (M, K, 2)
+    off = np.abs(d[:, 0] * q[:, :, 1] - d[:, 1] * q[:, :, 0]) / length
+    along = (q[:, :, 0] * d[:, 0] + q[:, :, 1] * d[:, 1]) / length
+    on = (off <= 1e3 * eps) & (-1e3 * eps <= along) & (along <= length + 1e3 * eps)
+    out = [0] * len(q)
+    for i, k in zip(*np.nonzero(on)):
+        out[i] = (out[i] or set()) | {((seg_base, int(direction[k, 0]), int(direction[k, 1]), int(offset[k])),
+                                       bool(side[k]))}
+    return [tag_ids.setdefault(tuple(sorted(key)), len(tag_ids) + 1) if key else 0 for key in out]
 
 
 #: gaps narrower than this share of the patch size count as contact

@@ -6,13 +6,20 @@ import numpy as np
 
 def unique_rows(a):
     """``np.unique(a, axis=0, return_index=True, return_inverse=True)[1:]`` for an integer
-    array (N, K), by one lexsort (np.unique sorts the rows as opaque bytes, much slower on
-    millions of rows: README, 'Measured choices behind the defaults').  Returns
-    ``(first, inverse)``: the first row of each distinct value (in the lexicographic order of
-    the values) and each row's value id."""
+    array (N, K): returns ``(first, inverse)``, the first row of each distinct value (in the
+    lexicographic order of the values) and each row's value id.  By one 1-D sort of a
+    mixed-radix key of the columns (first made dense ranks where their spans are too wide for
+    63 bits), else by one lexsort; np.unique on rows sorts them as opaque bytes, much slower on
+    millions of rows (README, 'Measured choices behind the defaults')."""
     a = np.asarray(a)
     if len(a) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    key = _mixed_radix([a[:, k] for k in range(a.shape[1])])
+    if key is None:
+        key = _mixed_radix([np.unique(a[:, k], return_inverse=True)[1].reshape(-1) for k in range(a.shape[1])])
+    if key is not None:
+        _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+        return first, inverse.reshape(-1)
     order = np.lexsort(a.T[::-1])
     s = a[order]
     new = np.ones(len(a), bool)
@@ -25,14 +32,24 @@ def unique_rows(a):
 def group_ids(columns):
     """Dense ids (N,) of the distinct rows of integer ``columns`` (a list of (N,) arrays):
     one 1-D sort of a mixed-radix key when it fits in 63 bits, else :func:`unique_rows`."""
+    key = _mixed_radix(columns)
+    if key is not None:
+        return np.unique(key, return_inverse=True)[1].reshape(-1)
+    return unique_rows(np.stack(columns, axis=1))[1]
+
+
+def _mixed_radix(columns):
+    """(N,) int64: the integer ``columns`` (a list of (N,) arrays) as the digits of one number,
+    the first most significant (so its order is the rows' lexicographic order), or None when
+    their spans do not fit in 62 bits."""
     cols = [np.asarray(c, np.int64) - np.min(c) for c in columns]
     spans = [int(c.max()) + 1 for c in cols]
-    if np.prod([float(s) for s in spans]) < 2.0 ** 62:
-        key = np.zeros(len(cols[0]), np.int64)
-        for c, s in zip(cols, spans):
-            key = key * s + c
-        return np.unique(key, return_inverse=True)[1].reshape(-1)
-    return unique_rows(np.stack(cols, axis=1))[1]
+    if np.prod([float(s) for s in spans]) >= 2.0 ** 62:
+        return None
+    key = np.zeros(len(cols[0]), np.int64)
+    for c, s in zip(cols, spans):
+        key = key * s + c
+    return key
 
 
 def connected_components(n, links):
