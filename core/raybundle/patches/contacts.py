@@ -28,6 +28,8 @@ patch and only get the tags.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..tracing.sampling import orthonormal_basis
@@ -167,17 +169,17 @@ def contact_segments(scene, faces, tol, min_plane_area=0.0):
 
 
 def _split(poly, a, b, eps):
-    """Split the convex polygon ``poly`` (M, 2) by the line through a, b:
-    (left, right) polygons, either None when the line misses the interior."""
+    """Split the convex polygon ``poly`` (M corners [x, y], a list) by the line through the
+    points a, b: (left, right) polygons (lists), either None when the line misses the interior."""
     # Python floats: the same IEEE arithmetic as on arrays, without numpy's cost per call on
     # polygons of three to six corners (called once per piece and line: 95k times for 270k triangles)
     ax, ay = float(a[0]), float(a[1])
     dx, dy = float(b[0]) - ax, float(b[1]) - ay
-    h = float(np.hypot(dx, dy))
+    h = math.hypot(dx, dy)
     if not h > 0:                                # a point, not a line (on arrays: NaN, no split)
         return None, None
     ux, uy = dx / h, dy / h
-    pts = poly.tolist()
+    pts = poly
     s = [ux * (p[1] - ay) - uy * (p[0] - ax) for p in pts]                     # signed distance [m]
     s = [0.0 if abs(v) <= eps else v for v in s]
     if not any(v > 0 for v in s) or not any(v < 0 for v in s):
@@ -196,7 +198,7 @@ def _split(poly, a, b, eps):
             x = [p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]
             left.append(x)
             right.append(x)
-    return np.array(left), np.array(right)
+    return left, right
 
 
 def _without_collinear(poly, eps):
@@ -222,16 +224,10 @@ def _crosses(tri, segs, eps):
     return ((s > eps).any(axis=1)) & ((s < -eps).any(axis=1))
 
 
-_NEXT: dict = {}
-
-
 def _area(poly):
+    """The area of the polygon ``poly`` (M corners [x, y], a list): the shoelace formula."""
     m = len(poly)
-    nxt = _NEXT.get(m)
-    if nxt is None:
-        nxt = _NEXT[m] = np.roll(np.arange(m), -1)
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * abs(np.dot(x, y[nxt]) - np.dot(y, x[nxt]))
+    return 0.5 * abs(sum(poly[i][0] * poly[(i + 1) % m][1] - poly[i][1] * poly[(i + 1) % m][0] for i in range(m)))
 
 
 def _cross2(u, v):
@@ -316,20 +312,21 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
         for f in touched[~whole]:
             tri = group[f]
             segs = np.nonzero(touch[f])[0]
-            polys = [c2[f]]
+            # pieces as lists of [x, y] while cutting (numpy's cost per call on 3-6 corners)
+            polys = [c2[f].tolist()]
             # a line that leaves the triangle's corners on one side misses every piece of it
             crossing = segs[_crosses(c2[f], seg[segs], eps)]
-            full = _area(c2[f])
-            for k in crossing:
+            least = min_fraction * _area(polys[0])
+            for a, b in seg[crossing].tolist():
                 nxt = []
                 for poly in polys:
-                    lft, rgt = _split(poly, seg[k, 0], seg[k, 1], eps)
-                    if lft is None or min(_area(lft), _area(rgt)) < min_fraction * full:
+                    lft, rgt = _split(poly, a, b, eps)
+                    if lft is None or min(_area(lft), _area(rgt)) < least:
                         nxt.append(poly)
                     else:
                         nxt += [lft, rgt]
                 polys = nxt
-            polys = [_without_collinear(poly, eps) for poly in polys]
+            polys = [_without_collinear(np.array(poly), eps) for poly in polys]
             tags = [_corner_tags(poly, seg, segs, seg_base, eps, tag_ids) for poly in polys]
             if len(polys) == 1:          # not cut: the triangle keeps its patch, its corners get their tags
                 if any(tags[0]):
