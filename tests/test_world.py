@@ -159,7 +159,14 @@ def test_world_light_samples_by_brightness_and_is_unbiased():
         rng = np.random.default_rng(7)
         d, pdf, L = wl.sample(rng.random((20000, 3)))
         assert np.allclose(np.linalg.norm(d, axis=1), 1)
-        assert np.allclose(wl.pdf(d), pdf) and np.allclose(sc.world.radiance(d), L)
+        assert np.allclose(wl.density(d), pdf) and np.allclose(sc.world.radiance(d), L)
+        # and with a guide (random sums over the sky's cells for three sides; one side has none)
+        from raybundle.lights.world_light import GUIDE_CELLS
+        sums = rng.random((GUIDE_CELLS, 3)) ** 8
+        sums[:, 2] = 0.0
+        guide, at = wl.guide_of(sums, np.arange(3)), rng.integers(0, 3, 20000)
+        d, pdf, _ = wl.sample(rng.random((20000, 3)), guide, at)
+        assert np.allclose(wl.density(d, guide, at), pdf)
         n = np.array([0.0, -np.sin(theta), np.cos(theta)])
         far = np.array([[0.0, 0.0, 50.0]]) + rng.normal(size=(4000, 3))      # open space above the plate
         e = wl.irradiance(far, np.broadcast_to(n, far.shape), rng.random((4000, 8, 3)))

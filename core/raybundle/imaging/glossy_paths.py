@@ -5,11 +5,18 @@ the glossy lobes and takes the outgoing radiance of the surface it reaches from 
 (running-average diffuse part, first shot, and either the current iterate ``E f(t, w)`` or,
 for up to ``glossy_gather_depth`` glossy bounces, one more lobe-sampled ray); the mesh lights
 the lobe reflects are shared with the light samples by multiple importance sampling
-(power heuristic) when ``glossy_mis`` is on.  Radiance in [W m^-2 sr^-1].
+(power heuristic) when ``glossy_mis`` is on, and so is the world where it changes with
+direction: at the visible point one world sample per path (by brightness, guided by what the
+bundles brought each side from the sky: :class:`~raybundle.lights.world_light.WorldLight`)
+shares the sky the lobe reflects with the path's first ray if it leaves the scene.
+Radiance in [W m^-2 sr^-1].
 """
 from __future__ import annotations
 
 import numpy as np
+
+from ..lights.direct import DirectLighting
+from ..lights.world_light import WorldLight
 
 
 class GlossyEyePaths:
@@ -22,6 +29,9 @@ class GlossyEyePaths:
         self.settings, self.rng, self.surface_values = settings, rng, surface_values
         # light samples and the lobe's own ray share the mesh lights (MIS)
         self.light_mis = bool(settings.glossy_gather and settings.glossy_mis)
+        # ... and so do world samples and the lobe's rays that leave the scene
+        w = scene.world
+        self.world_light = WorldLight(w, tracer) if self.light_mis and w.emits and not w.is_constant else None
         self.rays = 0
 
     def gather(self, g, idx, u):
@@ -44,9 +54,42 @@ class GlossyEyePaths:
         vert = solver.reconstruction.averaged(e) if self.settings.smooth and len(idx) else None
         m, n, wo = g.material[idx], g.normal[idx], g.w_eye[idx]
         w_i, weight = sc.materials.sample_glossy(m, n, wo, u)
-        return self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo) if self.light_mis else None)
+        if self.world_light is None or len(idx) == 0:
+            return self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo) if self.light_mis else None)
+        sides = sc.tside_side[g.tside[idx]]
+        guide = at = None
+        if solver.world_guide is not None:
+            seen, at = np.unique(sides, return_inverse=True)
+            guide, at = WorldLight.guide_of(solver.world_guide, seen), at.reshape(-1)
+        world_mis = (self.world_light.density(w_i, guide, at), sc.materials.glossy_pdf(m, n, w_i, wo))
+        out = self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo), world_mis=world_mis)
+        return out + self.world_samples(g.point[idx], n, m, wo, guide, at)
 
-    def trace(self, pts, n, w_i, throughput, e, vert, light_mis=None):
+    def world_samples(self, pts, n, m, wo, guide=None, at=None):
+        """The sky the glossy lobes of materials ``m`` (N,) at ``pts`` (N, 3) (normals ``n``,
+        viewer ``wo``) reflect, one world sample each (:meth:`WorldLight.sample`, ``guide`` for
+        points on sides ``at``): ``L_w f_g(w, wo) cos / p_w``, weighted ``p_w^2 / (p_w^2 + p_g^2)``
+        against the lobe's own ray (p_g :meth:`~raybundle.scene.materials.MaterialTable.glossy_pdf`),
+        which :meth:`trace` weights the other way (N, 3)."""
+        mats = self.scene.materials
+        d, p_w, L = self.world_light.sample(self.rng.random((len(pts), 3)), guide, at)
+        cos = np.einsum("ij,ij->i", n, d)
+        out = np.zeros((len(pts), 3))
+        live = np.nonzero((cos > 0) & (p_w > 0))[0]
+        if len(live) == 0:
+            return out
+        f = mats.brdf(m[live], n[live], -d[live], wo[live], diffuse=False)
+        go = np.any(f > 0, axis=1) & np.any(L[live] > 0, axis=1)
+        live, f = live[go], f[go]
+        blocked = self.tracer.occluded(pts[live] + n[live] * self.tracer.eps, d[live],
+                                       np.full(len(live), self.world_light.far))
+        self.rays += len(live)
+        ok, f = live[~blocked], f[~blocked]
+        w = DirectLighting.mis_weight(p_w[ok], mats.glossy_pdf(m[ok], n[ok], d[ok], wo[ok]))
+        out[ok] = L[ok] * f * (cos[ok] / p_w[ok] * w)[:, None]
+        return out
+
+    def trace(self, pts, n, w_i, throughput, e, vert, light_mis=None, world_mis=None):
         """Radiance (N, 3) arriving at ``pts`` (N, 3) with normals ``n`` along ``w_i``
         (N, 3), times ``throughput`` (N, 3), read from the solver where each ray lands
         (:meth:`gather`): the hit's outgoing radiance from the side values ``e``
@@ -55,7 +98,10 @@ class GlossyEyePaths:
         the hit's glossy lobe, up to ``glossy_gather_depth`` rays in all.  With
         ``light_mis = (materials, w_out)`` of the glossy lobes the rays were drawn from,
         first rays that meet a first-shot mesh light add its emission, MIS-weighted
-        against the light samples (:meth:`~raybundle.lights.direct.DirectLighting.lobe_hits_light`)."""
+        against the light samples (:meth:`~raybundle.lights.direct.DirectLighting.lobe_hits_light`);
+        with ``world_mis = (p_w, p_g)`` (N,) each, the world sampling's and the lobe's densities of
+        the first rays, those that leave the scene see the world weighted ``p_g^2 / (p_g^2 + p_w^2)``
+        (:meth:`world_samples` takes the rest)."""
         sc, mats, solver = self.scene, self.scene.materials, self.solver
         out = np.zeros((len(pts), 3))
         pix = np.arange(len(pts))                     # which output row each path belongs to
@@ -73,7 +119,10 @@ class GlossyEyePaths:
             hit = tri >= 0
             if sc.world.emits:      # paths that leave the scene see the world
                 gone = live[~hit]
-                np.add.at(out, pix[gone], throughput[gone] * sc.world.radiance(w_i[gone]))
+                seen = throughput[gone] * sc.world.radiance(w_i[gone])
+                if world_mis is not None and bounce == 0:
+                    seen *= DirectLighting.mis_weight(world_mis[1][gone], world_mis[0][gone])[:, None]
+                np.add.at(out, pix[gone], seen)
             live, tri, t = live[hit], tri[hit], t[hit]
             if light_mis is not None and len(live):      # the lobe's ray meets a mesh light (MIS)
                 m_from, wo_from = (light_mis[0], light_mis[1]) if bounce == 0 else (m, wo)

@@ -110,13 +110,26 @@ class WorldLight:
         phi = np.pi * (1.0 - 2.0 * (col + u[:, 2]) / self.w)
         s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
         d = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
+        return d, self._density(k, row, guide, sides), self.world.image[row, col]
+
+    def _density(self, k, row, guide, sides):
+        """(N,) [1/sr] :meth:`sample`'s density in pixels ``k`` (N,) (flat index; ``row`` their
+        rows), by brightness alone or by ``guide``'s mixture for points on ``sides``."""
         pdf = self.p[k] / self.omega[row]
         if guide is not None:
+            share, _, prob = guide
             cell = self._pixel_cell[k]
             cw = self._cell_weight[cell]
             g = prob[sides * GUIDE_CELLS + cell] / np.where(cw > 0, cw, 1.0) * self.total
-            pdf = pdf * (a * g + (1.0 - a))
-        return d, pdf, self.world.image[row, col]
+            pdf = pdf * (share[sides] * g + (1.0 - share[sides]))
+        return pdf
+
+    def density(self, directions, guide=None, sides=None):
+        """(N,) [1/sr] the density :meth:`sample` draws the unit ``directions`` (N, 3) with (by
+        brightness alone, or with ``guide`` for points on ``sides``): the other strategy's
+        weight in a combination by multiple importance sampling."""
+        row, col = pixel_of(np.asarray(directions, float), self.h, self.w)
+        return self._density(row * self.w + col, row, guide, sides)
 
     @staticmethod
     def guide_of(guide_sums, sides):
@@ -131,11 +144,6 @@ class WorldLight:
         cdf[~has] = np.linspace(1.0 / GUIDE_CELLS, 1.0, GUIDE_CELLS)       # never drawn, kept sorted
         cdf += np.arange(len(g))[:, None]
         return np.where(has, GUIDE_SHARE, 0.0), cdf.ravel(), prob.ravel()
-
-    def pdf(self, directions):
-        """(N,) [1/sr] the density :meth:`sample` draws ``directions`` (N, 3) with by brightness alone."""
-        row, col = pixel_of(np.asarray(directions, float), self.h, self.w)
-        return self.p[row * self.w + col] / self.omega[row]
 
     def irradiance(self, points, normals, u, guide_sums=None, sides=None):
         """(N, 3) [W/m^2] estimate of the direct irradiance from the world at ``points``
