@@ -93,9 +93,12 @@ def test_mesh_light_pdf_matches_its_sampler():
         assert lit.mean() > 0.9 and np.allclose(got, expected, rtol=1e-6), height
 
 
-def pass_values(roughness, mis, passes, seed):
-    """Per-pass pixel estimates (passes, N, 3) of the direct and glossy part, no iteration."""
-    r = pipeline.make_renderer(lamp_over_plane(roughness), RenderSettings(seed=seed, glossy_mis=mis))
+def pass_values(scene, mis, passes, seed):
+    """Per-pass pixel estimates (passes, N, 3) of the direct and glossy part of ``scene``, no
+    iteration; ``mis``: ``glossy_mis``."""
+    r = pipeline.make_renderer(scene, RenderSettings(seed=seed, glossy_mis=mis))
+    if scene.world is not None and scene.world.emits:
+        assert (r.glossy_paths.world_light is not None) == mis         # world samples only with MIS
     out = []
     for _ in range(passes):
         before = r.pass_sum + r.gather_sum
@@ -108,8 +111,8 @@ def pass_values(roughness, mis, passes, seed):
 def highlight_batches(roughness, passes=320, batches=20):
     """Per-pass sums over the highlight (the brightest 10% of pixels) with and without MIS,
     and their batch means (batches,) each."""
-    with_mis = pass_values(roughness, True, passes, seed=5).sum(axis=2)
-    without = pass_values(roughness, False, passes, seed=6).sum(axis=2)
+    with_mis = pass_values(lamp_over_plane(roughness), True, passes, seed=5).sum(axis=2)
+    without = pass_values(lamp_over_plane(roughness), False, passes, seed=6).sum(axis=2)
     mean = 0.5 * (with_mis.mean(axis=0) + without.mean(axis=0))
     hi = np.nonzero(mean > np.percentile(mean, 90))[0]
     assert len(hi) > 20
@@ -150,20 +153,6 @@ def plane_under_a_bright_sky_patch(roughness=0.6):
     return build_scene(v, [[0, 1, 2], [0, 2, 3]], [0, 0], mats, camera=cam, world=World(img), triangle_patch=[0, 0])
 
 
-def world_pass_values(mis, passes, seed):
-    """Per-pass pixel estimates (passes, N, 3) of the plane under the sky patch."""
-    r = pipeline.make_renderer(pipeline.prepare(plane_under_a_bright_sky_patch(), patches=1),
-                               RenderSettings(seed=seed, glossy_mis=mis))
-    assert (r.glossy_paths.world_light is not None) == mis
-    out = []
-    for _ in range(passes):
-        before = r.pass_sum + r.gather_sum
-        r.image_pass()
-        out.append(r.pass_sum + r.gather_sum - before)
-    r.tracer.close()
-    return np.array(out).sum(axis=2)
-
-
 def test_world_samples_share_the_sky_with_the_glossy_lobe():
     """A rough GGX plane (0.6) reflecting a small bright patch of sky: with world samples and
     the lobe's rays combined by MIS the image has the mean of the lobe's rays alone (within 4.5
@@ -171,7 +160,8 @@ def test_world_samples_share_the_sky_with_the_glossy_lobe():
     of its per-pass variance where the patch is reflected (the lobe's rays find the patch
     rarely)."""
     passes, batches = 320, 20
-    y_mis, y_lobe = world_pass_values(True, passes, seed=5), world_pass_values(False, passes, seed=6)
+    y_mis, y_lobe = (pass_values(pipeline.prepare(plane_under_a_bright_sky_patch(), patches=1), mis, passes,
+                                 seed).sum(axis=2) for mis, seed in ((True, 5), (False, 6)))
     mean = 0.5 * (y_mis.mean(axis=0) + y_lobe.mean(axis=0))
     hi = np.nonzero(mean > np.percentile(mean, 75))[0]
     b_mis, b_lobe = (v[:, hi].reshape(batches, passes // batches, -1).mean(axis=1).sum(axis=1) for v in (y_mis, y_lobe))

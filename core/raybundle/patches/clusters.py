@@ -274,19 +274,27 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
 def _sides_apart(ids, part, row, plane, behind):
     """Cluster ids (S,) with each cluster that holds pieces on both sides of a pierced plane
     split by side (:func:`~raybundle.patches.contacts.pierced_parts`: the ``part`` (S,) of each
-    triangle; per tagged corner its triangle ``row``, ``plane`` and side ``behind``).  A
-    triangle's side of its cluster's plane is that of its part (a part never crosses the cut);
-    triangles of no tagged part, or of a part that does not reach the plane, form a third group."""
-    trio = np.unique(np.stack([ids[row], plane, behind], axis=1), axis=0)
-    pair, n_sides = np.unique(trio[:, :2], axis=0, return_counts=True)
-    conflict = pair[n_sides > 1]
+    triangle; per tagged corner its triangle ``row``, ``plane`` and side ``behind``), by the
+    plane most of its tagged corners lie on (a cluster of a shelf through a wall, under a panel
+    that stands across the wall on it, by the wall's).  A triangle's side of that plane is
+    that of its part (a part never crosses the cut); triangles of no tagged part, or of a part
+    that does not reach the plane, form a third group.  (Splitting by every such plane at once
+    made 25% more patches in the dining room of the interior bench, 45% in the living room.)"""
+    pair, count = np.unique(np.stack([ids[row], plane], axis=1), axis=0, return_counts=True)
+    sides = np.unique(np.stack([ids[row], plane, behind], axis=1), axis=0)[:, :2]
+    both = np.unique(sides, axis=0, return_counts=True)
+    conflict = both[0][both[1] > 1]
     if len(conflict) == 0:
         return ids
-    # one plane per cluster (the first), and each tagged part's side of it
-    c_ids, first = np.unique(conflict[:, 0], return_index=True)
-    c_plane = dict(zip(c_ids.tolist(), conflict[first, 1].tolist()))
+    # per conflict cluster its plane with the most tagged corners
+    span = int(plane.max()) + 1
+    at = np.isin(pair[:, 0] * span + pair[:, 1], conflict[:, 0] * span + conflict[:, 1])
+    pair, count = pair[at], count[at]
+    order = np.lexsort((-count, pair[:, 0]))
+    first = order[np.r_[True, pair[order[1:], 0] != pair[order[:-1], 0]]]
+    c_plane = dict(zip(pair[first, 0].tolist(), pair[first, 1].tolist()))
     in_conflict = np.zeros(int(ids.max()) + 1, bool)
-    in_conflict[c_ids] = True
+    in_conflict[pair[first, 0]] = True
     split = np.flatnonzero(in_conflict[ids])
     side_of = {}
     for key in zip(part[row].tolist(), plane.tolist(), behind.tolist()):

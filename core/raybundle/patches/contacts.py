@@ -638,7 +638,8 @@ def pierced_parts(scene):
     el, eh = lo[check], hi[check]
     t, tn = pierce.ravel(), pierce[:, [1, 2, 0]].ravel()
     agree = np.ones(len(lo), bool)
-    agree[check] = np.where(a[el] == a[eh], (t[el] == t[eh]) & (tn[el] == tn[eh]), (t[el] == tn[eh]) & (tn[el] == t[eh]))
+    agree[check] = np.where(a[el] == a[eh], (t[el] == t[eh]) & (tn[el] == tn[eh]),      # the same way round
+                            (t[el] == tn[eh]) & (tn[el] == t[eh]))
     del a, b
     part = connected_components(len(scene.triangles), np.stack([lo[agree] // 3, hi[agree] // 3], axis=1))
     cut = np.zeros(int(part.max(initial=-1)) + 1, bool)
@@ -656,13 +657,15 @@ def cut_where_pierced(scene, own, other):
     triangle and round, vectorised; :func:`_cut_once`).  Triangles with a corner within
     ``1e-6`` of the scene radius of a plane are left whole by it."""
     own, other = np.asarray(own, np.int64), np.asarray(other, np.int64)
+    if len(own) == 0:
+        return scene, np.arange(len(scene.triangles))
     _, r = scene.bounding_sphere
     eps = 1e-6 * max(r, 1e-12)
     n = scene.triangle_normal[other]
     p0 = scene.triangle_corners[other, 0]
     off = np.einsum("ij,ij->i", n, p0)
     q = np.round(n * 1e4).astype(np.int64)
-    plane = group_ids([q[:, 0], q[:, 1], q[:, 2], np.round(off / eps).astype(np.int64)]) if len(own) else own
+    plane = group_ids([q[:, 0], q[:, 1], q[:, 2], np.round(off / eps).astype(np.int64)])
     _, once = np.unique(np.stack([own, plane], axis=1), axis=0, return_index=True)        # a pair per plane
     own, plane, n, p0 = own[once], plane[once], n[once], p0[once]
     rows = np.arange(len(scene.triangles))
