@@ -24,14 +24,14 @@ class GlossyEyePaths:
     settings and random numbers (shared with the renderer, whose draws they interleave);
     ``surface_values`` reads side values at hit points; ``rays`` counts the rays traced."""
 
-    def __init__(self, scene, solver, direct, tracer, settings, rng, surface_values):
+    def __init__(self, scene, solver, direct, tracer, settings, rng, surface_values, world_light=None):
         self.scene, self.solver, self.direct, self.tracer = scene, solver, direct, tracer
         self.settings, self.rng, self.surface_values = settings, rng, surface_values
         # light samples and the lobe's own ray share the mesh lights (MIS)
         self.light_mis = bool(settings.glossy_gather and settings.glossy_mis)
-        # ... and so do world samples and the lobe's rays that leave the scene
-        w = scene.world
-        self.world_light = WorldLight(w, tracer) if self.light_mis and w.emits and not w.is_constant else None
+        # ... and so do world samples (``world_light``, a world that changes with direction) and
+        # the lobe's rays that leave the scene
+        self.world_light = world_light if self.light_mis else None
         self.rays = 0
 
     def gather(self, g, idx, u):

@@ -214,14 +214,19 @@ class Renderer(ProgressiveImage):
         self.glossy_material = mats.is_glossy
         py, px = np.divmod(np.arange(n), camera.width)
         self._pixel = np.stack([px, py], axis=1).astype(float)
+        # the world as a light to sample, where it changes with direction (the glossy eye paths'
+        # MIS, and the world samples at visible points below)
+        world = scene.world
+        sky = WorldLight(world, self.tracer) if world.emits and not world.is_constant else None
         # the glossy lobe the eye sees, by lobe-sampled eye paths (glossy_gather)
-        self.glossy_paths = GlossyEyePaths(scene, solver, direct, self.tracer, settings, self.rng, self.surface_values)
+        self.glossy_paths = GlossyEyePaths(scene, solver, direct, self.tracer, settings, self.rng, self.surface_values,
+                                           world_light=sky)
         # the final gather next to concave edges and contacts
         self.edge_gather = EdgeGather(scene, self.tracer, settings.seed)
         #: the world's direct light on the diffuse lobe, sampled at the visible points of every
         #: pass (the patches then give the rest: the solver's ``image_incoming``)
         self.world_samples = self.automatic_world_samples(settings.world_samples, direct)
-        self.world_light = (WorldLight(scene.world, self.tracer)
+        self.world_light = ((sky if sky is not None else WorldLight(world, self.tracer))
                             if self.world_samples > 0 and hasattr(solver, "separate_world")
                             and solver.separate_world() else None)
         self.gather_rays_used = 0                         # rays per pixel of the last resolve's gather

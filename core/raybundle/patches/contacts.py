@@ -33,7 +33,7 @@ import math
 import numpy as np
 
 from ..tracing.sampling import orthonormal_basis
-from ..util.arrays import connected_components, group_ids, unique_rows
+from ..util.arrays import connected_components, group_ids, shared_edges, unique_rows
 
 
 def _plane_groups(scene, faces):
@@ -558,8 +558,7 @@ def piercing(tracer, scene, faces):
     :data:`PIERCE_HITS` hits).  Of a post through the middle of a floor triangle, the post's
     triangles are found."""
     faces = np.asarray(faces, np.int64)
-    _, r = scene.bounding_sphere
-    vid = unique_rows(np.round(scene.vertices / max(r * 1e-7, 1e-12)).astype(np.int64))[1]
+    vid = _welded(scene)
     eps = tracer.eps
     own, other = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
     step = max(1, PROBE_CHUNK // 3)
@@ -601,6 +600,12 @@ def piercing(tracer, scene, faces):
     return pairs[:, 0], pairs[:, 1]
 
 
+def _welded(scene):
+    """(V,) int: vertex ids welded where positions agree to 1e-7 of the scene's radius."""
+    _, r = scene.bounding_sphere
+    return unique_rows(np.round(scene.vertices / max(r * 1e-7, 1e-12)).astype(np.int64))[1]
+
+
 def pierce_tag(plane, behind):
     """The weld tag of a corner on the cut along pierced ``plane`` (int) on the piece in front
     of it or ``behind`` it: negative, apart from :func:`split_at_contacts`'s positive ones."""
@@ -620,17 +625,10 @@ def pierced_parts(scene):
     tag = scene.triangle_corner_tag
     if tag is None or not (tag < 0).any():
         return None
-    _, r = scene.bounding_sphere
-    vid = unique_rows(np.round(scene.vertices / max(r * 1e-7, 1e-12)).astype(np.int64))[1].astype(np.int32)
-    a = vid[scene.triangles].ravel()                          # edge 3 t + k runs from corner k to k + 1
-    b = a.reshape(-1, 3)[:, [1, 2, 0]].ravel()
-    key = np.minimum(a, b).astype(np.int64) * (int(vid.max(initial=0)) + 1) + np.maximum(a, b)
-    order = np.argsort(key, kind="stable")
-    key = key[order]
-    same = np.flatnonzero(key[1:] == key[:-1])
-    del key
-    lo, hi = order[same], order[same + 1]                     # edges of two triangles at one place
-    del order, same
+    vid = _welded(scene).astype(np.int32)
+    corners = vid[scene.triangles]
+    lo, hi = shared_edges(corners)                            # edges of two triangles at one place
+    a = corners.reshape(-1)
     # the two triangles' pierce tags at each end of the shared edge (their own corners at that
     # position; a contact's tags, and a contact's share of a merged tag, left out: :func:`_merged`)
     pierce = np.where(tag < 0, -(-tag % (2 * _MERGED_STEP)), 0)
@@ -640,7 +638,7 @@ def pierced_parts(scene):
     agree = np.ones(len(lo), bool)
     agree[check] = np.where(a[el] == a[eh], (t[el] == t[eh]) & (tn[el] == tn[eh]),      # the same way round
                             (t[el] == tn[eh]) & (tn[el] == t[eh]))
-    del a, b
+    del a, corners
     part = connected_components(len(scene.triangles), np.stack([lo[agree] // 3, hi[agree] // 3], axis=1))
     cut = np.zeros(int(part.max(initial=-1)) + 1, bool)
     cut[part[(tag < 0).any(axis=1)]] = True

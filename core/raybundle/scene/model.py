@@ -30,7 +30,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..util.arrays import connected_components, group_ids, unique_rows
+from ..util.arrays import connected_components, group_ids, shared_edges, unique_rows
 from .camera import Camera
 from .materials import MaterialTable
 from .world import World
@@ -336,20 +336,8 @@ class PatchScene:
         _, normal = unique_rows(np.round(self.tside_normal * 1e3).astype(np.int64))
         tag = self.triangle_corner_tag[self.tside_triangle] if self.triangle_corner_tag is not None else None
         cls = group_ids([pos.ravel(), np.repeat(normal, 3)] + ([] if tag is None else [tag.ravel()])).reshape(-1, 3)
-        # tsides sharing an edge: its two end positions (sorted) as one key per tside edge
-        # (flat index 3 t + k: tside t's edge from corner k to corner k + 1); consecutive
-        # entries of one key are neighbours across it
-        n_pos = int(position.max(initial=0)) + 1
-        key = np.empty(pos.size, np.int64)
-        for k in range(3):
-            a, b = pos[:, k], pos[:, (k + 1) % 3]
-            key[k::3] = np.minimum(a, b) * n_pos + np.maximum(a, b)
-        order = np.argsort(key, kind="stable")
-        key = key[order]
-        same = np.flatnonzero(key[1:] == key[:-1])
-        del key
-        e1, e2 = order[same], order[same + 1]
-        del order, same
+        # tsides sharing an edge (flat index 3 t + k: tside t's edge from corner k to corner k + 1)
+        e1, e2 = shared_edges(pos)
         # tsides of one normal are welded already (same class at each shared position)
         turn = normal[e1 // 3] != normal[e2 // 3]
         e1, e2 = e1[turn], e2[turn]

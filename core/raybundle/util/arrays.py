@@ -1,4 +1,4 @@
-"""Array helpers shared by the layers: unique rows, group ids, connected components."""
+"""Array helpers shared by the layers: unique rows, group ids, shared edges, connected components."""
 from __future__ import annotations
 
 import numpy as np
@@ -54,6 +54,21 @@ def _mixed_radix(columns):
     for c, s in zip(cols, spans):
         key = key * s + c
     return key
+
+
+def shared_edges(corners):
+    """``(e1, e2)`` flat edge ids of pairs of triangles meeting along an edge: ``corners`` (N, 3)
+    int are the triangles' vertex ids (welded), and edge ``3 t + k`` runs from corner k of
+    triangle t to corner k + 1.  Edges at one place (the same two ids, either way round) are
+    sorted together, stably, and each consecutive pair of them is returned (three triangles on
+    one edge: two pairs)."""
+    a = np.asarray(corners).reshape(-1)
+    b = np.asarray(corners)[:, [1, 2, 0]].reshape(-1)
+    key = np.minimum(a, b).astype(np.int64) * (int(a.max(initial=0)) + 1) + np.maximum(a, b)
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    same = np.flatnonzero(key[1:] == key[:-1])
+    return order[same], order[same + 1]
 
 
 def connected_components(n, links):
