@@ -325,3 +325,40 @@ def test_a_large_area_light_close_by_is_sampled_by_solid_angle(height):
     se = est.std(axis=0) / np.sqrt(n)
     assert np.all(np.abs(est.mean(axis=0) - exact) < 4.5 * se), (est.mean(axis=0), exact, se)
     assert est[:, 0].std() / exact[0] < 1.2, est[:, 0].std() / exact[0]
+
+
+def test_an_area_lamps_selection_estimate_bounds_its_unoccluded_irradiance():
+    """Lamp selection's estimate for a rectangular area lamp is an upper bound of its exact
+    unoccluded irradiance (:func:`light_polygon_irradiance`): 200 random rectangles, 2,000
+    random points and normals each (measured: at most 0.99993 of it), and within 10% of it
+    5 to 10 sizes away facing the lamp.  A point whose tangent plane cuts the lamp through its
+    centre is lit by the half above; the guess at the centre gave it 0, so the lamp was taken
+    there with probability 1/16 and weighted 16: fireflies on the hall's stair block."""
+    from raybundle.lights.polygon import light_polygon_irradiance
+    from raybundle.lights.sources import ShapeLight
+
+    rng = np.random.default_rng(1)
+    worst = 0.0
+    for _ in range(200):
+        u, v = rng.normal(size=3), rng.normal(size=3)
+        v = np.cross(u, v)
+        u, v = u * rng.uniform(0.05, 3) / np.linalg.norm(u), v * rng.uniform(0.05, 3) / np.linalg.norm(v)
+        n = np.cross(u, v) / np.linalg.norm(np.cross(u, v))
+        lamp = ShapeLight(rng.normal(size=3), u, v, n, False, 4 * np.linalg.norm(u) * np.linalg.norm(v),
+                          np.array([1.0, 2.0, 3.0]))
+        x = lamp.center + rng.normal(size=(2000, 3)) * rng.uniform(0.1, 5)
+        nx = rng.normal(size=(2000, 3))
+        nx /= np.linalg.norm(nx, axis=1)[:, None]
+        exact, ok = light_polygon_irradiance(lamp, x, nx)
+        bound = lamp.selection_estimate(x, nx)
+        lit = ok & (exact > 1e-12)
+        worst = max(worst, float(np.max(exact[lit] * 2.0 / bound[lit])))
+        far = lamp.center + n * rng.uniform(5, 10) * (np.linalg.norm(u) + np.linalg.norm(v))
+        e_far, _ = light_polygon_irradiance(lamp, far[None], -n[None])
+        assert lamp.selection_estimate(far[None], -n[None])[0] < 1.1 * 2.0 * e_far[0]
+    assert worst <= 1.0 + 1e-9, worst
+    lamp = ShapeLight(np.zeros(3), np.array([0.5, 0, 0]), np.array([0, 0.5, 0]), np.array([0, 0, -1.0]), False, 1.0,
+                      np.ones(3))
+    x, nx = np.array([[0.0, 0.0, -1.0]]), np.array([[1.0, 0.0, 0.0]])
+    exact, _ = light_polygon_irradiance(lamp, x, nx)
+    assert exact[0] > 0.01 and lamp.selection_estimate(x, nx)[0] >= exact[0]

@@ -198,11 +198,14 @@ class EdgeGather:
     #: the fewest automatic gather rays per pixel (more where the bias they would remove is
     #: small against their noise: :meth:`automatic_rays`)
     MIN_GATHER_RAYS = 32
-    #: how many times ``v / b^2`` rays the gather needs to pay (:meth:`automatic_rays`): 16 rays
-    #: per point miss the rare bright ones (a ray landing next to a lamp), so ``v`` comes out low;
-    #: calibrated on ``cornell`` and the interior bench with ``gather_share`` 0.25 (README, 'final
-    #: gather'): 2 let a gather of twice ``v / b^2`` run on ``cornell`` at 10 s, where it did harm
-    NOISE_MARGIN = 3.0
+    #: how many times ``v / b^2`` rays the gather needs to pay (:meth:`automatic_rays`).  The
+    #: gather's rays are stratified, so its noise falls faster than ``v / n``; 16 rays per point
+    #: miss the rare bright ones, so ``v`` comes out low: the two about cancel.  ``cornell``
+    #: (unbiased patches) measures ``v / b^2`` 120 to inf, the interior bench's hall 23-38, where
+    #: 48 rays take its error at 60 s from 5.6% to 4.1% (README, 'final gather')
+    NOISE_MARGIN = 1.0
+    #: the probe: up to this many points on flagged sides, this many gather rays each
+    PROBE_POINTS, PROBE_RAYS = 512, 16
 
     def __init__(self, scene, tracer, seed):
         self.scene, self.tracer, self.seed = scene, tracer, seed
@@ -234,20 +237,22 @@ class EdgeGather:
 
     def automatic_rays(self, final, g, k, gather_seconds, patch_values=None):
         """Gather rays per sub-pixel sample that ``gather_seconds`` buy for ``k`` sub-pixel
-        samples, or 0 where the gather would not pay.  Measured on up to 512 of ``g``'s points
-        on flagged sides, one gather ray at a time, 16 each: the cost per ray (and the count
+        samples, or 0 where the gather would not pay.  Measured on up to :data:`PROBE_POINTS`
+        (512) of ``g``'s points on flagged sides, one gather ray at a time, :data:`PROBE_RAYS`
+        (16) each: the cost per ray (and the count
         of such points gives the rays per pixel), each point's variance per ray ``v`` and, from
         ``patch_values(tsides, bary)`` (N, 3) (what the image reads there without the gather),
-        its bias ``b^2 = (mean - patch value)^2 - v / 16``, in luminance.  With ``n`` rays the
-        gather's error is about ``v / n`` against ``b^2`` without it (averaged over the points):
-        it runs only if ``n`` is above :data:`NOISE_MARGIN` ``mean v / mean b^2`` (and
+        its bias ``b^2 = (mean - patch value)^2 - v / 16``, in luminance, averaged over the
+        points before it is clipped at 0 (clipped point by point, the noise of the 16-ray mean
+        came out as bias).  With ``n`` rays the gather's error is about ``v / n`` against ``b^2``
+        without it: it runs only if ``n`` is above :data:`NOISE_MARGIN` ``mean v / mean b^2`` (and
         :data:`MIN_GATHER_RAYS`).  A box whose patches follow the light well needs a hundred
         rays and more; a real room, where patches average thin detail next to windows, pays at
         a few dozen."""
         f = self.flagged(g)
         if len(f) == 0:
             return 0
-        probe, probe_rays = f[:: max(1, len(f) // 512)], 16
+        probe, probe_rays = f[:: max(1, len(f) // self.PROBE_POINTS)], self.PROBE_RAYS
         rep = np.repeat(probe, probe_rays)
         ts, bary = g.tside[rep], g.bary[rep]
         t0 = time.perf_counter()
@@ -260,7 +265,7 @@ class EdgeGather:
         if patch_values is not None:
             var = one.var(axis=1, ddof=1)
             patch = patch_values(g.tside[probe], g.bary[probe]).sum(axis=1)
-            bias2 = np.maximum((one.mean(axis=1) - patch) ** 2 - var / probe_rays, 0.0).mean()
+            bias2 = max(((one.mean(axis=1) - patch) ** 2 - var / probe_rays).mean(), 0.0)
             needed = max(needed, self.NOISE_MARGIN * var.mean() / bias2 if bias2 > 0 else np.inf)
         self.last_needed = needed
         if per_pixel < needed:

@@ -179,13 +179,11 @@ class Renderer(ProgressiveImage):
         self.settings = settings
         self.rng = np.random.default_rng([settings.seed, 1])
         self._resolve_rng = np.random.default_rng([settings.seed, 2])
-        self.n_light_samples = direct.samples_per_pass(settings.light_samples)
-        # per pass and pixel: the glossy lobe (2) and the first light samples (3 each); further
-        # light samples (many lights) come from the PRNG, keeping memory bounded.  The sub-pixel
-        # position is not among them: it continues the pixel's own R_2 sequence (image_pass)
-        self.kronecker_light_samples = min(self.n_light_samples, 4)
-        self.pass_sampler = ShiftedKronecker(camera.width * camera.height, 2 + 3 * self.kronecker_light_samples,
-                                             self.rng)
+        # per pass and pixel: the glossy lobe's uniforms.  The sub-pixel position continues the
+        # pixel's own R_2 sequence (image_pass), the light samples one R_3 sequence per pixel and
+        # light (_shade), from this shift per pixel
+        self.pass_sampler = ShiftedKronecker(camera.width * camera.height, 2, self.rng)
+        self._light_shift = np.random.default_rng([settings.seed, 9]).random((camera.width * camera.height, 3))
         n = camera.width * camera.height
         self.pass_sum = np.zeros((n, 3))
         self.pass_sq_sum = np.zeros(n)                    # per-pass luminance squared (for the variance)
@@ -347,15 +345,14 @@ class Renderer(ProgressiveImage):
         extra_pix = np.union1d(np.nonzero(lo < hi)[0], self._noisy_pixels())
         self._add_emission(np.arange(n), emitted)
         self._restart_solver_parts()
-        value, gathered, gl = self._shade(g, u[:, :2], u[:, 2:], np.arange(n))
+        value, gathered, gl = self._shade(g, u, None, np.arange(n))
         k = self.settings.emission_edge_samples
         if len(extra_pix) and k > 0:
             pix, jitter = self._subpixel_sequence(extra_pix, k)
             gx = self.trace_gbuffer(jitter, pixels=pix)
             le, _ = self.seen_radiance(gx)
             self._add_emission(pix, le)
-            extra, extra_g, _ = self._shade(gx, self.rng.random((len(pix), 2)),
-                                            self.rng.random((len(pix), 3 * self.kronecker_light_samples)), pix)
+            extra, extra_g, _ = self._shade(gx, self.rng.random((len(pix), 2)), self.rng, pix)
             value[extra_pix] = (value[extra_pix] + extra.reshape(len(extra_pix), k, 3).sum(axis=1)) / (k + 1)
             gathered[extra_pix] = (gathered[extra_pix] + extra_g.reshape(len(extra_pix), k, 3).sum(axis=1)) / (k + 1)
         self.pass_sum += value
@@ -393,8 +390,14 @@ class Renderer(ProgressiveImage):
     def _shade(self, g, u_lobe, u_light, pixels):
         """Per-pass radiance (N, 3) of the samples in G-buffer ``g`` taken in ``pixels``
         (N,): direct light of the first-shot lights and, with ``glossy_gather``, the
-        glossy lobe; and the pixels left for :meth:`accumulate_glossy`.  ``u_lobe`` (N, 2),
-        ``u_light`` (N, 3K) uniforms.
+        glossy lobe; and the pixels left for :meth:`accumulate_glossy`.  ``u_lobe`` (N, 2)
+        uniforms; ``u_light`` a Generator for the light samples, or None for a pass's own samples
+        (one per pixel): each pixel's light samples then continue, light by light, one randomly
+        shifted R_3 sequence over the passes, the penumbra samples of pass p taking indices
+        p c .. p c + c - 1 (c = ``penumbra_samples``), the others the first of those.  A penumbra's
+        shadow rays thus stay stratified over the light across passes (the interior bench's
+        hall, lit mostly by a 33 m^2 panel through its openings, at fixed work: direct light's
+        noise per image 3.27% -> 2.92%).
 
         The diffuse lobe of polygonal lights takes their exact unoccluded irradiance
         as a control variate (:meth:`~raybundle.lights.direct.DirectLighting.reflected_radiance`
@@ -420,19 +423,23 @@ class Renderer(ProgressiveImage):
             flags = self.shadow_flags[pixels[hf]]
             start = self.passes == 0          # no earlier samples: every point is treated as a penumbra
             # per point, the lights whose earlier samples were both seen and blocked
-            pen_lights = np.full(len(hf), ALL_LIGHTS) if start else flags[:, 0] & flags[:, 1]
+            pen_lights = np.full(len(hf), ALL_LIGHTS) if start else self._penumbrae()[pixels[hf]]
             if mis is not None:       # the lobe's MIS weight assumes light_samples light samples
                 pen_lights[mis] = 0
             # penumbra_samples / light_samples sets of samples for the lights in a point's
             # penumbra, on one randomly shifted Kronecker sequence per point
             n_s = int(self.settings.light_samples)
             f = flags.copy()
+            more = -(-int(self.settings.penumbra_samples) // n_s)
+            if u_light is None:       # the pass's own: each pixel's sequences continue over the passes
+                u, sequence = None, (self._light_shift[pixels[hf]], np.full(len(hf), self.passes * more * n_s))
+            else:
+                u, sequence = u_light, (self.rng.random((len(hf), 3)), None)
             value = self.direct.reflected_radiance(
-                g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], self._light_uniforms(u_light[hf]), n_s,
+                g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], u, n_s,
                 mis=mis, diffuse_scale=self.albedo_scale(g.triangle[hf], g.point[hf]), shadow_flags=f,
                 analytic=np.full(len(hf), ALL_LIGHTS) if start else flags[:, 0],
-                penumbra=(pen_lights, -(-int(self.settings.penumbra_samples) // n_s), self.rng.random((len(hf), 3))),
-                select=self.rng.random(len(hf)))
+                penumbra=(pen_lights, more) + sequence, select=self.rng.random(len(hf)))
             out[hf] += value
             np.bitwise_or.at(self.shadow_flags, pixels[hf], f)
             self.image_rays += self.direct.rays - before
@@ -454,6 +461,22 @@ class Renderer(ProgressiveImage):
             self.image_rays += self.glossy_paths.rays - before
             gl = gl[:0]
         return out, gathered, gl
+
+    def _penumbrae(self):
+        """(pixels,) uint64: per pixel, the lights whose earlier shadow rays there or in one of
+        its four neighbours both reached and missed the light.  A light that a small blocker
+        hides from 1% of a pixel's view is found blocked by one pass in a hundred, whose
+        estimate then drops to nothing: the neighbours' flags find such pixels sooner (the
+        hall's stair block speckled; fixed work, direct light's noise per image 2.77% -> 2.40%,
+        with 9 passes in place of 12)."""
+        f = self.shadow_flags
+        pen = (f[:, 0] & f[:, 1]).reshape(self.camera.height, self.camera.width)
+        out = pen.copy()
+        out[1:] |= pen[:-1]
+        out[:-1] |= pen[1:]
+        out[:, 1:] |= pen[:, :-1]
+        out[:, :-1] |= pen[:, 1:]
+        return out.ravel()
 
     #: the image passes' share of the traced rays when ``image_ray_share`` is 0 (:meth:`step`)
     DIFFUSE_IMAGE_SHARE = 0.2
@@ -486,12 +509,6 @@ class Renderer(ProgressiveImage):
         if len(idx) > cap:
             idx = idx[np.argsort(se2[idx])[-cap:]]
         return idx
-
-    def _light_uniforms(self, kron):
-        """(N, K, 3) light-sample uniforms: Kronecker for the first ones, PRNG for the rest."""
-        u = kron.reshape(len(kron), kron.shape[1] // 3, 3)
-        extra = self.n_light_samples - u.shape[1]
-        return np.concatenate([u, self.rng.random((len(kron), extra, 3))], axis=1) if extra > 0 else u
 
     def _add_emission(self, pixels, le):
         """Add emission samples ``le`` (N, 3) seen in ``pixels`` (N,) (repeats allowed)."""

@@ -23,6 +23,9 @@ from .sources import MeshLight, PointLight, ShapeLight, SunLight, small_emitters
 
 #: the golden ratio's fraction: lamp l's selection uniform is (u + l phi) mod 1
 _GOLDEN = 0.6180339887498949
+#: each light's offset of a point's Kronecker shift (reflected_radiance's ``penumbra``): light l
+#: adds l times this, mod 1 (the R_3 generators of the next dimensions)
+_LIGHT_OFFSET = kronecker_alpha(6)[3:]
 #: a light mask with every light's bit set (:func:`light_bits`)
 ALL_LIGHTS = np.uint64(0xFFFF_FFFF_FFFF_FFFF)
 
@@ -140,7 +143,8 @@ class DirectLighting:
         """Per light, the probability (one value per point in ``reach[l]``) that it is taken at
         the points: ``clip(c_l / (SELECT_SHARE C), SELECT_MIN, 1)``, ``c_l`` the lamp's
         unoccluded irradiance at the point (luminance: the exact ``Le I(x)`` where ``exact``
-        holds it, else one unshadowed sample at the middle of the lamp's sample space) and
+        holds it, else :meth:`~raybundle.lights.sources.ShapeLight.selection_estimate`, an upper
+        bound for area lamps, a guess for the others) and
         ``C`` the sum over the lamps; None (every lamp always taken) for a single lamp or
         more than :data:`SELECT_MAX_LIGHTS`.  Unbiased whatever the estimates: each lamp's
         samples are weighted 1 / probability."""
@@ -156,10 +160,7 @@ class DirectLighting:
                 base = np.setdiff1d(base, here[ok], assume_unique=True)
             if len(base) == 0:
                 continue
-            y, e = light.estimate(points[base])
-            w = y - points[base]
-            cos_x = np.einsum("ij,ij->i", normals[base], w) / np.maximum(np.linalg.norm(w, axis=1), 1e-300)
-            c[base, li] = e.mean(axis=1) * np.maximum(cos_x, 0.0)
+            c[base, li] = light.selection_estimate(points[base], normals[base])
         total = c.sum(axis=1, keepdims=True)
         chance = np.clip(c / np.maximum(self.SELECT_SHARE * total, 1e-300), self.SELECT_MIN, 1.0)
         return [chance[reach[li], li] for li in range(len(lights))]
@@ -174,7 +175,8 @@ class DirectLighting:
 
         Unbiased estimate with ``samples_per_light`` shadow rays per area light
         (one per point light or sun): ``sum_l mean_s e_l cos_x f(w_travel, w_out) V``.
-        ``u``: uniforms (N, K, 3) with K = :meth:`samples_per_pass`, or a Generator.
+        ``u``: uniforms (N, K, 3) with K = :meth:`samples_per_pass`, a Generator, or None
+        where ``penumbra`` gives every sample's sequence (its ``first``).
         ``mis`` (N,) bool: points whose glossy lobe also gets one lobe-sampled ray that
         counts the mesh lights it meets (:meth:`mis_weight`); the glossy part of their
         mesh-light samples is weighted by ``w_l = (n p_l)^2 / ((n p_l)^2 + p_g^2)`` (power
@@ -187,11 +189,17 @@ class DirectLighting:
         (:func:`light_bits`).  ``shadow_flags`` (N, 2) uint64, updated in place: in column 0
         the lights a sample reached, in column 1 those a sample facing them found blocked.
 
-        ``penumbra`` ``(mask (N,) uint64, count, shift (N, 3))`` or None: the lights in a
-        point's ``mask`` take ``count`` times as many samples there, on the randomly shifted
-        Kronecker (R_3) sequence ``(shift + j alpha) mod 1`` (j = c K + k for its c-th set
-        of the K = :meth:`samples_per_pass` samples), in place of those of ``u``: the
-        penumbra samples cost rays only for the lights whose shadow edge crosses the point.
+        ``penumbra`` ``(mask (N,) uint64, count, shift (N, 3), first (N,) int or None)`` or
+        None: the lights in a point's ``mask`` take ``count`` times as many samples there, on
+        the randomly shifted Kronecker (R_3) sequence ``(shift + l beta + j alpha) mod 1`` of
+        light ``l`` (``beta`` a fixed irrational offset, so each light has a shift of its own),
+        in place of those of ``u``: the penumbra samples cost rays only for the lights whose
+        shadow edge crosses the point.  Without ``first``, ``j = c n + s`` for the s-th of the
+        light's n = ``samples_per_light`` samples in its c-th set; with ``first`` every light
+        takes every sample from its sequence, from index ``first + c n + s``: a caller that
+        keeps ``shift`` per pixel and advances ``first`` by ``count n`` every pass continues
+        one sequence per pixel and light over the passes, so a penumbra's shadow rays stay
+        stratified over the light across passes, not only within one.
 
         ``select`` (N,) uniforms or None: lamps chosen by their contribution
         (:meth:`_selection`): a lamp whose unoccluded contribution at a point is a small share of
@@ -250,12 +258,14 @@ class DirectLighting:
                 pt, copy = base, None
                 weight = np.broadcast_to(picked / n_s, len(pt))[:, None]
             else:
-                mask, more, shift = penumbra
+                mask, more, shift, first = penumbra
                 on = (mask[base] & bit) != 0
                 reps = np.where(on, int(more), 1)
                 pt = np.repeat(base, reps)
                 copy = np.arange(len(pt)) - np.repeat(np.cumsum(reps) - reps, reps)
-                kron = np.nonzero(np.repeat(on, reps))[0]
+                kron = np.nonzero(np.repeat(on, reps))[0] if first is None else np.arange(len(pt))
+                start = copy[kron] * n_s + (0 if first is None else first[pt[kron]])
+                light_shift = shift[pt[kron]] + li * _LIGHT_OFFSET
                 weight = np.repeat(picked / (n_s * reps), reps)[:, None]
             p, nrm, m, wo = points[pt], normals[pt], mats[pt], w_out[pt]
             scale = None if diffuse_scale is None else diffuse_scale[pt]
@@ -267,11 +277,10 @@ class DirectLighting:
                 taken = np.zeros(n, bool)
                 taken[here[ok]] = True
                 f_d = f_d_all[pt] * taken[pt, None]
-            for _ in range(n_s):
-                uk = u[pt, k]
+            for s in range(n_s):
+                uk = u[pt, k] if u is not None else np.empty((len(pt), 3))
                 if copy is not None and len(kron):
-                    j = copy[kron] * n_k + k
-                    uk[kron] = (shift[pt[kron]] + j[:, None] * alpha) % 1.0
+                    uk[kron] = (light_shift + (start + s)[:, None] * alpha) % 1.0
                 if shadow_flags is None and f_d is None:
                     e, travel, cos_x = self.light_samples_at(p, nrm, light, uk)
                     live = np.any(e > 0, axis=1)

@@ -29,12 +29,16 @@ from ..tracing.sampling import (
 
 
 class _Light:
-    """What every light class shares: :meth:`estimate`."""
+    """What every light class shares: :meth:`selection_estimate`."""
 
-    def estimate(self, points):
-        """One cheap unshadowed sample per point (N, 3), ``(y, e)`` as :meth:`sample`'s,
-        at the middle of the light's sample space: lamp selection's guess of its share."""
-        return self.sample(points, np.full((len(points), 3), 0.5))
+    def selection_estimate(self, points, normals):
+        """Lamp selection's guess (N,) of the light's unoccluded irradiance [W/m^2, mean of
+        RGB] at ``points`` (N, 3) with unit ``normals``: one unshadowed sample at the middle
+        of the light's sample space."""
+        y, e = self.sample(points, np.full((len(points), 3), 0.5))
+        w = y - points
+        cos_x = np.einsum("ij,ij->i", normals, w) / np.maximum(np.linalg.norm(w, axis=1), 1e-300)
+        return e.mean(axis=1) * np.maximum(cos_x, 0.0)
 
 
 @dataclass
@@ -266,10 +270,24 @@ class ShapeLight(_Light):
                 y[near], e[near] = self._sample_solid_angle(points[near], u[near])
         return y, e[:, None] * self.radiance
 
-    def estimate(self, points):
-        """As a point at its centre, by area (cheap, no spherical rectangle)."""
-        y, e = self._by_area(points, np.zeros(len(points)), np.zeros(len(points)))
-        return y, e[:, None] * self.radiance
+    def selection_estimate(self, points, normals):
+        """An upper bound (N,) of the unoccluded irradiance [W/m^2, mean of RGB] (the
+        ellipse's by its rectangle): with ``r`` the distance from the point to the
+        rectangle, ``d`` its height above the light's plane and ``m`` the largest
+        ``n . (corner - x)``, ``cos_x <= m / r`` and ``cos_l = d / |y - x| <= d / r``, so
+        ``E <= Le min(pi, A m d / r^4)``.  A guess at the centre could be far below the
+        truth (a point near the plane of a lamp whose centre is below its horizon, part of
+        it above): picked with probability 1/16 and weighted 16, it made fireflies."""
+        p = points - self.center
+        uu, vv = self.axis_u @ self.axis_u, self.axis_v @ self.axis_v
+        a = np.clip(p @ self.axis_u / uu, -1.0, 1.0)
+        b = np.clip(p @ self.axis_v / vv, -1.0, 1.0)
+        r2 = np.einsum("ij,ij->i", *(2 * [p - a[:, None] * self.axis_u - b[:, None] * self.axis_v]))
+        d = np.maximum(p @ self.normal, 0.0)
+        m = np.maximum(-np.einsum("ij,ij->i", normals, p) + np.abs(normals @ self.axis_u)
+                       + np.abs(normals @ self.axis_v), 0.0)
+        area = 4.0 * np.sqrt(uu * vv)
+        return float(np.mean(self.radiance)) * np.minimum(np.pi, area * m * d / np.maximum(r2 * r2, 1e-300))
 
     def _by_area(self, points, a, b):
         """The point ``center + a axis_u + b axis_v`` (N, 3) and ``cos_l A / r^2`` (N,)."""
