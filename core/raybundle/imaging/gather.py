@@ -199,13 +199,16 @@ class EdgeGather:
     #: small against their noise: :meth:`automatic_rays`)
     MIN_GATHER_RAYS = 32
     #: how many times ``v / b^2`` rays the gather needs to pay (:meth:`automatic_rays`).  The
-    #: gather's rays are stratified, so its noise falls faster than ``v / n``; 16 rays per point
-    #: miss the rare bright ones, so ``v`` comes out low: the two about cancel.  ``cornell``
-    #: (unbiased patches) measures ``v / b^2`` 120 to inf, the interior bench's hall 23-38, where
-    #: 48 rays take its error at 60 s from 5.6% to 4.1% (README, 'final gather')
+    #: gather's rays are stratified, so its noise falls faster than ``v / n``, and a probe's
+    #: rays miss the rare bright ones, so ``v`` comes out low: the two about cancel.  On
+    #: ``cornell`` after 180 iterations (unbiased patches, where a gather of 50-75 rays at 10 s
+    #: did harm) the probe measures ``v / b^2`` 255-685, in the interior bench's dining room
+    #: 44-58 and in its hall at most 32, where the gather takes the error at 60 s from 5.6% to 4%
     NOISE_MARGIN = 1.0
-    #: the probe: up to this many points on flagged sides, this many gather rays each
-    PROBE_POINTS, PROBE_RAYS = 512, 16
+    #: the probe: up to this many points on flagged sides, this many gather rays each (16 rays
+    #: left the estimate of ``b^2``, a difference of two near numbers, so noisy that ``v / b^2``
+    #: spread from 48 to inf on ``cornell`` and from 35 to 161 in the dining room)
+    PROBE_POINTS, PROBE_RAYS = 512, 64
 
     def __init__(self, scene, tracer, seed):
         self.scene, self.tracer, self.seed = scene, tracer, seed
@@ -239,12 +242,12 @@ class EdgeGather:
         """Gather rays per sub-pixel sample that ``gather_seconds`` buy for ``k`` sub-pixel
         samples, or 0 where the gather would not pay.  Measured on up to :data:`PROBE_POINTS`
         (512) of ``g``'s points on flagged sides, one gather ray at a time, :data:`PROBE_RAYS`
-        (16) each: the cost per ray (and the count
+        (64) each: the cost per ray (and the count
         of such points gives the rays per pixel), each point's variance per ray ``v`` and, from
         ``patch_values(tsides, bary)`` (N, 3) (what the image reads there without the gather),
-        its bias ``b^2 = (mean - patch value)^2 - v / 16``, in luminance, averaged over the
-        points before it is clipped at 0 (clipped point by point, the noise of the 16-ray mean
-        came out as bias).  With ``n`` rays the gather's error is about ``v / n`` against ``b^2``
+        its bias ``b^2 = (mean - patch value)^2 - v / R`` (R the probe's rays), in luminance,
+        averaged over the points before it is clipped at 0 (clipped point by point, the noise
+        of the R-ray mean came out as bias).  With ``n`` rays the gather's error is about ``v / n`` against ``b^2``
         without it: it runs only if ``n`` is above :data:`NOISE_MARGIN` ``mean v / mean b^2`` (and
         :data:`MIN_GATHER_RAYS`).  A box whose patches follow the light well needs a hundred
         rays and more; a real room, where patches average thin detail next to windows, pays at
