@@ -427,7 +427,7 @@ class Renderer(ProgressiveImage):
             if mis is not None:       # the lobe's MIS weight assumes light_samples light samples
                 pen_lights[mis] = 0
             # penumbra_samples / light_samples sets of samples for the lights in a point's
-            # penumbra, on one randomly shifted Kronecker sequence per point
+            # penumbra, on one randomly shifted Kronecker sequence per point and light
             n_s = int(self.settings.light_samples)
             f = flags.copy()
             more = -(-int(self.settings.penumbra_samples) // n_s)
@@ -658,8 +658,8 @@ class Renderer(ProgressiveImage):
     #: (:class:`~raybundle.imaging.gather.FinalGather`'s ``near`` 0): the direct light estimated
     #: at hits within a patch size of the gathering point (bakes do, where a vertex's value is
     #: final) cost 6 times as much per ray in the interior bench's hall (13 lamps) and took no
-    #: noise away; at 60 s it had 48 rays per pixel where it now has about 300: 4.44 / 4.18% ->
-    #: 4.05 / 3.69% (seeds 3, 4)
+    #: noise away; at 60 s it had 48 rays per pixel where it now has about 350: 4.44 / 4.18% ->
+    #: 4.04 / 3.80% (seeds 3, 4)
     GATHER_NEAR = 0.0
 
     def automatic_gather_pays(self, gather_seconds):
