@@ -126,3 +126,51 @@ def test_a_renderer_run_keeps_the_loop_budget(scene):
         assert res.stats["total_seconds"] >= res.stats["setup_seconds"]
     finally:
         r.tracer.close()
+
+
+class _Clock:
+    """A clock the test advances (``run.time`` replaced: the loop reads ``perf_counter``)."""
+
+    def __init__(self):
+        self.now = 100.0
+
+    def perf_counter(self):
+        return self.now
+
+
+class _Stepper:
+    """A runner whose steps take 0.1 s, and 2.0 s from ``long_from`` steps on (an image pass
+    due), on ``clock``; it says what its next step will take, as a renderer does."""
+
+    def __init__(self, clock, long_from):
+        self.clock, self.long_from = clock, long_from
+        self.stats = type("Stats", (), {"iterations": 0})()
+
+    def next_step_seconds(self):
+        return self._length(self.stats.iterations)
+
+    def _length(self, k):
+        return 2.0 if k >= self.long_from else 0.1
+
+    def step(self):
+        self.clock.now += self._length(self.stats.iterations)
+        self.stats.iterations += 1
+
+
+def test_a_timed_run_ends_within_half_a_step_of_its_budget(monkeypatch):
+    """A 10 s budget whose 100th step would be a long one (2 s, as an image pass of the interior
+    bench's hall) starting at 9.9 s: the loop stops before it, since less than half of it is
+    left (the runner says what its next step takes), where checking the clock only before a
+    step ended the run at 11.9 s; and with the long steps from the 80th on (7.9 s), it stops
+    within half a step of the budget (9.9 s, where the old loop took 11.9 s too)."""
+    from raybundle.imaging import run
+
+    for long_from, latest in ((99, 10.0), (79, 11.0)):
+        clock = _Clock()
+        monkeypatch.setattr(run, "time", clock)
+        runner = _Stepper(clock, long_from)
+        loop = run.RunLoop(runner, seconds=10.0, started=clock.now)
+        loop.advance()
+        took = clock.now - 100.0
+        assert 9.0 <= took <= latest, (long_from, took)
+        assert not loop.short

@@ -198,6 +198,7 @@ class Renderer(ProgressiveImage):
         self.glossy_iterations = 0
         self.image_rays = 0
         self._since_pass = 0                              # iterations since the last image pass (step)
+        self._iteration_seconds = 0.0                     # seconds spent in solver iterations (step)
         self.pass_seconds = 0.0                           # seconds spent in image passes
         self.gbuffer = None
         self._planned = None                # automatic_gather_pays' plan for the next diffuse_indirect
@@ -727,17 +728,33 @@ class Renderer(ProgressiveImage):
         solver = self.solver
         if self.passes == 0:
             self.image_pass()
+        t0 = time.perf_counter()
         solver.step()
         if not solver.diffuse_only:
             self.accumulate_glossy()
+        self._iteration_seconds += time.perf_counter() - t0
         self._since_pass += 1
+        if self._pass_due(self._since_pass):
+            self.image_pass()
+            self._since_pass = 0
+
+    def _pass_due(self, since):
+        """Whether an image pass is due after ``since`` iterations since the last (:meth:`step`)."""
+        solver = self.solver
         share = self.settings.image_ray_share or (
             self.DIFFUSE_IMAGE_SHARE if solver.diffuse_only else self.GLOSSY_IMAGE_SHARE)
         per_pass = (self.image_rays - self._setup_rays) / (self.passes - 1) if self.passes > 1 else self._setup_rays
         per_iter = solver.work_rays() / max(solver.stats.iterations, 1)
-        if self._since_pass * share * max(per_iter, 1) >= per_pass * (1 - share):
-            self.image_pass()
-            self._since_pass = 0
+        return since * share * max(per_iter, 1) >= per_pass * (1 - share)
+
+    def next_step_seconds(self):
+        """What the next :meth:`step` will take [s], from this run's means: an iteration, and an
+        image pass where one will be due (the run loop's clock, :class:`~raybundle.imaging.run.RunLoop`)."""
+        iterations = self.solver.stats.iterations
+        if iterations == 0 or self.passes == 0:
+            return 0.0
+        t = self._iteration_seconds / iterations
+        return t + (self.pass_seconds / self.passes if self._pass_due(self._since_pass + 1) else 0.0)
 
     #: the arrays that are sums over image passes and iterations (:meth:`sums`)
     SUMS = ("pass_sum", "pass_sq_sum", "glossy_sum", "gather_sum", "emission_sum", "emission_count")
