@@ -7,9 +7,9 @@ which owns the budget of the whole run:
 * ``iterations``: that many steps of the runner, reproducible with a fixed seed; or
 * ``seconds``, counted from ``started`` (the start of the command or the job, so loading,
   export and set-up count): the iterations stop when what is left is the final image's
-  share, ``final_share`` of the iteration time (or less than half the next step more:
-  :meth:`RunLoop._next_step_seconds`) (the automatic final gather,
-  :meth:`~raybundle.imaging.renderer.Renderer.diffuse_indirect`), so that the image is written when
+  share, ``final_share`` of the iteration time (the automatic final gather,
+  :meth:`~raybundle.imaging.renderer.Renderer.diffuse_indirect`), or less than half the next
+  step more (:meth:`RunLoop._next_step_seconds`), so that the image is written when
   the budget ends, but not before :data:`RunLoop.MIN_ITERATIONS` steps; the run then says
   its budget was too short (:meth:`RunLoop.budget_note`).
 
