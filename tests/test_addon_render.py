@@ -244,8 +244,10 @@ def test_the_world_renders_while_the_patches_are_laid_out(fresh, tmp_path):
     the layout's choices go and which no solver may read (``make_renderer`` refuses it);
     ``attach_world`` then gives the exported and the laid-out scene the world a plain export
     gives (the HDRI's sun taken out as a lamp, the camera's view); a cancelled export stops
-    the render's process."""
+    the render's process.  The layout (``lay_out``, the engine's) also welds the patches'
+    vertices for the reconstruction, so that work too is done while the world renders."""
     from raybundle.app import pipeline
+    from raybundle.app.plan import RunOptions, plan
     from raybundle_addon.export import export_scene
     from raybundle_addon.world import forget_rendered_worlds
 
@@ -258,7 +260,8 @@ def test_the_world_renders_while_the_patches_are_laid_out(fresh, tmp_path):
     forget_rendered_worlds()
     ex = export_scene(dg, defer_world=True)
     assert ex.scene.world.stand_in and ex.scene.world.emits and len(ex.scene.sun_lights) == 0
-    laid = pipeline.prepare(ex.scene, patches=50)
+    laid = pipeline.lay_out(ex.scene, plan(ex.scene, RunOptions(method="stochastic-iteration", patches=50)))
+    assert "smooth_vertex_ids" in vars(laid)              # made, not waiting for the world
     with pytest.raises(ValueError, match="stand-in"):
         pipeline.make_renderer(laid)
     ex.attach_world(laid)

@@ -167,7 +167,14 @@ def lay_out(scene, plan, stage=None, stop=None):
         _step(None, stop, "the method's choice")
         if stage is not None:
             stage(line)
-    return scene if plan.image_only else prepare(scene, patches=plan.patches, stage=stage, stop=stop)
+    if plan.image_only:
+        return scene
+    scene = prepare(scene, patches=plan.patches, stage=stage, stop=stop)
+    # every patch method's reconstruction reads the welded vertices: made here, they are made
+    # while Blender may still be rendering the world (the add-on attaches it after the layout)
+    _step(stage, stop, "welding the patches' vertices")
+    scene.smooth_vertex_ids
+    return scene
 
 
 def build(scene, plan, camera=None, image=True, stage=None, stop=None, attach=None):
