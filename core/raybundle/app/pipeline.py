@@ -160,8 +160,9 @@ def _make_image_method(scene, settings, camera, name, stage, stop):
 
 def lay_out(scene, plan, stage=None, stop=None):
     """``scene`` (loaded, not laid out) as ``plan`` (:func:`~raybundle.app.plan.plan`) runs it: its
-    patch layout (:func:`prepare`) for a patch method, itself for an image-only one.
-    ``stage(text)`` is told auto's choice and each set-up step; ``stop`` as in :func:`prepare`."""
+    patch layout (:func:`prepare`) with its welded vertices made
+    (:attr:`~raybundle.scene.model.PatchScene.smooth_vertex_ids`) for a patch method, itself for
+    an image-only one.  ``stage(text)`` is told auto's choice and each set-up step; ``stop`` as in :func:`prepare`."""
     line = plan.describe()
     if line:
         _step(None, stop, "the method's choice")
@@ -170,8 +171,8 @@ def lay_out(scene, plan, stage=None, stop=None):
     if plan.image_only:
         return scene
     scene = prepare(scene, patches=plan.patches, stage=stage, stop=stop)
-    # every patch method's reconstruction reads the welded vertices: made here, they are made
-    # while Blender may still be rendering the world (the add-on attaches it after the layout)
+    # every patch method's reconstruction reads them: made here, they are made while Blender
+    # may still be rendering the world (the add-on attaches it after the layout)
     _step(stage, stop, "welding the patches' vertices")
     scene.smooth_vertex_ids
     return scene
