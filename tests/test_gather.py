@@ -259,3 +259,50 @@ def test_the_image_gather_reads_the_patches_at_every_hit():
         assert r.direct.rays == before, r.direct.rays - before
     finally:
         r.tracer.close()
+
+
+def test_a_patch_touching_an_edge_is_gathered_on_all_its_triangles():
+    """A wall meshed as a fine grid (triangles a tenth of its patches) under a ceiling: its
+    patches are clusters of triangles.  A cluster's value averages what the ceiling edge does
+    to its triangles beside the edge, so it is wrong on its triangles away from the edge too
+    (the interior bench's hall: a pillar's face, one patch 1.26 m tall whose top meets the lit
+    ceiling, read 30% too bright a metre below).  The image's gather therefore serves whole
+    patches: every triangle of a side that has a triangle :func:`near_edge_tsides` flags, and
+    none of the others.  The flags per triangle side (before) split such clusters."""
+    n = 20
+    g = np.linspace(0.0, 1.0, n + 1)
+    yy, zz = np.meshgrid(g - 0.5, g)
+    wall_v = np.stack([np.zeros(yy.size), yy.ravel(), zz.ravel()], axis=1)
+    k = np.arange(n * n).reshape(n, n)
+    a, b = (k // n) * (n + 1) + k % n, (k // n) * (n + 1) + k % n + 1
+    c, d = a + n + 1, b + n + 1
+    wall_t = np.concatenate([np.stack([a, b, d], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)])
+    ceil_v = np.array([[0, -0.5, 1], [1, -0.5, 1], [1, 0.5, 1], [0, 0.5, 1]], float)
+    v = np.concatenate([wall_v, ceil_v, LAMP])
+    o = len(wall_v)
+    t = np.concatenate([wall_t, [[o, o + 2, o + 1], [o, o + 3, o + 2], [o + 4, o + 6, o + 5], [o + 4, o + 7, o + 6]]])
+    # the wall's triangles face +x
+    c0 = v[t]
+    flip = np.cross(c0[:, 1] - c0[:, 0], c0[:, 2] - c0[:, 0])[:, 0] < 0
+    t[flip] = t[flip][:, [0, 2, 1]]
+    mats = MaterialTable.from_list([dict(name="wall", diffuse=(KD,) * 3), dict(name="ceiling", diffuse=(0.5,) * 3),
+                                    dict(name="lamp", emission=(LE,) * 3)])
+    m = np.r_[np.zeros(len(wall_t), int), 1, 1, 2, 2]
+    solver = pipeline.make_solver(pipeline.prepare(build_scene(v, t, m, mats), patches=40), RenderSettings(seed=1))
+    sc = solver.scene
+    try:
+        wall = np.nonzero(sc.triangle_material[sc.tside_triangle] == 0)[0]
+        assert np.bincount(sc.tside_side[wall]).max() >= 8               # clusters of triangles
+        eg = EdgeGather(sc, solver.tracer, seed=2)
+        flags = eg.near_edge(wall)
+        side = sc.tside_side[wall]
+        mixed = np.unique(side[flags]).size + np.unique(side[~flags]).size - np.unique(side).size
+        assert mixed == 0, "a side gathered on some of its triangles only"
+        assert flags.any() and not flags.all()
+        # every side with a triangle right under the ceiling is gathered, on triangles far below too
+        z = sc.triangle_corners[sc.tside_triangle[wall]].mean(axis=1)[:, 2]
+        size = np.sqrt(sc.patch_area[sc.side_patch[side]])
+        assert flags[np.isin(side, side[z > 1.0 - 0.25 * size])].all()
+        assert (z[flags] < 1.0 - 1.5 * size[flags]).any()
+    finally:
+        solver.tracer.close()

@@ -568,7 +568,7 @@ class Renderer(ProgressiveImage):
         With ``smooth``, the bundles' running average and the caustic first shot are
         interpolated by :meth:`~raybundle.patches.reconstruction.LinearReconstruction.smooth_and_sharp`.
         With ``gather`` (and ``e_bar`` the solver's own), points on the sides
-        :func:`~raybundle.imaging.gather.near_edge_tsides` flags gather their indirect light
+        :meth:`~raybundle.imaging.gather.EdgeGather.near_edge` flags gather their indirect light
         instead (:class:`~raybundle.imaging.gather.FinalGather`): ``gather_rays`` rays per pixel,
         spread over its sub-pixel samples as one stratified set.  With ``gather_rays`` = -1
         the count is what ``gather_seconds`` buy (the run loop gives ``gather_share`` of a timed
@@ -668,11 +668,11 @@ class Renderer(ProgressiveImage):
         on the image: a timed run whose gather would not pay gives the seconds it kept for it
         to more iterations (:meth:`run`).  When it pays, the probe's plan is kept for the
         :meth:`diffuse_indirect` that follows."""
+        t0 = time.perf_counter()                  # probing the sides for edges counts too
         if self.settings.gather_rays != -1 or not gather_seconds or not self.scene.n_patches or \
                 not self.edge_gather.affordable(self._probe_gbuffer(), gather_seconds):
             return False
         k = max(1, int(self.settings.resolve_samples))
-        t0 = time.perf_counter()
         plan = self._indirect_plan(True, gather_seconds, k)
         self._planned = ((gather_seconds, k), plan, time.perf_counter() - t0) if plan[2] is not None else None
         return plan[2] is not None
