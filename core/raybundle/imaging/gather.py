@@ -157,7 +157,11 @@ class FinalGather:
         return out
 
 
-def near_edge_tsides(scene, tracer, rng, tsides=None, probes=32, reach=1.0, chunk=1 << 20):
+#: :func:`near_edge_tsides`' probe rays per triangle side
+PROBES = 32
+
+
+def near_edge_tsides(scene, tracer, rng, tsides=None, probes=PROBES, reach=1.0, chunk=1 << 20):
     """(N,) bool for triangle sides ``tsides`` (N,) (default: all): sides where the patch
     values are not to be trusted, because something else lies within ``reach`` patch sizes
     above them (a concave edge, a contact, an object close by): any of ``probes``
@@ -210,8 +214,6 @@ class EdgeGather:
     #: left the estimate of ``b^2``, a difference of two near numbers, so noisy that ``v / b^2``
     #: spread from 48 to inf on ``cornell`` and from 35 to 161 in the dining room)
     PROBE_POINTS, PROBE_RAYS = 512, 64
-    #: :func:`near_edge_tsides`' probe rays per triangle side a pixel sees (:meth:`near_edge`)
-    PROBES = 32
 
     def __init__(self, scene, tracer, seed):
         self.scene, self.tracer, self.seed = scene, tracer, seed
@@ -223,8 +225,10 @@ class EdgeGather:
 
     def near_edge(self, tsides):
         """(N,) bool: the side of each of ``tsides`` (N,) has a triangle side that
-        :func:`~raybundle.imaging.gather.near_edge_tsides` flags; each side is probed once, on
-        all its triangle sides, when a pixel first sees it.  A patch's value (a cluster's linear
+        :func:`~raybundle.imaging.gather.near_edge_tsides` flags; each side is probed once, when
+        a pixel first sees it: the triangle sides seen with :data:`PROBES` rays each, its other
+        triangle sides with :data:`PROBES` rays in all, shared by area
+        (:meth:`~raybundle.scene.model.PatchScene.tside_samples`).  A patch's value (a cluster's linear
         fit) averages what an edge does to its triangles beside the edge, so it is wrong on its
         triangles away from the edge too: in the interior bench's hall a pillar's face, one
         patch 1.26 m tall whose top meets the lit ceiling, had its indirect light 30% too high a
@@ -234,11 +238,9 @@ class EdgeGather:
         new = np.unique(side[known[side] < 0])
         if len(new):
             probe = np.nonzero(np.isin(sc.tside_side, new))[0]
-            # the triangle sides seen take PROBES rays each, as before; the rest of their patches
-            # PROBES in all, shared by area (all of them at PROBES each: 2.4 s in the dining room)
             if self._by_area is None:
-                self._by_area = sc.tside_samples(self.PROBES)
-            count = np.where(np.isin(probe, tsides), self.PROBES, self._by_area[probe])
+                self._by_area = sc.tside_samples(PROBES)
+            count = np.where(np.isin(probe, tsides), PROBES, self._by_area[probe])
             hit = np.zeros(sc.n_sides, bool)
             for c in np.unique(count):
                 ts = probe[count == c]
