@@ -63,9 +63,12 @@ def assert_converged(samples, exact, max_se):
     return mean, se
 
 
+# batch sizes: few iterations, with the SE still well under max_se (2026-11-28, the largest channel's
+# SE / exact in turn: 0.93, 1.26, 1.45, 0.46, 0.44 and 0.23%; 8 a batch in the last would leave
+# batches without an image pass)
 @pytest.mark.parametrize("glossy,sequence,batches,per_batch,directions", [
-    (False, "prng", 12, 120, 1), (False, "stratified", 12, 120, 1), (False, "pi-powers", 10, 200, 1),
-    (False, "stratified", 12, 40, 8), (True, "pi-powers", 10, 80, 1), (True, "stratified", 12, 16, 8)],
+    (False, "prng", 12, 72, 1), (False, "stratified", 12, 90, 1), (False, "pi-powers", 10, 200, 1),
+    (False, "stratified", 12, 40, 8), (True, "pi-powers", 10, 20, 1), (True, "stratified", 12, 16, 8)],
     ids=["prng-diffuse", "stratified-diffuse", "pi-powers-diffuse", "stratified-8-diffuse", "pi-powers-glossy",
          "stratified-8-glossy"])
 def test_furnace_converges_to_analytic(glossy, sequence, batches, per_batch, directions):
@@ -83,20 +86,20 @@ def test_furnace_converges_to_analytic(glossy, sequence, batches, per_batch, dir
 def test_glossy_furnace_image_without_gather():
     """The thesis' own eye estimator E_i f(t_i, w_eye) per iteration (glossy_gather off)."""
     r = furnace_renderer(True, "prng", glossy_gather=False)
-    patch, img = batch_means(r, 12, 120)
+    patch, img = batch_means(r, 12, 40)          # SE 0.64% of the exact (2026-11-28)
     assert r.glossy_iterations > 0 and not r.settings.glossy_gather
     assert_converged(img, r.scene.analytic_radiance, max_se=0.03)
     r.tracer.close()
 
 
 def test_halton_converges_to_a_wrong_answer():
-    """Thesis 1.2: Halton points driving the iteration bias the result (here far beyond 4.5 SE)."""
+    """Thesis 1.2: Halton points driving the iteration bias the result (here 6.8 SE in green)."""
     with pytest.warns(UserWarning, match="Halton"):
         r = furnace_renderer(False, "halton", patches=300)
     assert_biased(r)
 
 
-def assert_biased(renderer, batches=8, per_batch=150):
+def assert_biased(renderer, batches=8, per_batch=75):
     """Some channel of the patch mean lies beyond 4.5 SE of the analytic answer."""
     exact = renderer.scene.analytic_radiance
     patch, _ = batch_means(renderer, batches, per_batch)
@@ -173,12 +176,12 @@ def test_bad_run_limits_are_rejected():
 def test_view_independent_patch_radiance_matches_furnace():
     """patch_radiance (what the add-on writes back as color attributes) converges too."""
     r = furnace_renderer(False, "prng", patches=300, res=(8, 8))
-    for _ in range(3000):
+    for _ in range(1500):
         r.solver.step()
     L = r.solver.patch_radiance()
     exact = r.scene.analytic_radiance
     mean = (L * r.solver.area[:, None]).sum(axis=0) / r.solver.area.sum()
-    # 3000 iterations: the batch-means SE of this mean is ~0.3% (test_furnace_converges_to_analytic)
+    # 1500 iterations: the batch-means SE of this mean is ~0.45% (test_furnace_converges_to_analytic)
     assert np.all(np.abs(mean / exact - 1) < 0.02), mean
 
 
@@ -190,7 +193,7 @@ def test_short_runs_keep_no_start_up_transient():
     means = []
     for seed in (1, 2, 3):
         img = pipeline.render(sc, RenderSettings(seed=seed), iterations=48,
-                              camera=sc.camera.with_resolution(32, 32)).image
+                              camera=sc.camera.with_resolution(16, 16)).image
         means.append(img.reshape(-1, 3).mean(axis=0) / sc.analytic_radiance - 1)
     means = np.array(means)
     se = means.std(axis=0, ddof=1) / np.sqrt(len(means))
