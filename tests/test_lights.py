@@ -362,3 +362,43 @@ def test_an_area_lamps_selection_estimate_bounds_its_unoccluded_irradiance():
     x, nx = np.array([[0.0, 0.0, -1.0]]), np.array([[1.0, 0.0, 0.0]])
     exact, _ = light_polygon_irradiance(lamp, x, nx)
     assert exact[0] > 0.01 and lamp.selection_estimate(x, nx)[0] >= exact[0]
+
+
+def test_a_lamp_giving_little_light_at_a_point_costs_few_shadow_rays_there():
+    """Lamps chosen by their contribution: beside the area lamp of :func:`lamp_scene`, a weak
+    point lamp gives a few percent of the light on a floor line and is taken there by chance
+    (probability P < 1, weighted 1 / P).  Such a lamp takes no penumbra samples where it is
+    taken by chance: the old code took 8 for each (the interior bench's hall spent a fifth of
+    its image passes' light samples on 9 lamps inside their fittings giving 0.07% of its
+    light).  The estimates stay unbiased: per point, the means of 20,000 estimates agree with
+    those of every lamp always taken within 4.5 standard errors."""
+    from raybundle.lights.direct import light_bits
+
+    sc = lamp_scene()
+    sc.point_lights = PointLights(np.array([[1.5, 0.0, 0.4]]), np.array([[0.08, 0.08, 0.08]]))
+    tr = RayTracer(sc)
+    dl = DirectLighting(sc, tr)
+    assert len(dl.light_list()) == 2
+    b = light_bits(2)[1]                                    # the point lamp's bit
+    n = 20_000
+    p, up = floor_line(np.linspace(-1.0, -0.4, 4))
+    P, U, m = np.repeat(p, n, axis=0), np.repeat(up, n, axis=0), np.zeros(len(p) * n, int)
+    bits = np.full(len(P), b, np.uint64)
+
+    def estimate(**kw):
+        rays = dl.rays
+        out = dl.reflected_radiance(P, U, m, U, np.random.default_rng(3), **kw)
+        return out.reshape(len(p), n, 3), dl.rays - rays
+
+    always, _ = estimate()
+    chosen, r_chosen = estimate(select=np.random.default_rng(4).random(len(P)))
+    pen, r_pen = estimate(select=np.random.default_rng(4).random(len(P)),
+                          penumbra=(bits, 8, np.random.default_rng(5).random((len(P), 3)), None))
+    taken_point = r_chosen - len(P)                         # the area lamp takes one ray at every point
+    assert 0.15 * len(P) < taken_point < 0.9 * len(P)        # taken by chance here
+    assert r_pen == r_chosen                                 # and then without penumbra samples
+    for got in (chosen, pen):
+        se = np.sqrt(got.var(axis=1) / n + always.var(axis=1) / n)
+        z = np.abs(got.mean(axis=1) - always.mean(axis=1)) / np.maximum(se, 1e-12)
+        assert z.max() < 4.5, z.max()
+    tr.close()

@@ -139,7 +139,7 @@ class DirectLighting:
     #: lamps chosen only up to this many (the estimates cost N x lamps; a light tree is the way beyond)
     SELECT_MAX_LIGHTS = 64
 
-    def _selection(self, points, normals, reach, exact, select):
+    def _selection(self, points, normals, reach, exact):
         """Per light, the probability (one value per point in ``reach[l]``) that it is taken at
         the points: ``clip(c_l / (SELECT_SHARE C), SELECT_MIN, 1)``, ``c_l`` the lamp's
         unoccluded irradiance at the point (luminance: the exact ``Le I(x)`` where ``exact``
@@ -205,6 +205,8 @@ class DirectLighting:
         (:meth:`_selection`): a lamp whose unoccluded contribution at a point is a small share of
         all lamps' there is taken with probability ``P < 1`` (its samples weighted 1 / P), the
         decision ``(select + l phi) mod 1 < P`` for lamp ``l`` (phi the golden ratio's fraction).
+        A lamp taken by chance at a point (``P < 1``: a small share of the light there) takes no
+        penumbra samples there.
 
         ``analytic`` (bool, (N,) bool, or (N,) uint64 mask of lights): the diffuse lobe of
         polygonal lights (:func:`light_polygon_irradiance`) with the exact unoccluded irradiance as a control variate,
@@ -239,7 +241,7 @@ class DirectLighting:
             ex = light_polygon_irradiance(light, points[here], normals[here]) if len(here) else None
             reach.append(base)
             exact.append(None if ex is None else (here, ex[0], ex[1]))
-        chance = self._selection(points, normals, reach, exact, select) if select is not None else None
+        chance = self._selection(points, normals, reach, exact) if select is not None else None
         alpha = kronecker_alpha(3)
         k = 0
         for li, light in enumerate(lights):
@@ -260,6 +262,8 @@ class DirectLighting:
             else:
                 mask, more, shift, first = penumbra
                 on = (mask[base] & bit) != 0
+                if chance is not None:      # a lamp taken by chance gives little here: no penumbra samples
+                    on &= np.broadcast_to(picked, len(base)) <= 1.0
                 reps = np.where(on, int(more), 1)
                 pt = np.repeat(base, reps)
                 copy = np.arange(len(pt)) - np.repeat(np.cumsum(reps) - reps, reps)
