@@ -263,7 +263,7 @@ class DirectLighting:
                 mask, more, shift, first = penumbra
                 on = (mask[base] & bit) != 0
                 if chance is not None:      # a lamp taken by chance gives little here: no penumbra samples
-                    on &= np.broadcast_to(picked, len(base)) <= 1.0
+                    on &= picked <= 1.0
                 reps = np.where(on, int(more), 1)
                 pt = np.repeat(base, reps)
                 copy = np.arange(len(pt)) - np.repeat(np.cumsum(reps) - reps, reps)
