@@ -12,11 +12,12 @@ from test_solver import assert_converged
 from raybundle.app import pipeline
 from raybundle.imaging.settings import RenderSettings
 from raybundle.patches.clusters import NORMAL_CELLS, make_patches, normal_cells, tessellate
-from raybundle.patches.layout import subdivide
+from raybundle.patches.layout import CROWD_REACH, crowding, subdivide
 from raybundle.patches.reconstruction import LinearReconstruction
 from raybundle.scene import builtin as scenes
 from raybundle.scene.build import build_scene
 from raybundle.scene.materials import MaterialTable
+from raybundle.tracing.visibility import RayTracer
 
 
 def uv_sphere(centre, radius, rings, segments):
@@ -111,6 +112,62 @@ def test_a_shelf_over_a_floor_is_not_its_patch():
         assert np.ptp(zs) < 1e-9
 
 
+def quad(x0, x1, y0, y1, z, up=True):
+    """Two triangles of a horizontal rectangle facing up (or down)."""
+    v = [[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]]
+    return v, ([[0, 1, 2], [0, 2, 3]] if up else [[0, 2, 1], [0, 3, 2]])
+
+
+def scene_of(parts, detail=None):
+    """One scene of ``parts`` [(vertices, triangles)], one diffuse material, and ``detail``
+    (vertices, triangles) too: triangles much smaller than a patch, so that the layout groups."""
+    v, t = [], []
+    for pv, pt in parts + ([detail] if detail is not None else []):
+        t.append(np.asarray(pt) + sum(len(x) for x in v))
+        v.append(np.asarray(pv, float))
+    t = np.vstack(t)
+    return build_scene(np.vstack(v), t, np.zeros(len(t), int),
+                       MaterialTable.from_list([dict(name="w", diffuse=(0.5,) * 3, emission=(1,) * 3)]))
+
+
+def test_crowding_under_a_plate_is_its_closed_form():
+    """Under an unbounded plate at height d < reach, a share 1 - (d / reach)^2 of cosine-distributed
+    rays meets it within reach; nothing above: none."""
+    d, reach, rays = 0.1, 0.2, 20_000
+    sc = scene_of([quad(-0.25, 0.25, -0.25, 0.25, 0.0), quad(-50, 50, -50, 50, d, up=False)])
+    tracer = RayTracer(sc)
+    try:
+        share = crowding(tracer, sc, [0, 1], reach, rays=rays)
+        assert np.all(np.abs(share - (1 - (d / reach) ** 2)) < 4 * np.sqrt(0.75 * 0.25 / rays)), share
+        assert np.all(crowding(tracer, sc, [2, 3], reach, rays=rays) == 0)       # the plate sees nothing
+    finally:
+        tracer.close()
+
+
+def test_a_floor_under_a_stair_step_gets_finer_patches():
+    """A floor patch reaching under a step that floats a little above it averages the lit floor
+    with the dark one beneath: the floor's patches under the step are cut to half a patch size,
+    those in the open stay a patch wide, and the count stays about the target."""
+    floor = quad(0, 8, 0, 8, 0.0)
+    step = [quad(3, 5, 3.6, 4.4, 0.15, up=False), quad(3, 5, 3.6, 4.4, 0.25)]
+    sv, st = uv_sphere(np.array([7.0, 7.0, 1.0]), 0.3, 12, 24)
+    sc = scene_of([floor] + step, detail=(sv, st))
+    target = 200
+    p = make_patches(sc, patches=target)
+    assert 0.8 * target < p.n_patches < 1.25 * target, p.n_patches
+    on_floor = np.abs(p.triangle_corners[:, :, 2]).max(axis=1) < 1e-9
+    area = np.bincount(p.triangle_patch, p.triangle_area, minlength=p.n_patches)
+    centre = np.stack([np.bincount(p.triangle_patch, p.triangle_area * p.triangle_corners[:, :, i].mean(axis=1),
+                                   minlength=p.n_patches) for i in range(2)], axis=1) / area[:, None]
+    floor_patches = np.unique(p.triangle_patch[on_floor])
+    c = centre[floor_patches]
+    under = (c[:, 0] > 3.2) & (c[:, 0] < 4.8) & (c[:, 1] > 3.7) & (c[:, 1] < 4.3)
+    far = np.hypot(c[:, 0] - 4, c[:, 1] - 4) > 2.5
+    assert under.any() and far.any()
+    assert area[floor_patches[under]].max() < 0.5 * np.median(area[floor_patches[far]]), \
+        (area[floor_patches[under]].max(), np.median(area[floor_patches[far]]))
+
+
 def fanned_wall(slivers=100):
     """A 4 m x 3 m wall (z = 0) fanned out from one corner into long thin triangles, as walls
     are around windows in real models: edges up to 5 m, each a hundredth of the area."""
@@ -201,8 +258,10 @@ def test_several_value_sets_project_in_one_pass_as_each_alone():
     together = rec.smooth_and_sharp_many([(a, np.abs(sharp)), (b, None), (c, None)])
     assert [x.shape for x in together] == [x.shape for x in alone]
     assert min(x.min() for x in alone) == 0.0                     # the clamp acts
-    for x, y in zip(together, alone):          # to the conjugate gradients' tolerance (values ~1)
-        np.testing.assert_allclose(x, y, rtol=0, atol=1e-4)
+    # to the conjugate gradients' tolerance (values ~1; a residual 1e-5 of b's, each set stopping
+    # at its own iteration: 1.1e-4 apart at most where the floor under the sphere is cut finer)
+    for x, y in zip(together, alone):
+        np.testing.assert_allclose(x, y, rtol=0, atol=3e-4)
 
 
 def test_furnace_with_curved_clusters_stays_exact():

@@ -20,7 +20,10 @@ the image evaluates every lobe at the pixel's own triangle.
 
 :func:`make_patches` chooses the layout for a target patch count.  With a patch size
 h: triangles with an edge longer than h are cut (:func:`~raybundle.patches.layout.split_triangles`,
-then along contact lines); triangles smaller than h^2 / :data:`SMALL` are grouped, and so are
+then along contact lines), and the pieces that another surface crowds (a floor under a stair
+step h / 8 above it) cut again to h / 2 (:func:`~raybundle.patches.layout.refine_crowded`; h is then
+made coarser, so that the count stays about the target); triangles smaller than h^2 / :data:`SMALL`
+are grouped, and so are
 slivers (area under :data:`SLIVER` x their longest edge squared: a wall fanned out around a
 window), first halved along their length to pieces no longer than h
 (:func:`~raybundle.patches.layout.bisect_long`: a sliver grouped whole made a cluster metres long).
@@ -53,7 +56,8 @@ from ..tracing.sampling import frames_from_normals
 from ..tracing.visibility import RayTracer
 from ..util.arrays import group_ids
 from .contacts import CONTACT_SHARE, PROBE_CHUNK, gap_sides, pierced_parts
-from .layout import bisect_long, cut_at_contacts, edge_for_patches, longest_edges, split_triangles, subdivide
+from .layout import (bisect_long, cut_at_contacts, edge_for_patches, longest_edges, refine_crowded, split_triangles,
+                     subdivide)
 
 #: the patch count of a scene laid out without an explicit one (sides; the count that measured best
 #: at a fixed time across scene sizes: README, 'Measured choices behind the defaults'; :mod:`raybundle.app.auto`)
@@ -235,14 +239,14 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     h = float(size) if size is not None else patch_size(scene, patches, grouping)
     if not h > 0:
         raise ValueError("the patch size must be positive")
-    small = grouping.small(h)
-    if not small.any():
+    layout = _cut(scene, grouping, h)
+    if layout is not None and layout[4] and patches is not None:
+        # the crowded triangles cut again: a coarser h keeps about ``patches`` (each cut in four)
+        h *= np.sqrt((patches + 3 * layout[4]) / patches)
+        layout = _cut(scene, grouping, h)
+    if layout is None:
         return subdivide(scene, max_edge=h, contacts=contacts)
-    fine, k, row = split_triangles(scene, h, whole=small)
-    sliver = small[row] & fine.materials.reflects[fine.triangle_material] & (longest_edges(fine.triangle_corners) > h)
-    if sliver.any():            # long thin triangles: pieces no longer than a patch, grouped where they lie
-        fine, piece = bisect_long(fine, h, sliver)
-        k, row = k[piece], row[piece]
+    small, fine, row, split, _ = layout
     lit_by_world = scene.world.emits
     tracer = RayTracer(fine) if contacts or lit_by_world else None
     try:
@@ -250,7 +254,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
             # cut the pieces of split faces and the triangles that straddle a contact; carry
             # each new triangle's row in ``fine`` through the cut as its source
             rows = replace(fine, triangle_source=np.arange(len(fine.triangles)))
-            cut = cut_at_contacts(rows, np.nonzero((k > 1) & ~small[row])[0], h, tracer=tracer)
+            cut = cut_at_contacts(rows, np.nonzero(split & ~small[row])[0], h, tracer=tracer)
             row = row[cut.triangle_source]
             fine = replace(cut, triangle_source=fine.triangle_source[cut.triangle_source])
         fine_small = small[row]
@@ -269,6 +273,29 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     others = np.unique(fine.triangle_patch[~fine_small], return_inverse=True)[1].reshape(-1)
     patch[~fine_small] = n_clusters + others
     return replace(fine, triangle_patch=patch)
+
+
+def _cut(scene, grouping, h):
+    """The triangles of ``scene`` at patch size ``h`` before contacts and clusters: ``(small (T,)
+    bool, fine, row (T',), split (T',) bool, crowded)``: the triangles to group; the scene with the
+    others cut to edges <= h (:func:`~raybundle.patches.layout.split_triangles`, slivers halved along
+    their length: :func:`~raybundle.patches.layout.bisect_long`) and the crowded pieces cut to h / 2
+    (:func:`~raybundle.patches.layout.refine_crowded`); each new triangle's row in ``scene``; whether
+    it is a piece of a triangle cut (its contact lines are then still to cut); the count of
+    crowded pieces; None when no triangle is small (:func:`~raybundle.patches.layout.subdivide`'s
+    layout then)."""
+    small = grouping.small(h)
+    if not small.any():
+        return None
+    fine, k, row = split_triangles(scene, h, whole=small)
+    sliver = small[row] & fine.materials.reflects[fine.triangle_material] & (longest_edges(fine.triangle_corners) > h)
+    if sliver.any():            # long thin triangles: pieces no longer than a patch, grouped where they lie
+        fine, piece = bisect_long(fine, h, sliver)
+        k, row = k[piece], row[piece]
+    pieces = np.nonzero(~small[row] & fine.materials.reflects[fine.triangle_material])[0]
+    fine, piece, crowded = refine_crowded(fine, pieces, h)
+    split = (k[piece] > 1) | (np.bincount(piece, minlength=len(k))[piece] > 1)
+    return small, fine, row[piece], split, crowded
 
 
 def _sides_apart(ids, part, row, plane, behind):

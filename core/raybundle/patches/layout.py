@@ -17,6 +17,12 @@ CONTACT_ALL_MAX = 10_000
 #: cut at contacts: the facets of a curved mesh are such planes, tens of thousands of them in a
 #: furnished room, each costing a pass of its own while a leak through it is at most its area
 CONTACT_MIN_PLANE = 0.5
+#: cosine-distributed probe rays per side of a patch triangle that find how crowded it is (:func:`crowding`)
+CROWD_RAYS = 16
+#: a patch triangle is crowded where at least this share of its probe rays meets a surface ...
+CROWD_SHARE = 0.25
+#: ... within this share of the patch size (:func:`refine_crowded`)
+CROWD_REACH = 0.25
 
 
 def subdivide(scene: PatchScene, max_edge=None, patches=None, contacts=True) -> PatchScene:
@@ -201,3 +207,61 @@ def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene
         scene, rows = cut_where_pierced(scene, *pierced)
         todo = todo[rows]
     return split_at_contacts(scene, np.nonzero(todo)[0], tol=tol, min_plane_area=CONTACT_MIN_PLANE * max_edge ** 2)[0]
+
+
+def crowding(tracer, scene, which, reach, rays=CROWD_RAYS, seed=0):
+    """(W,) the share of ``rays`` cosine-distributed rays from uniform points of each triangle
+    ``which`` (W,) that meet a surface within ``reach`` [m] (for a two-sided triangle the larger
+    of its two sides' shares), traced by ``tracer`` over ``scene``; a fixed ``seed``, so a
+    layout is the same on every run.  Under an unbounded parallel plate at height d < reach
+    it is 1 - (d / reach)^2: a cosine-distributed ray meets the plate within reach when its
+    angle to the normal has cos >= d / reach, and sin^2 of that widest angle is its probability."""
+    from ..tracing.sampling import cosine_directions, frames_from_normals, points_on_triangles
+    which = np.asarray(which, np.int64)
+    out = np.zeros(len(which))
+    if not len(which):
+        return out
+    rng = np.random.default_rng(seed)
+    own = np.repeat(np.arange(len(which)), rays)
+    tri = which[own]
+    p = points_on_triangles(scene.triangle_corners[tri], *rng.random((2, len(tri))))
+    for sign in (1.0, -1.0):
+        sel = np.arange(len(tri)) if sign > 0 else np.nonzero(scene.triangle_two_sided[tri])[0]
+        if not len(sel):
+            continue
+        n = sign * scene.triangle_normal[tri[sel]]
+        t, b = frames_from_normals(n)
+        w = cosine_directions(rng.random((len(sel), 2)), t, b, n)
+        blocked = tracer.occluded(p[sel] + n * tracer.eps, w, np.full(len(sel), reach))
+        out = np.maximum(out, np.bincount(own[sel], blocked, minlength=len(which)) / rays)
+    return out
+
+
+def refine_crowded(scene: PatchScene, which, h, tracer=None):
+    """The patch triangles ``which`` (W,) that are crowded (:func:`crowding`: at least
+    :data:`CROWD_SHARE` of their probe rays meet a surface within :data:`CROWD_REACH` x ``h``,
+    the patch size [m]) cut again to edges of at most h / 2; the others kept.
+
+    A patch is one value over its area: a floor patch h wide reaching under a stair step
+    h / 8 above it averages the lit floor in front with the dark floor beneath, and the step's
+    underside, which sees only that floor, is lit by the average.  (The interior bench's hall,
+    h = 1.2 m at 4,000 patches: the floor in front of its lowest step 15% too bright.)
+    ``tracer``: a :class:`~raybundle.tracing.visibility.RayTracer` over ``scene``, or one is built
+    here.  Returns ``(scene, row, crowded)``: ``row`` (T',) the triangle of ``scene`` each new
+    one came from, ``crowded`` the count of triangles cut."""
+    which = np.asarray(which, np.int64)
+    if not len(which):
+        return scene, np.arange(len(scene.triangles)), 0
+    from ..tracing.visibility import RayTracer
+    probe = tracer if tracer is not None else RayTracer(scene)
+    try:
+        share = crowding(probe, scene, which, CROWD_REACH * h)
+    finally:
+        if probe is not tracer:
+            probe.close()
+    whole = np.ones(len(scene.triangles), bool)
+    whole[which[share >= CROWD_SHARE]] = False
+    if whole.all():
+        return scene, np.arange(len(scene.triangles)), 0
+    fine, _, row = split_triangles(scene, 0.5 * h, whole=whole)
+    return fine, row, int((~whole).sum())
