@@ -239,14 +239,21 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     h = float(size) if size is not None else patch_size(scene, patches, grouping)
     if not h > 0:
         raise ValueError("the patch size must be positive")
-    layout = _cut(scene, grouping, h)
-    if layout is not None and layout[4] and patches is not None:
-        # the crowded triangles cut again: a coarser h keeps about ``patches`` (each cut in four)
-        h *= np.sqrt((patches + 3 * layout[4]) / patches)
-        layout = _cut(scene, grouping, h)
-    if layout is None:
+    small = grouping.small(h)
+    if not small.any():
         return subdivide(scene, max_edge=h, contacts=contacts)
-    small, fine, row, split, _ = layout
+    # crowding is traced over the input (its pieces have the same surfaces), if a triangle is cut
+    pieces = ~small & scene.materials.reflects[scene.triangle_material]
+    probe = RayTracer(scene) if pieces.any() else None
+    try:
+        small, fine, row, split, crowded = _cut(scene, grouping, h, probe)
+        if crowded and patches is not None:
+            # the crowded pieces cut in four: a coarser h (more triangles small) keeps about ``patches``
+            h *= np.sqrt((patches + 3 * crowded) / patches)
+            small, fine, row, split, _ = _cut(scene, grouping, h, probe)
+    finally:
+        if probe is not None:
+            probe.close()
     lit_by_world = scene.world.emits
     tracer = RayTracer(fine) if contacts or lit_by_world else None
     try:
@@ -275,25 +282,23 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     return replace(fine, triangle_patch=patch)
 
 
-def _cut(scene, grouping, h):
-    """The triangles of ``scene`` at patch size ``h`` before contacts and clusters: ``(small (T,)
+def _cut(scene, grouping, h, probe):
+    """The triangles of ``scene`` at patch size ``h`` (some of them small) before contacts and
+    clusters, crowding traced by ``probe`` over ``scene``: ``(small (T,)
     bool, fine, row (T',), split (T',) bool, crowded)``: the triangles to group; the scene with the
     others cut to edges <= h (:func:`~raybundle.patches.layout.split_triangles`, slivers halved along
     their length: :func:`~raybundle.patches.layout.bisect_long`) and the crowded pieces cut to h / 2
     (:func:`~raybundle.patches.layout.refine_crowded`); each new triangle's row in ``scene``; whether
     it is a piece of a triangle cut (its contact lines are then still to cut); the count of
-    crowded pieces; None when no triangle is small (:func:`~raybundle.patches.layout.subdivide`'s
-    layout then)."""
+    crowded pieces."""
     small = grouping.small(h)
-    if not small.any():
-        return None
     fine, k, row = split_triangles(scene, h, whole=small)
     sliver = small[row] & fine.materials.reflects[fine.triangle_material] & (longest_edges(fine.triangle_corners) > h)
     if sliver.any():            # long thin triangles: pieces no longer than a patch, grouped where they lie
         fine, piece = bisect_long(fine, h, sliver)
         k, row = k[piece], row[piece]
     pieces = np.nonzero(~small[row] & fine.materials.reflects[fine.triangle_material])[0]
-    fine, piece, crowded = refine_crowded(fine, pieces, h)
+    fine, piece, crowded = refine_crowded(fine, pieces, h, tracer=probe)
     split = (k[piece] > 1) | (np.bincount(piece, minlength=len(k))[piece] > 1)
     return small, fine, row[piece], split, crowded
 
