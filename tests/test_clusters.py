@@ -12,7 +12,7 @@ from test_solver import assert_converged
 from raybundle.app import pipeline
 from raybundle.imaging.settings import RenderSettings
 from raybundle.patches.clusters import NORMAL_CELLS, make_patches, normal_cells, tessellate
-from raybundle.patches.layout import CROWD_REACH, crowding, subdivide
+from raybundle.patches.layout import crowding, subdivide
 from raybundle.patches.reconstruction import LinearReconstruction
 from raybundle.scene import builtin as scenes
 from raybundle.scene.build import build_scene
