@@ -298,7 +298,7 @@ def _cut(scene, grouping, h, probe):
         fine, piece = bisect_long(fine, h, sliver)
         k, row = k[piece], row[piece]
     pieces = np.nonzero(~small[row] & fine.materials.reflects[fine.triangle_material])[0]
-    fine, piece, crowded = refine_crowded(fine, pieces, h, tracer=probe)
+    fine, piece, crowded = refine_crowded(fine, pieces, h, probe)
     split = (k[piece] > 1) | (np.bincount(piece, minlength=len(k))[piece] > 1)
     return small, fine, row[piece], split, crowded
 

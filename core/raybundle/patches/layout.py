@@ -237,7 +237,7 @@ def crowding(tracer, scene, which, reach, rays=CROWD_RAYS, seed=0):
     return out
 
 
-def refine_crowded(scene: PatchScene, which, h, tracer=None):
+def refine_crowded(scene: PatchScene, which, h, tracer):
     """The patch triangles ``which`` (W,) that are crowded (:func:`crowding`: at least
     :data:`CROWD_SHARE` of their probe rays meet a surface within :data:`CROWD_REACH` x ``h``,
     the patch size [m]) cut again to edges of at most h / 2; the others kept.
@@ -246,19 +246,12 @@ def refine_crowded(scene: PatchScene, which, h, tracer=None):
     h / 8 above it averages the lit floor in front with the dark floor beneath, and the step's
     underside, which sees only that floor, is lit by the average.  (The interior bench's hall,
     h = 1.2 m at 4,000 patches: the floor in front of its lowest step 15% too bright.)
-    ``tracer``: a :class:`~raybundle.tracing.visibility.RayTracer` over ``scene``, or one is built
-    here.  Returns ``(scene, row, crowded)``: ``row`` (T',) the triangle of ``scene`` each new
+    ``tracer``: a :class:`~raybundle.tracing.visibility.RayTracer` over ``scene``'s surfaces.  Returns ``(scene, row, crowded)``: ``row`` (T',) the triangle of ``scene`` each new
     one came from, ``crowded`` the count of triangles cut."""
     which = np.asarray(which, np.int64)
     if not len(which):
         return scene, np.arange(len(scene.triangles)), 0
-    from ..tracing.visibility import RayTracer
-    probe = tracer if tracer is not None else RayTracer(scene)
-    try:
-        share = crowding(probe, scene, which, CROWD_REACH * h)
-    finally:
-        if probe is not tracer:
-            probe.close()
+    share = crowding(tracer, scene, which, CROWD_REACH * h)
     whole = np.ones(len(scene.triangles), bool)
     whole[which[share >= CROWD_SHARE]] = False
     if whole.all():
