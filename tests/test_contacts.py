@@ -216,6 +216,28 @@ def test_box_query_equals_the_pass_over_all_boxes():
         assert np.array_equal(query(a, b), brute)
 
 
+def test_touching_pairs_are_the_pass_over_all_pairs():
+    """The pairs of a triangle and a contact segment that touch, found among the pairs whose
+    boxes overlap, are exactly those that testing every pair finds: segments along edges,
+    through corners, ending at corners, long ones and short ones."""
+    from raybundle.patches.contacts import _on_segment, _touching, _touching_pairs
+
+    rng = np.random.default_rng(7)
+    corner = rng.uniform(0, 1, (400, 2))
+    tri = corner[:, None] + rng.normal(0, 0.03, (400, 3, 2))
+    along = tri[rng.integers(0, 400, 150)][:, :2]                       # along a triangle's edge
+    ends = tri[rng.integers(0, 400, 150)][:, :2] * np.array([1, 0.5])[:, None] + 0.01   # from a corner
+    free = rng.uniform(0, 1, (300, 2, 2))
+    free[:30, 1] = free[:30, 0] + rng.normal(0, 0.5, (30, 2))            # a few long ones
+    seg = np.concatenate([along, ends, free])
+    f, k = np.meshgrid(np.arange(len(tri)), np.arange(len(seg)), indexing="ij")
+    f, k = f.reshape(-1), k.reshape(-1)
+    brute = _touching(tri[f], seg[k], 1e-9) | _on_segment(tri[f], seg[k], 1e-9).any(axis=1)
+    pf, pk = _touching_pairs(tri, seg, 1e-9)
+    assert 500 < len(pf) < 0.2 * len(f)
+    assert np.array_equal(pf, f[brute]) and np.array_equal(pk, k[brute])
+
+
 def shelf_through_a_wall(triangles=4000):
     """A closed 2 m room (everything two-sided, nothing lit inside) with a shelf sunk through
     its wall at x = 1, lit from outside by a point light above the shelf's outer end; every

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..tracing.sampling import kronecker_alpha
+from ..util.arrays import ranges
 from .polygon import light_polygon_irradiance
 from .sources import MeshLight, PointLight, ShapeLight, SunLight, small_emitters
 
@@ -266,7 +267,7 @@ class DirectLighting:
                     on &= picked <= 1.0
                 reps = np.where(on, int(more), 1)
                 pt = np.repeat(base, reps)
-                copy = np.arange(len(pt)) - np.repeat(np.cumsum(reps) - reps, reps)
+                copy = ranges(0, reps)
                 kron = np.nonzero(np.repeat(on, reps))[0] if first is None else np.arange(len(pt))
                 start = copy[kron] * n_s + (0 if first is None else first[pt[kron]])
                 light_shift = shift[pt[kron]] + li * _LIGHT_OFFSET

@@ -54,7 +54,7 @@ import numpy as np
 from ..scene.model import PatchScene
 from ..tracing.sampling import frames_from_normals
 from ..tracing.visibility import RayTracer
-from ..util.arrays import group_ids
+from ..util.arrays import group_ids, ranges
 from .contacts import CONTACT_SHARE, PROBE_CHUNK, gap_sides, pierced_parts
 from .layout import (bisect_long, cut_at_contacts, edge_for_patches, longest_edges, refine_crowded, split_triangles,
                      subdivide)
@@ -149,7 +149,7 @@ class _Grouping:
         if spread:
             n = np.maximum(1, np.ceil(self.edge[idx] / h - 1e-9)).astype(np.int64)
             idx = np.repeat(idx, n)
-            t = (np.arange(len(idx)) - np.repeat(np.cumsum(n) - n, n) + 0.5) / np.repeat(n, n) - 0.5
+            t = (ranges(0, n) + 0.5) / np.repeat(n, n) - 0.5
             centroid = self.centroid[idx] + t[:, None] * self.long[idx]
             area = self.area[idx] / np.repeat(n, n)
         rows = self.rows[idx]

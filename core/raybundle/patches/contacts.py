@@ -33,7 +33,7 @@ import math
 import numpy as np
 
 from ..tracing.sampling import orthonormal_basis
-from ..util.arrays import connected_components, group_ids, shared_edges, unique_rows
+from ..util.arrays import connected_components, group_ids, ranges, shared_edges, unique_rows
 
 
 def _plane_groups(scene, faces):
@@ -58,13 +58,15 @@ def _plane_groups(scene, faces):
 class _BoxQuery:
     """The triangles whose bounding boxes ``lo``, ``hi`` (T, 3) overlap a query box, without
     a pass over all of them per query (a real room has tens of thousands of planes):
-    sort and sweep on the widest axis.  Boxes no longer than the 99th percentile along it
-    are sorted by their low end, so those that can overlap ``[a, b]`` lie in the window of low
-    ends ``[a - longest, b]``; the longer ones (1%) are always tested."""
+    sort and sweep on one ``axis`` (by default the widest).  Boxes no longer than the 99th
+    percentile along it are sorted by their low end, so those that can overlap ``[a, b]`` lie in
+    the window of low ends ``[a - longest, b]``; the longer ones (1%) are always tested."""
 
-    def __init__(self, lo, hi):
+    def __init__(self, lo, hi, axis=None):
         self.lo, self.hi = lo, hi
-        self.axis = int(np.argmax(hi.max(axis=0) - lo.min(axis=0))) if len(lo) else 0
+        if axis is None:
+            axis = int(np.argmax(hi.max(axis=0) - lo.min(axis=0))) if len(lo) else 0
+        self.axis = axis
         ext = hi[:, self.axis] - lo[:, self.axis]
         cut = np.quantile(ext, 0.99) if len(ext) else 0.0
         short = np.nonzero(ext <= cut)[0]
@@ -75,11 +77,21 @@ class _BoxQuery:
 
     def __call__(self, lo, hi):
         """Sorted ids of the boxes overlapping ``[lo, hi]`` (3,) (touching counts)."""
+        return np.sort(self.pairs(np.asarray(lo)[None], np.asarray(hi)[None])[1])
+
+    def pairs(self, lo, hi):
+        """``(query, box)`` (P,) int: every pair of a query box ``[lo[q], hi[q]]`` (Q, D) and a
+        box overlapping it (touching counts), vectorised over the queries."""
         k = self.axis
-        a = np.searchsorted(self.starts, lo[k] - self.longest, side="left")
-        b = np.searchsorted(self.starts, hi[k], side="right")
-        pool = np.concatenate([self.order[a:b], self.long])
-        return np.sort(pool[np.all((self.hi[pool] >= lo) & (self.lo[pool] <= hi), axis=1)])
+        a = np.searchsorted(self.starts, lo[:, k] - self.longest, side="left")
+        n = np.maximum(np.searchsorted(self.starts, hi[:, k], side="right") - a, 0)
+        query = np.repeat(np.arange(len(lo)), n)
+        box = self.order[ranges(a, n)]
+        if len(self.long):
+            query = np.concatenate([query, np.repeat(np.arange(len(lo)), len(self.long))])
+            box = np.concatenate([box, np.tile(self.long, len(lo))])
+        ok = np.all((self.hi[box] >= lo[query]) & (self.lo[box] <= hi[query]), axis=1)
+        return query[ok], box[ok]
 
 
 def contact_segments(scene, faces, tol, min_plane_area=0.0):
@@ -98,16 +110,18 @@ def contact_segments(scene, faces, tol, min_plane_area=0.0):
     corners = scene.triangle_corners
     lo_all, hi_all = corners.min(axis=1), corners.max(axis=1)
     _, r = scene.bounding_sphere
-    weld = np.round(scene.vertices / max(r * 1e-7, 1e-12)).astype(np.int64)
-    _, vid = np.unique(weld, axis=0, return_inverse=True)
-    vid = vid.reshape(-1)
-    overlapping = _BoxQuery(lo_all, hi_all)
+    vid = _welded(scene)
+    # a plane's box is thin along its normal: sweep along the axis where it is thinnest
+    overlapping = {}
     for group, n, off in _plane_groups(scene, faces):
         if min_plane_area > 0 and scene.triangle_area[group].sum() < min_plane_area:
             continue
         c = corners[group]
         lo, hi = c.reshape(-1, 3).min(axis=0) - tol, c.reshape(-1, 3).max(axis=0) + tol
-        cand = np.setdiff1d(overlapping(lo, hi), group)
+        axis = int(np.argmin(hi - lo))
+        if axis not in overlapping:
+            overlapping[axis] = _BoxQuery(lo_all, hi_all, axis)
+        cand = np.setdiff1d(overlapping[axis](lo, hi), group)
         d = corners[cand] @ n - off                                   # (C, 3) signed distances
         cand_mask = (d.min(axis=1) <= tol) & (d.max(axis=1) >= -tol)
         cand, d = cand[cand_mask], d[cand_mask]
@@ -202,25 +216,25 @@ def _split(poly, a, b, eps):
 
 
 def _without_collinear(poly, eps):
-    """The convex polygon without corners lying on the line through their neighbours
-    (they would give zero-area fan triangles)."""
+    """The convex polygon ``poly`` (a list of [x, y], as :func:`_split` makes) as an (M, 2)
+    array without the corners lying on the line through their neighbours (they would give
+    zero-area fan triangles)."""
     keep = []
     m = len(poly)
     for i in range(m):
-        a, p, b = poly[i - 1], poly[i], poly[(i + 1) % m]
-        ab = b - a
-        length = np.hypot(*ab)
-        if length > 0 and abs(ab[0] * (p[1] - a[1]) - ab[1] * (p[0] - a[0])) / length > eps:
-            keep.append(i)
-    return poly[keep]
+        (ax, ay), (px, py), (bx, by) = poly[i - 1], poly[i], poly[(i + 1) % m]
+        length = math.hypot(bx - ax, by - ay)
+        if length > 0 and abs((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / length > eps:
+            keep.append(poly[i])
+    return np.array(keep, float).reshape(-1, 2)
 
 
 def _crosses(tri, segs, eps):
-    """(K,) bool: the line of each segment ``segs`` (K, 2, 2) has corners of the triangle
-    ``tri`` (3, 2) strictly on both sides (farther than ``eps``), as :func:`_split` decides."""
+    """(P,) bool: the line of segment ``segs[p]`` (P, 2, 2) has corners of triangle ``tri[p]``
+    (P, 3, 2) strictly on both sides (farther than ``eps``), as :func:`_split` decides."""
     a, d = segs[:, 0], segs[:, 1] - segs[:, 0]
     dvec = d / np.hypot(d[:, 0], d[:, 1])[:, None]
-    s = dvec[:, None, 0] * (tri[None, :, 1] - a[:, None, 1]) - dvec[:, None, 1] * (tri[None, :, 0] - a[:, None, 0])
+    s = dvec[:, None, 0] * (tri[:, :, 1] - a[:, None, 1]) - dvec[:, None, 1] * (tri[:, :, 0] - a[:, None, 0])
     return ((s > eps).any(axis=1)) & ((s < -eps).any(axis=1))
 
 
@@ -234,20 +248,42 @@ def _cross2(u, v):
     return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
 
 
+#: pairs of a triangle and a segment tested at once in :func:`split_at_contacts` (memory: about
+#: 200 bytes a pair)
+PAIR_CHUNK = 1 << 20
+
+
+def _touching_pairs(tri2d, seg, eps):
+    """``(f, k)`` (P,) int, sorted by f then k: the pairs of a triangle ``tri2d[f]`` (F, 3, 2)
+    and a segment ``seg[k]`` (K, 2, 2) that touch, along a piece of positive length
+    (:func:`_touching`) or at a corner of the triangle (:func:`_on_segment`).  Only pairs whose
+    bounding boxes overlap are tested (:class:`_BoxQuery`): a floor holds thousands of triangles
+    and the outlines of every chair leg on it."""
+    pad = 1e3 * eps
+    k, f = _BoxQuery(tri2d.min(axis=1) - pad, tri2d.max(axis=1) + pad).pairs(seg.min(axis=1), seg.max(axis=1))
+    order = np.lexsort((k, f))
+    f, k = f[order], k[order]
+    hit = np.zeros(len(f), bool)
+    for lo in range(0, len(f), PAIR_CHUNK):
+        t, sg = tri2d[f[lo:lo + PAIR_CHUNK]], seg[k[lo:lo + PAIR_CHUNK]]
+        hit[lo:lo + PAIR_CHUNK] = _touching(t, sg, eps) | _on_segment(t, sg, eps).any(axis=1)
+    return f[hit], k[hit]
+
+
 def _touching(tri2d, seg, eps):
-    """(F, K) bool: segment k meets triangle f along a piece of positive length
-    (crossing its interior or lying on an edge).  Cyrus-Beck clipping."""
-    a, b = seg[None, :, 0], seg[None, :, 1]                              # (1, K, 2)
-    t0 = np.zeros((len(tri2d), len(seg)))
+    """(P,) bool: segment ``seg[p]`` (P, 2, 2) meets triangle ``tri2d[p]`` (P, 3, 2) along a
+    piece of positive length (crossing its interior or lying on an edge).  Cyrus-Beck clipping."""
+    a, b = seg[:, 0], seg[:, 1]                                          # (P, 2)
+    t0 = np.zeros(len(tri2d))
     t1 = np.ones_like(t0)
-    ccw = np.sign(_cross2(tri2d[:, 1] - tri2d[:, 0], tri2d[:, 2] - tri2d[:, 0]))[:, None]
+    ccw = np.sign(_cross2(tri2d[:, 1] - tri2d[:, 0], tri2d[:, 2] - tri2d[:, 0]))
     for i in range(3):
-        p, q = tri2d[:, None, i], tri2d[:, None, (i + 1) % 3]             # (F, 1, 2)
+        p, q = tri2d[:, i], tri2d[:, (i + 1) % 3]                          # (P, 2)
         e = q - p
         # inside when ccw * cross(e, x - p) >= -eps
         fa = ccw * _cross2(e, a - p)
         fb = ccw * _cross2(e, b - p)
-        elen = np.linalg.norm(e, axis=2)
+        elen = np.linalg.norm(e, axis=1)
         fa, fb = fa + eps * elen, fb + eps * elen
         den = fa - fb
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -258,7 +294,7 @@ def _touching(tri2d, seg, eps):
         leave = (fa >= 0) & (fb < 0)
         t0 = np.where(enter, np.maximum(t0, t), t0)
         t1 = np.where(leave, np.minimum(t1, t), t1)
-    seg_len = np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1)[None]
+    seg_len = np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1)
     return (t1 - t0) * seg_len > 4 * eps
 
 
@@ -293,31 +329,27 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     for group, origin, e1, e2, seg in groups:
         to2d = np.stack([e1, e2], axis=1)
         c2 = (scene.triangle_corners[group] - origin) @ to2d                 # (F, 3, 2)
-        touch = np.zeros((len(group), len(seg)), bool)
-        step = max(1, 4_000_000 // max(len(seg), 1))
-        for s in range(0, len(group), step):
-            touch[s:s + step] = _touching(c2[s:s + step], seg, eps) | _corner_on(c2[s:s + step], seg, eps)
-        touched = np.nonzero(touch.any(axis=1))[0]
+        f, k = _touching_pairs(c2, seg, eps)
+        crosses = np.zeros(len(f), bool)
+        for lo in range(0, len(f), PAIR_CHUNK):
+            crosses[lo:lo + PAIR_CHUNK] = _crosses(c2[f[lo:lo + PAIR_CHUNK]], seg[k[lo:lo + PAIR_CHUNK]], eps)
+        lines = _lines(seg, eps)
         # triangles no touching line cuts (every corner on one side of each): only their corners' tags
-        step = max(1, 1_000_000 // max(len(seg), 1))
-        whole = np.zeros(len(touched), bool)
-        for s in range(0, len(touched), step):
-            f = touched[s:s + step]
-            whole[s:s + step] = _uncut(c2[f], seg, touch[f], eps)
-        fast = touched[whole]
-        for s in range(0, len(fast), step):
-            f = fast[s:s + step]
-            tg = _corner_tags_uncut(c2[f], seg, touch[f], seg_base, eps, tag_ids)
-            corner_tag[group[f]] = _merged(corner_tag[group[f]], tg, tag_ids)
-        for f in touched[~whole]:
-            tri = group[f]
-            segs = np.nonzero(touch[f])[0]
-            # pieces as lists of [x, y] while cutting (numpy's cost per call on 3-6 corners)
-            polys = [c2[f].tolist()]
-            # a line that leaves the triangle's corners on one side misses every piece of it
-            crossing = segs[_crosses(c2[f], seg[segs], eps)]
+        cut = np.unique(f[crosses])
+        whole = ~np.isin(f, cut)
+        fast, own = np.unique(f[whole], return_inverse=True)
+        tg = _corner_tags(c2[fast].reshape(-1, 2), np.repeat(np.arange(len(fast)), 3), c2[fast].mean(axis=1),
+                          (own.reshape(-1), k[whole]), seg, lines, seg_base, eps, tag_ids)
+        corner_tag[group[fast]] = _merged(corner_tag[group[fast]], tg.reshape(-1, 3), tag_ids)
+        # the others cut into convex pieces, as lists of [x, y] (numpy's cost per call on 3-6 corners)
+        start = np.searchsorted(f, cut)
+        count = np.searchsorted(f, cut, side="right") - start
+        pieces = []
+        for fi, lo, n in zip(cut.tolist(), start.tolist(), count.tolist()):
+            polys = [c2[fi].tolist()]
             least = min_fraction * _area(polys[0])
-            for a, b in seg[crossing].tolist():
+            # a line that leaves the triangle's corners on one side misses every piece of it
+            for a, b in seg[k[lo:lo + n][crosses[lo:lo + n]]].tolist():
                 nxt = []
                 for poly in polys:
                     lft, rgt = _split(poly, a, b, eps)
@@ -326,18 +358,30 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
                     else:
                         nxt += [lft, rgt]
                 polys = nxt
-            polys = [_without_collinear(np.array(poly), eps) for poly in polys]
-            tags = [_corner_tags(poly, seg, segs, seg_base, eps, tag_ids) for poly in polys]
+            pieces.append([_without_collinear(poly, eps) for poly in polys])
+        # the pieces' corner tags, against the segments touching their triangle
+        polys = [poly for p in pieces for poly in p]
+        size = np.array([len(poly) for poly in polys], np.int64)
+        tri_of = np.repeat(np.arange(len(cut)), [len(p) for p in pieces])
+        tags = _corner_tags(np.concatenate(polys) if polys else np.zeros((0, 2)), np.repeat(np.arange(len(polys)), size),
+                            np.array([poly.mean(axis=0) for poly in polys]).reshape(-1, 2),
+                            (np.repeat(np.arange(len(polys)), count[tri_of]), k[ranges(start[tri_of], count[tri_of])]),
+                            seg, lines, seg_base, eps, tag_ids)
+        tags = np.split(tags, np.cumsum(size)[:-1]) if polys else []
+        j = 0
+        for fi, polys in zip(cut.tolist(), pieces):
+            tri, f_tags = group[fi], tags[j:j + len(polys)]
+            j += len(polys)
             if len(polys) == 1:          # not cut: the triangle keeps its patch, its corners get their tags
-                if any(tags[0]):
-                    corner_tag[tri] = _merged(corner_tag[tri], _tags_in_order(tags[0], polys[0], c2[f], eps), tag_ids)
+                if f_tags[0].any():
+                    corner_tag[tri] = _merged(corner_tag[tri], _tags_in_order(f_tags[0], polys[0], c2[fi], eps), tag_ids)
                 continue
             # the tags the triangle had (a cut where it pierces a surface) stay on its pieces' corners
-            tags = [_merged(_inherited_tags(poly, c2[f], corner_tag[tri], eps), tg, tag_ids)
-                    for poly, tg in zip(polys, tags)]
+            f_tags = [_merged(_inherited_tags(poly, c2[fi], corner_tag[tri], eps), tg, tag_ids)
+                      for poly, tg in zip(polys, f_tags)]
             replaced[tri] = True
             n_cut += len(polys) > 1
-            for poly, tg in zip(polys, tags):
+            for poly, tg in zip(polys, f_tags):
                 m = len(poly)
                 base = n_new_pts
                 new_pts.append(origin + poly @ to2d.T)
@@ -389,51 +433,28 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     return out, n_cut
 
 
-def _corner_on(tri2d, seg, eps):
-    """(F, K) bool: a corner of triangle f lies on segment k (a contact at one point)."""
-    a, b = seg[None, None, :, 0], seg[None, None, :, 1]                  # (1, 1, K, 2)
-    p = tri2d[:, :, None, :]                                            # (F, 3, 1, 2)
-    d = b - a
-    length = np.maximum(np.linalg.norm(d, axis=-1), 1e-300)
-    off = np.abs(_cross2(d, p - a)) / length
-    along = np.einsum("...i,...i->...", p - a, d) / length
-    return ((off <= 1e3 * eps) & (along >= -1e3 * eps) & (along <= length + 1e3 * eps)).any(axis=1)
-
-
-def _uncut(tri2d, seg, touch, eps):
-    """(F,) bool: no line of a touching segment (``touch`` (F, K)) has corners of triangle f
-    (``tri2d`` (F, 3, 2)) strictly on both of its sides, so :func:`_split` leaves it whole."""
+def _lines(seg, eps):
+    """The contact line of each segment ``seg`` (K, 2, 2): ``(u (K, 2), key (K, 3) int)``, its
+    unit direction, one of the two per line, and that direction and the line's offset from the
+    origin rounded, so that collinear segments (a floor's subdivided edge along a wall) get one
+    key and weld along their line."""
     a, d = seg[:, 0], seg[:, 1] - seg[:, 0]
     u = d / np.hypot(d[:, 0], d[:, 1])[:, None]
-    s = u[None, None, :, 0] * (tri2d[:, :, None, 1] - a[None, None, :, 1]) \
-        - u[None, None, :, 1] * (tri2d[:, :, None, 0] - a[None, None, :, 0])           # (F, 3, K)
-    both = (s > eps).any(axis=1) & (s < -eps).any(axis=1)
-    return ~(both & touch).any(axis=1)
-
-
-def _corner_tags_uncut(tri2d, seg, touch, seg_base, eps, tag_ids):
-    """:func:`_corner_tags` of whole triangles ``tri2d`` (F, 3, 2), vectorised: (F, 3) tags
-    in corner order, from the same keys (so equal lines weld with the cut pieces)."""
-    a, d = seg[:, 0], seg[:, 1] - seg[:, 0]
-    length = np.hypot(d[:, 0], d[:, 1])
-    q = tri2d[:, :, None, :] - a[None, None]                                           # (F, 3, K, 2)
-    off = np.abs(_cross2(d[None, None], q)) / length
-    along = np.einsum("fckx,kx->fck", q, d) / length
-    on = (off <= 1e3 * eps) & (along >= -1e3 * eps) & (along <= length + 1e3 * eps) & touch[:, None, :]
-    u = d / length[:, None]
-    flip = (u[:, 0] < -1e-9) | ((np.abs(u[:, 0]) <= 1e-9) & (u[:, 1] < 0))             # one direction per line
+    flip = (u[:, 0] < -1e-9) | ((np.abs(u[:, 0]) <= 1e-9) & (u[:, 1] < 0))
     u[flip] = -u[flip]
-    ur = np.round(u * 1e6).astype(np.int64)
     offset = np.round((u[:, 0] * a[:, 1] - u[:, 1] * a[:, 0]) / (1e3 * eps)).astype(np.int64)
-    centroid = tri2d.mean(axis=1)
-    side = (u[None, :, 0] * (centroid[:, None, 1] - a[None, :, 1])
-            - u[None, :, 1] * (centroid[:, None, 0] - a[None, :, 0])) > 0               # (F, K)
-    out = np.zeros(tri2d.shape[:2], np.int64)
-    for f, c in zip(*np.nonzero(on.any(axis=2))):
-        key = {((seg_base, int(ur[k, 0]), int(ur[k, 1]), int(offset[k])), bool(side[f, k]))
-               for k in np.nonzero(on[f, c])[0]}
-        out[f, c] = tag_ids.setdefault(tuple(sorted(key)), len(tag_ids) + 1)
-    return out
+    return u, np.concatenate([np.round(u * 1e6).astype(np.int64), offset[:, None]], axis=1)
+
+
+def _on_segment(points, seg, eps):
+    """(P, M) bool: point ``points[p, m]`` (P, M, 2) lies on segment ``seg[p]`` (P, 2, 2)
+    (within 1000 ``eps``)."""
+    a, d = seg[:, 0], seg[:, 1] - seg[:, 0]
+    length = np.hypot(d[:, 0], d[:, 1])[:, None]
+    q = points - a[:, None]
+    off = np.abs(d[:, None, 0] * q[:, :, 1] - d[:, None, 1] * q[:, :, 0]) / length
+    along = (q[:, :, 0] * d[:, None, 0] + q[:, :, 1] * d[:, None, 1]) / length
+    return (off <= 1e3 * eps) & (along >= -1e3 * eps) & (along <= length + 1e3 * eps)
 
 
 #: :func:`_merged`: a pierce tag merged with a contact tag moves by multiples of twice this
@@ -463,18 +484,15 @@ def _inherited_tags(poly, tri2d, tags, eps):
     if not np.any(tags):
         return out
     tol = 1e3 * eps
-    for i, p in enumerate(poly):
-        d = np.linalg.norm(tri2d - p, axis=1)
-        if d.min() <= tol:
-            out[i] = tags[int(np.argmin(d))]
-            continue
-        for j in range(3):
-            a, b = tri2d[j], tri2d[(j + 1) % 3]
-            if tags[j] != 0 and tags[j] == tags[(j + 1) % 3]:
-                e = b - a
-                t = np.dot(p - a, e) / np.dot(e, e)
-                if 0.0 <= t <= 1.0 and np.linalg.norm(a + t * e - p) <= tol:
-                    out[i] = tags[j]
+    d = np.linalg.norm(poly[:, None] - tri2d[None], axis=2)                      # (M, 3)
+    at = d.min(axis=1) <= tol
+    out[at] = tags[np.argmin(d[at], axis=1)]
+    for j in range(3):
+        if tags[j] != 0 and tags[j] == tags[(j + 1) % 3]:
+            a, e = tri2d[j], tri2d[(j + 1) % 3] - tri2d[j]
+            t = (poly - a) @ e / np.dot(e, e)
+            on = ~at & (t >= 0.0) & (t <= 1.0) & (np.linalg.norm(a + t[:, None] * e - poly, axis=1) <= tol)
+            out[on] = tags[j]
     return out
 
 
@@ -487,32 +505,32 @@ def _tags_in_order(tags, poly, tri2d, eps):
     return out
 
 
-def _corner_tags(poly, seg, segs, seg_base, eps, tag_ids):
-    """Weld tag per polygon corner: which contact lines the corner lies on, and on
-    which side of each the polygon lies (0 for none).  A line, not a segment: the
-    collinear segments of one contact (a floor's subdivided edge along a wall) weld
-    along it.  Vectorised over the segments ``segs`` (a floor triangle under a chair
-    may touch hundreds)."""
-    centroid = poly.mean(axis=0)
-    segs = np.asarray(segs, np.int64)
-    a, b = seg[segs, 0], seg[segs, 1]
-    d = b - a
-    length = np.hypot(d[:, 0], d[:, 1])
-    u = d / length[:, None]
-    flip = (u[:, 0] < -1e-9) | ((np.abs(u[:, 0]) <= 1e-9) & (u[:, 1] < 0))      # one direction per line
-    u[flip] = -u[flip]
-    direction = np.round(u * 1e6).astype(np.int64)
-    offset = np.round((u[:, 0] * a[:, 1] - u[:, 1] * a[:, 0]) / (1e3 * eps)).astype(np.int64)
-    side = u[:, 0] * (centroid[1] - a[:, 1]) - u[:, 1] * (centroid[0] - a[:, 0]) > 0
-    q = np.asarray(poly)[:, None, :] - a[None]                                  # (M, K, 2)
-    off = np.abs(d[:, 0] * q[:, :, 1] - d[:, 1] * q[:, :, 0]) / length
-    along = (q[:, :, 0] * d[:, 0] + q[:, :, 1] * d[:, 1]) / length
-    on = (off <= 1e3 * eps) & (-1e3 * eps <= along) & (along <= length + 1e3 * eps)
-    out = [0] * len(q)
-    for i, k in zip(*np.nonzero(on)):
-        out[i] = (out[i] or set()) | {((seg_base, int(direction[k, 0]), int(direction[k, 1]), int(offset[k])),
-                                       bool(side[k]))}
-    return [tag_ids.setdefault(tuple(sorted(key)), len(tag_ids) + 1) if key else 0 for key in out]
+def _corner_tags(points, polygon, centroid, pairs, seg, lines, seg_base, eps, tag_ids):
+    """Weld tag (M,) int per corner ``points`` (M, 2) of convex polygons (``polygon`` (M,) the
+    corner's polygon, ascending; ``centroid`` (N, 2) theirs): which contact lines the corner lies
+    on, and on which side of each its polygon lies; 0 for none.  A line, not a segment: the
+    collinear segments of one contact (a floor's subdivided edge along a wall) weld along it
+    (:func:`_lines`, of ``seg`` (K, 2, 2)).  ``pairs`` ``(polygon, segment)`` (P,) int, sorted
+    by polygon: the segments each polygon's corners are tested against (those touching it; a
+    floor triangle under a chair may touch hundreds).  Ids come from ``tag_ids`` in corner order,
+    so equal keys give one tag in every call."""
+    u, key = lines
+    own, k = pairs
+    first = np.searchsorted(own, np.arange(len(centroid)))
+    n = np.bincount(own, minlength=len(centroid))[polygon]
+    corner = np.repeat(np.arange(len(points)), n)                                 # (Q,) a corner and
+    k = k[ranges(first[polygon], n)]                                              # a segment to test
+    a = seg[k, 0]
+    on = _on_segment(points[corner, None], seg[k], eps)[:, 0]
+    c = centroid[polygon[corner[on]]]
+    side = u[k[on], 0] * (c[:, 1] - a[on, 1]) - u[k[on], 1] * (c[:, 0] - a[on, 0]) > 0
+    keys: dict = {}
+    for m, line, sd in zip(corner[on].tolist(), key[k[on]].tolist(), side.tolist()):
+        keys.setdefault(m, set()).add(((seg_base, *line), sd))
+    out = np.zeros(len(points), np.int64)
+    for m in sorted(keys):
+        out[m] = tag_ids.setdefault(tuple(sorted(keys[m])), len(tag_ids) + 1)
+    return out
 
 
 #: gaps narrower than this share of the patch size count as contact
@@ -681,7 +699,7 @@ def cut_where_pierced(scene, own, other):
         hi = np.searchsorted(cut_rows[order], own, side="right")
         count = hi - lo
         pair = np.repeat(np.arange(len(own)), count)
-        own = order[np.repeat(lo, count) + np.arange(len(pair)) - np.repeat(np.cumsum(count) - count, count)]
+        own = order[ranges(lo, count)]
         plane, n, p0 = plane[pair], n[pair], p0[pair]
     return scene, rows
 

@@ -1,4 +1,5 @@
-"""Array helpers shared by the layers: unique rows, group ids, shared edges, connected components."""
+"""Array helpers shared by the layers: unique rows, group ids, index ranges, shared edges,
+connected components."""
 from __future__ import annotations
 
 import numpy as np
@@ -54,6 +55,13 @@ def _mixed_radix(columns):
     for c, s in zip(cols, spans):
         key = key * s + c
     return key
+
+
+def ranges(start, count):
+    """(sum(count),) int64: ``arange(start[i], start[i] + count[i])`` for each i, concatenated
+    (``start`` a scalar or (N,), ``count`` (N,) int >= 0), without a loop over i."""
+    count = np.asarray(count, np.int64)
+    return np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count - start, count)
 
 
 def shared_edges(corners):
