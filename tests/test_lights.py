@@ -327,6 +327,27 @@ def test_a_large_area_light_close_by_is_sampled_by_solid_angle(height):
     assert est[:, 0].std() / exact[0] < 1.2, est[:, 0].std() / exact[0]
 
 
+def test_an_area_lamps_analytic_irradiance_is_its_clipped_rectangles():
+    """A rectangular area lamp's unoccluded ``I(x)``, taken by its outline (Lambert's sum over
+    its corners where the point sees it whole), is that of its rectangle clipped to the point's
+    horizon (:func:`~raybundle.lights.polygon.polygon_irradiance`) at 20,000 random points and
+    normals, half of them with the horizon through the lamp; 0 behind it."""
+    from raybundle.lights.polygon import light_polygon_irradiance, polygon_irradiance
+    from raybundle.lights.sources import ShapeLight
+
+    rng = np.random.default_rng(4)
+    lamp = ShapeLight(np.array([0.2, -0.1, 2.0]), np.array([1.5, 0.3, 0]), np.array([-0.2, 1.0, 0]),
+                      np.array([0, 0, -1.0]), False, 4 * np.hypot(1.5, 0.3) * np.hypot(0.2, 1.0), np.ones(3))
+    x = rng.uniform(-3, 3, (20_000, 3))
+    nx = rng.normal(size=(20_000, 3))
+    nx /= np.linalg.norm(nx, axis=1)[:, None]
+    corners = np.array([lamp.center + a * lamp.axis_u + b * lamp.axis_v for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+    got, ok = light_polygon_irradiance(lamp, x, nx)
+    want = np.where(x[:, 2] < 2.0, polygon_irradiance(x, nx, np.broadcast_to(corners, (len(x), 4, 3))), 0.0)
+    cut = np.any(np.einsum("nck,nk->nc", corners[None] - x[:, None], nx) < 0, axis=1) & (x[:, 2] < 2.0)
+    assert ok.all() and 0.3 < cut.mean() and np.allclose(got, want, rtol=1e-9, atol=1e-12)
+
+
 def test_an_area_lamps_selection_estimate_bounds_its_unoccluded_irradiance():
     """Lamp selection's estimate for a rectangular area lamp is an upper bound of its exact
     unoccluded irradiance (:func:`light_polygon_irradiance`): 200 random rectangles, 2,000

@@ -149,7 +149,8 @@ def light_polygon_irradiance(light, points, normals):
                             for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
         lit = (points - light.center) @ light.normal > 0
         out = np.zeros(len(points))
-        if lit.any():
-            out[lit] = polygon_irradiance(points[lit], normals[lit], np.broadcast_to(corners, (int(lit.sum()), 4, 3)))
+        if lit.any():        # by its outline: most points see it whole, Lambert's sum over 4 corners
+            out[lit] = clipped_edge_irradiance(points[lit], normals[lit],
+                                               np.stack([corners, np.roll(corners, -1, axis=0)], axis=1), light.normal)
         return out, np.ones(len(points), bool)
     return None

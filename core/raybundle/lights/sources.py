@@ -257,16 +257,16 @@ class ShapeLight(_Light):
     def sample(self, points, u):
         if self.ellipse:
             r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
-            a, b = r * np.cos(phi), r * np.sin(phi)
+            y, e = self._by_area(points, r * np.cos(phi), r * np.sin(phi))
+            return y, e[:, None] * self.radiance
+        radius = max(np.linalg.norm(self.axis_u + self.axis_v), np.linalg.norm(self.axis_u - self.axis_v))
+        gap = np.maximum(np.linalg.norm(points - self.center, axis=1) - radius, 0.0)
+        near = (self.area >= MeshLight.MIN_SOLID_ANGLE * gap * gap) & ((points - self.center) @ self.normal > 0)
+        if near.all():
+            y, e = self._sample_solid_angle(points, u)
         else:
-            a, b = 2 * u[:, 0] - 1, 2 * u[:, 1] - 1
-        y, e = self._by_area(points, a, b)
-        if not self.ellipse:
-            radius = max(np.linalg.norm(self.axis_u + self.axis_v), np.linalg.norm(self.axis_u - self.axis_v))
-            gap = np.maximum(np.linalg.norm(points - self.center, axis=1) - radius, 0.0)
-            near = np.nonzero((self.area >= MeshLight.MIN_SOLID_ANGLE * gap * gap)
-                              & ((points - self.center) @ self.normal > 0))[0]
-            if len(near):
+            y, e = self._by_area(points, 2 * u[:, 0] - 1, 2 * u[:, 1] - 1)
+            if near.any():
                 y[near], e[near] = self._sample_solid_angle(points[near], u[near])
         return y, e[:, None] * self.radiance
 
@@ -305,7 +305,10 @@ class ShapeLight(_Light):
         lx, ly = 2.0 * np.linalg.norm(self.axis_u), 2.0 * np.linalg.norm(self.axis_v)
         ex, ey = self.axis_u / (0.5 * lx), self.axis_v / (0.5 * ly)
         ez = np.cross(ex, ey)
-        d = (self.center - self.axis_u - self.axis_v) - points           # to the corner, (N, 3)
+        # what depends on the point only, once per run of equal points (a penumbra's samples)
+        new = np.ones(len(points), bool)
+        new[1:] = np.any(points[1:] != points[:-1], axis=1)
+        d = (self.center - self.axis_u - self.axis_v) - points[new]      # to the corner, (N', 3)
         x0, y0, z0 = d @ ex, d @ ey, d @ ez
         flip = z0 > 0                                                     # the frame's z away from the light
         z0 = np.where(flip, -z0, z0)
@@ -317,8 +320,13 @@ class ShapeLight(_Light):
         g2, g3 = np.arccos(np.clip(-n2 * n3, -1, 1)), np.arccos(np.clip(-n3 * n0, -1, 1))
         k = 2.0 * np.pi - g2 - g3
         omega = np.maximum(g0 + g1 - k, 0.0)
+        if not new.all():
+            run = np.cumsum(new) - 1
+            x0, y0, z0, x1, y1, n0, n2, k, omega, flip = (
+                a[run] for a in (x0, y0, z0, x1, y1, n0, n2, k, omega, flip))
         au = u[:, 0] * omega + k
-        fu = (np.cos(au) * n0 - n2) / np.where(np.sin(au) != 0, np.sin(au), 1e-300)
+        sin_au = np.sin(au)
+        fu = (np.cos(au) * n0 - n2) / np.where(sin_au != 0, sin_au, 1e-300)
         cu = np.clip(np.sign(fu) / np.sqrt(fu * fu + n0 * n0), -1.0, 1.0)
         xu = np.clip(-(cu * z0) / np.maximum(np.sqrt(1.0 - cu * cu), 1e-300), x0, x1)
         dd = np.sqrt(xu * xu + z0 * z0)
