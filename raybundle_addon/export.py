@@ -387,7 +387,10 @@ def border_rect(render, size):
 
 def export_camera(cam_ob, render, size=None, border=None, warn=print):
     """A :class:`raybundle.scene.camera.Camera` for camera object ``cam_ob`` (evaluated) and
-    the render settings; ``border`` (x0, y0, w, h) crops it to the border's pixels."""
+    the render settings; ``border`` (x0, y0, w, h) crops it to the border's pixels.  The pixel
+    filter is Cycles' (Film > Pixel Filter; a box is one pixel wide, as Cycles reads it)."""
+    from dataclasses import replace
+
     from raybundle.scene.camera import Camera
     from raybundle.scene.model import SceneError
 
@@ -407,10 +410,15 @@ def export_camera(cam_ob, render, size=None, border=None, warn=print):
                               clip_start=cd.clip_start)
     if getattr(cd.dof, "use_dof", False):
         warn(f"camera {cam_ob.name!r}: depth of field is not supported (a pinhole is used)")
+    cycles = getattr(render.id_data, "cycles", None)
+    if cycles is not None:
+        kind = str(cycles.pixel_filter_type)
+        cam = replace(cam, pixel_filter=kind, filter_width=1.0 if kind == "BOX" else float(cycles.filter_width))
+        if float(getattr(cycles, "film_exposure", 1.0)) != 1.0:
+            warn(f"film exposure {float(cycles.film_exposure):g} is not applied (the image is as at exposure 1)")
     if border is not None:
         x0, y0, bw, bh = border
-        cam = Camera(bw, bh, cam.fx, cam.fy, cam.cx - x0, cam.cy - (h - (y0 + bh)), cam.matrix_world,
-                     cam.orthographic, cam.clip_start)
+        cam = replace(cam, width=bw, height=bh, cx=cam.cx - x0, cy=cam.cy - (h - (y0 + bh)))
     return cam
 
 

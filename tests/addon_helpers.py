@@ -174,12 +174,14 @@ def render_raybundle(path, time_limit=None, iterations=None, seed=0, patches=Non
     return read_exr(path)
 
 
-def render_cycles(path, samples=64, seed=0):
-    """Render the current scene with Cycles (CPU, no denoising/clamping, box filter 1 px,
-    no glossy filter, Standard view) to an EXR; returns (H, W, 3)."""
+def render_cycles(path, samples=64, seed=0, pixel_filter=("BOX", 1.0)):
+    """Render the current scene with Cycles (CPU, no denoising/clamping, the pixel filter
+    ``(type, width)``, by default a box 1 px, no glossy filter, Standard view) to an EXR;
+    returns (H, W, 3).  The scene keeps the filter."""
     from raybundle.util.io import read_exr
 
     cycles_settings(samples, seed, world_strength=None)          # keeps the scene's world
+    bpy.context.scene.cycles.pixel_filter_type, bpy.context.scene.cycles.filter_width = pixel_filter
     exr_output(path)
     bpy.ops.render.render(write_still=True)
     return read_exr(path)

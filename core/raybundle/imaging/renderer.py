@@ -256,10 +256,11 @@ class Renderer(ProgressiveImage):
 
     # --------------------------------------------------------------- passes
     def trace_gbuffer(self, jitter, pixels=None):
-        """Primary rays through pixel corners + ``jitter`` (N, 2) in [0,1)^2, for all
+        """Primary rays through the pixels' sample positions for uniforms ``jitter`` (N, 2) in
+        [0,1)^2 (:meth:`~raybundle.scene.camera.Camera.subpixel`: the pixel filter's), for all
         pixels or for the pixel indices ``pixels`` (N,)."""
         cam = self.camera
-        pos = (self._pixel if pixels is None else self._pixel[pixels]) + jitter
+        pos = (self._pixel if pixels is None else self._pixel[pixels]) + cam.subpixel(jitter)
         org, dirs = cam.rays(pos[:, 0], pos[:, 1])
         tri, t, u, v = self.tracer.first_hit(org, dirs)
         self.image_rays += len(dirs)

@@ -7,7 +7,8 @@ import numpy as np
 
 def splat_to_camera(scene, camera, tracer, points, normals, triangles, travel, power, glossy=True):
     """Light tracing's measurement of photon hits: the radiance each hit makes its surface
-    reflect towards the eye, as the pixel it lands on sees it (box filter one pixel wide)::
+    reflect towards the eye, as the pixels whose filter covers where it lands see it
+    (:meth:`~raybundle.scene.camera.Camera.footprint`; with a box one pixel wide, the pixel it lands in)::
 
         dP = Phi f(d, w_e) cos_y density        [W m^-2 sr^-1]
 
@@ -19,7 +20,8 @@ def splat_to_camera(scene, camera, tracer, points, normals, triangles, travel, p
     ``pixel`` a flat index ``y * width + x``, to be summed (repeats allowed)."""
     px, py, to_eye, reach, density = camera.project(points)
     cos_y = np.einsum("ij,ij->i", normals, to_eye)
-    ok = (density > 0) & (cos_y > 0) & (px >= 0) & (px < camera.width) & (py >= 0) & (py < camera.height)
+    m = camera.filter_margin
+    ok = (density > 0) & (cos_y > 0) & (px >= -m) & (px < camera.width + m) & (py >= -m) & (py < camera.height + m)
     j = np.nonzero(ok)[0]
     if not len(j):
         return np.zeros(0, np.int64), np.zeros((0, 3)), 0
@@ -30,5 +32,5 @@ def splat_to_camera(scene, camera, tracer, points, normals, triangles, travel, p
     tex = None if scene.texture is None else scene.texture.at(scene.triangle_source[triangles[j]], points[j])
     f = scene.materials.brdf(scene.triangle_material[triangles[j]], normals[j], travel[j], to_eye[j],
                              glossy=glossy, diffuse_scale=tex)
-    pix = np.floor(py[j]).astype(np.int64) * camera.width + np.floor(px[j]).astype(np.int64)
-    return pix, power[j] * f * (cos_y[j] * density[j])[:, None], rays
+    sample, pix, weight = camera.footprint(px[j], py[j])
+    return pix, (power[j] * f * (cos_y[j] * density[j])[:, None])[sample] * weight[:, None], rays

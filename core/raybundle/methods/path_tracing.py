@@ -23,8 +23,8 @@ with three unbiased pieces:
 * **Russian roulette** from :data:`ROULETTE_DEPTH` bounces on, survival probability
   ``min(1, max_rgb throughput)``.
 
-The pixel value is the mean of the passes (box filter one pixel wide, a uniformly
-jittered position per pass, as Cycles' box filter).  Random numbers come from a PRNG or,
+The pixel value is the mean of the passes, each at a position in the pixel drawn from the
+camera's pixel filter as Cycles draws it (:meth:`~raybundle.scene.camera.Camera.subpixel`).  Random numbers come from a PRNG or,
 with ``sequence="halton"``, from a randomised quasi-Monte Carlo walk: pass ``n`` uses Halton
 point ``n``, digit-scrambled once per run and shifted per pixel (Cranley-Patterson rotation), for its first
 :data:`QMC_DIMENSIONS` numbers (the jitter, the first bounces), the PRNG after, so the
@@ -115,7 +115,8 @@ class PathTracer(ProgressiveImage, Method):
         n = len(self._pixel)
         pix = np.arange(n)
         jitter = u.take(pix, 2)
-        org, w = self.camera.rays(self._pixel[:, 0] + jitter[:, 0], self._pixel[:, 1] + jitter[:, 1])
+        pos = self._pixel + self.camera.subpixel(jitter)                     # the pixel filter's
+        org, w = self.camera.rays(pos[:, 0], pos[:, 1])
         self.pass_sum += self.trace(org, w, pix, u)
         self.passes += 1
         self.solver.stats.iterations = self.passes

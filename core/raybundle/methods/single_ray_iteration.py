@@ -257,7 +257,8 @@ class SingleRayIteration(ProgressiveImage, Method):
             return out
         sc = self.scene
         jitter = self.rng.random((len(self._pixel), 2))
-        org, w = self.camera.rays(self._pixel[:, 0] + jitter[:, 0], self._pixel[:, 1] + jitter[:, 1])
+        pos = self._pixel + self.camera.subpixel(jitter)                     # the pixel filter's
+        org, w = self.camera.rays(pos[:, 0], pos[:, 1])
         tri, _, _, _ = self.tracer.first_hit(org, w)
         self.image_rays += len(org)
         hit = tri >= 0

@@ -124,11 +124,25 @@ class World:
                     and np.allclose(c.matrix_world, camera.matrix_world))
 
     def view_pixel_means(self, camera):
-        """(h * w, 3) the mean of :attr:`view` over each of the ``camera``'s pixels (row-major
-        from the top left; :meth:`view_for` the camera)."""
+        """(h * w, 3) the mean of :attr:`view` under each of the ``camera``'s pixel filters
+        (row-major from the top left; :meth:`view_for` the camera): over the pixel for a box one
+        pixel wide, else weighted by the filter (:meth:`~raybundle.scene.camera.Camera.filter_weights`,
+        along x and y) over the view's sub-pixels it covers, normalised; beyond the image's edge
+        the view's edge stands for the world there."""
         h, w = camera.height, camera.width
         s = self.view.shape[1] // w
-        return self.view.reshape(h, s, w, s, 3).mean(axis=(1, 3)).reshape(-1, 3)
+        if camera.pixel_filter == "BOX" and camera.filter_width == 1.0:
+            return self.view.reshape(h, s, w, s, 3).mean(axis=(1, 3)).reshape(-1, 3)
+        r = int(np.ceil(camera.filter_margin))
+        taps = np.arange(-r * s, (r + 1) * s)                 # sub-pixels from a pixel's first one
+        weight = camera.filter_weights((taps + 0.5) / s - 0.5)
+        keep = weight > 0
+        taps, weight = taps[keep] + r * s, weight[keep] / weight[keep].sum()
+        view = np.pad(self.view, ((r * s, r * s), (r * s, r * s), (0, 0)), mode="edge")
+        start = np.arange(w) * s
+        rows = sum(wk * view[:, start + k] for k, wk in zip(taps, weight))            # (H', w, 3)
+        start = np.arange(h) * s
+        return sum(wk * rows[start + k] for k, wk in zip(taps, weight)).reshape(-1, 3)
 
     def view_radiance(self, directions):
         """(N, 3) radiance of :attr:`view` along camera rays of unit ``directions`` (N, 3)
