@@ -35,7 +35,8 @@ import time
 
 import numpy as np
 
-from ..tracing.sampling import cosine_directions, frames_from_normals, kronecker_alpha, points_on_triangles
+from ..tracing.sampling import cosine_directions, frames_from_normals, kronecker_alpha
+from ..tracing.visibility import near_surface
 
 
 class FinalGather:
@@ -183,12 +184,8 @@ def near_edge_tsides(scene, tracer, rng, tsides=None, probes=PROBES, reach=1.0, 
         own = np.repeat(np.arange(len(sel)), counts[sel])                   # each ray's side in sel
         ts = tsides[sel][own]
         tri = scene.tside_triangle[ts]
-        p = points_on_triangles(scene.triangle_corners[tri], *rng.random((2, len(ts))))
-        n = scene.tside_normal[ts]
-        t, b = frames_from_normals(n)
-        w = cosine_directions(rng.random((len(n), 2)), t, b, n)
-        reach_m = reach * np.sqrt(scene.patch_area[scene.triangle_patch[tri]])
-        blocked = tracer.occluded(p + n * tracer.eps, w, reach_m)
+        blocked = near_surface(tracer, scene.triangle_corners[tri], scene.tside_normal[ts],
+                               reach * np.sqrt(scene.patch_area[scene.triangle_patch[tri]]), rng)
         flag[sel] = np.bincount(own, blocked, minlength=len(sel)) > 0
         lo = hi
     return flag

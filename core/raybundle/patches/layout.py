@@ -216,7 +216,8 @@ def crowding(tracer, scene, which, reach, rays=CROWD_RAYS, seed=0):
     layout is the same on every run.  Under an unbounded parallel plate at height d < reach
     it is 1 - (d / reach)^2: a cosine-distributed ray meets the plate within reach when its
     angle to the normal has cos >= d / reach, and sin^2 of that widest angle is its probability."""
-    from ..tracing.sampling import cosine_directions, frames_from_normals, points_on_triangles
+    from ..tracing.sampling import points_on_triangles
+    from ..tracing.visibility import near_surface
     which = np.asarray(which, np.int64)
     out = np.zeros(len(which))
     if not len(which):
@@ -224,15 +225,13 @@ def crowding(tracer, scene, which, reach, rays=CROWD_RAYS, seed=0):
     rng = np.random.default_rng(seed)
     own = np.repeat(np.arange(len(which)), rays)
     tri = which[own]
-    p = points_on_triangles(scene.triangle_corners[tri], *rng.random((2, len(tri))))
+    p = points_on_triangles(scene.triangle_corners[tri], *rng.random((2, len(tri))))      # both sides' points
     for sign in (1.0, -1.0):
         sel = np.arange(len(tri)) if sign > 0 else np.nonzero(scene.triangle_two_sided[tri])[0]
         if not len(sel):
             continue
-        n = sign * scene.triangle_normal[tri[sel]]
-        t, b = frames_from_normals(n)
-        w = cosine_directions(rng.random((len(sel), 2)), t, b, n)
-        blocked = tracer.occluded(p[sel] + n * tracer.eps, w, np.full(len(sel), reach))
+        blocked = near_surface(tracer, scene.triangle_corners[tri[sel]], sign * scene.triangle_normal[tri[sel]],
+                               reach, rng, points=p[sel])
         out = np.maximum(out, np.bincount(own[sel], blocked, minlength=len(which)) / rays)
     return out
 

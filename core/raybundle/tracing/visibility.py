@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import frames_from_normals, points_on_triangles, stratified_2d_sets
+from .sampling import cosine_directions, frames_from_normals, points_on_triangles, stratified_2d_sets
 
 _MAX_LAYERS = 10000
 #: sender id of light that comes from the environment (world) in a :class:`Bundle`: along
@@ -340,6 +340,19 @@ class RayTracer:
                                         int(counts[k]), int(round(casts * counts[k] / max(bounds[-1], 1))),
                                         *ends))
         return out
+
+
+def near_surface(tracer, corners, normals, reach, rng, points=None):
+    """(K,) bool: a probe ray from a uniform point of each triangle ``corners`` (K, 3, 3) (or
+    from ``points`` (K, 3) on them), cosine-distributed about its unit ``normal`` (K, 3) and
+    starting ``eps`` above it, meets a surface within ``reach`` [m] (scalar or (K,)); ``rng``
+    draws the points, then the directions.  What lies that close above a surface (a contact, a
+    concave edge, a stair step over a floor) is what a constant patch value cannot tell apart
+    from what lies beside it."""
+    p = points_on_triangles(corners, *rng.random((2, len(corners)))) if points is None else points
+    t, b = frames_from_normals(normals)
+    w = cosine_directions(rng.random((len(normals), 2)), t, b, normals)
+    return tracer.occluded(p + normals * tracer.eps, w, np.broadcast_to(np.asarray(reach, float), len(p)))
 
 
 def bundle_from_hits(scene, d, delta, up, down, n_rays, casts, first=None, last=None):
