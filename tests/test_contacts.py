@@ -220,7 +220,7 @@ def test_touching_pairs_are_the_pass_over_all_pairs():
     """The pairs of a triangle and a contact segment that touch, found among the pairs whose
     boxes overlap, are exactly those that testing every pair finds: segments along edges,
     through corners, ending at corners, long ones and short ones."""
-    from raybundle.patches.contacts import _on_segment, _touching, _touching_pairs
+    from raybundle.patches.contacts import _crosses, _on_segment, _touching, _touching_pairs
 
     rng = np.random.default_rng(7)
     corner = rng.uniform(0, 1, (400, 2))
@@ -233,9 +233,10 @@ def test_touching_pairs_are_the_pass_over_all_pairs():
     f, k = np.meshgrid(np.arange(len(tri)), np.arange(len(seg)), indexing="ij")
     f, k = f.reshape(-1), k.reshape(-1)
     brute = _touching(tri[f], seg[k], 1e-9) | _on_segment(tri[f], seg[k], 1e-9).any(axis=1)
-    pf, pk = _touching_pairs(tri, seg, 1e-9)
+    pf, pk, crosses = _touching_pairs(tri, seg, 1e-9)
     assert 500 < len(pf) < 0.2 * len(f)
     assert np.array_equal(pf, f[brute]) and np.array_equal(pk, k[brute])
+    assert np.array_equal(crosses, _crosses(tri[pf], seg[pk], 1e-9)) and 0 < crosses.sum() < len(pf)
 
 
 def shelf_through_a_wall(triangles=4000):

@@ -254,20 +254,22 @@ PAIR_CHUNK = 1 << 20
 
 
 def _touching_pairs(tri2d, seg, eps):
-    """``(f, k)`` (P,) int, sorted by f then k: the pairs of a triangle ``tri2d[f]`` (F, 3, 2)
-    and a segment ``seg[k]`` (K, 2, 2) that touch, along a piece of positive length
-    (:func:`_touching`) or at a corner of the triangle (:func:`_on_segment`).  Only pairs whose
-    bounding boxes overlap are tested (:class:`_BoxQuery`): a floor holds thousands of triangles
-    and the outlines of every chair leg on it."""
+    """``(f, k, crosses)`` (P,): the pairs, sorted by f then k, of a triangle ``tri2d[f]``
+    (F, 3, 2) and a segment ``seg[k]`` (K, 2, 2) that touch, along a piece of positive length
+    (:func:`_touching`) or at a corner of the triangle (:func:`_on_segment`), and whether the
+    segment's line cuts the triangle (:func:`_crosses`).  Only pairs whose bounding boxes
+    overlap are tested (:class:`_BoxQuery`): a floor holds thousands of triangles and the
+    outlines of every chair leg on it."""
     pad = 1e3 * eps
     k, f = _BoxQuery(tri2d.min(axis=1) - pad, tri2d.max(axis=1) + pad).pairs(seg.min(axis=1), seg.max(axis=1))
     order = np.lexsort((k, f))
     f, k = f[order], k[order]
-    hit = np.zeros(len(f), bool)
+    hit, crosses = np.zeros(len(f), bool), np.zeros(len(f), bool)
     for lo in range(0, len(f), PAIR_CHUNK):
         t, sg = tri2d[f[lo:lo + PAIR_CHUNK]], seg[k[lo:lo + PAIR_CHUNK]]
         hit[lo:lo + PAIR_CHUNK] = _touching(t, sg, eps) | _on_segment(t, sg, eps).any(axis=1)
-    return f[hit], k[hit]
+        crosses[lo:lo + PAIR_CHUNK] = _crosses(t, sg, eps)
+    return f[hit], k[hit], crosses[hit]
 
 
 def _touching(tri2d, seg, eps):
@@ -329,10 +331,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     for group, origin, e1, e2, seg in groups:
         to2d = np.stack([e1, e2], axis=1)
         c2 = (scene.triangle_corners[group] - origin) @ to2d                 # (F, 3, 2)
-        f, k = _touching_pairs(c2, seg, eps)
-        crosses = np.zeros(len(f), bool)
-        for lo in range(0, len(f), PAIR_CHUNK):
-            crosses[lo:lo + PAIR_CHUNK] = _crosses(c2[f[lo:lo + PAIR_CHUNK]], seg[k[lo:lo + PAIR_CHUNK]], eps)
+        f, k, crosses = _touching_pairs(c2, seg, eps)
         lines = _lines(seg, eps)
         # triangles no touching line cuts (every corner on one side of each): only their corners' tags
         cut = np.unique(f[crosses])
