@@ -57,6 +57,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .node_graphs import start_graph_bake
 from .shaders import MaterialConverter
 from .world import camera_view, start_world_export
 
@@ -463,7 +464,33 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
 
 
 def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name, world, t0):
-    """:func:`export_scene`'s objects, lights and materials, with the camera and world made."""
+    """:func:`export_scene`'s objects, lights and materials, with the camera and world made;
+    Blender bakes the node graphs on the materials' inputs meanwhile (:mod:`.node_graphs`)."""
+    override = getattr(depsgraph.view_layer, "material_override", None)
+    graphs = start_graph_bake(_used_materials(depsgraph, override))
+    try:
+        return _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, world, t0,
+                               MaterialConverter(warn, graphs), override)
+    finally:
+        graphs.cancel()
+
+
+def _used_materials(depsgraph, override):
+    """The materials of the geometry ``depsgraph`` renders (``override`` alone when set)."""
+    if override is not None:
+        return [override]
+    found = {}
+    for inst in depsgraph.object_instances:
+        ob = inst.object
+        if ob.type in GEOMETRY_TYPES:
+            for m in [s.material for s in ob.material_slots] or list(getattr(ob.data, "materials", [])):
+                if m is not None:
+                    found.setdefault(m.name_full, m)
+    return list(found.values())
+
+
+def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, world, t0, converter, override):
+    """:func:`_export_geometry` with the material ``converter`` made."""
     from raybundle.scene.build import build_scene
     from raybundle.scene.materials import MaterialTable
     from raybundle.scene.model import AreaLights, PointLights, SceneError, SunLights
@@ -471,7 +498,6 @@ def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
 
     render = scene.render
     viewport = depsgraph.mode == "VIEWPORT"
-    converter = MaterialConverter(warn)
     mat_index, mat_specs = {}, []
 
     def material_id(mat):
@@ -487,7 +513,6 @@ def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
     objects = []
     lights = {"point": [], "sun": [], "area": []}
     portals = []
-    override = getattr(depsgraph.view_layer, "material_override", None)
     n_vert = n_tri = 0
     for inst in depsgraph.object_instances:
         ob = inst.object

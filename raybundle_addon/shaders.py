@@ -76,6 +76,18 @@ def _lum(c):
 
 
 @dataclass(frozen=True)
+class EvaluatedImage:
+    """Stands for the image Blender baked of a node graph (:mod:`.node_graphs`) where an
+    :class:`AlbedoTexture` names an image; its pixels are the converter's."""
+
+    name_full: str
+
+    @property
+    def name(self):
+        return self.name_full
+
+
+@dataclass(frozen=True)
 class AlbedoTexture:
     """What drives a material's diffuse albedo point by point: an image through a UV map
     (``uv`` the map's name, "" for the active render UV map) or a color attribute
@@ -96,8 +108,11 @@ class MaterialConverter:
     ``warn(message)`` collects warnings; each material is converted once (cache).
     """
 
-    def __init__(self, warn):
+    def __init__(self, warn, graphs=None):
         self.warn = warn
+        #: the node graphs Blender evaluated (:class:`.node_graphs.GraphBake`), or None
+        self.graphs = graphs
+        self._material = None
         self._cache = {}
         self._image_pixels = {}
         #: material name -> its :class:`AlbedoTexture`
@@ -130,6 +145,7 @@ class MaterialConverter:
             return dict(name=name)
         notes = []
         self._albedo = []
+        self._material = mat
         try:
             acc = _Closure()
             self._closure(out.inputs["Surface"], 1.0, acc, notes, 0)
@@ -240,7 +256,9 @@ class MaterialConverter:
                 self._albedo.append(AlbedoTexture(attribute=node.layer_name))
                 return np.ones(3)
             elif node is not None:
-                notes.append(f"{sock.name!r} is driven by a {node.bl_label} node: using the socket's own value")
+                got = self._graph(sock, node, notes)
+                if got is not None:
+                    return got
         return np.array(sock.default_value[:3], float)
 
     def value(self, sock, notes):
@@ -251,8 +269,35 @@ class MaterialConverter:
             if node is not None and node.type == "VALUE":
                 return float(node.outputs[0].default_value)
             if node is not None:
-                notes.append(f"{sock.name!r} is driven by a {node.bl_label} node: using the socket's own value")
+                got = self._graph(sock, node, notes)
+                if got is not None:
+                    return float(got[0])
         return float(sock.default_value)
+
+    def _graph(self, sock, node, notes):
+        """(3,) the value of the node graph driving ``sock`` (from ``node``) as Blender baked it
+        (:mod:`.node_graphs`): on an albedo input an albedo texture (its mean returned), elsewhere
+        its mean (noted when it varies); None (noted) when Blender did not evaluate it."""
+        got = "it was not evaluated" if self.graphs is None else self.graphs.get(self._material, sock)
+        if isinstance(got, str):
+            notes.append(f"{sock.name!r} is driven by a {node.bl_label} node ({got}): using the socket's own value")
+            return None
+        mean = got.reshape(-1, 3).astype(float).mean(axis=0)
+        lo, hi = got.reshape(-1, 3).min(axis=0), got.reshape(-1, 3).max(axis=0)
+        if np.all(hi - lo <= 1e-6):
+            return mean
+        if sock.type == "RGBA" and _is_albedo(sock):
+            image = EvaluatedImage(f"{self._material.name_full}: {sock.node.name}.{sock.name}")
+            self._image_pixels[image.name_full] = np.asarray(got, np.float32)
+            self._albedo.append(AlbedoTexture(image, self.graphs.uv(self._material, sock)))
+            return mean
+        if sock.type == "RGBA":
+            notes.append(f"{sock.name!r} varies over the surface with its node graph: its mean color "
+                         f"{color_text(mean)} is used")
+        else:
+            notes.append(f"{sock.name!r} varies over the surface with its node graph ({lo[0]:.3g} to {hi[0]:.3g}): "
+                         f"its mean {mean[0]:.3g} is used")
+        return mean
 
     def image_pixels(self, image):
         """(H, W, 3) linear RGB of ``image`` (row 0 at the bottom), or None without pixel data."""
@@ -386,6 +431,16 @@ def _follow_reroutes(node):
     return None
 
 
+def read_directly(sock, node):
+    """Whether the converter reads input ``sock`` linked to ``node`` without Blender's help
+    (:meth:`MaterialConverter.color`, :meth:`MaterialConverter.value`): an RGB or Value node, an
+    image texture on a color input, a color attribute on an albedo input."""
+    if sock.type == "VALUE":
+        return node.type == "VALUE"
+    return (node.type in ("RGB", "TEX_IMAGE", "TEX_ENVIRONMENT")
+            or node.type == "VERTEX_COLOR" and _is_albedo(sock))
+
+
 def _is_albedo(sock):
     """A Diffuse BSDF's Color or a Principled BSDF's Base Color input."""
     return sock.name in ("Color", "Base Color") and sock.node.type in ("BSDF_DIFFUSE", "BSDF_PRINCIPLED")
@@ -407,9 +462,15 @@ def _uv_source(tex_node):
 
 
 def _image_pixels(image):
-    """(H, W, 3) linear RGB of an image's pixels (None without data), row 0 at the
-    bottom.  Byte images in an sRGB color space hold encoded values in
-    ``Image.pixels``: they are decoded first."""
+    """(H, W, 3) linear RGB of an image's pixels (None without data), row 0 at the bottom."""
+    px = image_rgba(image)
+    return None if px is None else np.ascontiguousarray(px[..., :3])
+
+
+def image_rgba(image):
+    """(H, W, 4) float32 linear RGB and alpha of an image's pixels (None without data), row 0
+    at the bottom.  Byte images in an sRGB color space hold encoded values in
+    ``Image.pixels``: their colors are decoded first."""
     try:
         w, h = image.size
         ch = image.channels
@@ -425,4 +486,7 @@ def _image_pixels(image):
     rgb = px[..., :3] if ch >= 3 else np.repeat(px[..., :1], 3, axis=2)
     if not image.is_float and image.colorspace_settings.name in ("sRGB",):
         rgb = srgb_to_linear(rgb)
-    return np.asarray(rgb, np.float32)
+    alpha = px[..., 3:4] if ch in (2, 4) else np.ones((h, w, 1), np.float32)
+    if ch == 2:
+        alpha = px[..., 1:2]
+    return np.concatenate([rgb, alpha], axis=2).astype(np.float32)

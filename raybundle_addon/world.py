@@ -20,12 +20,11 @@ from __future__ import annotations
 
 import hashlib
 import os
-import subprocess
-import sys
-import tempfile
 import time
 
 import numpy as np
+
+from .blender_process import BlenderProcess, BlenderProcessError, temporary_folder
 
 #: width of the equirectangular image a node-tree world is rendered into (pixels; height half of it)
 EQUIRECT_WIDTH = 512
@@ -210,7 +209,7 @@ def start_world_render(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, vi
 
     import bpy
 
-    tmp = tempfile.TemporaryDirectory(prefix="raybundle-world-")
+    tmp = temporary_folder("raybundle-world-")
     library = os.path.join(tmp.name, "world.blend")
     try:
         bpy.data.libraries.write(library, {world}, path_remap="ABSOLUTE", fake_user=True)
@@ -223,7 +222,6 @@ def start_world_render(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, vi
         tmp.cleanup()
         return WorldRender(key, result=_cache[key])
     out = os.path.join(tmp.name, "world.exr")
-    script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "world_render.py")
     args = [library, world.name, out, str(int(width)), str(int(samples)), str(int(threads))]
     seen = None
     if view is not None:
@@ -231,23 +229,13 @@ def start_world_render(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, vi
         args.append(os.path.join(tmp.name, "view.json"))
         with open(args[-1], "w") as f:
             json.dump(dict(view, out=seen), f)
-    binary = bpy.app.binary_path
-    if binary and os.path.basename(binary).lower().startswith("blender"):
-        cmd = [binary, "-b", "--factory-startup", "--python-exit-code", "1", "--python", script, "--", *args]
-    else:                                     # the bpy module: this Python imports bpy
-        cmd = [sys.executable, script, *args]
+    # on all threads at a lower priority: it takes the cores the patches' layout leaves idle and
+    # leaves the layout its own (on one thread the living room's set-up waited 3.5-4 s for it at
+    # the end; at the same priority the dining room's layout took 2 s longer)
     try:
-        # the render's log to a file: a pipe nobody reads while the caller works would fill and stall it.
-        # It runs on all threads at a lower priority (world_render.py lowers its own on POSIX: no
-        # preexec_fn in a process with threads): it takes the cores the patches' layout leaves idle
-        # and leaves the layout its own (on one thread the living room's set-up waited 3.5-4 s for
-        # it at the end; at the same priority the dining room's layout took 2 s longer)
-        lower = dict(creationflags=subprocess.BELOW_NORMAL_PRIORITY_CLASS) if os.name == "nt" else {}
-        with open(os.path.join(tmp.name, "log.txt"), "w") as log:
-            proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, **lower)
-    except OSError as e:
-        tmp.cleanup()
-        raise WorldRenderError(f"its render did not start: {e}") from None
+        proc = BlenderProcess("world_render.py", args, tmp, RENDER_TIMEOUT)
+    except BlenderProcessError as e:
+        raise WorldRenderError(str(e)) from None
     return WorldRender(key, proc, tmp, out, seen)
 
 
@@ -255,8 +243,7 @@ class WorldRender:
     """A render of a world under way (:func:`start_world_render`), or one already known."""
 
     def __init__(self, key, proc=None, tmp=None, out=None, seen=None, result=None):
-        self.key, self._proc, self._tmp, self._out, self._seen, self._result = key, proc, tmp, out, seen, result
-        self._started = time.perf_counter()
+        self.key, self._proc, self._out, self._seen, self._result = key, proc, out, seen, result
 
     def result(self):
         """``(image, seen)`` as :func:`render_world` returns them, once the render is done
@@ -265,21 +252,14 @@ class WorldRender:
 
         if self._result is not None:
             return self._result
+        paths = [self._out] + ([self._seen] if self._seen is not None else [])
         try:
-            try:
-                self._proc.wait(timeout=max(1.0, RENDER_TIMEOUT - (time.perf_counter() - self._started)))
-            except subprocess.TimeoutExpired:
-                self._proc.kill()
-                self._proc.wait()
-                raise WorldRenderError(f"its render did not finish in {RENDER_TIMEOUT:g} s") from None
-            paths = [self._out] + ([self._seen] if self._seen is not None else [])
-            if self._proc.returncode != 0 or not all(os.path.exists(p) for p in paths):
-                with open(os.path.join(self._tmp.name, "log.txt"), errors="replace") as f:
-                    lines = [x for x in f.read().splitlines() if x.strip()]
-                raise WorldRenderError(f"its render failed: {lines[-1] if lines else 'exit code ' + str(self._proc.returncode)}")
+            self._proc.wait(paths)
             images = [_radiance(read_exr(p)) for p in paths]
+        except BlenderProcessError as e:
+            raise WorldRenderError(f"its render failed: {e}") from None
         finally:
-            self._tmp.cleanup()
+            self._proc.close()
         self._result = (images[0], images[1] if self._seen is not None else None)
         _cache.clear()                                # one world at a time is enough
         _cache[self.key] = self._result
@@ -287,11 +267,8 @@ class WorldRender:
 
     def cancel(self):
         """Stop the render (a cancelled or failed export) and remove its files."""
-        if self._proc is not None and self._proc.poll() is None:
-            self._proc.kill()
-            self._proc.wait()
-        if self._tmp is not None:
-            self._tmp.cleanup()
+        if self._proc is not None:
+            self._proc.close()
 
 
 def _radiance(img):

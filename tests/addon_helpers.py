@@ -215,3 +215,38 @@ def erode(mask, r=1):
         for dx in range(-r, r + 1):
             out &= p[r + dy:r + dy + h, r + dx:r + dx + w]
     return out
+
+
+def plane_with_uvs(size=2.0):
+    """A white-ish (0.6) plane of ``size`` m at z = 0 with UVs = (x, y) / size + 0.5, 4 x 4 quads."""
+    n = 4
+    xs = np.linspace(-size / 2, size / 2, n + 1)
+    v = [(x, y, 0.0) for y in xs for x in xs]
+    f = [(j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
+         for j in range(n) for i in range(n)]
+    ob = add_object("plane", v, f, [node_material("white", color=(0.6, 0.6, 0.6))])
+    me = ob.data
+    uv = me.uv_layers.new(name="UVMap")
+    co = np.array([me.vertices[lp.vertex_index].co[:2] for lp in me.loops])
+    uv.uv.foreach_set("vector", (co / size + 0.5).astype(np.float32).ravel())
+    return ob
+
+
+def textured_plane():
+    """``plane_with_uvs`` with a Diffuse BSDF whose Color is an 8 x 8 float image texture
+    (a checker of 0.15 and 0.75 with a brighter corner texel), under a point light, seen by
+    an ortho camera from above (32 x 32 pixels over the plane)."""
+    plane = plane_with_uvs()
+    img = bpy.data.images.new("checker", 8, 8, float_buffer=True)
+    px = np.where((np.add.outer(np.arange(8), np.arange(8)) % 2)[..., None], 0.15, 0.75) * np.ones(3)
+    px[0, 0] = 0.95
+    rgba = np.concatenate([px, np.ones((8, 8, 1))], axis=2).astype(np.float32)
+    img.pixels.foreach_set(rgba.ravel())
+    mat = plane.data.materials[0]
+    nt = mat.node_tree
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    nt.links.new(tex.outputs["Color"], nt.nodes["Diffuse BSDF"].inputs["Color"])
+    add_light("POINT", location=(0.3, -0.2, 1.5), energy=1000.0, shadow_soft_size=0.0)
+    add_camera((0, 0, 3), resolution=(32, 32), ortho_scale=2.0)
+    return plane, px

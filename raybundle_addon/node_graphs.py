@@ -1,0 +1,273 @@
+"""Material inputs driven by node graphs, evaluated by Blender.
+
+A shader's input (Base Color, Roughness, Metallic, Emission Strength, a Mix Shader's factor...)
+driven by nodes the converter does not read directly (:func:`.shaders.read_directly`) is
+evaluated by Blender, nothing of the graph is reimplemented here.  The graph can be evaluated
+when every node in it computes its output from its inputs alone (:data:`PURE`: Math, Vector
+Math, Mix, Color Ramp, Hue/Saturation, Brightness/Contrast, Separate/Combine, curves...) or is
+an Image Texture read through one UV map: its value is then a function of the UV, which Cycles
+bakes (:mod:`.material_bake`, in a process of its own, on a copy of the material) over a unit
+square whose UV covers the images once: the graph's exact value at the centres of a grid
+:func:`bake_scale` times finer than the largest image, each image read with its own
+interpolation.  A non-linear graph of an interpolated image is not the interpolation of the
+graph's values at the texels (a checker through a Color Ramp): the finer grid keeps the
+difference below the bilinear error of the finer grid where images are small (magnified on
+screen), while large images are baked at their own resolution.  A graph without images is a
+constant, baked into one texel.
+
+What the converter does with the baked image (:class:`.shaders.MaterialConverter`): on an
+albedo input (a Diffuse BSDF's Color, a Principled BSDF's Base Color) it is an albedo texture
+on that UV map, like an image texture linked there directly; on any other input its mean is
+the material's value, with a warning when it varies over the surface.
+
+Graphs reading anything else (procedural textures, Texture Coordinate's Generated or Object,
+attributes, Geometry, Fresnel, Layer Weight, Light Path, node groups) are not evaluated: the
+socket's own value is used, with a warning naming the node.  One process bakes every graph of
+a scene; the results are kept for the session (the same material, images and graphs are not
+baked again).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .blender_process import BlenderProcess, BlenderProcessError, temporary_folder
+
+#: node types whose output is a function of their inputs alone (no position, view, light or attribute)
+PURE = frozenset((
+    "REROUTE", "MATH", "VECT_MATH", "MIX", "MIX_RGB", "VALTORGB", "HUE_SAT", "BRIGHTCONTRAST", "GAMMA",
+    "INVERT", "SEPRGB", "COMBRGB", "SEPARATE_COLOR", "COMBINE_COLOR", "SEPXYZ", "COMBXYZ", "SEPHSV",
+    "COMBHSV", "RGB", "VALUE", "CURVE_RGB", "CURVE_FLOAT", "CURVE_VEC", "MAP_RANGE", "CLAMP", "RGBTOBW",
+    "BLACKBODY", "WAVELENGTH"))
+#: shader nodes whose color and value inputs the converter reads
+READ_SHADERS = frozenset(("BSDF_DIFFUSE", "BSDF_GLOSSY", "BSDF_ANISOTROPIC", "EMISSION", "MIX_SHADER",
+                          "BSDF_PRINCIPLED"))
+#: texels a graph's bake aims at: images smaller than this are baked on a grid up to
+#: :data:`MAX_BAKE_SCALE` times finer in each axis
+BAKE_TEXELS = 1_000_000
+MAX_BAKE_SCALE = 8
+#: seconds before the bake is given up
+BAKE_TIMEOUT = 300.0
+
+_cache: dict = {}
+
+
+@dataclass
+class GraphInput:
+    """An input socket whose graph Blender bakes: ``material`` (its ``name_full``), ``node``
+    (name) and ``socket`` (identifier); ``images``: Image Texture node name -> bpy Image;
+    ``uv``: the UV map they are read through ("" the active render one); ``size`` (W, H)."""
+
+    material: str
+    node: str
+    socket: str
+    images: dict = field(default_factory=dict)
+    uv: str = ""
+    size: tuple = (1, 1)
+
+    @property
+    def key(self):
+        return (self.material, self.node, self.socket)
+
+
+def socket_key(mat, sock):
+    """The key of ``sock`` (an input of a node of material ``mat``) among the baked graphs."""
+    return (mat.name_full, sock.node.name, sock.identifier)
+
+
+def graph_input(mat, sock):
+    """The :class:`GraphInput` of the graph that drives input ``sock`` of material ``mat``, or a
+    one-line reason why Blender cannot evaluate it over a UV map."""
+    from .shaders import _follow_reroutes, _uv_source
+
+    images, uvs, seen = {}, set(), set()
+    stack = [sock.links[0].from_node]
+    while stack:
+        node = stack.pop()
+        if node.name in seen:
+            continue
+        seen.add(node.name)
+        if node.type == "TEX_IMAGE":
+            uv = _uv_source(node)
+            if uv is None or getattr(node, "projection", "FLAT") != "FLAT":
+                return f"the Image Texture {node.name!r} is not read through a UV map"
+            if node.image is None:
+                return f"the Image Texture {node.name!r} has no image"
+            images[node.name] = node.image
+            uvs.add(uv)
+            continue
+        if node.type not in PURE:
+            return f"it reads a {node.bl_label} node, which depends on more than a UV map"
+        for s in node.inputs:
+            for link in s.links:
+                if getattr(link, "is_muted", False) or not getattr(link, "is_valid", True):
+                    continue
+                src = _follow_reroutes(link.from_node)
+                if src is not None:
+                    stack.append(src)
+    if len(uvs) > 1:
+        return "its images are read through different UV maps"
+    size = (1, 1)
+    for im in images.values():
+        w, h = im.size
+        if w * h > size[0] * size[1]:
+            size = (int(w), int(h))
+    if images:
+        k = bake_scale(size)
+        size = (size[0] * k, size[1] * k)
+    return GraphInput(mat.name_full, sock.node.name, sock.identifier, images, uvs.pop() if uvs else "", size)
+
+
+def bake_scale(size):
+    """How many times finer than an image of ``size`` (W, H) texels its graph is baked in each
+    axis: the largest k <= :data:`MAX_BAKE_SCALE` with k^2 W H <= :data:`BAKE_TEXELS`, at least 1."""
+    w, h = size
+    return int(np.clip(np.floor(np.sqrt(BAKE_TEXELS / max(w * h, 1))), 1, MAX_BAKE_SCALE))
+
+
+def linked_inputs(mat):
+    """The color and value inputs of the shaders of ``mat`` that the converter reads, linked
+    to nodes it does not read directly: (socket, source node) pairs."""
+    from .shaders import _follow_reroutes, read_directly
+
+    nt = getattr(mat, "node_tree", None)
+    out = None if nt is None else (nt.get_output_node("CYCLES") or nt.get_output_node("ALL"))
+    if out is None or not out.inputs["Surface"].is_linked:
+        return []
+    found, seen, stack = [], set(), [out.inputs["Surface"]]
+    while stack:
+        sock = stack.pop()
+        node = _follow_reroutes(sock.links[0].from_node) if sock.is_linked else None
+        if node is None or node.name in seen or node.type not in READ_SHADERS:
+            continue
+        seen.add(node.name)
+        for s in node.inputs:
+            if not s.is_linked:
+                continue
+            if s.type == "SHADER":
+                stack.append(s)
+            elif s.type in ("RGBA", "VALUE"):
+                src = _follow_reroutes(s.links[0].from_node)
+                if src is not None and not read_directly(s, src):
+                    found.append((s, src))
+    return found
+
+
+class GraphBake:
+    """The graphs of a scene's materials baked by Blender (:func:`start_graph_bake`);
+    :meth:`get` waits for the bake the first time."""
+
+    def __init__(self, inputs, reasons, job=None, key=None, results=None):
+        self._inputs, self._reasons, self._job, self._key = inputs, reasons, job, key
+        self._results = results
+        #: None, or the one-line reason the bake failed
+        self.failed = None
+        #: seconds the bake took from its start to its results (0 when known from before)
+        self.seconds = 0.0
+
+    def get(self, mat, sock):
+        """(H, W, 3) float32 linear values of the graph driving ``sock`` over its UV map (row
+        0 at the bottom), or a one-line reason why there are none."""
+        key = socket_key(mat, sock)
+        if key in self._reasons:
+            return self._reasons[key]
+        if key not in self._inputs:
+            return "it was not evaluated"
+        if self._results is None:
+            self._finish()
+        if self.failed is not None:
+            return f"Blender could not bake it ({self.failed})"
+        return self._results[key]
+
+    def uv(self, mat, sock):
+        """The UV map the graph of ``sock`` is baked over ("" the active render one)."""
+        return self._inputs[socket_key(mat, sock)].uv
+
+    def _finish(self):
+        import time
+
+        job, paths = self._job
+        t0 = time.perf_counter()
+        try:
+            job.wait(list(paths.values()))
+            self._results = {k: np.load(p) for k, p in paths.items()}
+            _cache.clear()                    # one scene's graphs at a time are enough
+            _cache[self._key] = self._results
+        except (BlenderProcessError, OSError, ValueError) as e:
+            self.failed = str(e)
+            self._results = {}
+        finally:
+            job.close()
+            self._job = None
+        self.seconds = time.perf_counter() - t0
+
+    def cancel(self):
+        if self._job is not None:
+            self._job[0].close()
+            self._job = None
+
+
+def start_graph_bake(materials, threads=0):
+    """Begin baking the graphs Blender can evaluate on the inputs of ``materials`` (bpy
+    Materials, None skipped) in one process on ``threads`` CPU threads (0: all): a
+    :class:`GraphBake`.  Graphs baked before in this session are not baked again."""
+    import bpy
+
+    from .shaders import image_rgba
+
+    inputs, reasons, originals = {}, {}, {}
+    for mat in dict.fromkeys(m for m in materials if m is not None):
+        for sock, _ in linked_inputs(mat):
+            got = graph_input(mat, sock)
+            if isinstance(got, str):
+                reasons[socket_key(mat, sock)] = got
+            else:
+                inputs[got.key] = got
+                originals[mat.name_full] = getattr(mat, "original", mat)
+    if not inputs:
+        return GraphBake(inputs, reasons, results={})
+    folder = temporary_folder("raybundle-graphs-")
+    try:
+        library = os.path.join(folder.name, "materials.blend")
+        bpy.data.libraries.write(library, set(originals.values()), path_remap="ABSOLUTE", fake_user=True)
+        digest = hashlib.sha1(open(library, "rb").read())
+        files, tasks, paths = {}, [], {}
+        for n, g in enumerate(inputs.values()):
+            task_images = {}
+            for node, im in g.images.items():
+                if im.name_full not in files:
+                    px = image_rgba(im)
+                    if px is None:
+                        reasons[g.key] = f"the image {im.name!r} has no pixel data"
+                        break
+                    files[im.name_full] = os.path.join(folder.name, f"image{len(files)}.npy")
+                    np.save(files[im.name_full], px)
+                    digest.update(px.tobytes())
+                task_images[node] = files[im.name_full]
+            else:
+                paths[g.key] = os.path.join(folder.name, f"bake{n}.npy")
+                tasks.append(dict(material=originals[g.material].name, node=g.node, socket=g.socket, size=list(g.size),
+                                  uv_maps=[g.uv], images=task_images, out=paths[g.key]))
+        for k in [k for k in inputs if k in reasons]:
+            del inputs[k]
+        if not tasks:
+            folder.cleanup()
+            return GraphBake(inputs, reasons, results={})
+        key = (digest.hexdigest(), json.dumps([[t["material"], t["node"], t["socket"], t["size"]] for t in tasks]))
+        if key in _cache:
+            folder.cleanup()
+            return GraphBake(inputs, reasons, results=_cache[key])
+        with open(os.path.join(folder.name, "job.json"), "w") as f:
+            json.dump(dict(tasks=tasks), f)
+        job = BlenderProcess("material_bake.py", [library, os.path.join(folder.name, "job.json"), str(int(threads))],
+                             folder, BAKE_TIMEOUT)
+    except (RuntimeError, OSError, BlenderProcessError) as e:
+        folder.cleanup()
+        bake = GraphBake(inputs, reasons, results={})
+        bake.failed = str(e)
+        return bake
+    return GraphBake(inputs, reasons, job=(job, paths), key=key)
