@@ -145,8 +145,10 @@ def _main(argv, interrupted):
         state["job"] = job
         if interrupted.is_set():          # Ctrl-C before the job existed
             job.stop.set()
-        if event == "export" and args.save_npz:
+        # the exported scene once its world is in it (a world Blender renders arrives after the layout)
+        if args.save_npz and not state.get("saved") and job.export is not None and job.export.world_render is None:
             job.export.scene.save_npz(args.save_npz)
+            state["saved"] = True
         if event in ("progress", "image") and job.renderer is not None:
             bar(job.fraction, {"iterations": job.renderer.solver.stats.iterations,
                                "seconds": time.perf_counter() - job.t_start})

@@ -213,42 +213,57 @@ def _ray_visible(ob, warn):
 
 
 def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, warn):
-    """For an object whose materials have albedo textures (``converter.textures``):
-    ((T, 3, 2) corner UVs, (T,) image index into ``images`` (-1 untextured, -2 the
-    corner colors), (T, 3, 3) corner colors of a color attribute), or None.
-    ``images`` (image name -> (index, bpy Image)) grows as new images are met."""
+    """For an object whose materials have albedo textures (``converter.textures``) or
+    cut-outs (``converter.cutouts``): ((T, 3, 2) corner UVs, (T,) image index into ``images``
+    (-1 untextured, -2 the corner colors), (T, 3, 3) corner colors of a color attribute, (T,)
+    coverage map index into ``images`` (-1 opaque)), or None.  ``images`` (key -> (index, bpy
+    Image or :class:`.shaders.EvaluatedImage`, is a coverage map)) grows as new images are met."""
     for m in slots:
-        converter.convert(m)                  # (cached) fills converter.textures
+        converter.convert(m)                  # (cached) fills converter.textures and .cutouts
     tex = [converter.textures.get(m.name_full) if m is not None else None for m in slots] or [None]
-    if not any(tex):
+    cut = [converter.cutouts.get(m.name_full) if m is not None else None for m in slots] or [None]
+    if not any(tex) and not any(cut):
         return None
     slot = np.clip(poly_mat[tri_poly], 0, len(tex) - 1)
     uv = np.zeros((len(loops), 3, 2))
     img = np.full(len(loops), -1, np.int64)
+    alpha = np.full(len(loops), -1, np.int64)
     colors = np.zeros((len(loops), 3, 3))
     layers = {}
-    for k, got in enumerate(tex):
-        sel = np.nonzero(slot == k)[0]
-        if got is None or len(sel) == 0:
-            continue
-        if got.attribute is not None:
-            colors[sel] = _corner_colors(me, got.attribute, ob, slots[k], warn)[loops[sel]]
-            img[sel] = -2
-            continue
-        name = got.uv
+
+    def read_uv(name, what, sel, k):
         layer = (me.uv_layers.get(name) if name else
                  next((l for l in me.uv_layers if l.active_render), me.uv_layers.active))
         if layer is None:
-            warn(f"object {ob.name!r}: material {slots[k].name!r} has the image texture {got.image.name!r} but the "
-                 f"mesh has no UV map{' ' + repr(name) if name else ''}: its mean color is used")
-            continue
+            warn(f"object {ob.name!r}: material {slots[k].name!r} has {what} but the mesh has no UV "
+                 f"map{' ' + repr(name) if name else ''}: {'its mean is used' if 'image' in what else 'opaque'}")
+            return False
         if layer.name not in layers:
             a = np.empty(2 * len(me.loops), np.float32)
             layer.uv.foreach_get("vector", a)
             layers[layer.name] = a.reshape(-1, 2)
         uv[sel] = layers[layer.name][loops[sel]]
-        img[sel] = images.setdefault(got.image.name_full, (len(images), got.image))[0]
-    return (uv, img, colors) if np.any(img != -1) else None
+        return True
+
+    for k, (got, cover) in enumerate(zip(tex, cut)):
+        sel = np.nonzero(slot == k)[0]
+        if len(sel) == 0:
+            continue
+        if got is not None and got.attribute is not None:
+            colors[sel] = _corner_colors(me, got.attribute, ob, slots[k], warn)[loops[sel]]
+            img[sel] = -2
+        elif got is not None and read_uv(got.uv, f"the image texture {got.image.name!r}", sel, k):
+            img[sel] = images.setdefault(got.image.name_full, (len(images), got.image, False))[0]
+        if cover is None:
+            continue
+        if cover.uv is not None and not (got is not None and got.attribute is None and np.all(img[sel] >= 0)):
+            if not read_uv(cover.uv, "a cut-out (Alpha)", sel, k):
+                continue
+        elif cover.uv is not None and got.uv != cover.uv:
+            warn(f"object {ob.name!r}: material {slots[k].name!r} reads its Alpha through another UV map than its "
+                 f"albedo: the albedo's ({got.uv or 'the active one'}) is used for both")
+        alpha[sel] = images.setdefault(("alpha", cover.image.name_full), (len(images), cover.image, True))[0]
+    return (uv, img, colors, alpha) if np.any(img != -1) or np.any(alpha != -1) else None
 
 
 def _corner_colors(me, name, ob, mat, warn):
@@ -509,7 +524,8 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
 
     cache = {}
     verts, tris, tmats, tobj, tpoly, tloops, tnorm = [], [], [], [], [], [], []
-    tuv, timg, tcol, images = [], [], [], {}    # albedo textures: corner UVs, image per triangle, corner colors
+    # albedo textures and cut-outs: corner UVs, image per triangle, corner colors, coverage map per triangle
+    tuv, timg, tcol, talpha, images = [], [], [], [], {}
     objects = []
     lights = {"point": [], "sun": [], "area": []}
     portals = []
@@ -578,6 +594,7 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
         tuv.append((len(tri), textured[0]) if textured else (len(tri), None))
         timg.append(textured[1] if textured else None)
         tcol.append(textured[2] if textured else None)
+        talpha.append(textured[3] if textured else None)
         objects.append(info)
         n_vert += len(pos)
         n_tri += len(tri)
@@ -604,14 +621,20 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
         return cls(**{k: np.array([r[k] for r in rows]) for k in rows[0]})
 
     texture = None
-    if any(x is not None and np.any(x != -1) for x in timg):
-        face_image = np.concatenate([np.full(n, -1, np.int64) if x is None else x for (n, _), x in zip(tuv, timg)])
+    if any(x is not None and np.any(x != -1) for x in timg + talpha):
+        def faces(per_object):
+            return np.concatenate([np.full(n, -1, np.int64) if x is None else x for (n, _), x in zip(tuv, per_object)])
+
+        face_image, face_alpha = faces(timg), faces(talpha)
         tcol = [np.zeros((n, 3, 3)) if c is None else c for (n, _), c in zip(tuv, tcol)]
         tuv = [np.zeros((n, 3, 2)) if u is None else u for n, u in tuv]
         from raybundle.scene.textures import SurfaceTexture, modulation_map
 
-        maps = [modulation_map(converter.image_pixels(im))[0] for _, im in sorted(images.values(), key=lambda x: x[0])]
-        texture = SurfaceTexture(maps, face_image, v[t], np.concatenate(tuv), np.concatenate(tcol))
+        # albedo maps are the image over its mean (the material holds the mean), coverage maps as they are
+        maps = [np.asarray(converter.image_pixels(im), np.float32) if cover else
+                modulation_map(converter.image_pixels(im))[0]
+                for _, im, cover in sorted(images.values(), key=lambda x: x[0])]
+        texture = SurfaceTexture(maps, face_image, v[t], np.concatenate(tuv), np.concatenate(tcol), face_alpha)
     with _warnings.catch_warnings(record=True) as caught:
         _warnings.simplefilter("always")
         shading = None

@@ -25,7 +25,12 @@ model.  A material's node tree is read from its Cycles output node:
   node there is the albedo per point the same way (the material white, times the
   attribute's color interpolated over each face).  On any other
   color input an image texture is its mean color (warned); an **RGB** / **Value** node
-  gives its value; any other link uses the socket's own value, with a warning.
+  gives its value.
+* A Principled BSDF's **Alpha** below 1, a constant or a node graph Blender bakes (an image's
+  alpha through a UV map), is a cut-out (:attr:`MaterialConverter.cutouts`, the coverage of
+  :mod:`raybundle.scene.textures`): light passes where it is cut out.
+* Any input driven by other nodes is evaluated by Blender where the graph is a function of a
+  UV map (:mod:`.node_graphs`): an albedo texture on an albedo input, its mean elsewhere.
 * Anything else (Glass, Translucent, Transparent, Subsurface, groups...) makes the
   whole material fall back to its viewport color (``Material.diffuse_color``) as a
   Diffuse BSDF, with one warning naming the material.  A material without nodes
@@ -88,6 +93,16 @@ class EvaluatedImage:
 
 
 @dataclass(frozen=True)
+class Coverage:
+    """A material's cut-out (a Principled BSDF's Alpha below 1): the coverage map ``image``
+    (an :class:`EvaluatedImage`) read through UV map ``uv`` ("" the active render one; None for
+    a constant coverage, which needs no UV map)."""
+
+    image: object
+    uv: str | None = None
+
+
+@dataclass(frozen=True)
 class AlbedoTexture:
     """What drives a material's diffuse albedo point by point: an image through a UV map
     (``uv`` the map's name, "" for the active render UV map) or a color attribute
@@ -117,7 +132,10 @@ class MaterialConverter:
         self._image_pixels = {}
         #: material name -> its :class:`AlbedoTexture`
         self.textures = {}
+        #: material name -> its :class:`Coverage` (cut-out materials only)
+        self.cutouts = {}
         self._albedo = []               # albedo textures met while converting one material
+        self._cutout = []               # coverages met while converting one material
 
     # ------------------------------------------------------------ materials
     def convert(self, mat):
@@ -144,7 +162,7 @@ class MaterialConverter:
             self.warn(f"material {name!r} has no surface shader connected to its output: rendered black")
             return dict(name=name)
         notes = []
-        self._albedo = []
+        self._albedo, self._cutout = [], []
         self._material = mat
         try:
             acc = _Closure()
@@ -152,6 +170,10 @@ class MaterialConverter:
         except Unsupported as e:
             self.warn(f"material {name!r}: {e}; using its viewport color")
             return self._viewport(mat)
+        if self._cutout:
+            self.cutouts[name] = self._cutout[0]
+            if len(self._cutout) > 1:
+                notes.append("several Principled BSDFs with an Alpha: the first one's is used")
         found = list(dict.fromkeys(t.key for t in self._albedo))
         if len(found) == 1:
             self.textures[name] = self._albedo[0]
@@ -208,8 +230,11 @@ class MaterialConverter:
             self._closure(node.inputs[0], weight, acc, notes, depth + 1)
             self._closure(node.inputs[1], weight, acc, notes, depth + 1)
         elif t == "BSDF_PRINCIPLED":
+            alpha = node.inputs.get("Alpha")
+            if alpha is not None:
+                self._coverage(alpha, weight, notes)
             inputs = {s.name: (self.color(s, notes) if s.type == "RGBA" else self.value(s, notes))
-                      for s in node.inputs if s.type in ("RGBA", "VALUE")}
+                      for s in node.inputs if s.type in ("RGBA", "VALUE") and s.name != "Alpha"}
             spec = principled_to_material(inputs, getattr(node, "distribution", "MULTI_GGX"),
                                           notes.append)
             simple = principled_to_material(inputs, getattr(node, "distribution", "MULTI_GGX"),
@@ -219,6 +244,34 @@ class MaterialConverter:
         else:
             label = node.bl_label if hasattr(node, "bl_label") else t
             raise Unsupported(f"the {label} node ({node.name!r}) is not supported")
+
+    def _coverage(self, sock, weight, notes):
+        """Record the cut-out of a Principled BSDF's ``Alpha`` input ``sock``: a constant, or the
+        map Blender baked of its node graph (:mod:`.node_graphs`); nothing where it is 1."""
+        node = _follow_reroutes(sock.links[0].from_node) if sock.is_linked else None
+        uv, px = None, None
+        if node is None:
+            value = float(sock.default_value)
+        elif node.type == "VALUE":
+            value = float(node.outputs[0].default_value)
+        else:
+            got = "it was not evaluated" if self.graphs is None else self.graphs.get(self._material, sock)
+            if isinstance(got, str):
+                notes.append(f"'Alpha' is driven by a {node.bl_label} node ({got}): the surface is opaque")
+                return
+            px = np.clip(np.asarray(got, np.float32)[..., :1], 0.0, 1.0)
+            value = float(px.max()) if float(px.max() - px.min()) <= 1e-6 else None
+            uv = None if value is not None else self.graphs.uv(self._material, sock)
+        if value is not None:
+            value = float(np.clip(value, 0.0, 1.0))
+            if value >= 1.0 - 1e-6:
+                return
+            px = np.full((1, 1, 1), value, np.float32)
+        if abs(weight - 1.0) > 1e-9:
+            notes.append("the Alpha of a Principled BSDF mixed with other shaders cuts out the whole material")
+        image = EvaluatedImage(f"{self._material.name_full}: {sock.node.name}.Alpha")
+        self._image_pixels[image.name_full] = np.repeat(px, 3, axis=2)
+        self._cutout.append(Coverage(image, uv))
 
     def _normal_note(self, node, notes):
         sock = node.inputs.get("Normal")
@@ -400,8 +453,6 @@ def principled_to_material(inputs, distribution="MULTI_GGX", warn=print, layered
                        ("Diffuse Roughness", "diffuse roughness")):
         if float(get(key, 0.0)) > 1e-6:
             warn(f"Principled BSDF {label} is ignored")
-    if float(get("Alpha", 1.0)) < 1.0 - 1e-6:
-        warn("Principled BSDF alpha (transparency) is ignored: the surface is opaque")
     if layered:
         try:
             from raybundle.scene.materials import principled_material

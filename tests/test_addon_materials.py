@@ -136,3 +136,84 @@ def test_graphs_blender_cannot_evaluate_over_a_uv_map_keep_their_warning(fresh):
     assert any("'Roughness' varies over the surface" in w for w in ex.warnings), ex.warnings
     assert ramp.outputs[0].is_linked and (len(nt.nodes), len(nt.links), len(gt.nodes), len(gt.links)) == nodes
     assert {k: len(getattr(bpy.data, k)) for k in before} == before
+
+
+def _leaf_plane(alpha, size=1.2, z=0.6):
+    """A square of ``size`` m at height ``z`` with UVs over it, a Principled BSDF (green) whose
+    Alpha is the alpha channel of an image (``alpha`` (H, W), Closest interpolation)."""
+    mat = node_material("leaf", "principled", color=(0.2, 0.6, 0.1), roughness=1.0)
+    nt = mat.node_tree
+    img = bpy.data.images.new("leaf", alpha.shape[1], alpha.shape[0], alpha=True, float_buffer=True)
+    rgba = np.concatenate([np.full(alpha.shape + (3,), 0.5), alpha[..., None]], axis=2).astype(np.float32)
+    img.pixels.foreach_set(rgba.ravel())
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = img, "Closest"
+    nt.links.new(tex.outputs["Alpha"], nt.nodes["Principled BSDF"].inputs["Alpha"])
+    h = size / 2
+    ob = add_object("leaf", [(-h, -h, z), (h, -h, z), (h, h, z), (-h, h, z)], [(0, 1, 2, 3)], [mat])
+    ob.data.uv_layers.new(name="UVMap").uv.foreach_set("vector", np.array([0, 0, 1, 0, 1, 1, 0, 1], np.float32))
+    return ob
+
+
+def test_an_alpha_cut_leaf_lets_light_and_the_eye_through_as_in_cycles(fresh, tmp_path):
+    """A leaf plane whose image alpha cuts out a 4 x 4 checker, over a floor under a point lamp,
+    seen from above: the floor's checker of light and shadow, the floor seen through the holes
+    and the leaf where it is, region by region against Cycles.  Opaque (the old export), the
+    shadow under the leaf is whole and the leaf hides the floor."""
+    from addon_helpers import render_cycles, render_raybundle
+
+    checker = np.add.outer(np.arange(4), np.arange(4)) % 2
+    _leaf_plane(checker.astype(float))
+    s = 2.0
+    add_object("floor", [(-s, -s, 0), (s, -s, 0), (s, s, 0), (-s, s, 0)], [(0, 1, 2, 3)],
+               [node_material("floor", color=(0.8, 0.8, 0.8))])
+    add_light("POINT", location=(0.2, -0.1, 2.4), energy=400.0, shadow_soft_size=0.0)
+    add_camera((0, -1.6, 3.0), rotation=(0.5, 0, 0), resolution=(48, 36), lens=32)
+    ex = _export()
+    assert ex.scene.texture is not None and ex.scene.texture.has_cutouts
+    assert not any("lpha" in w for w in ex.warnings), ex.warnings
+    a = render_cycles(tmp_path / "a.exr", samples=128, seed=1)
+    b = render_cycles(tmp_path / "b.exr", samples=128, seed=2)
+    ours = render_raybundle(tmp_path / "rb.exr", iterations=20, seed=3)
+
+    def regions(x):                         # 6 x 6 regions of 8 x 6 pixels
+        return x.reshape(6, 6, 6, 8, 3).mean(axis=(1, 3))
+
+    ref = regions(0.5 * (a + b))
+    lit = ref.mean(axis=-1) > 0.02 * ref.mean(axis=-1).max()
+    rel = (regions(ours) / np.where(ref > 0, ref, 1) - 1)[lit]
+    print("regions", lit.sum(), np.sqrt((rel ** 2).mean()), np.abs(rel).max(), ours.mean() / ref.mean())
+    assert np.sqrt((rel ** 2).mean()) < 0.05 and np.abs(rel).max() < 0.12, rel
+    assert ours.mean() == pytest.approx(ref.mean(), rel=0.03)
+
+
+def test_the_headless_command_saves_a_cut_out_scene_with_its_rendered_world(fresh, tmp_path):
+    """``--save-npz`` on a file whose world Blender renders (a Gradient Texture) and whose leaf is
+    cut out by its image's alpha: the .npz holds the rendered world (it was refused while the
+    world was still rendering) and the coverage; the render is finite."""
+    import subprocess
+
+    from addon_helpers import blender_cli_command
+    from cycles_reference import new_with_nodes
+
+    from raybundle.scene.npz import load_npz
+
+    leaf = _leaf_plane(np.add.outer(np.arange(4), np.arange(4)) % 2 * 1.0)
+    leaf.data.materials[0].node_tree.nodes["Image Texture"].image.pack()
+    s = 2.0
+    add_object("floor", [(-s, -s, 0), (s, -s, 0), (s, s, 0), (-s, s, 0)], [(0, 1, 2, 3)],
+               [node_material("floor", color=(0.8, 0.8, 0.8))])
+    add_camera((0, -1.6, 3.0), rotation=(0.5, 0, 0), resolution=(24, 18), lens=32)
+    world = new_with_nodes(bpy.data.worlds, "gradient")
+    nt = world.node_tree
+    ramp = nt.nodes.new("ShaderNodeTexGradient")
+    nt.links.new(ramp.outputs["Color"], nt.nodes["Background"].inputs["Color"])
+    bpy.context.scene.world = world
+    blend, out, npz = tmp_path / "leaf.blend", tmp_path / "out.exr", tmp_path / "scene.npz"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    r = subprocess.run(blender_cli_command(blend, "--out", out, "--iterations", 3, "--save-npz", npz),
+                       capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    sc = load_npz(npz)
+    assert not sc.world.is_constant and sc.world.emits
+    assert sc.texture is not None and sc.texture.has_cutouts

@@ -278,3 +278,24 @@ def test_texture_detail_stays_sharp_in_bakes_and_images_and_patches_hold_its_mea
     # measured: mean 1e-5, 95th percentile of |rel| 0.4%, largest 1.1% (patch-mean albedo: +-50% at texel edges)
     assert np.abs(rel.mean()) < 0.005 and np.percentile(np.abs(rel), 95) < 0.02 and np.abs(rel).max() < 0.05
     r.tracer.close()
+
+
+def test_a_patch_over_many_texels_reads_its_mean_from_the_maps_pyramid():
+    """The mean of a map over a triangle covering thousands of texels (a 64 x 64 noise map tiled
+    8 times) is the map's mean within 0.3%, read on a coarser level of its pyramid with at most
+    MAX_SAMPLES points; a coverage map gives each triangle its mean coverage the same way."""
+    from raybundle.scene.textures import MAX_SAMPLES, SurfaceTexture
+
+    noise = np.random.default_rng(2).random((64, 64, 3)).astype(np.float32) + 0.5
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    t = np.array([[0, 1, 2], [0, 2, 3]])
+    tex = SurfaceTexture([noise, np.repeat(noise[..., :1] - 0.5, 3, axis=2)], [0, 0], v[t], v[t][..., :2] * 8,
+                         face_alpha=[1, 1])
+    mats = MaterialTable.from_list([dict(diffuse=(0.5, 0.5, 0.5), emission=(1.0, 1.0, 1.0))])
+    sc = build_scene(v, t, [0, 0], mats, texture=tex)
+    means = tex._triangle_means(sc, tex.face_image, seed=1)
+    assert np.allclose(means, noise.reshape(-1, 3).mean(axis=0), rtol=0.003), means
+    assert tex.level(0, 3).shape == (8, 8, 3) and np.allclose(tex.level(0, 3).mean(), noise.mean(), rtol=1e-6)
+    assert 64 * 64 * 64 / 2 > MAX_SAMPLES                  # each triangle covers more texels than it reads
+    cover = tex.triangle_coverage(sc, seed=1)
+    assert np.allclose(cover, noise[..., 0].mean() - 0.5, rtol=0.01), cover

@@ -269,3 +269,66 @@ def test_scene_far_from_origin_keeps_precision(rng):
         assert fa.n_casts == fb.n_casts
     a.close()
     b.close()
+
+
+def cut_out_planes(alpha_map):
+    """Two unit squares facing each other along z (z = 1 front, z = 0 back), two-sided; the
+    front has the coverage map ``alpha_map`` (H, W) over UV = (x, y)."""
+    from raybundle.scene.textures import SurfaceTexture
+
+    sq = np.array([(0, 0), (1, 0), (1, 1), (0, 1)], float)
+    v = np.concatenate([np.c_[sq, np.ones(4)], np.c_[sq, np.zeros(4)]])
+    t = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    mats = MaterialTable.from_list([dict(diffuse=(0.5, 0.5, 0.5), emission=(1.0, 1.0, 1.0))])
+    tex = SurfaceTexture([np.repeat(np.asarray(alpha_map, np.float32)[..., None], 3, axis=2)],
+                         np.full(4, -1), v[t], v[t][..., :2], face_alpha=[0, 0, -1, -1])
+    return build_scene(v, t, np.zeros(4, np.int64), mats, two_sided=True, texture=tex)
+
+
+def test_cut_outs_pass_rays_where_they_are_cut_out_and_with_their_coverage_elsewhere():
+    """A front square cut out on its left half (coverage 0 | 1): rays there reach the back
+    square, in every query (first hits, shadow rays, bundle lines); with a constant coverage
+    0.3 the front is met by 30% of the rays, within 4.5 standard errors."""
+    from raybundle.scene.textures import SurfaceTexture
+
+    left = np.zeros((8, 64))
+    left[:, 32:] = 1.0
+    sc = cut_out_planes(left)
+    tr = RayTracer(sc)
+    try:
+        x = np.linspace(0.05, 0.95, 40)
+        o = np.stack([x, np.full_like(x, 0.5), np.full_like(x, 2.0)], axis=1)
+        d = np.array([0.0, 0.0, -1.0])
+        tri, t, _, _ = tr.first_hit(o, d)
+        inside = np.abs(x - 0.5) > 0.02                       # off the bilinear seam
+        assert np.all((t[inside] < 1.5) == (x[inside] > 0.5)), (x, t)
+        assert np.all(sc.triangle_source[tri[inside]] // 2 == np.where(x[inside] > 0.5, 0, 1))
+        shadow = tr.occluded(o + 1.5 * d, -d, np.full(len(o), 1.2))   # from z = 0.5 up to z = 1.7
+        assert np.all(shadow[inside] == (x[inside] > 0.5))
+        up, down, ray, _ = tr.all_hit_pairs(o, d)
+        pairs = set(ray.tolist())                             # a front-back pair only where the front is kept
+        assert {k for k in np.nonzero(inside)[0] if x[k] > 0.5} <= pairs
+        assert not pairs & {k for k in np.nonzero(inside)[0] if x[k] < 0.5}
+    finally:
+        tr.close()
+
+    again = SurfaceTexture.from_arrays(sc.texture.to_arrays())          # the .npz keeps the coverage
+    assert np.array_equal(again.face_alpha, sc.texture.face_alpha) and again.has_cutouts
+
+    sc = cut_out_planes(np.full((1, 1), 0.3))
+    tr = RayTracer(sc)
+    try:
+        rng = np.random.default_rng(5)
+        n = 20000
+        o = np.c_[rng.uniform(0.01, 0.99, (n, 2)), np.full(n, 2.0)]
+        d = np.array([0.0, 0.0, -1.0])
+        front = tr.first_hit(o, d)[1] < 1.5
+        shadow = tr.occluded(o + 1.5 * d, -d, np.full(n, 1.2))
+        up, down, ray, _ = tr.all_hit_pairs(o, d)
+        se = np.sqrt(0.3 * 0.7 / n)
+        for got in (front.mean(), shadow.mean(), len(ray) / n):
+            assert abs(got - 0.3) < 4.5 * se, (got, se)
+        again = tr.first_hit(o, d)[1] < 1.5                  # a new query draws anew
+        assert (front != again).any()
+    finally:
+        tr.close()

@@ -507,13 +507,17 @@ def plane_fans(light):
 
 def small_emitters(scene, small_fraction=0.1):
     """Material ids (list) of the mesh emitters the first shot takes: constant emission (not
-    the furnaces' ``c (1 - a(w))``) over at most ``small_fraction`` of the scene's area."""
+    the furnaces' ``c (1 - a(w))``) over at most ``small_fraction`` of the scene's area, and
+    no cut-out (a cut-out emits where it is covered only: the iteration's bundles take it)."""
     mats = scene.materials
     total = scene.triangle_area.sum()
     constant = ~np.any(mats.emission_albedo_complement > 0, axis=1) & np.any(mats.emission > 0, axis=1)
+    cut = np.zeros(len(scene.triangles), bool)
+    if scene.texture is not None and scene.texture.has_cutouts:
+        cut = scene.texture.cutout_faces[scene.triangle_source]
     out = []
     for m in np.nonzero(constant)[0]:
         tri = scene.triangle_material == m
-        if tri.any() and scene.triangle_area[tri].sum() <= small_fraction * total:
+        if tri.any() and not cut[tri].any() and scene.triangle_area[tri].sum() <= small_fraction * total:
             out.append(int(m))
     return out

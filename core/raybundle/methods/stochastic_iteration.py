@@ -97,8 +97,15 @@ class StochasticIterationSolver(Method):
         pm = scene.side_material
         self.patch_material = pm
         self.normal = scene.side_normal
-        # receiving area: the side's area less what is buried inside solids
+        # receiving area: the side's area less what is buried inside solids, times a cut-out's
+        # coverage (the light a cut-out patch receives lands on its covered part only)
         self.tside_open_area = tracer.open_fraction() * scene.triangle_area[scene.tside_triangle]
+        # the first shot averages the irradiance at points of the surface itself (a cut-out's
+        # holes take no samples): its sides' area is the open one, without the coverage
+        open_area = np.bincount(scene.tside_side, self.tside_open_area, minlength=scene.n_sides)
+        if tracer.cutouts is not None:
+            cover = tracer.cutouts.triangle_coverage(scene, seed)[scene.tside_triangle]
+            self.tside_open_area *= np.maximum(cover, 1e-6)      # a side cut out everywhere receives nothing
         self.area = np.bincount(scene.tside_side, self.tside_open_area, minlength=scene.n_sides)
         self.reconstruction = LinearReconstruction(scene, self.tside_open_area)
         self.kd_over_pi = mats.diffuse_reflectance[pm] / np.pi          # (P, 3)
@@ -132,7 +139,7 @@ class StochasticIterationSolver(Method):
             raise ValueError("glossy_send_rays must be at least 1")
         self.glossy_send_rays = int(glossy_send_rays)
         # incoming first shot, refined by a few shadow rays every iteration
-        self.first_shot = PatchFirstShot(direct, np.random.default_rng([seed, 7]), receiving_area=self.area)
+        self.first_shot = PatchFirstShot(direct, np.random.default_rng([seed, 7]), receiving_area=open_area)
         self.grid_rng = np.random.default_rng([seed, 3])   # bundle grid offset and rotation
         # a sixteenth of the lit sides' worth of shadow rays per iteration (per side, not per
         # triangle: a cluster's many small triangles share one estimate)

@@ -1,4 +1,4 @@
-"""Image textures on the diffuse albedo: sharp texture detail over smooth light.
+"""Image textures on the diffuse albedo and cut-outs: sharp texture detail over smooth light.
 
 A textured material's diffuse reflectance varies over a surface as
 ``kd(x) = kd_m * M(uv(x))``: ``kd_m`` the material's reflectance from the image's
@@ -9,8 +9,9 @@ Linear interpolation and Repeat extension does; texel centres at (i + 0.5) / W).
 
 The solver keeps one variable per patch side, so a patch reflects with its mean
 albedo ``kd_m * mean_patch(M)`` (:meth:`SurfaceTexture.side_means`: the modulation
-averaged over the patch at stratified points, as many as the patch covers texels,
-up to :data:`MAX_SAMPLES` per triangle); images and bakes multiply the diffuse
+averaged over the patch at stratified points, as many as the patch covers texels, up to
+:data:`MAX_SAMPLES` per triangle, on the level of the map's pyramid of 2 x 2 means where the
+triangle covers no more texels than that); images and bakes multiply the diffuse
 light at each pixel or texel by ``kd_m * M(uv)`` (:meth:`SurfaceTexture.at`), so the
 texture stays sharp while the light is interpolated smoothly.
 
@@ -21,15 +22,27 @@ then holds white, so the color is the factor itself).
 UVs live on the *input* faces (the exported triangles, before subdivision): a
 point's UV is the input face's corner UVs weighted by the point's barycentrics on
 that face, whatever patch triangle it lies on.
+
+**Cut-outs.** A face may also have a *coverage* map ``alpha(uv)`` in [0, 1] (``face_alpha``,
+Blender's Alpha of a Principled BSDF): as in Cycles, a fraction ``alpha`` of the light that
+reaches the point meets the surface and ``1 - alpha`` passes on unchanged, as through a hole.
+The tracer (:mod:`raybundle.tracing.visibility`) keeps a hit on such a face with probability
+``alpha`` at the hit point, so bundles, shadow rays and eye rays see the surface that often;
+a patch then receives light on its covered area only (:meth:`SurfaceTexture.triangle_coverage`
+scales its receiving area), so its radiance is that of the surface where it is, and the eye
+sees it with the coverage of each pixel.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 #: most modulation samples per patch triangle for its mean
-MAX_SAMPLES = 1024
+MAX_SAMPLES = 256
+#: fewest samples per triangle for its mean coverage: a patch's radiance is the light it
+#: receives over its covered area, so an error there is an error of the patch
+MIN_COVERAGE_SAMPLES = 64
 
 
 @dataclass
@@ -41,16 +54,21 @@ class SurfaceTexture:
     corner colors, interpolated linearly: a color attribute, whose color is the albedo
     factor itself), indexed by :attr:`~raybundle.scene.model.PatchScene.triangle_source`;
     ``face_corners`` (F, 3, 3) [m] and ``face_uv`` (F, 3, 2): the input faces and their
-    corner UVs; ``face_color`` (F, 3, 3) or None: their corner colors."""
+    corner UVs; ``face_color`` (F, 3, 3) or None: their corner colors; ``face_alpha`` (F,) int
+    or None: the map of each face's coverage (its first channel; -1: opaque)."""
 
     images: list
     face_image: np.ndarray
     face_corners: np.ndarray
     face_uv: np.ndarray
     face_color: np.ndarray | None = None
+    face_alpha: np.ndarray | None = None
+    _pyramids: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
         self.face_image = np.asarray(self.face_image, np.int64)
+        self.face_alpha = (np.full(len(self.face_image), -1, np.int64) if self.face_alpha is None
+                           else np.asarray(self.face_alpha, np.int64))
         self.face_corners = np.asarray(self.face_corners, float)
         self.face_uv = np.asarray(self.face_uv, float)
         if self.face_color is not None:
@@ -66,6 +84,8 @@ class SurfaceTexture:
                                 else np.zeros((0, 3), np.float32))}
         if self.face_color is not None:
             d["texture_face_color"] = self.face_color
+        if self.has_cutouts:
+            d["texture_face_alpha"] = self.face_alpha
         return d
 
     @classmethod
@@ -78,11 +98,12 @@ class SurfaceTexture:
             images.append(np.asarray(d["texture_pixels"][k:k + h * w]).reshape(h, w, 3))
             k += h * w
         return cls(images, d["texture_face_image"], d["texture_face_corners"], d["texture_face_uv"],
-                   d.get("texture_face_color"))
+                   d.get("texture_face_color"), d.get("texture_face_alpha"))
 
-    def lookup(self, image, uv):
-        """Bilinear, repeating lookup (N, 3) of map ``image`` at ``uv`` (N, 2)."""
-        im = self.images[image]
+    def lookup(self, image, uv, level=0):
+        """Bilinear, repeating lookup (N, 3) of map ``image`` at ``uv`` (N, 2), on ``level`` of
+        its pyramid (0: the map itself; each level the 2 x 2 means of the one below)."""
+        im = self.level(image, level)
         h, w = im.shape[:2]
         x = uv[:, 0] * w - 0.5
         y = uv[:, 1] * h - 0.5
@@ -92,6 +113,24 @@ class SurfaceTexture:
         x1, y1 = (x0 + 1) % w, (y0 + 1) % h
         return ((1 - fy) * ((1 - fx) * im[y0, x0] + fx * im[y0, x1])
                 + fy * ((1 - fx) * im[y1, x0] + fx * im[y1, x1]))
+
+    def level(self, image, level):
+        """Level ``level`` of map ``image``'s pyramid (kept once made): level 0 is the map, each
+        next level the means of 2 x 2 texels (an odd row or column is averaged with the first,
+        as the map repeats)."""
+        if level == 0:
+            return self.images[image]
+        key = (image, level)
+        if key not in self._pyramids:
+            im = self.level(image, level - 1)
+            for axis in (0, 1):
+                if im.shape[axis] > 1:
+                    if im.shape[axis] % 2:
+                        im = np.concatenate([im, np.take(im, [0], axis=axis)], axis=axis)
+                    im = 0.5 * (np.take(im, np.arange(0, im.shape[axis], 2), axis=axis)
+                                + np.take(im, np.arange(1, im.shape[axis], 2), axis=axis))
+            self._pyramids[key] = np.ascontiguousarray(im, np.float32)
+        return self._pyramids[key]
 
     def uv_at(self, face, points):
         """UV (N, 2) of ``points`` (N, 3) on input faces ``face`` (N,)."""
@@ -118,41 +157,80 @@ class SurfaceTexture:
             out[sel] = self.lookup(int(k), self.uv_at(face[sel], points[sel]))
         return out
 
+    @property
+    def has_cutouts(self):
+        """Whether any face has a coverage map."""
+        return bool(np.any(self.face_alpha >= 0))
+
+    @property
+    def cutout_faces(self):
+        """(F,) bool: the faces with a coverage map."""
+        return self.face_alpha >= 0
+
+    def alpha_at(self, face, points):
+        """(N,) coverage in [0, 1] at ``points`` (N, 3) on input faces ``face`` (N,) (1 where opaque)."""
+        face = np.asarray(face, np.int64)
+        out = np.ones(len(face))
+        k_of = self.face_alpha[face]
+        for k in np.unique(k_of[k_of >= 0]):
+            sel = np.nonzero(k_of == k)[0]
+            out[sel] = self.lookup(int(k), self.uv_at(face[sel], points[sel]))[:, 0]
+        return np.clip(out, 0.0, 1.0)
+
+    def triangle_coverage(self, scene, seed=0):
+        """(T,) the mean coverage over each triangle of ``scene`` (1 where opaque), from
+        stratified points as :meth:`side_means` takes them."""
+        return np.clip(self._triangle_means(scene, self.face_alpha, seed, MIN_COVERAGE_SAMPLES)[:, 0], 0.0, 1.0)
+
     def side_means(self, scene, seed=0):
         """(S, 3) the area-weighted mean modulation over each patch side of ``scene``
-        (stratified points on every triangle of a textured face, about one per texel it
-        covers, 16 to :data:`MAX_SAMPLES`)."""
-        from ..tracing.sampling import points_on_triangles, stratified_2d
-
+        (:meth:`_triangle_means` of the albedo maps)."""
         tri_face = scene.triangle_source
-        img = self.face_image[tri_face]
-        mod = np.ones((len(scene.triangles), 3))
-        col = np.nonzero(img == -2)[0]
+        mod = self._triangle_means(scene, self.face_image, seed)
+        col = np.nonzero(self.face_image[tri_face] == -2)[0]
         if len(col):          # linear over the face: the mean over a triangle is at its centroid
             mod[col] = self.at(tri_face[col], scene.triangle_corners[col].mean(axis=1))
-        textured = np.nonzero(img >= 0)[0]
-        if len(textured):
-            uv = self.face_uv[tri_face[textured]]
-            du, dv = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-            uv_area = 0.5 * np.abs(du[:, 0] * dv[:, 1] - du[:, 1] * dv[:, 0])
-            c = self.face_corners[tri_face[textured]]
-            src_area = 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
-            texels = np.array([im.shape[0] * im.shape[1] for im in self.images], float)[img[textured]]
-            share = scene.triangle_area[textured] / np.maximum(src_area, 1e-300)
-            k = np.clip(np.ceil(uv_area * share * texels), 16, MAX_SAMPLES).astype(np.int64)
-            rng = np.random.default_rng([seed, 31])
-            for n in np.unique(k):
-                sel = textured[k == n]
-                st = np.concatenate([stratified_2d(int(n), rng) for _ in range(len(sel))])
-                pts = points_on_triangles(np.repeat(scene.triangle_corners[sel], n, axis=0), st[:, 0], st[:, 1])
-                m = self.at(np.repeat(tri_face[sel], n), pts)
-                mod[sel] = m.reshape(len(sel), int(n), 3).mean(axis=1)
         area = scene.triangle_area[scene.tside_triangle]
         side = scene.tside_side
         num = np.stack([np.bincount(side, area * mod[scene.tside_triangle][:, c], minlength=scene.n_sides)
                         for c in range(3)], axis=1)
         den = np.bincount(side, area, minlength=scene.n_sides)
         return num / np.maximum(den, 1e-300)[:, None]
+
+    def _triangle_means(self, scene, face_map, seed, fewest=16):
+        """(T, 3) the mean over each triangle of ``scene`` of the map ``face_map`` (F,) gives its
+        face (ones where it gives none): the map at stratified points, one per texel the triangle
+        covers, ``fewest`` to :data:`MAX_SAMPLES`.  A triangle that covers more texels reads a
+        coarser level of the map's pyramid (each texel the mean of 2 x 2 of the level below),
+        where it covers at most :data:`MAX_SAMPLES`.  The points' UVs are the triangle's corner
+        UVs interpolated (UV is affine over a face)."""
+        from ..tracing.sampling import stratified_2d_sets, uniform_triangle
+
+        tri_face = scene.triangle_source
+        img = face_map[tri_face]
+        mean = np.ones((len(scene.triangles), 3))
+        textured = np.nonzero(img >= 0)[0]
+        if len(textured) == 0:
+            return mean
+        face = tri_face[textured]
+        uv = np.stack([self.uv_at(face, scene.triangle_corners[textured, j]) for j in range(3)], axis=1)
+        du, dv = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+        texels = np.array([im.shape[0] * im.shape[1] for im in self.images], float)[img[textured]]
+        covered = 0.5 * np.abs(du[:, 0] * dv[:, 1] - du[:, 1] * dv[:, 0]) * texels
+        level = np.maximum(0, np.ceil(np.log(np.maximum(covered, 1.0) / MAX_SAMPLES) / np.log(4.0))).astype(np.int64)
+        # points per triangle: the texels it covers on its level, rounded up to a power of 2
+        k = np.clip(np.ceil(covered / 4.0 ** level), fewest, MAX_SAMPLES)
+        k = np.minimum(2 ** np.ceil(np.log2(k)), MAX_SAMPLES).astype(np.int64)
+        rng = np.random.default_rng([seed, 31])
+        groups, which = np.unique(np.stack([k, level, img[textured]], axis=1), axis=0, return_inverse=True)
+        order = np.argsort(which.ravel(), kind="stable")
+        for (n, lev, m), sel in zip(groups, np.split(order, np.cumsum(np.bincount(which.ravel()))[:-1])):
+            st = stratified_2d_sets(len(sel), int(n), rng).reshape(-1, 2)
+            w = uniform_triangle(st[:, 0], st[:, 1]).reshape(len(sel), int(n), 3)
+            at = np.einsum("tnk,tkc->tnc", w, uv[sel]).reshape(-1, 2)
+            got = self.lookup(int(m), at, int(lev))
+            mean[textured[sel]] = got.reshape(len(sel), int(n), -1).mean(axis=1)
+        return mean
 
 
 def modulation_map(image):

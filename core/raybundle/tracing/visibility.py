@@ -17,6 +17,11 @@ Hits closer than ``eps`` along a ray are one hit (``eps`` = 1e-5 of the scene
 radius; Embree's hit distances carry errors of that order in single precision): a ray through a shared edge or vertex is counted once, and walls
 thinner than ``eps`` behave as one surface.
 
+Cut-outs (:class:`~raybundle.scene.textures.SurfaceTexture`'s coverage): a hit on a face
+with a coverage map is kept with probability ``alpha`` at the hit point, drawn from a hash of
+the ray, the layer and the query (the same for any split over threads); a ray that passes
+goes on from just past the hit, in every query (first hits, shadow rays, bundle lines).
+
 ``embreex`` traces one ray after another in C and releases the GIL, so every
 query is split into one chunk per core and run on a thread pool.
 """
@@ -32,6 +37,8 @@ import numpy as np
 from .sampling import cosine_directions, frames_from_normals, points_on_triangles, stratified_2d_sets
 
 _MAX_LAYERS = 10000
+#: most surfaces a first-hit query passes through before it gives up (the ray then misses)
+_MAX_PASSES = 1000
 #: sender id of light that comes from the environment (world) in a :class:`Bundle`: along
 #: ``travel_sign`` +1 it arrives from the world at -d, along -1 from the world at +d
 ENVIRONMENT = -1
@@ -91,6 +98,11 @@ class RayTracer:
         self._embree.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))  # commit now
         self.threads = max(1, int(threads or os.cpu_count() or 1))
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
+        tex = scene.texture
+        #: the scene's coverage maps (None: every surface is opaque) and (T,) bool cut-out triangles
+        self.cutouts = tex if tex is not None and tex.has_cutouts else None
+        self._cut = None if self.cutouts is None else self.cutouts.cutout_faces[scene.triangle_source]
+        self._queries = 0
 
     def close(self):
         if self._pool is not None:
@@ -113,10 +125,47 @@ class RayTracer:
         """Closest hits of rays (N, 3) from ``origins`` along unit ``directions``.
 
         Returns ``(triangle, t, u, v)``: triangle id (-1 = miss), distance [m] and
-        Embree's barycentrics (hit = (1-u-v) v0 + u v1 + v v2).
+        Embree's barycentrics (hit = (1-u-v) v0 + u v1 + v v2).  A cut-out's hit is
+        kept with the probability of its coverage there (module docstring).
         """
         origins = np.asarray(origins, float)
         directions = np.broadcast_to(np.asarray(directions, float), origins.shape)
+        hits = self._first_hits(origins, directions)
+        return hits if self.cutouts is None else self._through_cutouts(origins, directions, *hits)
+
+    def _through_cutouts(self, origins, directions, tri, t, u, v):
+        """:meth:`first_hit`'s hits ``(tri, t, u, v)`` (changed in place) with the cut-out hits
+        that are not kept traced on from just past them."""
+        query = self._next_query()
+        todo = np.arange(len(tri))
+        for layer in range(_MAX_PASSES):
+            todo = todo[tri[todo] >= 0]
+            todo = todo[self._cut[tri[todo]]]
+            if todo.size == 0:
+                return tri, t, u, v
+            go = todo[~self._kept(tri[todo], origins[todo] + t[todo, None] * directions[todo], todo, layer, query)]
+            if go.size == 0:
+                return tri, t, u, v
+            start = t[go] + self.eps
+            tri[go], dt, u[go], v[go] = self._first_hits(origins[go] + start[:, None] * directions[go],
+                                                         directions[go])
+            t[go] = start + dt
+            todo = go
+        tri[todo] = -1                  # passed through more surfaces than any scene has: a miss
+        return tri, t, u, v
+
+    def _kept(self, tri, points, rays, layer, query):
+        """(N,) bool: the hits on cut-out triangles ``tri`` at ``points`` are kept (their
+        coverage against a uniform number hashed from ``rays``, ``layer`` and ``query``)."""
+        alpha = self.cutouts.alpha_at(self.scene.triangle_source[tri], points)
+        return hashed_uniform(rays, layer, query) < alpha
+
+    def _next_query(self):
+        self._queries += 1
+        return self._queries
+
+    def _first_hits(self, origins, directions):
+        """Embree's closest hits, cut-outs or not: ``(triangle, t, u, v)``."""
 
         def work(a, b):
             r = self._run(origins[a:b], directions[a:b], output=1)
@@ -129,7 +178,8 @@ class RayTracer:
         return tri, t, np.concatenate([p[2] for p in parts]), np.concatenate([p[3] for p in parts])
 
     def occluded(self, origins, directions, distances):
-        """(N,) bool: is anything hit between ``origins`` and ``distances`` along ``directions``?"""
+        """(N,) bool: is anything hit between ``origins`` and ``distances`` along ``directions``?
+        (A cut-out with the probability of its coverage where the ray meets it.)"""
         origins = np.asarray(origins, float)
         directions = np.broadcast_to(np.asarray(directions, float), origins.shape)
         dist = np.asarray(distances, np.float32)
@@ -138,7 +188,13 @@ class RayTracer:
             return self._run(origins[a:b], directions[a:b], query="OCCLUDED",
                              dists=np.ascontiguousarray(dist[a:b]))
 
-        return np.concatenate(self._map_chunks(work, len(origins))) != -1
+        hit = np.concatenate(self._map_chunks(work, len(origins))) != -1
+        if self.cutouts is not None and hit.any():
+            sel = np.nonzero(hit)[0]
+            o, d = origins[sel], directions[sel]
+            tri, t, _, _ = self._through_cutouts(o, d, *self._first_hits(o, d))
+            hit[sel] = (tri >= 0) & (t < dist[sel])
+        return hit
 
     def open_fraction(self, points_per_triangle=32, refine_points=512, seed=0):
         """(TS,) fraction of each triangle side's area that is not buried inside a closed solid.
@@ -264,6 +320,7 @@ class RayTracer:
         ``(up, down, ray, casts, first, first_ray, last, last_ray)``."""
         d32 = np.broadcast_to(np.asarray(direction, float), np.shape(origins)).astype(np.float32)
         eps32 = np.float32(self.eps)
+        query = self._next_query()
 
         def work(a, b):
             # active rays are kept compact: origin (float32, scene-centred), direction,
@@ -282,21 +339,27 @@ class RayTracer:
                 r = self._embree.run(o32 + start[:, None] * dr, dr, output=1)
                 prim = r["primID"].astype(np.int64)
                 hit = prim >= 0
+                kept = hit.copy()
+                if self.cutouts is not None:
+                    c = np.nonzero(hit)[0]
+                    c = c[self._cut[prim[c]]]
+                    at = (o32[c] + (start[c] + r["tfar"][c])[:, None] * dr[c]).astype(float) + self.center
+                    kept[c] = self._kept(prim[c], at, ray[c], layer, query)
                 if ends:
-                    if layer == 0:
-                        out[3].append(prim[hit])
-                        out[4].append(ray[hit])
+                    first = kept & (last < 0)
+                    out[3].append(prim[first])
+                    out[4].append(ray[first])
                     gone = ~hit & (last >= 0)
                     out[5].append(last[gone])
                     out[6].append(ray[gone])
-                o32, dr, ray, prim, prev = o32[hit], dr[hit], ray[hit], prim[hit], last[hit]
+                o32, dr, ray, prim, prev, kept = o32[hit], dr[hit], ray[hit], prim[hit], last[hit], kept[hit]
                 start = start[hit] + r["tfar"][hit] + eps32
-                new = prev != prim          # a re-hit of the same triangle is no new surface
+                new = kept & (prev != prim)     # a re-hit of the same triangle is no new surface
                 pair = new & (prev >= 0)
                 out[0].append(prev[pair])
                 out[1].append(prim[pair])
                 out[2].append(ray[pair])
-                last = prim
+                last = np.where(kept, prim, prev)
             else:
                 warnings.warn(f"a bundle ray met more than {_MAX_LAYERS} surfaces; it was cut off", stacklevel=4)
             return [np.concatenate(x) if x else np.zeros(0, np.int64) for x in out], casts
@@ -340,6 +403,19 @@ class RayTracer:
                                         int(counts[k]), int(round(casts * counts[k] / max(bounds[-1], 1))),
                                         *ends))
         return out
+
+
+def hashed_uniform(rays, layer, query):
+    """(N,) uniform numbers in [0, 1) from the ray ids ``rays`` (N,), a ``layer`` and a
+    ``query`` number (SplitMix64 of their combination): the same for the same ray wherever it
+    is traced."""
+    with np.errstate(over="ignore"):
+        z = (np.asarray(rays, np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+             + np.uint64((int(layer) * 0x632BE59BD9B4E019 + int(query) * 0xD1B54A32D192ED03) % (1 << 64)))
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        z = z ^ (z >> np.uint64(31))
+    return (z >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53))
 
 
 def near_surface(tracer, corners, normals, reach, rng, points=None):
