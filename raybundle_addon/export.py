@@ -236,7 +236,7 @@ def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, wa
                  next((l for l in me.uv_layers if l.active_render), me.uv_layers.active))
         if layer is None:
             warn(f"object {ob.name!r}: material {slots[k].name!r} has {what} but the mesh has no UV "
-                 f"map{' ' + repr(name) if name else ''}: {'its mean is used' if 'image' in what else 'opaque'}")
+                 f"map{' ' + repr(name) if name else ''}: {'its mean color is used' if 'image' in what else 'opaque'}")
             return False
         if layer.name not in layers:
             a = np.empty(2 * len(me.loops), np.float32)

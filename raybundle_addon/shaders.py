@@ -28,7 +28,9 @@ model.  A material's node tree is read from its Cycles output node:
   gives its value.
 * A Principled BSDF's **Alpha** below 1, a constant or a node graph Blender bakes (an image's
   alpha through a UV map), is a cut-out (:attr:`MaterialConverter.cutouts`, the coverage of
-  :mod:`raybundle.scene.textures`): light passes where it is cut out.
+  :mod:`raybundle.scene.textures`): light passes where it is cut out.  So is a **Mix Shader**
+  of a Transparent BSDF and another shader: its factor is the other's coverage (the
+  Transparent BSDF's color is not modeled, warned).
 * Any input driven by other nodes is evaluated by Blender where the graph is a function of a
   UV map (:mod:`.node_graphs`): an albedo texture on an albedo input, its mean elsewhere.
 * Anything else (Glass, Translucent, Transparent, Subsurface, groups...) makes the
@@ -222,6 +224,15 @@ class MaterialConverter:
         elif t == "EMISSION":
             acc.emission += weight * self.color(node.inputs["Color"], notes) * max(
                 self.value(node.inputs["Strength"], notes), 0.0)
+        elif t == "MIX_SHADER" and _transparent_input(node) is not None:
+            # Mix(Fac, Transparent, X): X where covered, a fraction Fac (1 - Fac with the
+            # Transparent second) of the light; the rest passes on: a cut-out of X
+            clear = _transparent_input(node)
+            color = self.color(_follow_reroutes(node.inputs[clear].links[0].from_node).inputs["Color"], notes)
+            if np.any(np.abs(color - 1.0) > 1e-6):
+                notes.append(f"a Transparent BSDF's color {color_text(color)} is not modeled: it passes all light")
+            self._coverage(node.inputs[0], weight, notes, invert=clear == 2)
+            self._closure(node.inputs[3 - clear], weight, acc, notes, depth + 1)
         elif t == "MIX_SHADER":
             fac = float(np.clip(self.value(node.inputs[0], notes), 0.0, 1.0))
             self._closure(node.inputs[1], weight * (1.0 - fac), acc, notes, depth + 1)
@@ -245,9 +256,11 @@ class MaterialConverter:
             label = node.bl_label if hasattr(node, "bl_label") else t
             raise Unsupported(f"the {label} node ({node.name!r}) is not supported")
 
-    def _coverage(self, sock, weight, notes):
-        """Record the cut-out of a Principled BSDF's ``Alpha`` input ``sock``: a constant, or the
-        map Blender baked of its node graph (:mod:`.node_graphs`); nothing where it is 1."""
+    def _coverage(self, sock, weight, notes, invert=False):
+        """Record the cut-out given by input ``sock`` (a Principled BSDF's ``Alpha``, a Mix
+        Shader's ``Fac`` with a Transparent BSDF; ``invert``: the coverage is 1 - its value): a
+        constant, or the map Blender baked of its node graph (:mod:`.node_graphs`); nothing
+        where the coverage is 1."""
         node = _follow_reroutes(sock.links[0].from_node) if sock.is_linked else None
         uv, px = None, None
         if node is None:
@@ -257,19 +270,21 @@ class MaterialConverter:
         else:
             got = "it was not evaluated" if self.graphs is None else self.graphs.get(self._material, sock)
             if isinstance(got, str):
-                notes.append(f"'Alpha' is driven by a {node.bl_label} node ({got}): the surface is opaque")
+                notes.append(f"{sock.name!r} is driven by a {node.bl_label} node ({got}): the surface is opaque")
                 return
             px = np.clip(np.asarray(got, np.float32)[..., :1], 0.0, 1.0)
+            if invert:
+                px = 1.0 - px
             value = float(px.max()) if float(px.max() - px.min()) <= 1e-6 else None
             uv = None if value is not None else self.graphs.uv(self._material, sock)
         if value is not None:
-            value = float(np.clip(value, 0.0, 1.0))
+            value = float(np.clip(1.0 - value if invert and px is None else value, 0.0, 1.0))
             if value >= 1.0 - 1e-6:
                 return
             px = np.full((1, 1, 1), value, np.float32)
         if abs(weight - 1.0) > 1e-9:
-            notes.append("the Alpha of a Principled BSDF mixed with other shaders cuts out the whole material")
-        image = EvaluatedImage(f"{self._material.name_full}: {sock.node.name}.Alpha")
+            notes.append(f"the cut-out of {sock.node.name!r}, mixed with other shaders, cuts out the whole material")
+        image = EvaluatedImage(f"{self._material.name_full}: {sock.node.name}.{sock.name}")
         self._image_pixels[image.name_full] = np.repeat(px, 3, axis=2)
         self._cutout.append(Coverage(image, uv))
 
@@ -471,6 +486,13 @@ def principled_to_material(inputs, distribution="MULTI_GGX", warn=print, layered
 
 
 # ------------------------------------------------------------------- helpers
+def _transparent_input(mix):
+    """1 or 2: the input of Mix Shader ``mix`` that a Transparent BSDF drives (the other not), or None."""
+    found = [k for k in (1, 2) if mix.inputs[k].is_linked
+             and getattr(_follow_reroutes(mix.inputs[k].links[0].from_node), "type", None) == "BSDF_TRANSPARENT"]
+    return found[0] if len(found) == 1 else None
+
+
 def _follow_reroutes(node):
     for _ in range(256):
         if node is None or node.type != "REROUTE":

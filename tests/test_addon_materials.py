@@ -217,3 +217,35 @@ def test_the_headless_command_saves_a_cut_out_scene_with_its_rendered_world(fres
     sc = load_npz(npz)
     assert not sc.world.is_constant and sc.world.emits
     assert sc.texture is not None and sc.texture.has_cutouts
+
+
+def test_a_mix_with_a_transparent_bsdf_is_the_same_cut_out_as_an_alpha(fresh, tmp_path):
+    """The leaf's cut-out described three ways renders the same image, bit for bit (the same
+    seed): the Principled Alpha from the image's alpha; a Mix Shader of a Transparent BSDF (first)
+    and the Principled BSDF with the alpha as its factor; the Transparent BSDF second with
+    1 - alpha (a Math node) as the factor."""
+    from addon_helpers import render_raybundle
+
+    leaf = _leaf_plane((np.add.outer(np.arange(4), np.arange(4)) % 2) * 0.8 + 0.1)
+    add_light("POINT", location=(0.2, -0.1, 2.4), energy=400.0, shadow_soft_size=0.0)
+    add_camera((0, -1.6, 3.0), rotation=(0.5, 0, 0), resolution=(24, 18), lens=32)
+    nt = leaf.data.materials[0].node_tree
+    bsdf, tex, out = nt.nodes["Principled BSDF"], nt.nodes["Image Texture"], nt.nodes["Material Output"]
+    images = [render_raybundle(tmp_path / "alpha.exr", iterations=4, seed=1)]
+    nt.links.remove(bsdf.inputs["Alpha"].links[0])
+    clear, mix = nt.nodes.new("ShaderNodeBsdfTransparent"), nt.nodes.new("ShaderNodeMixShader")
+    nt.links.new(tex.outputs["Alpha"], mix.inputs[0])
+    nt.links.new(clear.outputs[0], mix.inputs[1])
+    nt.links.new(bsdf.outputs[0], mix.inputs[2])
+    nt.links.new(mix.outputs[0], out.inputs["Surface"])
+    ex = _export()
+    assert ex.scene.texture.has_cutouts and not any("ransparent" in w for w in ex.warnings), ex.warnings
+    images.append(render_raybundle(tmp_path / "mix.exr", iterations=4, seed=1))
+    one_minus = nt.nodes.new("ShaderNodeMath")
+    one_minus.operation, one_minus.inputs[0].default_value = "SUBTRACT", 1.0
+    nt.links.new(tex.outputs["Alpha"], one_minus.inputs[1])
+    nt.links.new(one_minus.outputs[0], mix.inputs[0])
+    nt.links.new(bsdf.outputs[0], mix.inputs[1])
+    nt.links.new(clear.outputs[0], mix.inputs[2])
+    images.append(render_raybundle(tmp_path / "inverted.exr", iterations=4, seed=1))
+    assert images[0].mean() > 0 and np.array_equal(images[0], images[1]) and np.array_equal(images[0], images[2])
