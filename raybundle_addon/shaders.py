@@ -96,7 +96,8 @@ class EvaluatedImage:
 
 @dataclass(frozen=True)
 class Coverage:
-    """A material's cut-out (a Principled BSDF's Alpha below 1): the coverage map ``image``
+    """A material's cut-out (a Principled BSDF's Alpha below 1, a Mix with a Transparent BSDF):
+    the coverage map ``image``
     (an :class:`EvaluatedImage`) read through UV map ``uv`` ("" the active render one; None for
     a constant coverage, which needs no UV map)."""
 

@@ -32,6 +32,24 @@ def _between(nt, node, source, target):
     return node
 
 
+def _against_cycles_by_region(tmp_path, samples, floor):
+    """Render the scene with Cycles (two halves of ``samples``) and raybundle (20 iterations) on
+    48 x 36 pixels; ``(ours, reference, rel)``: the raybundle image, the reference's 6 x 6
+    regions of 8 x 6 pixels and the relative error of those brighter than ``floor`` x the brightest."""
+    from addon_helpers import render_cycles, render_raybundle
+
+    a = render_cycles(tmp_path / "a.exr", samples=samples, seed=1)
+    b = render_cycles(tmp_path / "b.exr", samples=samples, seed=2)
+    ours = render_raybundle(tmp_path / "rb.exr", iterations=20, seed=3)
+
+    def regions(x):
+        return x.reshape(6, 6, 6, 8, 3).mean(axis=(1, 3))
+
+    ref = regions(0.5 * (a + b))
+    lit = ref.mean(axis=-1) > floor * ref.mean(axis=-1).max()
+    return ours, ref, (regions(ours) / np.where(ref > 0, ref, 1) - 1)[lit]
+
+
 def test_a_color_ramp_on_an_image_drives_the_albedo_as_in_cycles(fresh, tmp_path):
     """Image -> Math (power 2) -> Color Ramp (orange to blue) -> Diffuse Color: Blender bakes the
     graph over the image's texels; the render follows Cycles pixel by pixel.  The converter
@@ -65,8 +83,6 @@ def test_a_node_driven_roughness_and_color_are_blenders_values(fresh, tmp_path):
     """Principled Roughness <- Math(Value 0.6 x 0.5) and Base Color <- Mix(red, blue, 0.25):
     constant graphs, evaluated by Blender to 0.3 and its mix; a glossy plate under an area
     lamp then renders as in Cycles (the highlight's size is the roughness')."""
-    from addon_helpers import render_cycles, render_raybundle
-
     mat = node_material("plate", "principled", color=(0.8, 0.8, 0.8), roughness=0.5)
     nt = mat.node_tree
     bsdf = nt.nodes["Principled BSDF"]
@@ -91,16 +107,7 @@ def test_a_node_driven_roughness_and_color_are_blenders_values(fresh, tmp_path):
     assert mt.roughness[0] == pytest.approx(0.3, abs=1e-6)
     assert np.allclose(mt.glossy[0], (0.7, 0.1, 0.3), atol=1e-6)           # F0 = base color (metallic)
     assert not any("driven" in w for w in ex.warnings), ex.warnings
-    a = render_cycles(tmp_path / "a.exr", samples=256, seed=1)
-    b = render_cycles(tmp_path / "b.exr", samples=256, seed=2)
-    ours = render_raybundle(tmp_path / "rb.exr", iterations=20, seed=3)
-
-    def regions(x):                         # 6 x 6 regions of 8 x 6 pixels
-        return x.reshape(6, 6, 6, 8, 3).mean(axis=(1, 3))
-
-    ref = regions(0.5 * (a + b))
-    lit = ref.mean(axis=-1) > 0.05 * ref.mean(axis=-1).max()
-    rel = (regions(ours) / np.where(ref > 0, ref, 1) - 1)[lit]
+    ours, ref, rel = _against_cycles_by_region(tmp_path, 256, 0.05)
     # measured: 10 lit regions, rms 3.7%, largest 5.5% (the highlight's noise after 20
     # iterations; Cycles' own below 2%); the sockets' own values (roughness 0.5, grey): 50-500%
     assert np.sqrt((rel ** 2).mean()) < 0.08 and np.abs(rel).max() < 0.15, rel
@@ -160,8 +167,6 @@ def test_an_alpha_cut_leaf_lets_light_and_the_eye_through_as_in_cycles(fresh, tm
     seen from above: the floor's checker of light and shadow, the floor seen through the holes
     and the leaf where it is, region by region against Cycles.  Opaque (the old export), the
     shadow under the leaf is whole and the leaf hides the floor."""
-    from addon_helpers import render_cycles, render_raybundle
-
     checker = np.add.outer(np.arange(4), np.arange(4)) % 2
     _leaf_plane(checker.astype(float))
     s = 2.0
@@ -172,17 +177,8 @@ def test_an_alpha_cut_leaf_lets_light_and_the_eye_through_as_in_cycles(fresh, tm
     ex = _export()
     assert ex.scene.texture is not None and ex.scene.texture.has_cutouts
     assert not any("lpha" in w for w in ex.warnings), ex.warnings
-    a = render_cycles(tmp_path / "a.exr", samples=128, seed=1)
-    b = render_cycles(tmp_path / "b.exr", samples=128, seed=2)
-    ours = render_raybundle(tmp_path / "rb.exr", iterations=20, seed=3)
-
-    def regions(x):                         # 6 x 6 regions of 8 x 6 pixels
-        return x.reshape(6, 6, 6, 8, 3).mean(axis=(1, 3))
-
-    ref = regions(0.5 * (a + b))
-    lit = ref.mean(axis=-1) > 0.02 * ref.mean(axis=-1).max()
-    rel = (regions(ours) / np.where(ref > 0, ref, 1) - 1)[lit]
-    print("regions", lit.sum(), np.sqrt((rel ** 2).mean()), np.abs(rel).max(), ours.mean() / ref.mean())
+    ours, ref, rel = _against_cycles_by_region(tmp_path, 128, 0.02)
+    # measured: 36 lit regions, rms 1.2%, largest 6.8%, mean x1.002 (opaque: rms 20%, largest 73%)
     assert np.sqrt((rel ** 2).mean()) < 0.05 and np.abs(rel).max() < 0.12, rel
     assert ours.mean() == pytest.approx(ref.mean(), rel=0.03)
 
