@@ -256,12 +256,13 @@ def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, wa
             img[sel] = images.setdefault(got.image.name_full, (len(images), got.image, False))[0]
         if cover is None:
             continue
-        if cover.uv is not None and not (got is not None and got.attribute is None and np.all(img[sel] >= 0)):
-            if not read_uv(cover.uv, "a cut-out (Alpha)", sel, k):
+        if cover.uv is not None:                  # a map: through the albedo's UVs, or its own
+            shared = got is not None and got.attribute is None and np.all(img[sel] >= 0)
+            if shared and got.uv != cover.uv:
+                warn(f"object {ob.name!r}: material {slots[k].name!r} reads its cut-out through another UV map than "
+                     f"its albedo: the albedo's ({got.uv or 'the active one'}) is used for both")
+            elif not shared and not read_uv(cover.uv, "a cut-out (Alpha)", sel, k):
                 continue
-        elif cover.uv is not None and got.uv != cover.uv:
-            warn(f"object {ob.name!r}: material {slots[k].name!r} reads its Alpha through another UV map than its "
-                 f"albedo: the albedo's ({got.uv or 'the active one'}) is used for both")
         alpha[sel] = images.setdefault(("alpha", cover.image.name_full), (len(images), cover.image, True))[0]
     return (uv, img, colors, alpha) if np.any(img != -1) or np.any(alpha != -1) else None
 
