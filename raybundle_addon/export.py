@@ -220,7 +220,7 @@ def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, wa
     Image or :class:`.shaders.EvaluatedImage`, is a coverage map)) grows as new images are met."""
     for m in slots:
         converter.convert(m)                  # (cached) fills converter.textures and .cutouts
-    tex = [converter.textures.get(m.name_full) if m is not None else None for m in slots] or [None]
+    tex = [converter.texture_of(ob, m) for m in slots] or [None]
     cut = [converter.cutouts.get(m.name_full) if m is not None else None for m in slots] or [None]
     if not any(tex) and not any(cut):
         return None
@@ -483,7 +483,7 @@ def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
     """:func:`export_scene`'s objects, lights and materials, with the camera and world made;
     Blender bakes the node graphs on the materials' inputs meanwhile (:mod:`.node_graphs`)."""
     override = getattr(depsgraph.view_layer, "material_override", None)
-    graphs = start_graph_bake(_used_materials(depsgraph, override))
+    graphs = start_graph_bake(*_used_materials(depsgraph, override))
     try:
         return _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, world, t0,
                                MaterialConverter(warn, graphs), override)
@@ -492,17 +492,18 @@ def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
 
 
 def _used_materials(depsgraph, override):
-    """The materials of the geometry ``depsgraph`` renders (``override`` alone when set)."""
-    if override is not None:
-        return [override]
-    found = {}
+    """``(materials, users)``: the materials of the geometry ``depsgraph`` renders (``override``
+    alone when set), and material name -> the (original) objects that use it."""
+    found, users = {}, {}
     for inst in depsgraph.object_instances:
         ob = inst.object
         if ob.type in GEOMETRY_TYPES:
-            for m in [s.material for s in ob.material_slots] or list(getattr(ob.data, "materials", [])):
+            mats = [s.material for s in ob.material_slots] or list(getattr(ob.data, "materials", []))
+            for m in [override] if override is not None else mats:
                 if m is not None:
                     found.setdefault(m.name_full, m)
-    return list(found.values())
+                    users.setdefault(m.name_full, {}).setdefault(ob.original.name_full, ob.original)
+    return list(found.values()), {k: list(v.values()) for k, v in users.items()}
 
 
 def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, world, t0, converter, override):
@@ -629,11 +630,10 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
         face_image, face_alpha = faces(timg), faces(talpha)
         tcol = [np.zeros((n, 3, 3)) if c is None else c for (n, _), c in zip(tuv, tcol)]
         tuv = [np.zeros((n, 3, 2)) if u is None else u for n, u in tuv]
-        from raybundle.scene.textures import SurfaceTexture, modulation_map
+        from raybundle.scene.textures import SurfaceTexture
 
         # albedo maps are the image over its mean (the material holds the mean), coverage maps as they are
-        maps = [np.asarray(converter.image_pixels(im), np.float32) if cover else
-                modulation_map(converter.image_pixels(im))[0]
+        maps = [np.asarray(converter.image_pixels(im), np.float32) if cover else converter.modulation(im)
                 for _, im, cover in sorted(images.values(), key=lambda x: x[0])]
         texture = SurfaceTexture(maps, face_image, v[t], np.concatenate(tuv), np.concatenate(tcol), face_alpha)
     with _warnings.catch_warnings(record=True) as caught:

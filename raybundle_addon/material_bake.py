@@ -14,7 +14,9 @@ every Image Texture node reads the linear RGBA pixels of its ``.npy`` (H, W, 4) 
 node's own interpolation, and Cycles bakes the emission (``EMIT``, one sample per texel, no
 margin) of a unit square whose UV maps (``uv_maps``, and the default one) cover [0, 1]^2 once,
 into a W x H float image: texel (i, j) is the graph's value at UV ((i + 0.5) / W, (j + 0.5) / H)
-(where W, H are the image's own, every image is read at its own texel there).  Its (H, W, 3) linear RGB goes to ``out``
+(where W, H are the image's own, every image is read at its own texel there).
+A task with an ``"object"`` (its name in the library) bakes on that object instead, every face
+of it with the rewired material, through its UV map ``uv_maps[0]``.  Its (H, W, 3) linear RGB goes to ``out``
 (row 0 at the bottom, as ``Image.pixels``).
 """
 import json
@@ -34,6 +36,7 @@ def main(argv):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     with bpy.data.libraries.load(library, link=False) as (src, dst):
         dst.materials = sorted({t["material"] for t in tasks})
+        dst.objects = sorted({t["object"] for t in tasks if t.get("object")})
     sc = bpy.context.scene
     r = sc.render
     r.engine = "CYCLES"
@@ -79,15 +82,27 @@ def main(argv):
         node.image = target
         nt.nodes.active = node
 
-        me = bpy.data.meshes.new("unit square")
-        me.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [], [(0, 1, 2, 3)])
-        corners = np.array([0, 0, 1, 0, 1, 1, 0, 1], np.float32)
-        for name in ["UVMap", *task["uv_maps"]]:
-            if name and name not in me.uv_layers:
-                me.uv_layers.new(name=name).uv.foreach_set("vector", corners)
-        me.materials.append(mat)
-        ob = bpy.data.objects.new("unit square", me)
-        sc.collection.objects.link(ob)
+        if task.get("object"):
+            ob = bpy.data.objects[task["object"]]
+            if ob.name not in sc.collection.objects:
+                sc.collection.objects.link(ob)
+            ob.hide_viewport = ob.hide_render = ob.hide_select = False
+            if len(ob.material_slots):
+                for slot in ob.material_slots:
+                    slot.material = mat
+            else:
+                ob.data.materials.append(mat)
+            ob.data.uv_layers.active = ob.data.uv_layers[task["uv_maps"][0]]
+        else:
+            me = bpy.data.meshes.new("unit square")
+            me.from_pydata([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [], [(0, 1, 2, 3)])
+            corners = np.array([0, 0, 1, 0, 1, 1, 0, 1], np.float32)
+            for name in ["UVMap", *task["uv_maps"]]:
+                if name and name not in me.uv_layers:
+                    me.uv_layers.new(name=name).uv.foreach_set("vector", corners)
+            me.materials.append(mat)
+            ob = bpy.data.objects.new("unit square", me)
+            sc.collection.objects.link(ob)
         for other in sc.objects:
             other.select_set(other is ob)
         bpy.context.view_layer.objects.active = ob

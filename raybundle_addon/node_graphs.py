@@ -20,8 +20,13 @@ albedo input (a Diffuse BSDF's Color, a Principled BSDF's Base Color) it is an a
 on that UV map, like an image texture linked there directly; on any other input its mean is
 the material's value, with a warning when it varies over the surface.
 
-Graphs reading anything else (procedural textures, Texture Coordinate's Generated or Object,
-attributes, Geometry, Fresnel, Layer Weight, Light Path, node groups) are not evaluated: the
+A graph that reads the position on the object (procedural textures, Texture Coordinate's
+Generated, Object or Normal, Mapping, Object Info, images through other coordinates:
+:data:`POSITIONAL`) is baked on each object that uses the material, through the object's own
+UV map (:data:`OBJECT_BAKE_SIZE` texels a side) where that map lies inside [0, 1] without
+overlaps (its faces' UV area at most 1): the albedo texture is then the object's own.  Graphs
+reading the view or the light (Fresnel, Layer Weight, Light Path, Geometry, Texture
+Coordinate's Camera, Window or Reflection), attributes or node groups are not evaluated: the
 socket's own value is used, with a warning naming the node.  One process bakes every graph of
 a scene; the results are kept for the session (the same material, images and graphs are not
 baked again).
@@ -43,6 +48,15 @@ PURE = frozenset((
     "INVERT", "SEPRGB", "COMBRGB", "SEPARATE_COLOR", "COMBINE_COLOR", "SEPXYZ", "COMBXYZ", "SEPHSV",
     "COMBHSV", "RGB", "VALUE", "CURVE_RGB", "CURVE_FLOAT", "CURVE_VEC", "MAP_RANGE", "CLAMP", "RGBTOBW",
     "BLACKBODY", "WAVELENGTH"))
+#: node types whose output depends on the point of the object (baked on the object itself)
+POSITIONAL = frozenset((
+    "TEX_NOISE", "TEX_VORONOI", "TEX_WAVE", "TEX_MAGIC", "TEX_GRADIENT", "TEX_CHECKER", "TEX_BRICK",
+    "TEX_MUSGRAVE", "TEX_WHITE_NOISE", "TEX_GABOR", "TEX_COORD", "MAPPING", "OBJECT_INFO", "VECTOR_ROTATE",
+    "UVMAP"))
+#: Texture Coordinate outputs that depend on the view: not baked
+VIEW_COORDINATES = frozenset(("Camera", "Window", "Reflection"))
+#: texels a side of a graph baked on an object
+OBJECT_BAKE_SIZE = 1024
 #: shader nodes whose color and value inputs the converter reads
 READ_SHADERS = frozenset(("BSDF_DIFFUSE", "BSDF_GLOSSY", "BSDF_ANISOTROPIC", "EMISSION", "MIX_SHADER",
                           "BSDF_PRINCIPLED"))
@@ -68,6 +82,8 @@ class GraphInput:
     images: dict = field(default_factory=dict)
     uv: str = ""
     size: tuple = (1, 1)
+    #: baked on each object that uses the material (the graph reads the point of the object)
+    per_object: bool = False
 
     @property
     def key(self):
@@ -84,7 +100,7 @@ def graph_input(mat, sock):
     one-line reason why Blender cannot evaluate it over a UV map."""
     from .shaders import _follow_reroutes, _uv_source
 
-    images, uvs, seen = {}, set(), set()
+    images, uvs, seen, positional = {}, set(), set(), False
     stack = [sock.links[0].from_node]
     while stack:
         node = stack.pop()
@@ -92,23 +108,34 @@ def graph_input(mat, sock):
             continue
         seen.add(node.name)
         if node.type == "TEX_IMAGE":
-            uv = _uv_source(node)
-            if uv is None or getattr(node, "projection", "FLAT") != "FLAT":
-                return f"the Image Texture {node.name!r} is not read through a UV map"
             if node.image is None:
                 return f"the Image Texture {node.name!r} has no image"
             images[node.name] = node.image
-            uvs.add(uv)
-            continue
-        if node.type not in PURE:
-            return f"it reads a {node.bl_label} node, which depends on more than a UV map"
+            uv = _uv_source(node)
+            if uv is None or getattr(node, "projection", "FLAT") != "FLAT":
+                positional = True           # read through other coordinates: baked on the object
+            else:
+                uvs.add(uv)
+                continue
+        elif node.type in POSITIONAL:
+            positional = True
+        elif node.type not in PURE:
+            return f"it reads a {node.bl_label} node, which depends on the view, the light or more than the point"
         for s in node.inputs:
             for link in s.links:
                 if getattr(link, "is_muted", False) or not getattr(link, "is_valid", True):
                     continue
                 src = _follow_reroutes(link.from_node)
+                if src is not None and src.type == "TEX_COORD" and link.from_socket.name in VIEW_COORDINATES:
+                    return f"it reads Texture Coordinate's {link.from_socket.name}, which depends on the view"
                 if src is not None:
                     stack.append(src)
+    first = sock.links[0]
+    if first.from_node.type == "TEX_COORD" and first.from_socket.name in VIEW_COORDINATES:
+        return f"it reads Texture Coordinate's {first.from_socket.name}, which depends on the view"
+    if positional:
+        return GraphInput(mat.name_full, sock.node.name, sock.identifier, images, "",
+                          (OBJECT_BAKE_SIZE, OBJECT_BAKE_SIZE), per_object=True)
     if len(uvs) > 1:
         return "its images are read through different UV maps"
     size = (1, 1)
@@ -161,9 +188,12 @@ class GraphBake:
     """The graphs of a scene's materials baked by Blender (:func:`start_graph_bake`);
     :meth:`get` waits for the bake the first time."""
 
-    def __init__(self, inputs, reasons, job=None, key=None, results=None):
+    def __init__(self, inputs, reasons, job=None, key=None, results=None, objects=None, uv_of=None):
         self._inputs, self._reasons, self._job, self._key = inputs, reasons, job, key
         self._results = results
+        #: per-object inputs' key -> the keys of its objects' bakes (key + object name)
+        self._objects = objects or {}
+        self._uv_of = uv_of or {}
         #: None, or the one-line reason the bake failed
         self.failed = None
         #: seconds the bake took from its start to its results (0 when known from before)
@@ -171,7 +201,8 @@ class GraphBake:
 
     def get(self, mat, sock):
         """(H, W, 3) float32 linear values of the graph driving ``sock`` over its UV map (row
-        0 at the bottom), or a one-line reason why there are none."""
+        0 at the bottom), or a one-line reason why there are none; for a graph baked on each
+        object (:attr:`GraphInput.per_object`) a dict object name -> those values or a reason."""
         key = socket_key(mat, sock)
         if key in self._reasons:
             return self._reasons[key]
@@ -181,11 +212,15 @@ class GraphBake:
             self._finish()
         if self.failed is not None:
             return f"Blender could not bake it ({self.failed})"
+        if self._inputs[key].per_object:
+            return {k[3]: self._results.get(k, self._reasons.get(k)) for k in self._objects.get(key, [])}
         return self._results[key]
 
-    def uv(self, mat, sock):
-        """The UV map the graph of ``sock`` is baked over ("" the active render one)."""
-        return self._inputs[socket_key(mat, sock)].uv
+    def uv(self, mat, sock, obj=None):
+        """The UV map the graph of ``sock`` is baked over ("" the active render one); on object
+        ``obj`` (name) for a graph baked on each object."""
+        key = socket_key(mat, sock)
+        return self._uv_of.get(key + (obj,), "") if obj is not None else self._inputs[key].uv
 
     def _finish(self):
         import time
@@ -211,14 +246,44 @@ class GraphBake:
             self._job = None
 
 
-def start_graph_bake(materials, threads=0):
+def object_uv(ob):
+    """The name of the UV map of object ``ob`` a graph is baked through (its active render
+    one), or a one-line reason why there is none: the map must lie inside [0, 1] with its
+    faces' UV area at most 1 (no overlaps, no tiling)."""
+    me = getattr(ob, "data", None)
+    layers = getattr(me, "uv_layers", None)
+    layer = None if not layers else next((l for l in layers if l.active_render), layers.active)
+    if layer is None:
+        return f"object {ob.name!r} has no UV map to bake it through"
+    uv = np.empty(2 * len(me.loops), np.float32)
+    layer.uv.foreach_get("vector", uv)
+    uv = uv.reshape(-1, 2).astype(float)
+    if len(uv) == 0:
+        return f"object {ob.name!r} has no faces"
+    start = np.empty(len(me.polygons), np.int64)
+    me.polygons.foreach_get("loop_start", start)
+    nxt = np.arange(len(uv)) + 1
+    ends = np.r_[start[1:], len(uv)]
+    nxt[ends - 1] = start                       # each polygon's loop closes on its first corner
+    cross = uv[:, 0] * uv[nxt, 1] - uv[nxt, 0] * uv[:, 1]
+    area = np.abs(np.add.reduceat(cross, start)).sum() / 2
+    if uv.min() < -1e-6 or uv.max() > 1 + 1e-6 or area > 1 + 1e-3:
+        return (f"object {ob.name!r}'s UV map {layer.name!r} leaves [0, 1] or overlaps itself (UV area "
+                f"{area:.3g}): its graph needs a map that covers it once")
+    return layer.name
+
+
+def start_graph_bake(materials, users=None, threads=0):
     """Begin baking the graphs Blender can evaluate on the inputs of ``materials`` (bpy
     Materials, None skipped) in one process on ``threads`` CPU threads (0: all): a
-    :class:`GraphBake`.  Graphs baked before in this session are not baked again."""
+    :class:`GraphBake`.  ``users``: material name -> the objects that use it (their originals),
+    for graphs baked on each object.  Graphs baked before in this session are not baked again."""
     import bpy
 
     from .shaders import image_rgba
 
+    users = users or {}
+    objects, uv_of, bake_objects = {}, {}, {}
     inputs, reasons, originals = {}, {}, {}
     for mat in dict.fromkeys(m for m in materials if m is not None):
         for sock, _ in linked_inputs(mat):
@@ -228,12 +293,24 @@ def start_graph_bake(materials, threads=0):
             else:
                 inputs[got.key] = got
                 originals[mat.name_full] = getattr(mat, "original", mat)
+                if got.per_object:
+                    objects[got.key] = []
+                    for ob in users.get(mat.name_full, []):
+                        where = object_uv(ob)
+                        key = got.key + (ob.name_full,)
+                        objects[got.key].append(key)
+                        if where.startswith("object "):
+                            reasons[key] = where
+                        else:
+                            uv_of[key] = where
+                            bake_objects[ob.name_full] = ob
     if not inputs:
         return GraphBake(inputs, reasons, results={})
     folder = temporary_folder("raybundle-graphs-")
     try:
         library = os.path.join(folder.name, "materials.blend")
-        bpy.data.libraries.write(library, set(originals.values()), path_remap="ABSOLUTE", fake_user=True)
+        bpy.data.libraries.write(library, set(originals.values()) | set(bake_objects.values()),
+                                 path_remap="ABSOLUTE", fake_user=True)
         digest = hashlib.sha1(open(library, "rb").read())
         files, tasks, paths = {}, [], {}
         for n, g in enumerate(inputs.values()):
@@ -249,25 +326,31 @@ def start_graph_bake(materials, threads=0):
                     digest.update(px.tobytes())
                 task_images[node] = files[im.name_full]
             else:
-                paths[g.key] = os.path.join(folder.name, f"bake{n}.npy")
-                tasks.append(dict(material=originals[g.material].name, node=g.node, socket=g.socket, size=list(g.size),
-                                  uv_maps=[g.uv], images=task_images, out=paths[g.key]))
+                task = dict(material=originals[g.material].name, node=g.node, socket=g.socket, size=list(g.size),
+                            uv_maps=[g.uv], images=task_images)
+                for key in objects.get(g.key, [g.key]) if g.per_object else [g.key]:
+                    if key in reasons:
+                        continue
+                    paths[key] = os.path.join(folder.name, f"bake{len(paths)}.npy")
+                    tasks.append(dict(task, out=paths[key], **(
+                        dict(object=bake_objects[key[3]].name, uv_maps=[uv_of[key]]) if g.per_object else {})))
         for k in [k for k in inputs if k in reasons]:
             del inputs[k]
         if not tasks:
             folder.cleanup()
-            return GraphBake(inputs, reasons, results={})
-        key = (digest.hexdigest(), json.dumps([[t["material"], t["node"], t["socket"], t["size"]] for t in tasks]))
+            return GraphBake(inputs, reasons, results={}, objects=objects, uv_of=uv_of)
+        key = (digest.hexdigest(), json.dumps([[t["material"], t["node"], t["socket"], t["size"], t.get("object")]
+                                               for t in tasks]))
         if key in _cache:
             folder.cleanup()
-            return GraphBake(inputs, reasons, results=_cache[key])
+            return GraphBake(inputs, reasons, results=_cache[key], objects=objects, uv_of=uv_of)
         with open(os.path.join(folder.name, "job.json"), "w") as f:
             json.dump(dict(tasks=tasks), f)
         job = BlenderProcess("material_bake.py", [library, os.path.join(folder.name, "job.json"), str(int(threads))],
                              folder, BAKE_TIMEOUT)
     except (RuntimeError, OSError, BlenderProcessError) as e:
         folder.cleanup()
-        bake = GraphBake(inputs, reasons, results={})
+        bake = GraphBake(inputs, reasons, results={}, objects=objects)
         bake.failed = str(e)
         return bake
-    return GraphBake(inputs, reasons, job=(job, paths), key=key)
+    return GraphBake(inputs, reasons, job=(job, paths), key=key, objects=objects, uv_of=uv_of)

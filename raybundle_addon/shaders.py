@@ -32,7 +32,9 @@ model.  A material's node tree is read from its Cycles output node:
   of a Transparent BSDF and another shader: its factor is the other's coverage (the
   Transparent BSDF's color is not modeled, warned).
 * Any input driven by other nodes is evaluated by Blender where the graph is a function of a
-  UV map (:mod:`.node_graphs`): an albedo texture on an albedo input, its mean elsewhere.
+  UV map, or of the point of an object whose UV map covers it once (:mod:`.node_graphs`): an
+  albedo texture on an albedo input (the object's own for a graph baked on each object), its
+  mean elsewhere.
 * Anything else (Glass, Translucent, Transparent, Subsurface, groups...) makes the
   whole material fall back to its viewport color (``Material.diffuse_color``) as a
   Diffuse BSDF, with one warning naming the material.  A material without nodes
@@ -45,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from raybundle.scene.materials import color_text
+from raybundle.scene.textures import modulation_map
 
 #: the diffuse color of faces without a material (Blender's default surface)
 DEFAULT_GREY = 0.8
@@ -137,6 +140,9 @@ class MaterialConverter:
         self.textures = {}
         #: material name -> its :class:`Coverage` (cut-out materials only)
         self.cutouts = {}
+        #: (object name, material name) -> the :class:`AlbedoTexture` Blender baked on that object
+        self.object_textures = {}
+        self._normalizer = {}           # image name -> the material's mean albedo its map divides by
         self._albedo = []               # albedo textures met while converting one material
         self._cutout = []               # coverages met while converting one material
 
@@ -351,6 +357,8 @@ class MaterialConverter:
         if isinstance(got, str):
             notes.append(f"{sock.name!r} is driven by a {node.bl_label} node ({got}): using the socket's own value")
             return None
+        if isinstance(got, dict):
+            return self._object_graph(sock, node, got, notes)
         mean = got.reshape(-1, 3).astype(float).mean(axis=0)
         lo, hi = got.reshape(-1, 3).min(axis=0), got.reshape(-1, 3).max(axis=0)
         if np.all(hi - lo <= 1e-6):
@@ -367,6 +375,50 @@ class MaterialConverter:
             notes.append(f"{sock.name!r} varies over the surface with its node graph ({lo[0]:.3g} to {hi[0]:.3g}): "
                          f"its mean {mean[0]:.3g} is used")
         return mean
+
+    def _object_graph(self, sock, node, got, notes):
+        """:meth:`_graph` of a graph Blender baked on each object (``got``: object name -> its
+        map or a reason): the material holds the objects' mean; on an albedo input each object
+        gets its own albedo texture (its map over that mean)."""
+        baked = {k: np.asarray(v, np.float32) for k, v in got.items() if v is not None and not isinstance(v, str)}
+        for why in dict.fromkeys(v for v in got.values() if isinstance(v, str)):
+            notes.append(f"{sock.name!r} ({node.bl_label} node) is not baked on every object: {why}; the mean of "
+                         "the others is used there")
+        if not baked:
+            notes.append(f"{sock.name!r} is driven by a {node.bl_label} node that was baked on no object: using "
+                         "the socket's own value")
+            return None
+        mean = np.mean([v.reshape(-1, 3).astype(float).mean(axis=0) for v in baked.values()], axis=0)
+        if sock.type == "RGBA" and _is_albedo(sock):
+            for obj, px in baked.items():
+                image = EvaluatedImage(f"{self._material.name_full}: {obj}: {sock.node.name}.{sock.name}")
+                self._image_pixels[image.name_full] = px
+                self._normalizer[image.name_full] = mean
+                self.object_textures[(obj, self._material.name_full)] = AlbedoTexture(
+                    image, self.graphs.uv(self._material, sock, obj))
+        elif sock.type == "RGBA":
+            notes.append(f"{sock.name!r} varies over the surface with its node graph: its mean color "
+                         f"{color_text(mean)} is used")
+        else:
+            notes.append(f"{sock.name!r} varies over the surface with its node graph: its mean {mean[0]:.3g} is used")
+        return mean
+
+    def texture_of(self, ob, mat):
+        """The :class:`AlbedoTexture` of material ``mat`` on object ``ob`` (an object's own bake
+        first, then the material's), or None."""
+        if mat is None:
+            return None
+        own = self.object_textures.get((getattr(ob, "original", ob).name_full, mat.name_full))
+        return own if own is not None else self.textures.get(mat.name_full)
+
+    def modulation(self, image):
+        """(H, W, 3) the albedo map of ``image``: its pixels over the material's mean albedo
+        (the image's own mean, or the objects' mean for a graph baked on each object)."""
+        px = self.image_pixels(image)
+        mean = self._normalizer.get(image.name_full)
+        if mean is None:
+            return modulation_map(px)[0]
+        return np.where(mean > 0, px / np.where(mean > 0, mean, 1.0), 1.0).astype(np.float32)
 
     def image_pixels(self, image):
         """(H, W, 3) linear RGB of ``image`` (row 0 at the bottom), or None without pixel data."""
