@@ -101,11 +101,14 @@ def graph_input(mat, sock):
     from .shaders import _follow_reroutes, _uv_source
 
     images, uvs, seen, positional = {}, set(), set(), False
-    stack = [sock.links[0].from_node]
+    stack = [sock.links[0]]
     while stack:
-        node = stack.pop()
-        if node.name in seen:
+        link = stack.pop()
+        node = _follow_reroutes(link.from_node)
+        if node is None or node.name in seen:
             continue
+        if node.type == "TEX_COORD" and link.from_socket.name in VIEW_COORDINATES:
+            return f"it reads Texture Coordinate's {link.from_socket.name}, which depends on the view"
         seen.add(node.name)
         if node.type == "TEX_IMAGE":
             if node.image is None:
@@ -121,18 +124,8 @@ def graph_input(mat, sock):
             positional = True
         elif node.type not in PURE:
             return f"it reads a {node.bl_label} node, which depends on the view, the light or more than the point"
-        for s in node.inputs:
-            for link in s.links:
-                if getattr(link, "is_muted", False) or not getattr(link, "is_valid", True):
-                    continue
-                src = _follow_reroutes(link.from_node)
-                if src is not None and src.type == "TEX_COORD" and link.from_socket.name in VIEW_COORDINATES:
-                    return f"it reads Texture Coordinate's {link.from_socket.name}, which depends on the view"
-                if src is not None:
-                    stack.append(src)
-    first = sock.links[0]
-    if first.from_node.type == "TEX_COORD" and first.from_socket.name in VIEW_COORDINATES:
-        return f"it reads Texture Coordinate's {first.from_socket.name}, which depends on the view"
+        stack += [lk for s in node.inputs for lk in s.links
+                  if not getattr(lk, "is_muted", False) and getattr(lk, "is_valid", True)]
     if positional:
         return GraphInput(mat.name_full, sock.node.name, sock.identifier, images, "",
                           (OBJECT_BAKE_SIZE, OBJECT_BAKE_SIZE), per_object=True)
@@ -157,8 +150,8 @@ def bake_scale(size):
 
 
 def linked_inputs(mat):
-    """The color and value inputs of the shaders of ``mat`` that the converter reads, linked
-    to nodes it does not read directly: (socket, source node) pairs."""
+    """The color and value inputs (sockets) of the shaders of ``mat`` that the converter reads,
+    linked to nodes it does not read directly."""
     from .shaders import _follow_reroutes, read_directly
 
     nt = getattr(mat, "node_tree", None)
@@ -180,7 +173,7 @@ def linked_inputs(mat):
             elif s.type in ("RGBA", "VALUE"):
                 src = _follow_reroutes(s.links[0].from_node)
                 if src is not None and not read_directly(s, src):
-                    found.append((s, src))
+                    found.append(s)
     return found
 
 
@@ -196,8 +189,6 @@ class GraphBake:
         self._uv_of = uv_of or {}
         #: None, or the one-line reason the bake failed
         self.failed = None
-        #: seconds the bake took from its start to its results (0 when known from before)
-        self.seconds = 0.0
 
     def get(self, mat, sock):
         """(H, W, 3) float32 linear values of the graph driving ``sock`` over its UV map (row
@@ -223,10 +214,7 @@ class GraphBake:
         return self._uv_of.get(key + (obj,), "") if obj is not None else self._inputs[key].uv
 
     def _finish(self):
-        import time
-
         job, paths = self._job
-        t0 = time.perf_counter()
         try:
             job.wait(list(paths.values()))
             self._results = {k: np.load(p) for k, p in paths.items()}
@@ -238,7 +226,6 @@ class GraphBake:
         finally:
             job.close()
             self._job = None
-        self.seconds = time.perf_counter() - t0
 
     def cancel(self):
         if self._job is not None:
@@ -247,19 +234,19 @@ class GraphBake:
 
 
 def object_uv(ob):
-    """The name of the UV map of object ``ob`` a graph is baked through (its active render
-    one), or a one-line reason why there is none: the map must lie inside [0, 1] with its
-    faces' UV area at most 1 (no overlaps, no tiling)."""
+    """``(name, reason)``: the UV map of object ``ob`` a graph is baked through (its active
+    render one), or None and a one-line reason why there is none: the map must lie inside
+    [0, 1] with its faces' UV area at most 1 (no overlaps, no tiling)."""
     me = getattr(ob, "data", None)
     layers = getattr(me, "uv_layers", None)
     layer = None if not layers else next((l for l in layers if l.active_render), layers.active)
     if layer is None:
-        return f"object {ob.name!r} has no UV map to bake it through"
+        return None, f"object {ob.name!r} has no UV map to bake it through"
     uv = np.empty(2 * len(me.loops), np.float32)
     layer.uv.foreach_get("vector", uv)
     uv = uv.reshape(-1, 2).astype(float)
     if len(uv) == 0:
-        return f"object {ob.name!r} has no faces"
+        return None, f"object {ob.name!r} has no faces"
     start = np.empty(len(me.polygons), np.int64)
     me.polygons.foreach_get("loop_start", start)
     nxt = np.arange(len(uv)) + 1
@@ -268,9 +255,9 @@ def object_uv(ob):
     cross = uv[:, 0] * uv[nxt, 1] - uv[nxt, 0] * uv[:, 1]
     area = np.abs(np.add.reduceat(cross, start)).sum() / 2
     if uv.min() < -1e-6 or uv.max() > 1 + 1e-6 or area > 1 + 1e-3:
-        return (f"object {ob.name!r}'s UV map {layer.name!r} leaves [0, 1] or overlaps itself (UV area "
-                f"{area:.3g}): its graph needs a map that covers it once")
-    return layer.name
+        return None, (f"object {ob.name!r}'s UV map {layer.name!r} leaves [0, 1] or overlaps itself (UV area "
+                      f"{area:.3g}): its graph needs a map that covers it once")
+    return layer.name, None
 
 
 def start_graph_bake(materials, users=None, threads=0):
@@ -286,7 +273,7 @@ def start_graph_bake(materials, users=None, threads=0):
     objects, uv_of, bake_objects = {}, {}, {}
     inputs, reasons, originals = {}, {}, {}
     for mat in dict.fromkeys(m for m in materials if m is not None):
-        for sock, _ in linked_inputs(mat):
+        for sock in linked_inputs(mat):
             got = graph_input(mat, sock)
             if isinstance(got, str):
                 reasons[socket_key(mat, sock)] = got
@@ -296,11 +283,11 @@ def start_graph_bake(materials, users=None, threads=0):
                 if got.per_object:
                     objects[got.key] = []
                     for ob in users.get(mat.name_full, []):
-                        where = object_uv(ob)
+                        where, why = object_uv(ob)
                         key = got.key + (ob.name_full,)
                         objects[got.key].append(key)
-                        if where.startswith("object "):
-                            reasons[key] = where
+                        if where is None:
+                            reasons[key] = why
                         else:
                             uv_of[key] = where
                             bake_objects[ob.name_full] = ob

@@ -291,9 +291,7 @@ class MaterialConverter:
             px = np.full((1, 1, 1), value, np.float32)
         if abs(weight - 1.0) > 1e-9:
             notes.append(f"the cut-out of {sock.node.name!r}, mixed with other shaders, cuts out the whole material")
-        image = EvaluatedImage(f"{self._material.name_full}: {sock.node.name}.{sock.name}")
-        self._image_pixels[image.name_full] = np.repeat(px, 3, axis=2)
-        self._cutout.append(Coverage(image, uv))
+        self._cutout.append(Coverage(self._evaluated(sock, np.repeat(px, 3, axis=2)), uv))
 
     def _normal_note(self, node, notes):
         sock = node.inputs.get("Normal")
@@ -364,9 +362,7 @@ class MaterialConverter:
         if np.all(hi - lo <= 1e-6):
             return mean
         if sock.type == "RGBA" and _is_albedo(sock):
-            image = EvaluatedImage(f"{self._material.name_full}: {sock.node.name}.{sock.name}")
-            self._image_pixels[image.name_full] = np.asarray(got, np.float32)
-            self._albedo.append(AlbedoTexture(image, self.graphs.uv(self._material, sock)))
+            self._albedo.append(AlbedoTexture(self._evaluated(sock, got), self.graphs.uv(self._material, sock)))
             return mean
         if sock.type == "RGBA":
             notes.append(f"{sock.name!r} varies over the surface with its node graph: its mean color "
@@ -391,8 +387,7 @@ class MaterialConverter:
         mean = np.mean([v.reshape(-1, 3).astype(float).mean(axis=0) for v in baked.values()], axis=0)
         if sock.type == "RGBA" and _is_albedo(sock):
             for obj, px in baked.items():
-                image = EvaluatedImage(f"{self._material.name_full}: {obj}: {sock.node.name}.{sock.name}")
-                self._image_pixels[image.name_full] = px
+                image = self._evaluated(sock, px, obj)
                 self._normalizer[image.name_full] = mean
                 self.object_textures[(obj, self._material.name_full)] = AlbedoTexture(
                     image, self.graphs.uv(self._material, sock, obj))
@@ -402,6 +397,14 @@ class MaterialConverter:
         else:
             notes.append(f"{sock.name!r} varies over the surface with its node graph: its mean {mean[0]:.3g} is used")
         return mean
+
+    def _evaluated(self, sock, pixels, obj=None):
+        """The :class:`EvaluatedImage` of ``pixels`` (H, W, 3) Blender baked for input ``sock`` of
+        the material being converted (on object ``obj``), its pixels kept for :meth:`image_pixels`."""
+        where = f"{obj}: " if obj is not None else ""
+        image = EvaluatedImage(f"{self._material.name_full}: {where}{sock.node.name}.{sock.name}")
+        self._image_pixels[image.name_full] = np.asarray(pixels, np.float32)
+        return image
 
     def texture_of(self, ob, mat):
         """The :class:`AlbedoTexture` of material ``mat`` on object ``ob`` (an object's own bake

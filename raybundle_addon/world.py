@@ -236,13 +236,13 @@ def start_world_render(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, vi
         proc = BlenderProcess("world_render.py", args, tmp, RENDER_TIMEOUT)
     except BlenderProcessError as e:
         raise WorldRenderError(str(e)) from None
-    return WorldRender(key, proc, tmp, out, seen)
+    return WorldRender(key, proc, out, seen)
 
 
 class WorldRender:
     """A render of a world under way (:func:`start_world_render`), or one already known."""
 
-    def __init__(self, key, proc=None, tmp=None, out=None, seen=None, result=None):
+    def __init__(self, key, proc=None, out=None, seen=None, result=None):
         self.key, self._proc, self._out, self._seen, self._result = key, proc, out, seen, result
 
     def result(self):
