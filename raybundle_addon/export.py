@@ -379,6 +379,30 @@ def _warn_overlaps(corners, tobj, objects, warn):
         warn(f"{len(found) - 3} more pairs of objects overlap in one plane (z-fighting)")
 
 
+#: a transmissive object is flat (a pane) when this share of its area faces one axis
+FLAT_GLASS = 0.95
+
+
+def _warn_curved_glass(sc, tobj, objects, warn):
+    """One warning naming the objects whose transmissive faces are not flat (their area-weighted
+    normals' largest eigenvalue below :data:`FLAT_GLASS`): light passes them unbent
+    (:mod:`raybundle.scene.transmission`), so their caustic is spread as a soft shadow."""
+    glass = np.nonzero(sc.materials.transmits[sc.triangle_material])[0]
+    if len(glass) == 0:
+        return
+    src = sc.triangle_source[glass]
+    n, a = sc.triangle_normal[glass], sc.triangle_area[glass]
+    curved = []
+    for o in np.unique(tobj[src]):
+        k = tobj[src] == o
+        s = np.einsum("i,ij,ik->jk", a[k], n[k], n[k]) / max(a[k].sum(), 1e-300)
+        if np.linalg.eigvalsh(s)[-1] < FLAT_GLASS:
+            curved.append(objects[o].original)
+    if curved:
+        warn(f"glass that is not flat ({', '.join(repr(c) for c in curved[:3])}{' ...' if len(curved) > 3 else ''}) "
+             "lets light through unbent: its caustics are spread as a soft shadow (the eye sees it refract)")
+
+
 def render_size(render):
     """(W, H) pixels after the resolution percentage."""
     s = render.resolution_percentage / 100.0
@@ -649,6 +673,7 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
     for w in caught:
         warn(str(w.message))
     _warn_overlaps(v[t], np.concatenate(tobj), objects, warn)
+    _warn_curved_glass(sc, np.concatenate(tobj), objects, warn)
     far = float(np.sqrt(((v - camera.position) ** 2).sum(axis=1).max())) if camera is not None else 0.0
     if cam_ob is not None and far > cam_ob.data.clip_end:
         warn(f"camera {cam_ob.name!r}: geometry beyond the clip end ({cam_ob.data.clip_end:g} m) is rendered "

@@ -35,7 +35,12 @@ model.  A material's node tree is read from its Cycles output node:
   UV map, or of the point of an object whose UV map covers it once (:mod:`.node_graphs`): an
   albedo texture on an albedo input (the object's own for a graph baked on each object), its
   mean elsewhere.
-* Anything else (Glass, Translucent, Transparent, Subsurface, groups...) makes the
+* A **Glass**, **Refraction** or **Transparent BSDF**, or a Principled BSDF's **Transmission
+  Weight** (tinted by its Base Color, the rest of it opaque), is a smooth dielectric interface
+  over its share of the surface (:mod:`raybundle.scene.transmission`): its weight, IOR (1 for
+  Transparent), refraction and reflection tints (none reflected by a Refraction BSDF, which
+  takes no Fresnel loss either); rough glass is rendered smooth, warned.
+* Anything else (Translucent, Subsurface, groups...) makes the
   whole material fall back to its viewport color (``Material.diffuse_color``) as a
   Diffuse BSDF, with one warning naming the material.  A material without nodes
   is its viewport color (as Cycles does).  No material at all: grey 0.8.
@@ -51,6 +56,8 @@ from raybundle.scene.textures import modulation_map
 
 #: the diffuse color of faces without a material (Blender's default surface)
 DEFAULT_GREY = 0.8
+#: glass rougher than this is warned about: it is rendered smooth
+ROUGH_GLASS = 0.02
 
 
 def _core_supports(fieldname):
@@ -79,6 +86,8 @@ class _Closure:
     multi_ggx: list = field(default_factory=list)     # per glossy lobe: uses Multiscatter GGX
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
     principled: list = field(default_factory=list)    # [(weight, spec dict, simple spec dict)]
+    #: dielectric interfaces: [(weight, refraction tint (3,), reflection tint (3,), ior, fresnel 0/1)]
+    transmission: list = field(default_factory=list)
 
 
 def _lum(c):
@@ -228,6 +237,8 @@ class MaterialConverter:
             if "Anisotropy" in node.inputs and abs(self.value(node.inputs["Anisotropy"], notes)) > 1e-6:
                 notes.append("anisotropy is ignored (isotropic GGX)")
             self._normal_note(node, notes)
+        elif t in ("BSDF_GLASS", "BSDF_REFRACTION", "BSDF_TRANSPARENT"):
+            self._interface(node, weight, acc, notes)
         elif t == "EMISSION":
             acc.emission += weight * self.color(node.inputs["Color"], notes) * max(
                 self.value(node.inputs["Strength"], notes), 0.0)
@@ -253,15 +264,46 @@ class MaterialConverter:
                 self._coverage(alpha, weight, notes)
             inputs = {s.name: (self.color(s, notes) if s.type == "RGBA" else self.value(s, notes))
                       for s in node.inputs if s.type in ("RGBA", "VALUE") and s.name != "Alpha"}
+            # Cycles: metallic, then Transmission Weight of the rest is glass tinted by the base color
+            glass = (1.0 - float(np.clip(inputs.get("Metallic", 0.0), 0.0, 1.0))) * float(
+                np.clip(inputs.pop("Transmission Weight", 0.0), 0.0, 1.0))
+            if glass > 0:
+                self._glass(weight * glass, np.clip(inputs.get("Base Color", (0.8,) * 3), 0.0, 1.0)[:3],
+                            np.clip(inputs.get("Specular Tint", (1.0,) * 3), 0.0, 1.0)[:3],
+                            float(inputs.get("IOR", 1.5)), 1, float(inputs.get("Roughness", 0.5)), acc, notes)
             spec = principled_to_material(inputs, getattr(node, "distribution", "MULTI_GGX"),
                                           notes.append)
             simple = principled_to_material(inputs, getattr(node, "distribution", "MULTI_GGX"),
                                             lambda m: None, layered=False)
-            acc.principled.append((weight, spec, simple))
+            if glass < 1.0 - 1e-6:
+                acc.principled.append((weight * (1.0 - glass), spec, simple))
+            else:                             # all glass: only its emission is left of the rest
+                acc.emission += weight * np.asarray(spec.get("emission", (0.0, 0.0, 0.0)), float)
             self._normal_note(node, notes)
         else:
             label = node.bl_label if hasattr(node, "bl_label") else t
             raise Unsupported(f"the {label} node ({node.name!r}) is not supported")
+
+    def _interface(self, node, weight, acc, notes):
+        """A Glass, Refraction or Transparent BSDF ``node`` times ``weight`` into ``acc``: a
+        smooth dielectric interface (:mod:`raybundle.scene.transmission`)."""
+        color = np.clip(self.color(node.inputs["Color"], notes), 0.0, 1.0)
+        if node.type == "BSDF_TRANSPARENT":
+            self._glass(weight, color, np.zeros(3), 1.0, 1, 0.0, acc, notes)
+            return
+        ior = self.value(node.inputs["IOR"], notes)
+        rough = self.value(node.inputs["Roughness"], notes) if "Roughness" in node.inputs else 0.0
+        glass = node.type == "BSDF_GLASS"
+        self._glass(weight, color, color if glass else np.zeros(3), ior, int(glass), rough, acc, notes)
+        self._normal_note(node, notes)
+
+    def _glass(self, weight, color, reflection, ior, fresnel, roughness, acc, notes):
+        if ior <= 0:
+            notes.append(f"an IOR of {ior:g} is not physical: 1 is used (no bending)")
+            ior = 1.0
+        if roughness > ROUGH_GLASS:
+            notes.append(f"rough glass (roughness {roughness:.3g}) is rendered smooth")
+        acc.transmission.append((weight, np.asarray(color, float), np.asarray(reflection, float), ior, fresnel))
 
     def _coverage(self, sock, weight, notes, invert=False):
         """Record the cut-out given by input ``sock`` (a Principled BSDF's ``Alpha``, a Mix
@@ -439,6 +481,24 @@ class MaterialConverter:
 
     # -------------------------------------------------------------- flatten
     def _flatten(self, name, acc):
+        spec = self._flatten_opaque(name, acc)
+        if acc.transmission:
+            w = np.array([x[0] for x in acc.transmission])
+            total = float(w.sum())
+            if total > 1.0 + 1e-6:
+                self.warn(f"material {name!r}: its glass and transparent shaders add up to {total:.3g} > 1: "
+                          "scaled to 1")
+                w, total = w / total, 1.0
+            mean = lambda k: sum(wi * np.asarray(x[k], float) for wi, x in zip(w, acc.transmission)) / total
+            kinds = {(x[3], x[4]) for x in acc.transmission}
+            if len(kinds) > 1:
+                self.warn(f"material {name!r}: interfaces of different IOR or kind are mixed: one of their mean "
+                          "IOR is used")
+            spec.update(transmission=total, transmission_color=tuple(mean(1)), transmission_reflection=tuple(mean(2)),
+                        transmission_ior=float(mean(3)), transmission_fresnel=int(round(float(mean(4)))))
+        return spec
+
+    def _flatten_opaque(self, name, acc):
         emission = np.maximum(acc.emission, 0.0)
         plain = not (np.any(acc.diffuse) or np.any(acc.glossy))
         if len(acc.principled) == 1 and plain and abs(acc.principled[0][0] - 1.0) < 1e-9:
@@ -479,7 +539,7 @@ class MaterialConverter:
 
     def _clip(self, spec, name):
         """Colors above 1 create energy (the core rejects them): clip, with a warning."""
-        for k in ("diffuse", "glossy", "specular_tint"):
+        for k in ("diffuse", "glossy", "specular_tint", "transmission_color", "transmission_reflection"):
             if k in spec:
                 c = np.asarray(spec[k], float)
                 if np.any(c > 1.0 + 1e-6):
@@ -519,7 +579,7 @@ def principled_to_material(inputs, distribution="MULTI_GGX", warn=print, layered
     emission = np.asarray(get("Emission Color", (0.0, 0.0, 0.0)), float)[:3] * max(
         float(get("Emission Strength", 0.0)), 0.0)
     for key, label in (("Coat Weight", "coat"), ("Sheen Weight", "sheen"),
-                       ("Transmission Weight", "transmission"), ("Subsurface Weight", "subsurface"),
+                       ("Subsurface Weight", "subsurface"),
                        ("Anisotropic", "anisotropy"), ("Thin Film Thickness", "thin film"),
                        ("Diffuse Roughness", "diffuse roughness")):
         if float(get(key, 0.0)) > 1e-6:

@@ -59,14 +59,19 @@ def fresh(addon):
 
 
 # ------------------------------------------------------------------ building
-def node_material(name, kind="diffuse", color=(0.8, 0.8, 0.8), strength=1.0, roughness=0.5):
-    """A material with one shader node ``kind`` (diffuse, glossy, emission) to the output."""
+def node_material(name, kind="diffuse", color=(0.8, 0.8, 0.8), strength=1.0, roughness=0.5, ior=1.5):
+    """A material with one shader node ``kind`` (diffuse, glossy, emission, principled,
+    translucent, glass, refraction, transparent) to the output."""
     from make_demo_scenes import _new_material
 
     mat, nt, out = _new_material(name)
     node = nt.nodes.new({"diffuse": "ShaderNodeBsdfDiffuse", "glossy": "ShaderNodeBsdfGlossy",
                          "emission": "ShaderNodeEmission", "principled": "ShaderNodeBsdfPrincipled",
-                         "translucent": "ShaderNodeBsdfTranslucent"}[kind])
+                         "translucent": "ShaderNodeBsdfTranslucent", "glass": "ShaderNodeBsdfGlass",
+                         "refraction": "ShaderNodeBsdfRefraction", "transparent": "ShaderNodeBsdfTransparent"}[kind])
+    if kind in ("glass", "refraction"):
+        node.inputs["Roughness"].default_value = roughness
+        node.inputs["IOR"].default_value = ior
     if kind == "principled":
         node.inputs["Base Color"].default_value = (*color, 1.0)
         node.inputs["Roughness"].default_value = roughness

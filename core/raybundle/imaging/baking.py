@@ -95,7 +95,7 @@ def locate_points(input_scene, scene, tracer, face, bary, chunk=1 << 22):
         if len(todo) == 0:
             break
         nn = normal[todo]
-        t_hit, t, _, _ = tracer.first_hit(point[todo] + sign * 2 * eps * nn, -sign * nn)
+        t_hit, t, _, _ = tracer.first_hit(point[todo] + sign * 2 * eps * nn, -sign * nn, glass=False)
         good = (t_hit >= 0) & (t < 4 * eps)
         good[good] = scene.triangle_source[t_hit[good]] == face[todo[good]]
         tri[todo[good]] = t_hit[good]

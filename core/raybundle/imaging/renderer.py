@@ -39,6 +39,7 @@ import numpy as np
 from ..lights.direct import ALL_LIGHTS
 from ..lights.world_light import WorldLight
 from ..scene.shading import seen_normals
+from ..scene.transmission import scatter
 from ..tracing.sampling import ShiftedKronecker, kronecker_alpha, stratified_2d
 from .caustic_splats import CausticSplats
 from .gather import EdgeGather, FinalGather
@@ -63,10 +64,22 @@ class GBuffer:
     bary: np.ndarray
     #: (N,) the pixel (row-major index) of each primary ray, None for other rays
     pixel: np.ndarray | None = None
+    #: (N, 3) what the eye path's reflections and refractions on the way let through
+    #: (:meth:`Renderer.trace_gbuffer`), None: 1 (a scene without transmissive surfaces)
+    weight: np.ndarray | None = None
+    #: (N,) bool: the eye path was reflected or refracted on its way (None: none was)
+    bounced: np.ndarray | None = None
 
     @property
     def hit(self):
         return self.triangle >= 0
+
+    def weighted(self, values, idx=None):
+        """``values`` (N, 3) (of the rays ``idx``, default all) times what the eye path's way
+        through transmissive surfaces let through (:attr:`weight`)."""
+        if self.weight is None:
+            return values
+        return values * (self.weight if idx is None else self.weight[idx])
 
 
 @dataclass
@@ -258,12 +271,16 @@ class Renderer(ProgressiveImage):
     def trace_gbuffer(self, jitter, pixels=None):
         """Primary rays through the pixels' sample positions for uniforms ``jitter`` (N, 2) in
         [0,1)^2 (:meth:`~raybundle.scene.camera.Camera.subpixel`: the pixel filter's), for all
-        pixels or for the pixel indices ``pixels`` (N,)."""
+        pixels or for the pixel indices ``pixels`` (N,), followed through the interfaces of
+        glass and other transmissive surfaces (:meth:`_through_interfaces`)."""
         cam = self.camera
         pos = (self._pixel if pixels is None else self._pixel[pixels]) + cam.subpixel(jitter)
         org, dirs = cam.rays(pos[:, 0], pos[:, 1])
-        tri, t, u, v = self.tracer.first_hit(org, dirs)
+        tri, t, u, v = self.tracer.first_hit(org, dirs, glass=False)
         self.image_rays += len(dirs)
+        weight = bounced = None
+        if self.tracer.glass is not None:
+            org, dirs, tri, t, u, v, weight, bounced = self._through_interfaces(org, dirs, tri, t, u, v)
         hit = tri >= 0
         sc = self.scene
         ts = sc.seen_tside(np.where(hit, tri, 0), dirs)
@@ -274,7 +291,44 @@ class Renderer(ProgressiveImage):
             normal[h] = seen_normals(sc.shading, sc.triangle_source[tri[h]], point[h], normal[h], -dirs[h])
         return GBuffer(tri, ts, point, normal,
                        sc.triangle_material[sc.tside_triangle[ts]], -dirs, np.stack([1 - u - v, u, v], axis=1),
-                       np.arange(len(self._pixel)) if pixels is None else np.asarray(pixels))
+                       np.arange(len(self._pixel)) if pixels is None else np.asarray(pixels), weight, bounced)
+
+    def _through_interfaces(self, org, dirs, tri, t, u, v):
+        """Eye rays ``org``, ``dirs`` (N, 3) with first hits ``(tri, t, u, v)`` followed through
+        the transmissive surfaces they meet (:func:`~raybundle.scene.transmission.scatter`: by
+        Fresnel, reflected or refracted), up to ``transmission_depth`` interfaces (beyond:
+        black).  Returns the last segments' ``(org, dirs, tri, t, u, v)``, each ray's weight
+        (N, 3) and (N,) bool, whether it was turned."""
+        sc, tracer = self.scene, self.tracer
+        org, dirs = org.copy(), dirs.copy()
+        weight = np.ones((len(tri), 3))
+        bounced = np.zeros(len(tri), bool)
+        live = np.nonzero(tri >= 0)[0]
+        for depth in range(int(self.settings.transmission_depth) + 1):
+            live = live[tracer.glass[tri[live]]]
+            if len(live) == 0:
+                break
+            if depth == self.settings.transmission_depth:
+                weight[live], tri[live] = 0.0, -1
+                break
+            d = dirs[live]
+            p = org[live] + t[live, None] * d
+            geo = sc.triangle_normal[tri[live]]
+            shade = geo
+            if sc.shading is not None:
+                shade = seen_normals(sc.shading, sc.triangle_source[tri[live]], p,
+                                     np.where((np.einsum("ij,ij->i", geo, d) < 0)[:, None], geo, -geo), -d)
+            on, new, w = scatter(sc.materials, sc.triangle_material[tri[live]], d, geo, shade,
+                                 self.rng.random((len(live), 2)))
+            weight[live] *= w
+            live = live[on]
+            bounced[live] = True
+            org[live] = p[on] + tracer.eps * new[on]
+            dirs[live] = new[on]
+            tri[live], t[live], u[live], v[live] = tracer.first_hit(org[live], dirs[live], glass=False)
+            self.image_rays += len(live)
+            live = live[tri[live] >= 0]
+        return org, dirs, tri, t, u, v, weight, bounced
 
     def seen_radiance(self, g):
         """Radiance (N, 3) that reaches the eye directly: emission of the surfaces
@@ -290,6 +344,10 @@ class Renderer(ProgressiveImage):
         out = np.zeros((len(g.triangle), 3))
         miss = np.nonzero(~g.hit)[0]
         world = self.scene.world
+        if g.bounced is not None and len(miss):     # turned by glass: the world as light, no longer the camera's view
+            turned = miss[g.bounced[miss]]
+            out[turned] = world.radiance(-g.w_eye[turned])
+            miss = miss[~g.bounced[miss]]
         if len(miss) and self._view_means is None:
             out[miss] = world.radiance(-g.w_eye[miss], camera=True)
         elif len(miss):
@@ -302,7 +360,7 @@ class Renderer(ProgressiveImage):
         out[h] = self.scene.materials.emitted_radiance(g.material[h], cos_eye)
         emitter = np.zeros(len(out), bool)
         emitter[h] = np.any(out[h] > 0, axis=1)
-        return out, emitter
+        return g.weighted(out), emitter
 
     def surface_values(self, side_values, vert, tside, bary):
         """Side values (S, C) at hit points on triangle sides ``tside`` (N,):
@@ -462,7 +520,7 @@ class Renderer(ProgressiveImage):
             gathered[gl] = self.glossy_paths.gather(g, gl, u_lobe[gl])
             self.image_rays += self.glossy_paths.rays - before
             gl = gl[:0]
-        return out, gathered, gl
+        return g.weighted(out), g.weighted(gathered), gl
 
     def _penumbrae(self):
         """(pixels,) uint64: per pixel, the lights whose earlier shadow rays there or in one of
@@ -553,10 +611,10 @@ class Renderer(ProgressiveImage):
         patch = self.scene.tside_side[g.tside[gl]]
         mats, solver = self.scene.materials, self.solver
         f = mats.brdf(g.material[gl], g.normal[gl], solver.receive_direction[patch], g.w_eye[gl], diffuse=False)
-        self.glossy_sum[gl] += solver.glossy_incoming[patch] * f
+        self.glossy_sum[gl] += g.weighted(solver.glossy_incoming[patch] * f, gl)
         if solver.caustic is not None:     # the first shot's glossy reflections arrive as Ec
             f = mats.brdf(g.material[gl], g.normal[gl], solver.caustic.direction[patch], g.w_eye[gl], diffuse=False)
-            self.glossy_sum[gl] += solver.caustic.E[patch] * f
+            self.glossy_sum[gl] += g.weighted(solver.caustic.E[patch] * f, gl)
 
     # -------------------------------------------------------------- resolve
     def diffuse_indirect(self, e_bar=None, samples=None, gather=True, gather_seconds=None):
@@ -625,7 +683,7 @@ class Renderer(ProgressiveImage):
             m = g.material[h]
             w_d = sc.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]))
             scale = self.albedo_scale(g.triangle[h], g.point[h])
-            out[h] += w_d * kd[m] / np.pi * e * (1.0 if scale is None else scale)
+            out[h] += g.weighted(w_d * kd[m] / np.pi * e * (1.0 if scale is None else scale), h)
         return out / k
 
     def _indirect_plan(self, gather, gather_seconds, k):

@@ -50,7 +50,10 @@ class RenderSettings:
     from the world; 0 = the patches carry it, as the rest of the diffuse light; -1 (the
     default) = 4 where the world is the only light, else 0
     (:meth:`Renderer.automatic_world_samples`: beside a sun most such rays meet blinds and
-    walls, and the few through a window make single pixels bright).
+    walls, and the few through a window make single pixels bright);
+    ``transmission_depth``: the interfaces of glass, refraction and transparent surfaces an eye
+    path is reflected or refracted by before it is cut off (black), Cycles' default
+    transmission bounces (:mod:`raybundle.scene.transmission`, :meth:`Renderer.trace_gbuffer`).
     """
 
     bundle_resolution: int = 0
@@ -73,6 +76,7 @@ class RenderSettings:
     penumbra_samples: int = 8
     caustic_splats: float = 1.0
     world_samples: int = -1
+    transmission_depth: int = 12
     threads: int | None = None
 
 
@@ -101,5 +105,7 @@ class RenderSettings:
             raise ValueError("gather_rays must lie in [-1, 65536] (0 = no final gather, -1 = automatic)")
         if not 0.0 <= float(self.gather_share) < 1.0:
             raise ValueError("gather_share must lie in [0, 1)")
+        if not 0 <= int(self.transmission_depth) <= 1024:
+            raise ValueError("transmission_depth must lie in [0, 1024]")
         if not 0.0 <= float(self.caustic_splats) <= 64.0:
             raise ValueError("caustic_splats must lie in [0, 64] (0 = the caustic from the patches)")

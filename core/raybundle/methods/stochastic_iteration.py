@@ -62,6 +62,7 @@ from ..lights.caustics import CausticShot
 from ..lights.first_shot import PatchFirstShot
 from ..lights.world_light import GUIDE_CELLS, guide_cell
 from ..patches.reconstruction import LinearReconstruction
+from ..scene.transmission import solver_share
 from ..tracing.sampling import points_on_triangles, uniform_sphere, uniform_sphere_pdf
 from .base import Method, SolverStats
 
@@ -106,9 +107,13 @@ class StochasticIterationSolver(Method):
         if tracer.cutouts is not None:
             cover = tracer.cutouts.triangle_coverage(scene, seed)[scene.tside_triangle]
             self.tside_open_area *= np.maximum(cover, 1e-6)      # a side cut out everywhere receives nothing
+        kd = mats.diffuse_reflectance
+        if tracer.glass is not None:          # glass: the rays it does not let through, as a cut-out's
+            kept, kd = solver_share(mats)
+            self.tside_open_area *= kept[scene.triangle_material[scene.tside_triangle]]
         self.area = np.bincount(scene.tside_side, self.tside_open_area, minlength=scene.n_sides)
         self.reconstruction = LinearReconstruction(scene, self.tside_open_area)
-        self.kd_over_pi = mats.diffuse_reflectance[pm] / np.pi          # (P, 3)
+        self.kd_over_pi = kd[pm] / np.pi          # (P, 3)
         if scene.texture is not None:         # a textured patch reflects with its mean albedo
             self.kd_over_pi = self.kd_over_pi * scene.texture.side_means(scene, seed)
         self.glossy_mask = mats.is_glossy[pm]

@@ -597,7 +597,7 @@ def piercing(tracer, scene, faces):
         d = (b[live] - a[live]) / length[live, None]
         start = np.full(len(live), eps)
         for _ in range(PIERCE_HITS):                 # past hits that do not count (a neighbour, in plane)
-            tri, t, _, _ = tracer.first_hit(a[live] + start[:, None] * d, d)
+            tri, t, _, _ = tracer.first_hit(a[live] + start[:, None] * d, d, glass=False)
             t = t + start
             hit = np.nonzero((tri >= 0) & (t < length[live] - 2 * eps))[0]
             theirs = tri[hit]

@@ -82,7 +82,10 @@ MIN_ALPHA = 1e-3
 #: glossy lobes below this GGX roughness count as near-mirrors (:mod:`raybundle.app.auto`,
 #: :mod:`raybundle.methods.ray_bundle_walk`)
 NEAR_MIRROR_ROUGHNESS = 0.1
-_MU_TABLE = 65  # samples of cos(theta_out) in the directional-albedo tables
+_MU_TABLE = 65
+#: the transmission parameters and their defaults (an opaque surface)
+_TRANSMISSION_DEFAULTS = {"transmission": 0.0, "transmission_ior": 1.0, "transmission_color": (1.0, 1.0, 1.0),
+                          "transmission_reflection": (1.0, 1.0, 1.0), "transmission_fresnel": 1}  # samples of cos(theta_out) in the directional-albedo tables
 
 
 @dataclass
@@ -107,6 +110,16 @@ class MaterialTable:
         1 = F82-tint conductor Fresnel with F0 = ks (Principled metallic).
     multiscatter : (M,) int  1 = Cycles' Multiscatter GGX energy compensation on
         the GGX lobes; 0 (default) = single scattering.
+    transmission : (M,) float  the share of the surface that is a smooth dielectric
+        interface (Glass / Refraction / Transparent BSDF, Principled Transmission), in [0, 1];
+        0 (default) = opaque.  The reflectances above are the rest's, already weighted
+        (:mod:`raybundle.scene.transmission`).
+    transmission_ior : (M,) float  its IOR (outside -> inside through the front); 1 = no
+        bending and no Fresnel (Transparent BSDF).
+    transmission_color : (M, 3) float  the tint of the light it refracts, in [0, 1].
+    transmission_reflection : (M, 3) float  the tint of the light it reflects (Fresnel).
+    transmission_fresnel : (M,) int  1 (default): refraction takes 1 - F (Glass BSDF,
+        Principled); 0: all that is not totally reflected (Refraction BSDF).
     See the module docstring for the equations.
     """
 
@@ -121,6 +134,11 @@ class MaterialTable:
     specular_tint: np.ndarray = None
     glossy_fresnel: np.ndarray = None
     multiscatter: np.ndarray = None
+    transmission: np.ndarray = None
+    transmission_ior: np.ndarray = None
+    transmission_color: np.ndarray = None
+    transmission_reflection: np.ndarray = None
+    transmission_fresnel: np.ndarray = None
     _albedo_tables: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -133,13 +151,17 @@ class MaterialTable:
             self.glossy_fresnel = np.zeros(n, dtype=np.int64)
         if self.multiscatter is None:
             self.multiscatter = np.zeros(n, dtype=np.int64)
+        for k, default in _TRANSMISSION_DEFAULTS.items():
+            if getattr(self, k) is None:
+                setattr(self, k, np.array([default] * n, float if k != "transmission_fresnel" else np.int64)
+                        .reshape((n,) + np.shape(default)))
 
     @classmethod
     def from_list(cls, specs):
         """Build from a list of dicts with keys ``name``, ``diffuse``, ``glossy``,
         ``roughness``, ``glossy_weight``, ``emission``, ``emission_albedo_complement``,
-        ``specular_ior``, ``specular_tint``, ``glossy_fresnel``, ``multiscatter`` (all
-        optional; :func:`principled_material` makes such a dict from a Principled BSDF)."""
+        ``specular_ior``, ``specular_tint``, ``glossy_fresnel``, ``multiscatter``, and the
+        ``transmission*`` keys (all optional; :func:`principled_material` makes such a dict from a Principled BSDF)."""
         n = len(specs)
         t = cls(
             names=[s.get("name", f"material_{k}") for k, s in enumerate(specs)],
@@ -161,6 +183,8 @@ class MaterialTable:
             t.specular_tint[k] = s.get("specular_tint", (1.0, 1.0, 1.0))
             t.glossy_fresnel[k] = int(s.get("glossy_fresnel", 0))
             t.multiscatter[k] = int(bool(s.get("multiscatter", 0)))
+            for key, default in _TRANSMISSION_DEFAULTS.items():
+                getattr(t, key)[k] = s.get(key, default)
         return t
 
     def __len__(self):
@@ -192,6 +216,12 @@ class MaterialTable:
         return lobe | (self.has_layer & (self.glossy_weight < 1))
 
     @property
+    def transmits(self) -> np.ndarray:
+        """(M,) bool: part of the surface is a dielectric interface light passes
+        (:mod:`raybundle.scene.transmission`)."""
+        return np.asarray(self.transmission, float) > 0
+
+    @property
     def is_emitter(self) -> np.ndarray:
         return np.any(self.emission > 0, axis=1) | np.any(self.emission_albedo_complement > 0, axis=1)
 
@@ -209,7 +239,7 @@ class MaterialTable:
         """Raise ValueError on parameters that break energy conservation or are not finite."""
         arrays = {k: np.asarray(getattr(self, k), float) for k in (
             "diffuse", "glossy", "roughness", "glossy_weight", "emission", "emission_albedo_complement",
-            "specular_ior", "specular_tint", "glossy_fresnel", "multiscatter")}
+            "specular_ior", "specular_tint", "glossy_fresnel", "multiscatter", *_TRANSMISSION_DEFAULTS)}
         for k, a in arrays.items():
             bad = ~np.isfinite(a)
             if bad.any():
@@ -218,7 +248,7 @@ class MaterialTable:
             if (a < 0).any():
                 m = int(np.nonzero((a < 0).reshape(len(a), -1).any(axis=1))[0][0])
                 raise ValueError(f"material {self.names[m]!r}: {k} is negative")
-        for k in ("diffuse", "glossy", "specular_tint"):
+        for k in ("diffuse", "glossy", "specular_tint", "transmission_color", "transmission_reflection"):
             over = arrays[k] > 1.0
             if over.any():
                 m = int(np.nonzero(over.any(axis=1))[0][0])
@@ -232,7 +262,10 @@ class MaterialTable:
         if ((eta > 0) & (eta < 1)).any():
             m = int(np.nonzero((eta > 0) & (eta < 1))[0][0])
             raise ValueError(f"material {self.names[m]!r}: specular_ior {eta[m]} must be 0 (no layer) or >= 1")
-        for k in ("glossy_fresnel", "multiscatter"):
+        if (arrays["transmission"] > 1).any() or (arrays["transmission_ior"] <= 0).any():
+            m = int(np.nonzero((arrays["transmission"] > 1) | (arrays["transmission_ior"] <= 0))[0][0])
+            raise ValueError(f"material {self.names[m]!r}: transmission must lie in [0, 1] and its IOR be positive")
+        for k in ("glossy_fresnel", "multiscatter", "transmission_fresnel"):
             bad = (arrays[k] != 0) & (arrays[k] != 1)
             if bad.any():
                 m = int(np.nonzero(bad)[0][0])
@@ -494,7 +527,8 @@ class MaterialTable:
                 prefix + "specular_ior": np.asarray(self.specular_ior, float),
                 prefix + "specular_tint": np.asarray(self.specular_tint, float),
                 prefix + "glossy_fresnel": np.asarray(self.glossy_fresnel, np.int64),
-                prefix + "multiscatter": np.asarray(self.multiscatter, np.int64)}
+                prefix + "multiscatter": np.asarray(self.multiscatter, np.int64),
+                **{prefix + k: np.asarray(getattr(self, k)) for k in _TRANSMISSION_DEFAULTS}}
 
     @classmethod
     def from_arrays(cls, d, prefix="material_"):
@@ -514,7 +548,9 @@ class MaterialTable:
                                                else np.asarray(comp, float).reshape(n, 3)),
                    specular_ior=opt("specular_ior", n), specular_tint=opt("specular_tint", (n, 3)),
                    glossy_fresnel=opt("glossy_fresnel", n, np.int64),
-                   multiscatter=opt("multiscatter", n, np.int64))
+                   multiscatter=opt("multiscatter", n, np.int64),
+                   **{k: opt(k, (n,) + np.shape(v), np.int64 if k == "transmission_fresnel" else float)
+                      for k, v in _TRANSMISSION_DEFAULTS.items()})
 
 
 def color_text(c, digits=3) -> str:

@@ -21,6 +21,10 @@ Cut-outs (:class:`~raybundle.scene.textures.SurfaceTexture`'s coverage): a hit o
 with a coverage map is kept with probability ``alpha`` at the hit point, drawn from a hash of
 the ray, the layer and the query (the same for any split over threads); a ray that passes
 goes on from just past the hit, in every query (first hits, shadow rays, bundle lines).
+So does a hit on a transmissive surface (glass, refraction, transparency), kept with the
+probability that the ray does not pass straight through
+(:func:`~raybundle.scene.transmission.pass_probability`), except in the eye's paths, which
+refract there instead (``first_hit(..., glass=False)``).
 
 ``embreex`` traces one ray after another in C and releases the GIL, so every
 query is split into one chunk per core and run on a thread pool.
@@ -34,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..scene.transmission import pass_probability
 from .sampling import cosine_directions, frames_from_normals, points_on_triangles, stratified_2d_sets
 
 _MAX_LAYERS = 10000
@@ -99,9 +104,15 @@ class RayTracer:
         self.threads = max(1, int(threads or os.cpu_count() or 1))
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         tex = scene.texture
-        #: the scene's coverage maps (None: every surface is opaque) and (T,) bool cut-out triangles
+        #: the scene's coverage maps (None: no cut-outs) and (T,) bool cut-out triangles
         self.cutouts = tex if tex is not None and tex.has_cutouts else None
         self._cut = None if self.cutouts is None else self.cutouts.cutout_faces[scene.triangle_source]
+        #: (T,) bool triangles light passes straight through (:mod:`raybundle.scene.transmission`), or None
+        glass = scene.materials.transmits[scene.triangle_material] if len(scene.triangles) else None
+        self.glass = glass if glass is not None and glass.any() else None
+        self._through = (None if self._cut is None and self.glass is None else
+                         (self._cut if self.glass is None else
+                          self.glass if self._cut is None else self._cut | self.glass))
         self._queries = 0
 
     def close(self):
@@ -121,29 +132,36 @@ class RayTracer:
         return self._embree.run(np.ascontiguousarray(origins - self.center, np.float32),
                                 np.ascontiguousarray(directions, np.float32), **kw)
 
-    def first_hit(self, origins, directions):
+    def first_hit(self, origins, directions, glass=True):
         """Closest hits of rays (N, 3) from ``origins`` along unit ``directions``.
 
         Returns ``(triangle, t, u, v)``: triangle id (-1 = miss), distance [m] and
         Embree's barycentrics (hit = (1-u-v) v0 + u v1 + v v2).  A cut-out's hit is
-        kept with the probability of its coverage there (module docstring).
+        kept with the probability of its coverage there (module docstring), and with
+        ``glass`` a transmissive surface's with the probability that the ray does not pass
+        straight through it (:func:`~raybundle.scene.transmission.pass_probability`; the eye's
+        paths refract there instead: ``glass`` False).
         """
         origins = np.asarray(origins, float)
         directions = np.broadcast_to(np.asarray(directions, float), origins.shape)
         hits = self._first_hits(origins, directions)
-        return hits if self.cutouts is None else self._through_cutouts(origins, directions, *hits)
+        through = self._cut if not glass else self._through
+        return hits if through is None else self._through_surfaces(origins, directions, *hits, glass=glass)
 
-    def _through_cutouts(self, origins, directions, tri, t, u, v):
-        """:meth:`first_hit`'s hits ``(tri, t, u, v)`` (changed in place) with the cut-out hits
-        that are not kept traced on from just past them."""
+    def _through_surfaces(self, origins, directions, tri, t, u, v, glass=True):
+        """:meth:`first_hit`'s hits ``(tri, t, u, v)`` (changed in place) with the hits on
+        cut-outs (and with ``glass`` on transmissive surfaces) that are not kept traced on from
+        just past them."""
         query = self._next_query()
+        through = self._through if glass else self._cut
         todo = np.arange(len(tri))
         for layer in range(_MAX_PASSES):
             todo = todo[tri[todo] >= 0]
-            todo = todo[self._cut[tri[todo]]]
+            todo = todo[through[tri[todo]]]
             if todo.size == 0:
                 return tri, t, u, v
-            go = todo[~self._kept(tri[todo], origins[todo] + t[todo, None] * directions[todo], todo, layer, query)]
+            go = todo[~self._kept(tri[todo], origins[todo] + t[todo, None] * directions[todo], todo, layer, query,
+                                  directions[todo] if glass else None)]
             if go.size == 0:
                 return tri, t, u, v
             start = t[go] + self.eps
@@ -154,11 +172,21 @@ class RayTracer:
         tri[todo] = -1                  # passed through more surfaces than any scene has: a miss
         return tri, t, u, v
 
-    def _kept(self, tri, points, rays, layer, query):
-        """(N,) bool: the hits on cut-out triangles ``tri`` at ``points`` are kept (their
-        coverage against a uniform number hashed from ``rays``, ``layer`` and ``query``)."""
-        alpha = self.cutouts.alpha_at(self.scene.triangle_source[tri], points)
-        return hashed_uniform(rays, layer, query) < alpha
+    def _kept(self, tri, points, rays, layer, query, directions=None):
+        """(N,) bool: the hits on triangles ``tri`` at ``points`` are kept: a uniform number hashed
+        from ``rays``, ``layer`` and ``query`` against the coverage of a cut-out times, for rays
+        along ``directions`` (None: cut-outs only), the probability of not passing a
+        transmissive surface (:func:`~raybundle.scene.transmission.pass_probability`)."""
+        keep = np.ones(len(tri))
+        if self._cut is not None:
+            c = np.nonzero(self._cut[tri])[0]
+            keep[c] = self.cutouts.alpha_at(self.scene.triangle_source[tri[c]], points[c])
+        if directions is not None and self.glass is not None:
+            g = np.nonzero(self.glass[tri])[0]
+            sc = self.scene
+            cos = np.einsum("ij,ij->i", sc.triangle_normal[tri[g]], directions[g])
+            keep[g] *= 1.0 - pass_probability(sc.materials, sc.triangle_material[tri[g]], cos)
+        return hashed_uniform(rays, layer, query) < keep
 
     def _next_query(self):
         self._queries += 1
@@ -189,10 +217,10 @@ class RayTracer:
                              dists=np.ascontiguousarray(dist[a:b]))
 
         hit = np.concatenate(self._map_chunks(work, len(origins))) != -1
-        if self.cutouts is not None and hit.any():
+        if self._through is not None and hit.any():
             sel = np.nonzero(hit)[0]
             o, d = origins[sel], directions[sel]
-            tri, t, _, _ = self._through_cutouts(o, d, *self._first_hits(o, d))
+            tri, t, _, _ = self._through_surfaces(o, d, *self._first_hits(o, d))
             hit[sel] = (tri >= 0) & (t < dist[sel])
         return hit
 
@@ -260,7 +288,7 @@ class RayTracer:
             else:
                 phi = phi0[live] + a
                 d = c60 * nl + s60 * (np.cos(phi)[:, None] * t[live] + np.sin(phi)[:, None] * b[live])
-            hit, _, _, _ = self.first_hit(pts[live] + nl * self.eps, d)
+            hit, _, _, _ = self.first_hit(pts[live] + nl * self.eps, d, glass=False)
             safe = np.maximum(hit, 0)
             back = ((hit >= 0) & sc.triangle_solid[safe]
                     & (np.einsum("ij,ij->i", sc.triangle_normal[safe], d) > 0))
@@ -340,11 +368,11 @@ class RayTracer:
                 prim = r["primID"].astype(np.int64)
                 hit = prim >= 0
                 kept = hit.copy()
-                if self.cutouts is not None:
+                if self._through is not None:
                     c = np.nonzero(hit)[0]
-                    c = c[self._cut[prim[c]]]
+                    c = c[self._through[prim[c]]]
                     at = (o32[c] + (start[c] + r["tfar"][c])[:, None] * dr[c]).astype(float) + self.center
-                    kept[c] = self._kept(prim[c], at, ray[c], layer, query)
+                    kept[c] = self._kept(prim[c], at, ray[c], layer, query, dr[c].astype(float))
                 if ends:
                     first = kept & (last < 0)
                     out[3].append(prim[first])

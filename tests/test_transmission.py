@@ -1,0 +1,144 @@
+"""Glass, refraction and transparency (:mod:`raybundle.scene.transmission`) against analytic
+answers: Fresnel and Snell at one interface, a pane under the sun, and the furnace, whose light
+field a white glass object inside must leave as it is."""
+import warnings
+
+import numpy as np
+import pytest
+
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
+from raybundle.scene.build import build_scene
+from raybundle.scene.camera import Camera
+from raybundle.scene.materials import MaterialTable, fresnel_dielectric_cos, fresnel_dielectric_fss
+from raybundle.scene.model import SunLights
+from raybundle.scene.transmission import pass_probability, scatter, solver_share
+from test_solver import assert_converged, batch_means
+
+
+def _glass(**kw):
+    return MaterialTable.from_list([dict(name="glass", transmission=1.0, transmission_ior=1.5, **kw)])
+
+
+def _box(lo, hi):
+    """Corners and outward triangles of an axis-aligned box."""
+    (x0, y0, z0), (x1, y1, z1) = lo, hi
+    v = np.array([(x0, y0, z0), (x1, y0, z0), (x1, y1, z0), (x0, y1, z0),
+                  (x0, y0, z1), (x1, y0, z1), (x1, y1, z1), (x0, y1, z1)], float)
+    quads = [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (2, 3, 7, 6), (1, 2, 6, 5), (0, 4, 7, 3)]
+    return v, np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+
+
+def test_one_interface_reflects_by_fresnel_and_refracts_by_snell():
+    """From outside at 60 degrees: reflected with probability F, refracted with sin t = sin i / 1.5,
+    weights the tints; from inside beyond the critical angle always reflected (a Refraction BSDF
+    absorbs there); a Transparent BSDF (IOR 1) passes straight on, tinted."""
+    n = 20000
+    th = np.radians(60)
+    d = np.tile([np.sin(th), 0.0, -np.cos(th)], (n, 1))
+    up = np.tile([0.0, 0.0, 1.0], (n, 1))
+    u = np.stack([np.zeros(n), (np.arange(n) + 0.5) / n], axis=1)
+    mats = _glass(transmission_color=(0.5, 0.6, 0.7), transmission_reflection=(0.9, 0.9, 0.9))
+    on, out, w = scatter(mats, np.zeros(n, int), d, up, up, u)
+    assert on.all()
+    refl = out[:, 2] > 0
+    assert refl.mean() == pytest.approx(fresnel_dielectric_cos(np.cos(th), 1.5), abs=1e-4)
+    np.testing.assert_allclose(out[refl], np.tile([np.sin(th), 0, np.cos(th)], (refl.sum(), 1)), atol=1e-12)
+    np.testing.assert_allclose(out[~refl, 0], np.sin(th) / 1.5, atol=1e-12)
+    np.testing.assert_allclose(w[refl], 0.9)
+    np.testing.assert_allclose(w[~refl], np.tile([0.5, 0.6, 0.7], ((~refl).sum(), 1)))
+    # from inside (travelling out through the front) at 60 degrees: beyond the critical angle
+    out_of = d * [1, 1, -1]
+    on, out, w = scatter(mats, np.zeros(n, int), out_of, up, up, u)
+    assert (out[:, 2] < 0).all() and np.allclose(w, 0.9)
+    refraction = MaterialTable.from_list([dict(transmission=1.0, transmission_ior=1.5, transmission_fresnel=0,
+                                               transmission_reflection=(0, 0, 0))])
+    _, out, w = scatter(refraction, np.zeros(n, int), d, up, up, u)
+    assert (out[:, 2] < 0).all() and np.allclose(w, 1.0)       # all refracted, no Fresnel loss
+    _, _, w = scatter(refraction, np.zeros(n, int), out_of, up, up, u)
+    assert np.allclose(w, 0.0)                                   # its total internal reflection is absorbed
+    clear = MaterialTable.from_list([dict(transmission=1.0, transmission_color=(0.25, 0.5, 1.0))])
+    _, out, w = scatter(clear, np.zeros(n, int), d, up, up, u)
+    np.testing.assert_allclose(out, d, atol=1e-12)
+    np.testing.assert_allclose(w, np.tile([0.25, 0.5, 1.0], (n, 1)))
+    assert pass_probability(clear, np.zeros(1, int), np.array([0.3]))[0] == pytest.approx(1.75 / 3)
+    # half glass: half the paths stop on the opaque rest, weighted 2
+    half = MaterialTable.from_list([dict(transmission=0.5, transmission_ior=1.5, diffuse=(0.4, 0.4, 0.4))])
+    on, _, w = scatter(half, np.zeros(n, int), d, up, up, np.stack([(np.arange(n) + 0.5) / n, u[:, 1]], axis=1))
+    assert on.mean() == pytest.approx(0.5, abs=1e-4) and np.allclose(w[~on], 2.0)
+
+
+def _pane_under_the_sun(seed, iterations, theta=30.0):
+    """A floor (albedo 0.5) under a sun at ``theta`` degrees, half of it under a glass pane 5 mm
+    thick, seen from above through the pane on one side: the image's direct light (its image
+    passes) and the camera."""
+    floor_v = np.array([(-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0)], float)
+    pv, pt = _box((0.0, -2, 0.5), (2, 2, 0.505))
+    v = np.concatenate([floor_v, pv])
+    t = np.concatenate([[(0, 1, 2), (0, 2, 3)], pt + 4])
+    m = np.array([0, 0] + [1] * len(pt))
+    mats = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.5, 0.5)),
+                                    dict(name="glass", transmission=1.0, transmission_ior=1.5)])
+    th = np.radians(theta)
+    sun = SunLights(direction=np.array([[np.sin(th), 0, -np.cos(th)]]), irradiance=np.ones((1, 3)),
+                    angle=np.zeros(1))
+    cam = Camera.look_at((0, 0, 3), (0, 0, 0), (0, 1, 0), 50, 36, (64, 64))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")           # the one-sided pane made two-sided
+        sc = build_scene(v, t, m, mats, camera=cam, sun_lights=sun, two_sided=True)
+    r = pipeline.make_renderer(pipeline.prepare(sc, patches=200), RenderSettings(seed=seed))
+    assert r.tracer.glass is not None
+    r.run(iterations=iterations)
+    r.tracer.close()
+    return (r.pass_sum / r.passes).reshape(64, 64, 3).mean(axis=2), cam
+
+
+def test_a_pane_passes_the_sun_and_the_eye_by_fresnel():
+    """The direct light on the floor beside the pane is kd/pi E cos exactly; under it, seen through it, that times
+    T(sun)^2 (the sun's rays pass both faces straight on) times T(eye)^2 / (1 - R(eye)^2) (the eye's
+    paths refract through both faces and are reflected between them), T = 1 - F: within 4.5 SE of 6
+    seeds, up to the light reflected between the faces on its way down (R(sun)^2 = 0.2%), which the
+    sun's straight rays leave out.  An opaque pane (the old export) leaves it black."""
+    th = np.radians(30.0)
+    lit = 0.5 / np.pi * np.cos(th)
+    ratios = []
+    for seed in range(6):
+        img, cam = _pane_under_the_sun(seed, 60)
+        assert img[16:48, 4:24].mean() == pytest.approx(lit, rel=1e-6)
+        ratios.append(img[16:48, 44:60].mean() / lit)
+    py, px = np.mgrid[16:48, 44:60]
+    _, d = cam.rays(px.ravel() + 0.5, py.ravel() + 0.5)
+    r_eye = fresnel_dielectric_cos(np.abs(d[:, 2]), 1.5)
+    t_sun = 1.0 - fresnel_dielectric_cos(np.cos(th), 1.5)
+    exact = (t_sun ** 2 * (1 - r_eye) ** 2 / (1 - r_eye ** 2)).mean()
+    mean, se = np.mean(ratios), np.std(ratios, ddof=1) / np.sqrt(len(ratios))
+    # measured 2026-11-28: mean / exact 1.0006, SE 0.06%
+    assert se < 0.005 and abs(mean - exact) < 4.5 * se + 0.002 * exact, (mean, exact, se)
+
+
+def test_a_furnace_with_a_glass_box_inside_stays_exact():
+    """The diffuse furnace with a closed box of white glass (IOR 1.5) inside: the light field is
+    still Le / (1 - a) everywhere, in the patches (the glass's own hold the light it reflects,
+    :func:`solver_share`) and in the image (the eye refracts and reflects through the box).  With
+    the glass's patches black, its reflected share was lost."""
+    base = scenes.furnace(resolution=(24, 24))
+    bv, bt = _box((0.45, 0.5, 0.2), (0.85, 0.9, 0.6))
+    v = np.concatenate([base.vertices, bv])
+    t = np.concatenate([base.triangles, bt + len(base.vertices)])
+    wall = dict(diffuse=tuple(scenes.FURNACE_ALBEDO), emission=scenes.FURNACE_LE)
+    mats = MaterialTable.from_list([wall, wall, dict(name="glass", transmission=1.0, transmission_ior=1.5)])
+    m = np.concatenate([base.triangle_material, np.full(len(bt), 2)])
+    kept, kd = solver_share(mats)
+    assert kept[2] == pytest.approx(fresnel_dielectric_fss(1.5)) and np.allclose(kd[2], 1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sc = build_scene(v, t, m, mats, camera=base.camera, analytic_radiance=base.analytic_radiance,
+                         two_sided=m == 2)
+    r = pipeline.make_renderer(pipeline.prepare(sc, patches=600),
+                               RenderSettings(sequence="stratified", seed=0, resolve_samples=4))
+    assert r.tracer.glass is not None
+    patch, img = batch_means(r, 12, 90)
+    assert_converged(patch, sc.analytic_radiance, max_se=0.02)
+    assert_converged(img, sc.analytic_radiance, max_se=0.02)
+    r.tracer.close()
