@@ -40,7 +40,9 @@ model.  A material's node tree is read from its Cycles output node:
   over its share of the surface (:mod:`raybundle.scene.transmission`): its weight, IOR (1 for
   Transparent), refraction and reflection tints (none reflected by a Refraction BSDF, which
   takes no Fresnel loss either); rough glass is rendered smooth, warned.
-* Anything else (Translucent, Subsurface, groups...) makes the
+* A **Translucent BSDF**: its color (times its mix weight) is the light one side lets through
+  to the other, diffusely (``translucent``).
+* Anything else (Subsurface, Holdout, groups...) makes the
   whole material fall back to its viewport color (``Material.diffuse_color``) as a
   Diffuse BSDF, with one warning naming the material.  A material without nodes
   is its viewport color (as Cycles does).  No material at all: grey 0.8.
@@ -88,6 +90,7 @@ class _Closure:
     principled: list = field(default_factory=list)    # [(weight, spec dict, simple spec dict)]
     #: dielectric interfaces: [(weight, refraction tint (3,), reflection tint (3,), ior, fresnel 0/1)]
     transmission: list = field(default_factory=list)
+    translucent: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def _lum(c):
@@ -236,6 +239,9 @@ class MaterialConverter:
                 notes.append(f"Glossy BSDF distribution {dist} is approximated by GGX")
             if "Anisotropy" in node.inputs and abs(self.value(node.inputs["Anisotropy"], notes)) > 1e-6:
                 notes.append("anisotropy is ignored (isotropic GGX)")
+            self._normal_note(node, notes)
+        elif t == "BSDF_TRANSLUCENT":
+            acc.translucent += weight * np.clip(self.color(node.inputs["Color"], notes), 0.0, 1.0)
             self._normal_note(node, notes)
         elif t in ("BSDF_GLASS", "BSDF_REFRACTION", "BSDF_TRANSPARENT"):
             self._interface(node, weight, acc, notes)
@@ -482,6 +488,13 @@ class MaterialConverter:
     # -------------------------------------------------------------- flatten
     def _flatten(self, name, acc):
         spec = self._flatten_opaque(name, acc)
+        if np.any(acc.translucent > 0):
+            reflected = np.asarray(spec.get("diffuse", (0, 0, 0)), float) * (1 - spec.get("glossy_weight", 0.0))
+            kt = np.minimum(acc.translucent, np.maximum(1.0 - reflected, 0.0))
+            if np.any(kt < acc.translucent - 1e-6):
+                self.warn(f"material {name!r}: its diffuse and translucent colors add up to more than 1 "
+                          "(it would create energy): the translucent one is clipped")
+            spec["translucent"] = tuple(kt)
         if acc.transmission:
             w = np.array([x[0] for x in acc.transmission])
             total = float(w.sum())
@@ -500,7 +513,7 @@ class MaterialConverter:
 
     def _flatten_opaque(self, name, acc):
         emission = np.maximum(acc.emission, 0.0)
-        plain = not (np.any(acc.diffuse) or np.any(acc.glossy))
+        plain = not (np.any(acc.diffuse) or np.any(acc.glossy) or np.any(acc.translucent))
         if len(acc.principled) == 1 and plain and abs(acc.principled[0][0] - 1.0) < 1e-9:
             spec = dict(acc.principled[0][1], name=name)
             spec["emission"] = tuple(np.asarray(spec.get("emission", (0, 0, 0)), float) + emission)

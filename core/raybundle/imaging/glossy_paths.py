@@ -50,7 +50,7 @@ class GlossyEyePaths:
         lobe sample.  Returns (len(idx), 3).
         """
         sc, solver = self.scene, self.solver
-        e = solver.indirect_incoming() + solver.first_shot.E.sum(axis=1)
+        e = solver.received()
         vert = solver.reconstruction.averaged(e) if self.settings.smooth and len(idx) else None
         m, n, wo = g.material[idx], g.normal[idx], g.w_eye[idx]
         w_i, weight = sc.materials.sample_glossy(m, n, wo, u)

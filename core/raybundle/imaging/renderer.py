@@ -657,9 +657,14 @@ class Renderer(ProgressiveImage):
         else:
             vert = self.solver.reconstruction.smooth_and_sharp(e_bar, None) \
                 if self.settings.smooth and np.any(e_bar) else None
-        if not np.any(e_bar) and final is None:
+        if not np.any(e_bar) and final is None and not len(getattr(self.solver, "translucent_sides", ())):
             return out
         kd = sc.materials.diffuse_reflectance
+        # translucent sides: what their patch's other side receives, sent on (smoothed like E_bar)
+        through = through_vert = None
+        if len(getattr(self.solver, "translucent_sides", ())):
+            through = self.solver.translucent_radiance(self.solver.received())
+            through_vert = self.solver.reconstruction.averaged(through) if self.settings.smooth else None
         offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve
         if final is not None:
             shift = self._resolve_rng.random((n, 2))
@@ -683,7 +688,10 @@ class Renderer(ProgressiveImage):
             m = g.material[h]
             w_d = sc.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]))
             scale = self.albedo_scale(g.triangle[h], g.point[h])
-            out[h] += g.weighted(w_d * kd[m] / np.pi * e * (1.0 if scale is None else scale), h)
+            value = w_d * kd[m] / np.pi * e * (1.0 if scale is None else scale)
+            if through is not None:
+                value += self.surface_values(through, through_vert, g.tside[h], g.bary[h])
+            out[h] += g.weighted(value, h)
         return out / k
 
     def _indirect_plan(self, gather, gather_seconds, k):

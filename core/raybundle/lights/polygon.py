@@ -128,8 +128,8 @@ def light_polygon_irradiance(light, points, normals):
         out = np.zeros(len(points))
         exact = np.ones(len(points), bool)
         for rows, nrm, p0, two, box, edges in light.planes:
-            front = (points - p0) @ nrm
-            lit = np.nonzero(front != 0 if two else front > 0)[0]
+            front = (points - p0) @ nrm       # the light's own points (in its plane) get nothing from it
+            lit = np.nonzero(np.abs(front) > light.plane_tol if two else front > light.plane_tol)[0]
             if len(lit) == 0:
                 continue
             if edges is not None:             # (which also drops the points it lies wholly below)

@@ -63,6 +63,10 @@ class MeshLight(_Light):
         self._radius = np.linalg.norm(c - self._centroid[:, None], axis=2).max(axis=1)
         self.planes = light_planes(self)
         self._fans = plane_fans(self)
+        #: points closer than this to the plane of the part sampled lie in it (the light itself, or
+        #: a surface flush with it): it sends them nothing, as a plane sends nothing along itself
+        #: (sampled by solid angle from a point of the light, its outline looked like a hemisphere)
+        self.plane_tol = 1e-5 * self.scene.bounding_sphere[1]
 
     def sample(self, points, u):
         """One sample of the light for each point (N, 3) from uniforms ``u`` (N, 3).
@@ -110,8 +114,12 @@ class MeshLight(_Light):
             y[idx] = points[idx] + t[:, None] * d
             cos_l[idx] = -nd
             e[idx] = total
-        lit = np.where(f["two_sided"][g], cos_l != 0, cos_l > 0)
+        lit = np.where(f["two_sided"][g], cos_l != 0, cos_l > 0) & self._off_plane(normal, y, points)
         return y, (np.abs(e) * lit / f["p"][g])[:, None] * self.radiance
+
+    def _off_plane(self, normal, y, points):
+        """(N,) bool: ``points`` lie off the plane through ``y`` of ``normal`` (N, 3) each."""
+        return np.abs(np.einsum("ij,ij->i", normal, y - points)) > self.plane_tol
 
     def _part_near(self, g, points):
         """(N,) bool: planar part ``g`` (N,) may look large from ``points`` (its solid angle
@@ -160,7 +168,7 @@ class MeshLight(_Light):
             y[near] = points[near] + t[:, None] * d
             cos_l[near] = -nd
             e[near] = omega
-        lit = np.where(self.two_sided[k], cos_l != 0, cos_l > 0)
+        lit = np.where(self.two_sided[k], cos_l != 0, cos_l > 0) & self._off_plane(normal, y, points)
         return y, (np.abs(e) * lit / p_k)[:, None] * self.radiance
 
     def pdf(self, points, k, y):

@@ -116,6 +116,11 @@ class StochasticIterationSolver(Method):
         self.kd_over_pi = kd[pm] / np.pi          # (P, 3)
         if scene.texture is not None:         # a textured patch reflects with its mean albedo
             self.kd_over_pi = self.kd_over_pi * scene.texture.side_means(scene, seed)
+        # translucent sides: kt / pi (S, 3) of the light their patch's other side receives
+        opposite = scene.side_opposite
+        self.translucent_sides = np.nonzero(np.any(mats.translucent[pm] > 0, axis=1) & (opposite >= 0))[0]
+        self.kt_over_pi = mats.translucent[pm[self.translucent_sides]] / np.pi
+        self.side_opposite = opposite
         self.glossy_mask = mats.is_glossy[pm]
         self.layered_sides = np.nonzero(mats.has_layer[pm])[0]      # diffuse lobe under a specular layer
         self.glossy_patches = np.nonzero(self.glossy_mask)[0]
@@ -225,7 +230,7 @@ class StochasticIterationSolver(Method):
             back = -w_i[live][hit]
             xs = sc.side_facing(tri[hit], back)
             ok = xs >= 0
-            e = self.indirect_incoming() + self.first_shot.E.sum(axis=1)
+            e = self.received()
             rows = np.nonzero(hit)[0][ok]
             got[rows] = self.radiance(xs[ok], back[ok], diffuse_incoming=e[xs[ok]], first_shot_emission=False)
         if self.world.emits:
@@ -400,6 +405,11 @@ class StochasticIterationSolver(Method):
         else:
             e = diffuse_incoming
         L += self._diffuse_weighted(self.kd_over_pi[sel] * e, pm, cos)
+        if len(self.translucent_sides):
+            full = self.incoming + fs.E.sum(axis=1) if diffuse_incoming is None else self.received()
+            if cs is not None and diffuse_incoming is None:
+                full = full + cs.E
+            L += self.translucent_radiance(full)[sel]
         g = np.nonzero(self.glossy_mask[sel])[0]
         if len(g) and glossy_as_diffuse:
             pg = patch[g]
@@ -438,8 +448,22 @@ class StochasticIterationSolver(Method):
         view-independent estimate written back as color attributes."""
         cos = np.ones(len(self.normal)) if w_out is None else np.einsum("ij,ij->i", self.normal, w_out)
         le = self.scene.materials.emitted_radiance(self.patch_material, cos)
-        diffuse = self.kd_over_pi * (self.indirect_incoming() + self.first_shot.E.sum(axis=1))
-        return le + self._diffuse_weighted(diffuse, self.patch_material, cos)
+        diffuse = self.kd_over_pi * self.received()
+        out = le + self._diffuse_weighted(diffuse, self.patch_material, cos)
+        return out + self.translucent_radiance(self.received()) if len(self.translucent_sides) else out
+
+    def received(self):
+        """(S, 3) [W/m^2] all the light each side receives, running average: :meth:`indirect_incoming`
+        plus the first shot."""
+        return self.indirect_incoming() + self.first_shot.E.sum(axis=1)
+
+    def translucent_radiance(self, received):
+        """(S, 3) [W m^-2 sr^-1] the radiance each translucent side sends on from what its
+        patch's other side receives (``received`` (S, 3)): ``kt / pi E(opposite)``, 0 elsewhere."""
+        out = np.zeros((len(self.area), 3))
+        t = self.translucent_sides
+        out[t] = self.kt_over_pi * received[self.side_opposite[t]]
+        return out
 
     def indirect_incoming(self):
         """(S, 3) [W/m^2] the view-independent incoming radiance an image resolves per

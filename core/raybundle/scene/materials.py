@@ -85,7 +85,8 @@ NEAR_MIRROR_ROUGHNESS = 0.1
 _MU_TABLE = 65
 #: the transmission parameters and their defaults (an opaque surface)
 _TRANSMISSION_DEFAULTS = {"transmission": 0.0, "transmission_ior": 1.0, "transmission_color": (1.0, 1.0, 1.0),
-                          "transmission_reflection": (1.0, 1.0, 1.0), "transmission_fresnel": 1}  # samples of cos(theta_out) in the directional-albedo tables
+                          "transmission_reflection": (1.0, 1.0, 1.0), "transmission_fresnel": 1,
+                          "translucent": (0.0, 0.0, 0.0)}  # samples of cos(theta_out) in the directional-albedo tables
 
 
 @dataclass
@@ -120,6 +121,9 @@ class MaterialTable:
     transmission_reflection : (M, 3) float  the tint of the light it reflects (Fresnel).
     transmission_fresnel : (M,) int  1 (default): refraction takes 1 - F (Glass BSDF,
         Principled); 0: all that is not totally reflected (Refraction BSDF).
+    translucent : (M, 3) float  kt, Blender's Translucent BSDF: light arriving on one side
+        leaves the other, ``f_t = kt / pi`` for ``w_in`` and ``w_out`` on opposite sides of
+        the surface (light through a curtain or a lampshade); ``(1 - g) kd + kt <= 1``.
     See the module docstring for the equations.
     """
 
@@ -139,6 +143,7 @@ class MaterialTable:
     transmission_color: np.ndarray = None
     transmission_reflection: np.ndarray = None
     transmission_fresnel: np.ndarray = None
+    translucent: np.ndarray = None
     _albedo_tables: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -227,8 +232,9 @@ class MaterialTable:
 
     @property
     def reflects(self) -> np.ndarray:
-        """(M,) bool: the material reflects some light (a diffuse or a glossy lobe)."""
-        return np.any(self.diffuse_reflectance > 0, axis=1) | self.is_glossy
+        """(M,) bool: the material reflects some light (a diffuse or a glossy lobe) or lets it
+        through diffusely (translucent)."""
+        return np.any(self.diffuse_reflectance > 0, axis=1) | self.is_glossy | np.any(self.translucent > 0, axis=1)
 
     @property
     def diffuse_reflectance(self) -> np.ndarray:
@@ -248,7 +254,10 @@ class MaterialTable:
             if (a < 0).any():
                 m = int(np.nonzero((a < 0).reshape(len(a), -1).any(axis=1))[0][0])
                 raise ValueError(f"material {self.names[m]!r}: {k} is negative")
-        for k in ("diffuse", "glossy", "specular_tint", "transmission_color", "transmission_reflection"):
+        arrays["diffuse and translucent"] = arrays["diffuse"] * (1 - arrays["glossy_weight"])[:, None] + arrays[
+            "translucent"]
+        for k in ("diffuse", "glossy", "specular_tint", "transmission_color", "transmission_reflection",
+                  "translucent", "diffuse and translucent"):
             over = arrays[k] > 1.0
             if over.any():
                 m = int(np.nonzero(over.any(axis=1))[0][0])

@@ -374,6 +374,11 @@ class PatchScene:
         return self.n_patches + int(self.patch_two_sided.sum())
 
     @cached_property
+    def side_opposite(self):
+        """(S,) int: the other side of each side's patch, -1 for one-sided patches."""
+        return np.concatenate([self.patch_back_side, np.nonzero(self.patch_two_sided)[0]]).astype(np.int64)
+
+    @cached_property
     def side_patch(self):
         """(S,) int: the patch each side belongs to."""
         return np.concatenate([np.arange(self.n_patches), np.nonzero(self.patch_two_sided)[0]])
