@@ -379,28 +379,45 @@ def _warn_overlaps(corners, tobj, objects, warn):
         warn(f"{len(found) - 3} more pairs of objects overlap in one plane (z-fighting)")
 
 
-#: a transmissive object is flat (a pane) when this share of its area faces one axis
+#: a transmissive object is a set of panes when this share of its area lies in planes that face a
+#: parallel plane of its own, nearer than :data:`PANE_THICKNESS` times their size
 FLAT_GLASS = 0.95
+PANE_THICKNESS = 0.1
+
+
+def _pane_share(n, a, corners):
+    """The share of the area ``a`` (N,) of triangles (normals ``n``, corners (N, 3, 3)) that lies in
+    planes facing a parallel plane of theirs across a thickness below :data:`PANE_THICKNESS` times
+    the plane's size (the two faces of a pane, whose bends cancel)."""
+    key_n = np.round(n * 1e4).astype(np.int64)
+    offset = np.einsum("ij,ij->i", n, corners[:, 0])
+    planes, inv = np.unique(np.column_stack([key_n, np.round(offset * 1e4).astype(np.int64)]), axis=0,
+                            return_inverse=True)
+    inv = inv.reshape(-1)
+    area = np.bincount(inv, a)
+    paired = np.zeros(len(planes), bool)
+    for i, (nx, ny, nz, off) in enumerate(planes):
+        other = np.nonzero((planes[:, 0] == -nx) & (planes[:, 1] == -ny) & (planes[:, 2] == -nz))[0]
+        gap = np.abs(planes[other, 3] + off) * 1e-4
+        paired[i] = bool(np.any(gap < PANE_THICKNESS * np.sqrt(area[i])))
+    return float(area[paired].sum() / max(area.sum(), 1e-300))
 
 
 def _warn_curved_glass(sc, tobj, objects, warn):
-    """One warning naming the objects whose transmissive faces are not flat (their area-weighted
-    normals' largest eigenvalue below :data:`FLAT_GLASS`): light passes them unbent
-    (:mod:`raybundle.scene.transmission`), so their caustic is spread as a soft shadow."""
+    """One warning naming the objects whose transmissive faces are not panes (:func:`_pane_share`
+    below :data:`FLAT_GLASS`): light passes them unbent (:mod:`raybundle.scene.transmission`), so
+    their caustic is spread as a soft shadow."""
     glass = np.nonzero(sc.materials.transmits[sc.triangle_material])[0]
     if len(glass) == 0:
         return
-    src = sc.triangle_source[glass]
-    n, a = sc.triangle_normal[glass], sc.triangle_area[glass]
-    curved = []
-    for o in np.unique(tobj[src]):
-        k = tobj[src] == o
-        s = np.einsum("i,ij,ik->jk", a[k], n[k], n[k]) / max(a[k].sum(), 1e-300)
-        if np.linalg.eigvalsh(s)[-1] < FLAT_GLASS:
-            curved.append(objects[o].original)
+    owner = tobj[sc.triangle_source[glass]]
+    curved = [objects[o].original for o in np.unique(owner)
+              if _pane_share(sc.triangle_normal[glass[owner == o]], sc.triangle_area[glass[owner == o]],
+                             sc.triangle_corners[glass[owner == o]]) < FLAT_GLASS]
     if curved:
-        warn(f"glass that is not flat ({', '.join(repr(c) for c in curved[:3])}{' ...' if len(curved) > 3 else ''}) "
-             "lets light through unbent: its caustics are spread as a soft shadow (the eye sees it refract)")
+        warn(f"glass that is not a pane of parallel faces ({', '.join(repr(c) for c in curved[:3])}"
+             f"{' ...' if len(curved) > 3 else ''}) lets light through unbent: its caustics are spread as a soft "
+             "shadow (the eye sees it refract)")
 
 
 def render_size(render):
