@@ -130,7 +130,7 @@ def test_a_furnace_with_a_glass_box_inside_stays_exact():
     wall = dict(diffuse=tuple(scenes.FURNACE_ALBEDO), emission=scenes.FURNACE_LE)
     mats = MaterialTable.from_list([wall, wall, dict(name="glass", transmission=1.0, transmission_ior=1.5)])
     m = np.concatenate([base.triangle_material, np.full(len(bt), 2)])
-    kept, kd = solver_share(mats)
+    kept, kd, _ = solver_share(mats)
     assert kept[2] == pytest.approx(fresnel_dielectric_fss(1.5)) and np.allclose(kd[2], 1.0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -503,6 +503,11 @@ class Renderer(ProgressiveImage):
             out[hf] += value
             np.bitwise_or.at(self.shadow_flags, pixels[hf], f)
             self.image_rays += self.direct.rays - before
+        kt = self.scene.materials.translucent[g.material[hf]]
+        through = hf[np.any(kt > 0, axis=1)] if self.direct.n_lights else hf[:0]
+        if len(through):          # the first-shot lights on a translucent surface's far side, let through
+            out[through] += self.scene.materials.translucent[g.material[through]] / np.pi * self.direct.far_side_irradiance(
+                g.point[through], g.normal[through], self.rng)
         if self.world_light is not None and len(hf):
             before = self.world_light.rays
             e = self.world_light.irradiance(g.point[hf], g.normal[hf],
@@ -662,8 +667,8 @@ class Renderer(ProgressiveImage):
         kd = sc.materials.diffuse_reflectance
         # translucent sides: what their patch's other side receives, sent on (smoothed like E_bar)
         through = through_vert = None
-        if len(getattr(self.solver, "translucent_sides", ())):
-            through = self.solver.translucent_radiance(self.solver.received())
+        if len(getattr(self.solver, "translucent_sides", ())):      # the first shot's part: _shade's
+            through = self.solver.translucent_radiance(self.solver.indirect_incoming())
             through_vert = self.solver.reconstruction.averaged(through) if self.settings.smooth else None
         offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve
         if final is not None:

@@ -93,12 +93,13 @@ class DirectLighting:
     def n_lights(self):
         return len(self.area_lights) + len(self.point_lights)
 
-    def light_samples_at(self, points, normals, light, u, unshadowed=False):
+    def light_samples_at(self, points, normals, light, u, unshadowed=False, crossed=None):
         """One sample of every point's irradiance from one light.
 
         Returns ``(E (N,3) [W/m^2], travel (N,3), cos_x (N,))`` where E already
         includes visibility, so ``E f(travel, w_out)`` is the reflected radiance;
-        with ``unshadowed``, also E without the visibility test (4th item).
+        with ``unshadowed``, also E without the visibility test (4th item).  ``crossed``: an
+        (N,) bool array to mark the points whose shadow ray passed a cut-out or glass.
         """
         y, e = light.sample(points, u)
         v = y - points
@@ -116,8 +117,11 @@ class DirectLighting:
             seg = y[live] - org
             dist = np.linalg.norm(seg, axis=1)
             self.rays += int(live.sum())
+            through = None if crossed is None else np.zeros(len(org), bool)
             blocked = self.tracer.occluded(org, seg / np.maximum(dist, 1e-300)[:, None],
-                                           np.maximum(dist - 2 * eps, 0.0))
+                                           np.maximum(dist - 2 * eps, 0.0), crossed=through)
+            if through is not None:
+                crossed[np.nonzero(live)[0][through]] = True
             idx = np.nonzero(live)[0][blocked]
             e[idx] = 0.0
         return (e, -w, cos_x, free) if unshadowed else (e, -w, cos_x)
@@ -349,11 +353,13 @@ class DirectLighting:
 
             def shadow_sums(p, nrm, sh, first, last):
                 """Sums of the shadowed and unshadowed estimates of samples first..last-1,
-                and whether some sample was seen and some blocked."""
+                and whether some sample was seen and some blocked or passed a cut-out or glass (whose
+                outcome was random: a point whose few samples all passed by chance would keep them)."""
                 seen, total = np.zeros((len(p), 3)), np.zeros((len(p), 3))
                 lit, shade = np.zeros(len(p), bool), np.zeros(len(p), bool)
                 for s in range(first, last):
-                    e, _, _, free = self.light_samples_at(p, nrm, light, (sh + s * alpha) % 1.0, unshadowed=True)
+                    e, _, _, free = self.light_samples_at(p, nrm, light, (sh + s * alpha) % 1.0, unshadowed=True,
+                                                          crossed=shade)
                     seen += e
                     total += free
                     reached, blocked = self._seen_blocked(e, free)
@@ -377,6 +383,15 @@ class DirectLighting:
                 ratio = np.where(total > 0, seen / np.maximum(total, 1e-300), 0.0)
                 out += np.where(ok[:, None], exact_i[:, None] * np.asarray(light.radiance, float) * ratio,
                                 seen / n_pts[:, None])
+        return out
+
+    def far_side_irradiance(self, points, normals, rng):
+        """(N, 3) [W/m^2] one sample per light of the first-shot lights' direct irradiance on the
+        far side of surfaces at ``points`` seen along ``normals`` (N, 3): what a translucent
+        surface lets through (shadow rays from just behind it)."""
+        out = np.zeros((len(points), 3))
+        for light in self.light_list():
+            out += self.light_samples_at(points, -normals, light, rng.random((len(points), 3)))[0]
         return out
 
     @staticmethod

@@ -108,9 +108,13 @@ class StochasticIterationSolver(Method):
             cover = tracer.cutouts.triangle_coverage(scene, seed)[scene.tside_triangle]
             self.tside_open_area *= np.maximum(cover, 1e-6)      # a side cut out everywhere receives nothing
         kd = mats.diffuse_reflectance
+        #: (S, 3) or None: kd / pi of the light a transmissive side's interface reflects, which
+        #: leaves out the first shot's (a caustic: :mod:`raybundle.scene.transmission`)
+        self.mirror_over_pi = None
         if tracer.glass is not None:          # glass: the rays it does not let through, as a cut-out's
-            kept, kd = solver_share(mats)
+            kept, kd, mirror = solver_share(mats)
             self.tside_open_area *= kept[scene.triangle_material[scene.tside_triangle]]
+            self.mirror_over_pi = mirror[pm] / np.pi
         self.area = np.bincount(scene.tside_side, self.tside_open_area, minlength=scene.n_sides)
         self.reconstruction = LinearReconstruction(scene, self.tside_open_area)
         self.kd_over_pi = kd[pm] / np.pi          # (P, 3)
@@ -405,6 +409,8 @@ class StochasticIterationSolver(Method):
         else:
             e = diffuse_incoming
         L += self._diffuse_weighted(self.kd_over_pi[sel] * e, pm, cos)
+        if self.mirror_over_pi is not None and diffuse_incoming is None:    # the iterate sent on
+            L -= self.mirror_over_pi[sel] * (fs.E[sel].sum(axis=1) + (0.0 if cs is None else cs.E[sel]))
         if len(self.translucent_sides):
             full = self.incoming + fs.E.sum(axis=1) if diffuse_incoming is None else self.received()
             if cs is not None and diffuse_incoming is None:

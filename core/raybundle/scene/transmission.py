@@ -23,7 +23,9 @@ It is used in two ways:
   glass object casts its transmittance as a soft shadow where Cycles focuses a caustic.
   What a ray does not pass it meets (:meth:`~raybundle.tracing.visibility.RayTracer.first_hit`):
   the patches of a transmissive surface hold the light it reflects, as a cut-out's
-  (:func:`solver_share`): spread over the hemisphere, where the eye sees it mirrored.
+  (:func:`solver_share`): spread over the hemisphere, where the eye sees it mirrored.  What it
+  reflects of the first-shot lights' direct light is a caustic (a lamp's image in the pane,
+  thrown on the room): left out, as the light of the small lights through curved glass.
 * **by Fresnel** (:func:`scatter`), for the eye's paths (the image): at each interface the
   eye path is reflected with probability ``F`` (weight the reflection tint) or refracted
   (weight the refraction tint), through up to ``transmission_depth`` interfaces, as Cycles
@@ -86,7 +88,8 @@ def scatter(materials, mat, travel, geometric, shading, u):
 
 def solver_share(materials):
     """Per material, what the solver's patches of a transmissive surface take: ``(kept (M,),
-    reflectance (M, 3))``.
+    reflectance (M, 3), mirror (M, 3))``, ``mirror`` the part of the reflectance that is the
+    interface's (``w_t F_avg`` times the reflection tint, over ``kept``).
 
     ``kept`` = the cosine-weighted mean over the hemisphere of the probability that a ray
     stops there, ``1 - w_t (1 - F_avg) mean(tint)`` (``F_avg`` = 2 int F mu dmu,
@@ -103,5 +106,6 @@ def solver_share(materials):
                      fresnel_dielectric_fss(np.maximum(eta, 1.0 / eta)), 0.0)
     kept = 1.0 - w * (1.0 - f_avg) * materials.transmission_color.mean(axis=1)
     kept = np.maximum(kept, 1e-6)
-    reflected = materials.diffuse_reflectance + (w * f_avg)[:, None] * materials.transmission_reflection
-    return kept, np.clip(reflected / kept[:, None], 0.0, 1.0)
+    mirror = (w * f_avg)[:, None] * materials.transmission_reflection / kept[:, None]
+    reflected = materials.diffuse_reflectance / kept[:, None] + mirror
+    return kept, np.clip(reflected, 0.0, 1.0), np.minimum(mirror, 1.0)

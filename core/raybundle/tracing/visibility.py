@@ -205,9 +205,11 @@ class RayTracer:
         t = np.concatenate([p[1] for p in parts]).astype(float)
         return tri, t, np.concatenate([p[2] for p in parts]), np.concatenate([p[3] for p in parts])
 
-    def occluded(self, origins, directions, distances):
+    def occluded(self, origins, directions, distances, crossed=None):
         """(N,) bool: is anything hit between ``origins`` and ``distances`` along ``directions``?
-        (A cut-out with the probability of its coverage where the ray meets it.)"""
+        (A cut-out with the probability of its coverage where the ray meets it, a transmissive
+        surface with the probability that the ray does not pass it.)  ``crossed``: an (N,) bool
+        array to mark the rays that passed such a surface (the outcome was random)."""
         origins = np.asarray(origins, float)
         directions = np.broadcast_to(np.asarray(directions, float), origins.shape)
         dist = np.asarray(distances, np.float32)
@@ -222,6 +224,8 @@ class RayTracer:
             o, d = origins[sel], directions[sel]
             tri, t, _, _ = self._through_surfaces(o, d, *self._first_hits(o, d))
             hit[sel] = (tri >= 0) & (t < dist[sel])
+            if crossed is not None:
+                crossed[sel[~hit[sel]]] = True
         return hit
 
     def open_fraction(self, points_per_triangle=32, refine_points=512, seed=0):
