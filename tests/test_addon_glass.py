@@ -180,7 +180,7 @@ def test_lightmaps_under_a_glass_pane_and_of_a_translucent_sheet_are_cycles_bake
     iterations) against Cycles' Combined bake (4096 samples, whose light through the glass is found
     by its BSDF's rays: 8 x 8 blocks of it differ by up to 3%), block by block.  The plate under the
     pane gets the lamp through both faces; the sheet sends on the lamp's light on its far side."""
-    from addon_helpers import plane_with_uvs
+    from addon_helpers import cycles_bake, lightmap_blocks, plane_with_uvs
     from cycles_reference import cycles_settings
 
     from raybundle.util.io import read_exr
@@ -203,24 +203,9 @@ def test_lightmaps_under_a_glass_pane_and_of_a_translucent_sheet_are_cycles_bake
     for name in ("plate", "sheet"):
         ob = bpy.data.objects[name]
         ours = read_exr(out.lightmaps[name])[::-1]              # rows bottom-up, as Image.pixels
-        nt = ob.data.materials[0].node_tree
-        target = bpy.data.images.new(f"cycles {name}", 32, 32, float_buffer=True)
-        node = nt.nodes.new("ShaderNodeTexImage")
-        node.image = target
-        nt.nodes.active = node
-        for o in bpy.context.scene.objects:
-            o.select_set(o is ob)
-        bpy.context.view_layer.objects.active = ob
-        bpy.ops.object.bake(type="COMBINED", margin=0, use_clear=True, target="IMAGE_TEXTURES")
-        px = np.empty(32 * 32 * 4, np.float32)
-        target.pixels.foreach_get(px)
-        ref = px.reshape(32, 32, 4)[..., :3]
-
-        def blocks(x):
-            return x.reshape(8, 4, 8, 4, 3).mean(axis=(1, 3))
-
-        rel[name] = blocks(ours) / blocks(ref) - 1
-    print({k: (float(r.mean()), float(np.sqrt((r ** 2).mean())), float(np.abs(r).max())) for k, r in rel.items()})
-    for name, (mean, rms, most) in {"plate": (0.02, 0.05, 0.12), "sheet": (0.03, 0.06, 0.15)}.items():
+        rel[name] = lightmap_blocks(ours) / lightmap_blocks(cycles_bake(ob, 32)) - 1
+    # measured 2026-11-28: plate mean 0.7%, RMS 3.4%, largest 10%; sheet 0.04%, 0.08%, 0.35% (without
+    # the penumbra samples where shadow rays passed the glass: plate mean +4.1%; translucency: -100%)
+    for name, (mean, rms, most) in {"plate": (0.02, 0.05, 0.12), "sheet": (0.01, 0.02, 0.05)}.items():
         r = rel[name]
         assert abs(r.mean()) < mean and np.sqrt((r ** 2).mean()) < rms and np.abs(r).max() < most, (name, r)
