@@ -213,11 +213,11 @@ def test_node_trees_flatten_to_lambert_ggx(fresh):
     nt.links.new(d2.outputs[0], add.inputs[1])
     nt.links.new(add.outputs[0], out.inputs["Surface"])
     hot = node_material("hot", color=(1.5, 0.5, 0.5))                       # albedo > 1
-    glass = new_mat("glass")
-    glass.diffuse_color = (0.2, 0.4, 0.6, 1)
-    nt, out = shader_tree(glass)
-    nt.links.new(nt.nodes.new("ShaderNodeBsdfTranslucent").outputs[0], out.inputs["Surface"])
-    for k, mat in enumerate((mix, glow, hot, glass)):
+    toon = new_mat("toon")
+    toon.diffuse_color = (0.2, 0.4, 0.6, 1)
+    nt, out = shader_tree(toon)
+    nt.links.new(nt.nodes.new("ShaderNodeBsdfToon").outputs[0], out.inputs["Surface"])
+    for k, mat in enumerate((mix, glow, hot, toon)):
         v, f = quad()
         add_object(f"o{k}", v, f, [mat], location=(2 * k, 0, 0))
     ex = export()
@@ -230,10 +230,10 @@ def test_node_trees_flatten_to_lambert_ggx(fresh):
     assert mt.roughness[k] == pytest.approx(0.3)
     assert np.allclose(mt.emission[i["glow"]], [4.0, 2.0, 1.0]) and np.allclose(mt.diffuse[i["glow"]], 0.5)
     assert np.allclose(mt.diffuse[i["hot"]], [1.0, 0.5, 0.5])
-    assert np.allclose(mt.diffuse[i["glass"]], [0.2, 0.4, 0.6]) and mt.glossy_weight[i["glass"]] == 0
+    assert np.allclose(mt.diffuse[i["toon"]], [0.2, 0.4, 0.6]) and mt.glossy_weight[i["toon"]] == 0
     w = " | ".join(ex.warnings)
     assert "'hot'" in w and "albedo > 1" in w
-    assert sum("'glass'" in x for x in ex.warnings) == 1 and "Translucent" in w and "viewport color" in w
+    assert sum("'toon'" in x for x in ex.warnings) == 1 and "Toon BSDF" in w and "viewport color" in w
     mt.validate()
     assert isinstance(mt, MaterialTable)
 

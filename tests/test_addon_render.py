@@ -606,18 +606,18 @@ def test_errors_are_one_line_reports(fresh, tmp_path, case, message):
 
 def test_unsupported_node_renders_with_a_warning_naming_the_material(fresh, tmp_path):
     small_lit_scene()
-    curtain = new_mat("curtain")
-    curtain.diffuse_color = (0.5, 0.6, 0.7, 1)
-    nt = curtain.node_tree
+    toon = new_mat("toon")
+    toon.diffuse_color = (0.5, 0.6, 0.7, 1)
+    nt = toon.node_tree
     nt.nodes.clear()
-    nt.links.new(nt.nodes.new("ShaderNodeBsdfTranslucent").outputs[0],
+    nt.links.new(nt.nodes.new("ShaderNodeBsdfToon").outputs[0],
                  nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
     v, f = box((-0.2, -0.2, 0), (0.2, 0.2, 0.4))
-    add_object("curtain block", v, f, [curtain])
+    add_object("toon block", v, f, [toon])
     img = render_raybundle(tmp_path / "w.exr", iterations=2)
     assert np.isfinite(img).all()
-    w = [x for x in last_run()["warnings"] if "'curtain'" in x]
-    assert len(w) == 1 and "Translucent BSDF" in w[0] and "viewport color" in w[0]
+    w = [x for x in last_run()["warnings"] if "'toon'" in x]
+    assert len(w) == 1 and "Toon BSDF" in w[0] and "viewport color" in w[0]
 
 
 def test_resolution_percentage_border_and_view_layers(fresh, tmp_path):
