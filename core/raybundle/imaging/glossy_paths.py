@@ -97,7 +97,7 @@ class GlossyEyePaths:
         values ``vert`` or flat when None); at glossy hits the path goes on along
         the hit's glossy lobe, up to ``glossy_gather_depth`` rays in all.  With
         ``light_mis = (materials, w_out)`` of the glossy lobes the rays were drawn from,
-        first rays that meet a first-shot mesh light add its emission, MIS-weighted
+        rays that meet a first-shot mesh light or an area lamp add its emission, MIS-weighted
         against the light samples (:meth:`~raybundle.lights.direct.DirectLighting.lobe_hits_light`);
         with ``world_mis = (p_w, p_g)`` (N,) each, the world sampling's and the lobe's densities of
         the first rays, those that leave the scene see the world weighted ``p_g^2 / (p_g^2 + p_w^2)``
@@ -117,6 +117,13 @@ class GlossyEyePaths:
             tri, t, bu, bv = self.tracer.first_hit(pts[live] + n[live] * self.tracer.eps, w_i[live])
             self.rays += len(live)
             hit = tri >= 0
+            if light_mis is not None and len(live):      # the lobe's ray meets a lamp (MIS)
+                m_from, wo_from = (light_mis[0], light_mis[1]) if bounce == 0 else (m, wo)
+                dist = np.where(hit, t, np.inf)
+                le = self.direct.lobe_hits_light(pts[live], m_from[live], n[live], wo_from[live], w_i[live], tri,
+                                                 pts[live] + np.where(hit, t, 0.0)[:, None] * w_i[live],
+                                                 self.settings.light_samples, distance=dist)
+                np.add.at(out, pix[live], throughput[live] * le)
             if sc.world.emits:      # paths that leave the scene see the world
                 gone = live[~hit]
                 seen = throughput[gone] * sc.world.radiance(w_i[gone])
@@ -124,11 +131,6 @@ class GlossyEyePaths:
                     seen *= DirectLighting.mis_weight(world_mis[1][gone], world_mis[0][gone])[:, None]
                 np.add.at(out, pix[gone], seen)
             live, tri, t = live[hit], tri[hit], t[hit]
-            if light_mis is not None and len(live):      # the lobe's ray meets a mesh light (MIS)
-                m_from, wo_from = (light_mis[0], light_mis[1]) if bounce == 0 else (m, wo)
-                le = self.direct.lobe_hits_light(pts[live], m_from[live], n[live], wo_from[live], w_i[live], tri,
-                                                 pts[live] + t[:, None] * w_i[live], self.settings.light_samples)
-                out[live] += throughput[live] * le
             bary = np.stack([1 - bu - bv, bu, bv], axis=1)[hit]
             ts = sc.seen_tside(tri, w_i[live])
             patch = sc.tside_side[ts]

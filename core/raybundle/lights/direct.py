@@ -256,7 +256,7 @@ class DirectLighting:
             base, picked = reach[li], 1.0
             if chance is not None:                 # the lamps chosen by their contribution
                 c_l = chance[li]
-                if mis is not None and isinstance(light, MeshLight):
+                if mis is not None and isinstance(light, (MeshLight, ShapeLight)):
                     c_l = np.where(mis[base], 1.0, c_l)    # the lobe's MIS weight assumes it is always taken
                 keep = (select[base] + li * _GOLDEN) % 1.0 < c_l
                 base, picked = base[keep], 1.0 / c_l[keep]
@@ -307,7 +307,7 @@ class DirectLighting:
                                 diffuse_scale=None if scale is None else scale[live])
                     if f_d is not None:                # the control variate took the diffuse part
                         f -= f_d[live]
-                    if mis is not None and isinstance(light, MeshLight):
+                    if mis is not None and isinstance(light, (MeshLight, ShapeLight)):
                         sel = np.nonzero(mis[pt[live]])[0]
                         if len(sel):
                             i = np.nonzero(live)[0][sel]
@@ -400,13 +400,25 @@ class DirectLighting:
         a2, b2 = p_a * p_a, p_b * p_b
         return np.where(a2 > 0, a2 / np.maximum(a2 + b2, 1e-300), 0.0)
 
-    def lobe_hits_light(self, origins, mats, normals, w_out, w_in, triangles, hits, samples_per_light=1):
+    def lobe_hits_light(self, origins, mats, normals, w_out, w_in, triangles, hits, samples_per_light=1,
+                        distance=None):
         """Emitted radiance (N, 3) of first-shot mesh lights met by lobe-sampled rays,
         MIS-weighted against light sampling (:meth:`reflected_radiance` with ``mis``):
         ``Le w_g``, ``w_g = p_g^2 / (p_g^2 + (n p_l)^2)``.  ``origins``, ``normals``,
         ``w_out``, ``w_in`` (N, 3) at the surface the rays leave along ``w_in``;
-        ``triangles`` (N,) the triangles met (-1 none) at points ``hits`` (N, 3)."""
+        ``triangles`` (N,) the triangles met (-1 none) at points ``hits`` (N, 3).  With
+        ``distance`` (N,) [m] (inf where nothing is met), also the area lights (not geometry)
+        the rays meet before it (:meth:`~raybundle.lights.sources.ShapeLight.hit`)."""
         out = np.zeros((len(origins), 3))
+        for light in self.area_lights if distance is not None else ():
+            if not isinstance(light, ShapeLight):
+                continue
+            met, y = light.hit(origins, w_in, distance)
+            i = np.nonzero(met)[0]
+            if len(i):
+                p_l = samples_per_light * light.pdf(origins[i], y[i])
+                p_g = self.scene.materials.glossy_pdf(mats[i], normals[i], w_in[i], w_out[i])
+                out[i] += self.mis_weight(p_g, p_l)[:, None] * light.radiance
         li = np.where(triangles >= 0, self.triangle_light[np.maximum(triangles, 0)], -1)
         for l_id in np.unique(li[li >= 0]):
             light = self.area_lights[l_id]
@@ -416,5 +428,5 @@ class DirectLighting:
             lit = np.where(light.two_sided[self.triangle_light_k[tri]], cos_l != 0, cos_l > 0)
             p_l = samples_per_light * light.pdf(origins[i], self.triangle_light_k[tri], hits[i])
             p_g = self.scene.materials.glossy_pdf(mats[i], normals[i], w_in[i], w_out[i])
-            out[i] = (lit * self.mis_weight(p_g, p_l))[:, None] * light.radiance
+            out[i] += (lit * self.mis_weight(p_g, p_l))[:, None] * light.radiance
         return out

@@ -344,6 +344,35 @@ class ShapeLight(_Light):
         zdir = np.where(flip[:, None], -ez, ez)
         return points + xu[:, None] * ex + yv[:, None] * ey + z0[:, None] * zdir, omega
 
+    def hit(self, origins, directions, t_max):
+        """(N,) bool: rays from ``origins`` along unit ``directions`` (N, 3) meet the light's
+        emitting side before ``t_max`` (N,) [m], and the points they meet (N, 3)."""
+        denom = directions @ self.normal
+        t = ((self.center - origins) @ self.normal) / np.where(denom < 0, denom, -1.0)
+        y = origins + t[:, None] * directions
+        a = (y - self.center) @ self.axis_u / (self.axis_u @ self.axis_u)
+        b = (y - self.center) @ self.axis_v / (self.axis_v @ self.axis_v)
+        inside = (a * a + b * b <= 1.0) if self.ellipse else ((np.abs(a) <= 1.0) & (np.abs(b) <= 1.0))
+        return (denom < 0) & (t > 0) & (t < t_max) & inside, y
+
+    def pdf(self, points, y):
+        """Density [1/sr] with which :meth:`sample` draws, from ``points`` (N, 3), the direction
+        to ``y`` (N, 3) on the light: ``1 / O`` where it samples the solid angle O, else
+        ``r^2 / (A cos_l)``."""
+        v = y - points
+        r2 = np.einsum("ij,ij->i", v, v)
+        cos_l = np.maximum(-(v @ self.normal) / np.sqrt(np.maximum(r2, 1e-300)), 1e-300)
+        out = r2 / (self.area * cos_l)
+        if not self.ellipse:
+            radius = max(np.linalg.norm(self.axis_u + self.axis_v), np.linalg.norm(self.axis_u - self.axis_v))
+            gap = np.maximum(np.linalg.norm(points - self.center, axis=1) - radius, 0.0)
+            near = np.nonzero((self.area >= MeshLight.MIN_SOLID_ANGLE * gap * gap)
+                              & ((points - self.center) @ self.normal > 0))[0]
+            if len(near):
+                _, omega = self._sample_solid_angle(points[near], np.zeros((len(near), 2)))
+                out[near] = 1.0 / np.maximum(omega, 1e-300)
+        return out
+
     def in_front(self, origin, normal):
         corners = [self.center + a * self.axis_u + b * self.axis_v for a in (-1, 1) for b in (-1, 1)]
         return np.any([np.einsum("ij,ij->i", c - origin, normal) > 0 for c in corners], axis=0)
