@@ -25,7 +25,7 @@ It is used in two ways:
   the patches of a transmissive surface hold the light it reflects, as a cut-out's
   (:func:`solver_share`): spread over the hemisphere, where the eye sees it mirrored.  What it
   reflects of the first-shot lights' direct light is a caustic (a lamp's image in the pane,
-  thrown on the room): left out, as the light of the small lights through curved glass.
+  thrown on the room): left out.
 * **by Fresnel** (:func:`scatter`), for the eye's paths (the image): at each interface the
   eye path is reflected with probability ``F`` (weight the reflection tint) or refracted
   (weight the refraction tint), through up to ``transmission_depth`` interfaces, as Cycles
