@@ -180,10 +180,10 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, ga
     if sc.texture is not None:                  # the texel's albedo: texture detail stays sharp
         kd = kd * sc.texture.at(sc.triangle_source[tri], points.point[idx])
     out[idx] += mats.diffuse_weight(m, ones) * kd / np.pi * e
-    kt = mats.translucent[m]
     if len(getattr(solver, "translucent_sides", ())):      # what a translucent side lets through
         through = solver.translucent_radiance(solver.indirect_incoming())
         out[idx] += rec.at(rec.averaged(through), ts, points.bary[idx])
+        kt = mats.translucent[m]
         far = np.nonzero(np.any(kt > 0, axis=1))[0]
         if direct.n_lights and len(far):               # the first-shot lights on its far side
             out[idx[far]] += kt[far] / np.pi * direct.irradiance(points.point[idx[far]], -n[far], rng,

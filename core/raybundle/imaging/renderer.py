@@ -504,10 +504,10 @@ class Renderer(ProgressiveImage):
             np.bitwise_or.at(self.shadow_flags, pixels[hf], f)
             self.image_rays += self.direct.rays - before
         kt = self.scene.materials.translucent[g.material[hf]]
-        through = hf[np.any(kt > 0, axis=1)] if self.direct.n_lights else hf[:0]
-        if len(through):          # the first-shot lights on a translucent surface's far side, let through
-            out[through] += self.scene.materials.translucent[g.material[through]] / np.pi * self.direct.far_side_irradiance(
-                g.point[through], g.normal[through], self.rng)
+        far = np.nonzero(np.any(kt > 0, axis=1))[0] if self.direct.n_lights else []
+        if len(far):          # the first-shot lights on a translucent surface's far side, let through
+            t = hf[far]
+            out[t] += kt[far] / np.pi * self.direct.far_side_irradiance(g.point[t], g.normal[t], self.rng)
         if self.world_light is not None and len(hf):
             before = self.world_light.rays
             e = self.world_light.irradiance(g.point[hf], g.normal[hf],

@@ -121,10 +121,8 @@ class StochasticIterationSolver(Method):
         if scene.texture is not None:         # a textured patch reflects with its mean albedo
             self.kd_over_pi = self.kd_over_pi * scene.texture.side_means(scene, seed)
         # translucent sides: kt / pi (S, 3) of the light their patch's other side receives
-        opposite = scene.side_opposite
-        self.translucent_sides = np.nonzero(np.any(mats.translucent[pm] > 0, axis=1) & (opposite >= 0))[0]
+        self.translucent_sides = np.nonzero(np.any(mats.translucent[pm] > 0, axis=1) & (scene.side_opposite >= 0))[0]
         self.kt_over_pi = mats.translucent[pm[self.translucent_sides]] / np.pi
-        self.side_opposite = opposite
         self.glossy_mask = mats.is_glossy[pm]
         self.layered_sides = np.nonzero(mats.has_layer[pm])[0]      # diffuse lobe under a specular layer
         self.glossy_patches = np.nonzero(self.glossy_mask)[0]
@@ -411,11 +409,10 @@ class StochasticIterationSolver(Method):
         L += self._diffuse_weighted(self.kd_over_pi[sel] * e, pm, cos)
         if self.mirror_over_pi is not None and diffuse_incoming is None:    # the iterate sent on
             L -= self.mirror_over_pi[sel] * (fs.E[sel].sum(axis=1) + (0.0 if cs is None else cs.E[sel]))
-        if len(self.translucent_sides):
-            full = self.incoming + fs.E.sum(axis=1) if diffuse_incoming is None else self.received()
-            if cs is not None and diffuse_incoming is None:
-                full = full + cs.E
-            L += self.translucent_radiance(full)[sel]
+        if len(self.translucent_sides):       # the iterate's light on the other side, or the running average's
+            source = self.received() if diffuse_incoming is not None else (
+                self.incoming + fs.E.sum(axis=1) + (0.0 if cs is None else cs.E))
+            L += self.translucent_radiance(source)[sel]
         g = np.nonzero(self.glossy_mask[sel])[0]
         if len(g) and glossy_as_diffuse:
             pg = patch[g]
@@ -454,9 +451,9 @@ class StochasticIterationSolver(Method):
         view-independent estimate written back as color attributes."""
         cos = np.ones(len(self.normal)) if w_out is None else np.einsum("ij,ij->i", self.normal, w_out)
         le = self.scene.materials.emitted_radiance(self.patch_material, cos)
-        diffuse = self.kd_over_pi * self.received()
-        out = le + self._diffuse_weighted(diffuse, self.patch_material, cos)
-        return out + self.translucent_radiance(self.received()) if len(self.translucent_sides) else out
+        received = self.received()
+        out = le + self._diffuse_weighted(self.kd_over_pi * received, self.patch_material, cos)
+        return out + self.translucent_radiance(received) if len(self.translucent_sides) else out
 
     def received(self):
         """(S, 3) [W/m^2] all the light each side receives, running average: :meth:`indirect_incoming`
@@ -468,7 +465,7 @@ class StochasticIterationSolver(Method):
         patch's other side receives (``received`` (S, 3)): ``kt / pi E(opposite)``, 0 elsewhere."""
         out = np.zeros((len(self.area), 3))
         t = self.translucent_sides
-        out[t] = self.kt_over_pi * received[self.side_opposite[t]]
+        out[t] = self.kt_over_pi * received[self.scene.side_opposite[t]]
         return out
 
     def indirect_incoming(self):

@@ -110,9 +110,9 @@ class RayTracer:
         #: (T,) bool triangles light passes straight through (:mod:`raybundle.scene.transmission`), or None
         glass = scene.materials.transmits[scene.triangle_material] if len(scene.triangles) else None
         self.glass = glass if glass is not None and glass.any() else None
-        self._through = (None if self._cut is None and self.glass is None else
-                         (self._cut if self.glass is None else
-                          self.glass if self._cut is None else self._cut | self.glass))
+        masks = [m for m in (self._cut, self.glass) if m is not None]
+        #: (T,) bool triangles a ray may pass (cut-outs and glass), or None
+        self._through = np.logical_or.reduce(masks) if masks else None
         self._queries = 0
 
     def close(self):
