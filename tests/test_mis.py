@@ -153,6 +153,23 @@ def test_mis_cuts_the_variance_of_a_sharp_highlight(lamp):
     assert y_mis.var(axis=0).sum() < 0.1 * y_ls.var(axis=0).sum()
 
 
+@pytest.mark.parametrize("lamp", ["mesh", "area"])
+def test_the_lamps_a_glossy_lobe_meets_count_over_the_solvers_restart(lamp):
+    """What the eye's glossy paths take from the lamps (and the world) does not depend on the
+    solver's iterations: it counts with the pass, which the restart of the solver's running
+    average after its burn-in keeps; only what the paths read from the solver is dropped there.
+    Here (a plane with no diffuse lobe under a lamp, black world) that is nothing: the whole
+    highlight is in the passes' sum.  The old renderer put it with the solver's part and dropped
+    every pass before the restart (the full-material hall of the interior bench: 2/3 of its
+    passes at 60 s)."""
+    r = pipeline.make_renderer(lamp_over_plane(0.08, lamp), RenderSettings(seed=3))
+    r.run(iterations=r.solver.burn_in + 4)
+    r.tracer.close()
+    assert 0 < r.gather_passes < r.passes
+    np.testing.assert_array_equal(r.gather_sum, 0.0)
+    assert r.pass_sum.sum() > 0
+
+
 def plane_under_a_bright_sky_patch(roughness=0.6):
     """A glossy plane (4 x 4 m) under a dim world (0.05) with one small patch of sky 40 times
     as bright (4 x 4 pixels of 64 x 128, about 11 degrees across; too faint to be taken out as a

@@ -195,3 +195,35 @@ def test_a_furnace_with_a_two_sided_emitting_sheet_inside_stays_exact(through):
     assert_converged(patch, sc.analytic_radiance, max_se=0.02)
     assert_converged(img, sc.analytic_radiance, max_se=0.02)
     r.tracer.close()
+
+
+def test_area_lamps_are_seen_through_and_in_a_pane():
+    """A camera looks through a pane 5 mm thick (IOR 1.5) at an area lamp behind it (Le 5), and
+    a second lamp behind the camera (Le 3) faces the pane: Blender's area lamps are not seen by
+    the camera's own rays but are by the glossy and transmission rays a pane turns them into, so
+    each pixel sees ``5 T^2 / (1 - R^2) + 3 R (1 + T^2 / (1 - R^2))`` (T = 1 - R, R Fresnel at
+    the pixel's angle).  Within 4.5 SE of 64 G-buffers (sub-pixel jitter and Fresnel choices).
+    The old eye paths met no lamps: black."""
+    from raybundle.scene.model import AreaLights
+
+    pv, pt = _box((-4, -4, -1.005), (4, 4, -1.0))
+    area = AreaLights(center=[[0, 0, -2.0], [0, 0, 1.0]], axis_u=[[4.0, 0, 0]] * 2, axis_v=[[0, 4.0, 0]] * 2,
+                      normal=[[0, 0, 1.0], [0, 0, -1.0]], shape=[0, 0], radiance=[[5.0] * 3, [3.0] * 3])
+    cam = Camera.look_at((0, 0, 0), (0, 0, -1), (0, 1, 0), 50, 36, (16, 16))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sc = build_scene(pv, pt, np.zeros(len(pt), int), _glass(), camera=cam, area_lights=area, two_sided=True)
+    r = pipeline.make_renderer(pipeline.prepare(sc, patches=50), RenderSettings(seed=4))
+    seen = []
+    for _ in range(64):
+        g = r.trace_gbuffer(np.full((256, 2), 0.5))
+        seen.append(r.seen_radiance(g)[0][:, 0])
+    r.tracer.close()
+    seen = np.array(seen)
+    _, d = cam.rays(*(np.mgrid[0:16, 0:16][::-1].reshape(2, -1) + 0.5))
+    R = fresnel_dielectric_cos(np.abs(d[:, 2]), 1.5)
+    T = 1.0 - R
+    exact = 5 * T ** 2 / (1 - R ** 2) + 3 * R * (1 + T ** 2 / (1 - R ** 2))
+    ratio = seen.mean(axis=1) / exact.mean()          # per G-buffer, over the image
+    mean, se = ratio.mean(), ratio.std(ddof=1) / np.sqrt(len(ratio))
+    assert se < 0.01 and abs(mean - 1.0) < 4.5 * se + 1e-3, (mean, se)

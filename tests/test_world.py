@@ -257,10 +257,13 @@ def test_the_pixels_sample_the_world_where_it_is_the_only_light():
     assert RenderSettings().world_samples == -1
 
 
-def test_sides_much_smaller_than_a_bundle_cell_send_their_average():
+def test_sides_much_smaller_than_a_bundle_cell_gather_and_send_their_average():
     """A side far smaller than a bundle line's cross-section gets cell / area times its share
     when a line meets it; it sends its running average, not that spike (the living room of the
-    interior bench had sides a thousandth of a cell and its image went 70 times too bright)."""
+    interior bench had sides a thousandth of a cell and its image went 70 times too bright), and
+    gathers its light by rays of its own: the speck's upper side, which sees only the sky, holds
+    pi L_up exactly (each gather ray meets the sky above).  By the bundles alone, a line met the
+    speck (1e-5 of a cell) in none of the 320 directions or, rarely, brought 1e5 times too much."""
     v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0], [0, 0, 0.5], [0.001, 0, 0.5], [0, 0.001, 0.5]],
                  float)
     sc = build_scene(v, [[0, 1, 2], [0, 2, 3], [4, 5, 6]], [0, 0, 0], PLATE, two_sided=True,
@@ -272,6 +275,8 @@ def test_sides_much_smaller_than_a_bundle_cell_send_their_average():
         tiny = s._tiny
         assert len(tiny) == 2 and np.all(s.area[tiny] < 1e-5)                  # the speck's two sides
         assert np.array_equal(s.incoming[tiny], s.mean_incoming[tiny])
+        top = tiny[s.normal[tiny, 2] > 0]
+        np.testing.assert_allclose(s.mean_incoming[top], np.pi * L_UP[None], rtol=1e-9)
         big = np.setdiff1d(np.arange(len(s.area)), tiny)
         assert not np.array_equal(s.incoming[big], s.mean_incoming[big])       # the others send their iterate
     finally:

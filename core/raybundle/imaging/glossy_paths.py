@@ -47,7 +47,9 @@ class GlossyEyePaths:
         what makes glossy-to-glossy paths spiky).  Direct light of the first-shot
         lights is left out of what the rays see: :meth:`DirectLighting.reflected_radiance`
         and the first shot count it.  ``u`` (len(idx), 2): uniforms for the first
-        lobe sample.  Returns (len(idx), 3).
+        lobe sample.  Returns ``(light, solved)``, (len(idx), 3) each: what the paths took from
+        the lamps and the world (:meth:`trace`), which does not depend on the solver's
+        iterations, and what they read from the solver.
         """
         sc, solver = self.scene, self.solver
         e = solver.received()
@@ -62,8 +64,8 @@ class GlossyEyePaths:
             seen, at = np.unique(sides, return_inverse=True)
             guide, at = WorldLight.guide_of(solver.world_guide, seen), at.reshape(-1)
         world_mis = (self.world_light.density(w_i, guide, at), sc.materials.glossy_pdf(m, n, w_i, wo))
-        out = self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo), world_mis=world_mis)
-        return out + self.world_samples(g.point[idx], n, m, wo, guide, at)
+        light, solved = self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo), world_mis=world_mis)
+        return light + self.world_samples(g.point[idx], n, m, wo, guide, at), solved
 
     def world_samples(self, pts, n, m, wo, guide=None, at=None):
         """The sky the glossy lobes of materials ``m`` (N,) at ``pts`` (N, 3) (normals ``n``,
@@ -91,7 +93,8 @@ class GlossyEyePaths:
 
     def trace(self, pts, n, w_i, throughput, e, vert, light_mis=None, world_mis=None):
         """Radiance (N, 3) arriving at ``pts`` (N, 3) with normals ``n`` along ``w_i``
-        (N, 3), times ``throughput`` (N, 3), read from the solver where each ray lands
+        (N, 3), times ``throughput`` (N, 3), as ``(light, solved)`` (N, 3) each: the lamps and
+        the world the paths meet, and what they read from the solver where each ray lands
         (:meth:`gather`): the hit's outgoing radiance from the side values ``e``
         (S, 3) (the diffuse lobe's incoming radiance, interpolated with the vertex
         values ``vert`` or flat when None); at glossy hits the path goes on along
@@ -104,6 +107,7 @@ class GlossyEyePaths:
         (:meth:`world_samples` takes the rest)."""
         sc, mats, solver = self.scene, self.scene.materials, self.solver
         out = np.zeros((len(pts), 3))
+        light = np.zeros((len(pts), 3))
         pix = np.arange(len(pts))                     # which output row each path belongs to
         m = wo = None
         depth = max(1, int(self.settings.glossy_gather_depth))
@@ -123,13 +127,13 @@ class GlossyEyePaths:
                 le = self.direct.lobe_hits_light(pts[live], m_from[live], n[live], wo_from[live], w_i[live], tri,
                                                  pts[live] + np.where(hit, t, 0.0)[:, None] * w_i[live],
                                                  self.settings.light_samples, distance=dist)
-                np.add.at(out, pix[live], throughput[live] * le)
+                np.add.at(light, pix[live], throughput[live] * le)
             if sc.world.emits:      # paths that leave the scene see the world
                 gone = live[~hit]
                 seen = throughput[gone] * sc.world.radiance(w_i[gone])
                 if world_mis is not None and bounce == 0:
                     seen *= DirectLighting.mis_weight(world_mis[1][gone], world_mis[0][gone])[:, None]
-                np.add.at(out, pix[gone], seen)
+                np.add.at(light, pix[gone], seen)
             live, tri, t = live[hit], tri[hit], t[hit]
             bary = np.stack([1 - bu - bv, bu, bv], axis=1)[hit]
             ts = sc.seen_tside(tri, w_i[live])
@@ -147,9 +151,10 @@ class GlossyEyePaths:
                 # the lamps in the glossy lobe of a hit the path goes on from: light samples, MIS-weighted
                 # against the next ray (E1 f(w_mean, w) spiked where a sharp lobe lined up with w_mean)
                 hp = pts[live[gi]] + t[gi, None] * w_i[live[gi]]
-                L[gi] += self.direct.reflected_radiance(hp, hit_n[gi], hit_m[gi], w_back[gi], self.rng,
-                                                        self.settings.light_samples, mis=np.ones(len(gi), bool),
-                                                        diffuse_scale=np.zeros((len(gi), 3)))
+                lit = self.direct.reflected_radiance(hp, hit_n[gi], hit_m[gi], w_back[gi], self.rng,
+                                                     self.settings.light_samples, mis=np.ones(len(gi), bool),
+                                                     diffuse_scale=np.zeros((len(gi), 3)))
+                np.add.at(light, pix[live[gi]], throughput[live[gi]] * lit)
             stop = ~go_on
             if stop.any():   # paths that end here use the iterate for the hit's own glossy lobe,
                 s_idx = np.nonzero(stop)[0]      # spread evenly once a lobe has been followed
@@ -160,4 +165,4 @@ class GlossyEyePaths:
             keep = np.nonzero(go_on)[0]
             pix, m, n, wo = pix[live][keep], hit_m[keep], hit_n[keep], w_back[keep]
             pts, throughput = pts[keep], throughput[live][keep]
-        return out
+        return light, out

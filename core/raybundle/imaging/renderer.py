@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..lights.direct import ALL_LIGHTS
+from ..lights.sources import ShapeLight
 from ..lights.world_light import WorldLight
 from ..scene.shading import seen_normals
 from ..scene.transmission import scatter
@@ -69,6 +70,9 @@ class GBuffer:
     weight: np.ndarray | None = None
     #: (N,) bool: the eye path was reflected or refracted on its way (None: none was)
     bounced: np.ndarray | None = None
+    #: (N, 3) the area lamps the eye path met after it was turned, times :attr:`weight` there
+    #: (None: none)
+    lamps: np.ndarray | None = None
 
     @property
     def hit(self):
@@ -222,6 +226,8 @@ class Renderer(ProgressiveImage):
         # the extra samples' sequences (_subpixel_sequence): a random shift and the next index per pixel
         self._edge_shift = np.random.default_rng([settings.seed, 8]).random((n, 2))
         self._edge_index = np.zeros(n, np.int64)
+        # ... and of the first interface's choice, reflected or refracted (a 1-D Kronecker sequence)
+        self._choice_shift = np.random.default_rng([settings.seed, 9]).random(n)
         mats = scene.materials
         self.glossy_material = mats.is_glossy
         py, px = np.divmod(np.arange(n), camera.width)
@@ -272,15 +278,18 @@ class Renderer(ProgressiveImage):
         """Primary rays through the pixels' sample positions for uniforms ``jitter`` (N, 2) in
         [0,1)^2 (:meth:`~raybundle.scene.camera.Camera.subpixel`: the pixel filter's), for all
         pixels or for the pixel indices ``pixels`` (N,), followed through the interfaces of
-        glass and other transmissive surfaces (:meth:`_through_interfaces`)."""
+        glass and other transmissive surfaces (:meth:`_through_interfaces`; a third column of
+        ``jitter`` chooses at the first interface, reflected or refracted)."""
         cam = self.camera
-        pos = (self._pixel if pixels is None else self._pixel[pixels]) + cam.subpixel(jitter)
+        jitter = np.asarray(jitter, float)
+        pos = (self._pixel if pixels is None else self._pixel[pixels]) + cam.subpixel(jitter[:, :2])
         org, dirs = cam.rays(pos[:, 0], pos[:, 1])
         tri, t, u, v = self.tracer.first_hit(org, dirs, glass=False)
         self.image_rays += len(dirs)
-        weight = bounced = None
+        weight = bounced = lamps = None
         if self.tracer.glass is not None:
-            org, dirs, tri, t, u, v, weight, bounced = self._through_interfaces(org, dirs, tri, t, u, v)
+            org, dirs, tri, t, u, v, weight, bounced, lamps = self._through_interfaces(
+                org, dirs, tri, t, u, v, jitter[:, 2] if jitter.shape[1] > 2 else None)
         hit = tri >= 0
         sc = self.scene
         ts = sc.seen_tside(np.where(hit, tri, 0), dirs)
@@ -291,18 +300,27 @@ class Renderer(ProgressiveImage):
             normal[h] = seen_normals(sc.shading, sc.triangle_source[tri[h]], point[h], normal[h], -dirs[h])
         return GBuffer(tri, ts, point, normal,
                        sc.triangle_material[sc.tside_triangle[ts]], -dirs, np.stack([1 - u - v, u, v], axis=1),
-                       np.arange(len(self._pixel)) if pixels is None else np.asarray(pixels), weight, bounced)
+                       np.arange(len(self._pixel)) if pixels is None else np.asarray(pixels), weight, bounced, lamps)
 
-    def _through_interfaces(self, org, dirs, tri, t, u, v):
+    def _through_interfaces(self, org, dirs, tri, t, u, v, choice=None):
         """Eye rays ``org``, ``dirs`` (N, 3) with first hits ``(tri, t, u, v)`` followed through
         the transmissive surfaces they meet (:func:`~raybundle.scene.transmission.scatter`: by
-        Fresnel, reflected or refracted), up to ``transmission_depth`` interfaces (beyond:
+        Fresnel, reflected or refracted, at the first by the uniforms ``choice`` (N,) where
+        given), up to ``transmission_depth`` interfaces (beyond:
         black).  Returns the last segments' ``(org, dirs, tri, t, u, v)``, each ray's weight
-        (N, 3) and (N,) bool, whether it was turned."""
+        (N, 3), (N,) bool, whether it was turned, and the area lamps (N, 3) its turned segments
+        met before the surface they end on, weighted (or None where the scene has no area lamps).
+
+        Blender's area lamps are not visible to the camera's own rays by default, but are to the
+        glossy and transmission rays a turned path continues as: a lamp reflected in a pane or
+        seen through it adds its radiance, and the path goes on (a lamp is not geometry and
+        hides nothing behind it), as in Cycles."""
         sc, tracer = self.scene, self.tracer
         org, dirs = org.copy(), dirs.copy()
         weight = np.ones((len(tri), 3))
         bounced = np.zeros(len(tri), bool)
+        shapes = [light for light in self.direct.area_lights if isinstance(light, ShapeLight)]
+        lamps = np.zeros((len(tri), 3)) if shapes else None
         live = np.nonzero(tri >= 0)[0]
         for depth in range(int(self.settings.transmission_depth) + 1):
             live = live[tracer.glass[tri[live]]]
@@ -318,8 +336,10 @@ class Renderer(ProgressiveImage):
             if sc.shading is not None:
                 shade = seen_normals(sc.shading, sc.triangle_source[tri[live]], p,
                                      np.where((np.einsum("ij,ij->i", geo, d) < 0)[:, None], geo, -geo), -d)
-            on, new, w = scatter(sc.materials, sc.triangle_material[tri[live]], d, geo, shade,
-                                 self.rng.random((len(live), 2)))
+            uniforms = self.rng.random((len(live), 2))
+            if depth == 0 and choice is not None:
+                uniforms[:, 1] = choice[live]
+            on, new, w = scatter(sc.materials, sc.triangle_material[tri[live]], d, geo, shade, uniforms)
             weight[live] *= w
             live = live[on]
             bounced[live] = True
@@ -327,8 +347,13 @@ class Renderer(ProgressiveImage):
             dirs[live] = new[on]
             tri[live], t[live], u[live], v[live] = tracer.first_hit(org[live], dirs[live], glass=False)
             self.image_rays += len(live)
+            if shapes and len(live):
+                reach = np.where(tri[live] >= 0, t[live], np.inf)
+                for light in shapes:
+                    met, _ = light.hit(org[live], dirs[live], reach)
+                    lamps[live[met]] += weight[live[met]] * light.radiance
             live = live[tri[live] >= 0]
-        return org, dirs, tri, t, u, v, weight, bounced
+        return org, dirs, tri, t, u, v, weight, bounced, lamps
 
     def seen_radiance(self, g):
         """Radiance (N, 3) that reaches the eye directly: emission of the surfaces
@@ -360,7 +385,10 @@ class Renderer(ProgressiveImage):
         out[h] = self.scene.materials.emitted_radiance(g.material[h], cos_eye)
         emitter = np.zeros(len(out), bool)
         emitter[h] = np.any(out[h] > 0, axis=1)
-        return g.weighted(out), emitter
+        out = g.weighted(out)
+        if g.lamps is not None:
+            out += g.lamps
+        return out, emitter
 
     def surface_values(self, side_values, vert, tside, bary):
         """Side values (S, C) at hit points on triangle sides ``tside`` (N,):
@@ -522,7 +550,10 @@ class Renderer(ProgressiveImage):
         gathered = np.zeros_like(out)
         if self.settings.glossy_gather:
             before = self.glossy_paths.rays
-            gathered[gl] = self.glossy_paths.gather(g, gl, u_lobe[gl])
+            # the lamps and the world the paths meet count with the pass (kept over the solver's
+            # restart); what they read from the solver with the gather (dropped at its restart)
+            light, gathered[gl] = self.glossy_paths.gather(g, gl, u_lobe[gl])
+            out[gl] += light
             self.image_rays += self.glossy_paths.rays - before
             gl = gl[:0]
         return g.weighted(out), g.weighted(gathered), gl
@@ -595,7 +626,11 @@ class Renderer(ProgressiveImage):
     def _subpixel_sequence(self, pixels, k):
         """``k`` sub-pixel positions in each of ``pixels``, continuing one randomly shifted
         R_2 sequence per pixel (:func:`~raybundle.tracing.sampling.kronecker_alpha`) from
-        pass to pass: returns (pixel ids (N k,), positions (N k, 2)).  Every position is
+        pass to pass: returns (pixel ids (N k,), positions (N k, 3)), the third column the
+        choice at the first interface of glass the eye path meets (:meth:`trace_gbuffer`), on a
+        1-D Kronecker sequence per pixel: over a pixel's samples, the share reflected by a pane
+        is F to within one sample, where independent choices left the reflection in a grazing
+        balustrade a binomial speckle.  Every position is
         uniform in its pixel (the averages stay unbiased) and all of a pixel's samples (the
         passes' own and the extra ones) together fill it with discrepancy O(log n / n), where
         fresh jittered grids every pass left the coverage of an edge noisy as n^-3/4: a
@@ -604,7 +639,8 @@ class Renderer(ProgressiveImage):
         pix = np.repeat(pixels, k)
         i = self._edge_index[pix] + np.tile(np.arange(k), len(pixels))
         self._edge_index[pixels] += k
-        return pix, (self._edge_shift[pix] + i[:, None] * kronecker_alpha(2)) % 1.0
+        choice = (self._choice_shift[pix] + i * kronecker_alpha(1)[0]) % 1.0
+        return pix, np.column_stack([(self._edge_shift[pix] + i[:, None] * kronecker_alpha(2)) % 1.0, choice])
 
     def accumulate_glossy(self):
         """Add this iterate's glossy lobe per pixel: E_i f_glossy(t_i, w_eye) (+ Ec_i f_glossy(w_c, w_eye))."""

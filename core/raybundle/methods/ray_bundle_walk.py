@@ -44,6 +44,7 @@ class RayBundleWalk(StochasticIterationSolver):
     """Random walks of global ray bundles with Russian roulette (module docstring)."""
 
     SEPARATES_WORLD_DIRECT = False        # its own step: the world's light stays in its solution
+    TINY_GATHER_RAYS = 0                  # its senders send the walk's last step, not what a gather reads
 
     name = "ray-bundle-walk"
     #: the range of the continuation probability q (the scene's mean albedo)
@@ -77,8 +78,12 @@ class RayBundleWalk(StochasticIterationSolver):
         return self._walk_sent(self._all_patches, send_dir)
 
     def glossy_sent_radiance(self, send_dir):
-        """R^(k-1) of the glossy sides (G, 3) into ``send_dir`` (G, 3): the thesis' E f(t, s)."""
-        return self._walk_sent(self.glossy_patches, send_dir)
+        """R^(k-1) of the glossy sides (..., G, 3) into ``send_dir`` (..., G, 3), one row of G per
+        bundle direction: the thesis' E f(t, s)."""
+        shape = np.shape(send_dir)
+        d = np.asarray(send_dir, float).reshape(-1, 3)
+        gp = self.glossy_patches
+        return self._walk_sent(np.tile(gp, len(d) // max(len(gp), 1)), d).reshape(shape)
 
     def sent_environment(self, direction):
         return super().sent_environment(direction) if self.walk_step == 0 else np.zeros((2, 3))
