@@ -36,10 +36,12 @@ def run_options(scene, seconds=None, iterations=None):
     from raybundle.app.plan import RunOptions
 
     rb = getattr(scene, "raybundle", None)
+    depth = transmission_depth(scene)
     if rb is None:
-        return RunOptions(seconds=seconds, iterations=iterations)
+        return RunOptions(seconds=seconds, iterations=iterations, transmission_depth=depth)
     names = {f.name for f in fields(RunOptions)} & set(rb.bl_rna.properties.keys())
     values = {name: getattr(rb, name) for name in names}
+    values["transmission_depth"] = depth
     if seconds is not None or iterations is not None:
         values.update(seconds=seconds, iterations=iterations)
     elif not values["iterations"]:
@@ -47,6 +49,17 @@ def run_options(scene, seconds=None, iterations=None):
             raise ValueError("set a time limit (seconds) or an iteration count: both are 0")
         values.update(iterations=None, seconds=float(rb.time_limit))
     return RunOptions(**values)
+
+
+def transmission_depth(scene):
+    """The interfaces of glass an eye path goes through in Cycles on ``scene``: its Light Paths'
+    Transmission limit within the Total (a path caught in a pane by total internal reflection,
+    seen at its edge, goes on as far; the default file's 12, a converted file's 64), or None
+    where the scene has no Cycles settings (the core's default)."""
+    cycles = getattr(scene, "cycles", None)
+    if cycles is None or not hasattr(cycles, "transmission_bounces"):
+        return None
+    return int(min(cycles.transmission_bounces, cycles.max_bounces))
 
 
 def from_properties(cls, rb, prefix=""):

@@ -209,3 +209,22 @@ def test_lightmaps_under_a_glass_pane_and_of_a_translucent_sheet_are_cycles_bake
     for name, (mean, rms, most) in {"plate": (0.02, 0.05, 0.12), "sheet": (0.01, 0.02, 0.05)}.items():
         r = rel[name]
         assert abs(r.mean()) < mean and np.sqrt((r ** 2).mean()) < rms and np.abs(r).max() < most, (name, r)
+
+
+def test_eye_paths_go_through_as_many_interfaces_as_the_files_light_paths(fresh):
+    """Cycles follows an eye path through glass as far as the file's Light Paths allow (its
+    Transmission bounces within the Total); the render's plan takes the same limit.  The
+    converted rooms ask for 64: the hall's glass balustrade seen at its edge guides the eye by total
+    internal reflection further than the 12 the core took before (those pixels black, Cycles
+    0.52, about half the wall beside them)."""
+    from raybundle.app.plan import plan
+    from raybundle.scene import builtin
+    from raybundle_addon.properties import run_options
+
+    cycles = fresh.cycles
+    cycles.transmission_bounces, cycles.max_bounces = 64, 64
+    assert run_options(fresh).transmission_depth == 64
+    cycles.max_bounces = 8
+    options = run_options(fresh, seconds=5)
+    assert options.transmission_depth == 8
+    assert plan(builtin.load_scene("cornell"), options).settings.transmission_depth == 8

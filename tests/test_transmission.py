@@ -227,3 +227,32 @@ def test_area_lamps_are_seen_through_and_in_a_pane():
     ratio = seen.mean(axis=1) / exact.mean()          # per G-buffer, over the image
     mean, se = ratio.mean(), ratio.std(ddof=1) / np.sqrt(len(ratio))
     assert se < 0.01 and abs(mean - 1.0) < 4.5 * se + 1e-3, (mean, se)
+
+
+@pytest.mark.parametrize("depth", [12, 64])
+def test_a_slab_guides_the_eye_by_total_internal_reflection_as_far_as_the_bounces_go(depth):
+    """A camera looks at 40 degrees into the end face of a glass slab 1 m long and 2 cm thick:
+    the refracted paths meet its faces beyond the critical angle and run along it by total
+    internal reflection, about 24 times, to an area lamp (Le 5) beyond its far end, where they
+    leave at 40 degrees again: ``5 (1 - F)^2``, F at the entry angle.  Followed through 12
+    interfaces (Cycles' default Transmission bounces) they are cut off, black; through 64 (the
+    converted rooms' Light Paths, which the add-on now passes on: the hall's glass balustrade
+    seen at its edge) they reach the lamp, within 4.5 SE of 32 G-buffers."""
+    from raybundle.scene.model import AreaLights
+
+    v, t = _box((0.0, -0.01, -0.25), (1.0, 0.01, 0.25))
+    area = AreaLights(center=[[1.2, 0, 0]], axis_u=[[0, 0, 2.0]], axis_v=[[0, 2.0, 0]], normal=[[-1.0, 0, 0]],
+                      shape=[0], radiance=[[5.0] * 3])
+    th = np.radians(40)
+    eye = -0.3 * np.array([np.cos(th), np.sin(th), 0.0])
+    cam = Camera.look_at(tuple(eye), (0, 0, 0), (0, 0, 1), 1000, 36, (8, 8))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sc = build_scene(v, t, np.zeros(len(t), int), _glass(), camera=cam, area_lights=area, two_sided=True)
+    r = pipeline.make_renderer(pipeline.prepare(sc, patches=50), RenderSettings(seed=4, transmission_depth=depth))
+    seen = np.array([r.seen_radiance(r.trace_gbuffer(np.full((64, 2), 0.5)))[0][:, 0] for _ in range(32)])
+    r.tracer.close()
+    _, d = cam.rays(*(np.mgrid[0:8, 0:8][::-1].reshape(2, -1) + 0.5))
+    exact = (5 * (1 - fresnel_dielectric_cos(d[:, 0], 1.5)) ** 2).mean() if depth == 64 else 0.0
+    mean = seen.mean(axis=1)
+    assert abs(mean.mean() - exact) < 4.5 * mean.std(ddof=1) / np.sqrt(len(mean)) + 1e-3 * 5, (mean.mean(), exact)

@@ -42,7 +42,10 @@ class RunOptions:
     ``patches`` (0: one patch per triangle) and ``sequence``: None leaves them to ``auto``
     or the defaults; ``first_shot``: shoot the lights and small emitters first;
     ``gather_rays``: final-gather rays per pixel next to concave edges (-1: as many as a
-    tenth of a timed run buys); ``threads``: the ray tracer's (None: all cores)."""
+    tenth of a timed run buys); ``threads``: the ray tracer's (None: all cores);
+    ``transmission_depth``: the interfaces an eye path is followed through (None: the default
+    of :class:`~raybundle.imaging.settings.RenderSettings`; the add-on passes the file's own Light
+    Paths limit)."""
 
     method: str = StochasticIterationSolver.name
     iterations: int | None = None
@@ -54,6 +57,7 @@ class RunOptions:
     first_shot: bool = True
     gather_rays: int = -1
     threads: int | None = None
+    transmission_depth: int | None = None
 
 
 @dataclass
@@ -115,9 +119,10 @@ def _check_method(method, bake, chains):
 
 
 def _settings(o, sequence):
+    depth = {} if o.transmission_depth is None else {"transmission_depth": int(o.transmission_depth)}
     return RenderSettings(seed=int(o.seed), sequence=sequence or DEFAULT_SEQUENCE,
                           bundle_resolution=int(o.bundle_resolution), threads=o.threads,
-                          first_shot="auto" if o.first_shot else "none", gather_rays=int(o.gather_rays))
+                          first_shot="auto" if o.first_shot else "none", gather_rays=int(o.gather_rays), **depth)
 
 
 def plan(scene, options: RunOptions, bake=False, chains=False) -> Plan:

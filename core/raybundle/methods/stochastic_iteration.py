@@ -49,8 +49,8 @@ that draws the directions (``stratified`` (default), ``prng`` or ``pi-powers``;
 and rotation come from a separate PRNG stream.
 Failure modes: glossy lobes with low roughness (fireflies, blocky reflections:
 radiance is constant per patch), albedo near 1 (slow convergence), patches
-much smaller than the bundle cell (they are missed in most iterations; raise
-the bundle resolution).
+much smaller than the bundle cell (a line meets them rarely, and then with cell / area times
+their share: they gather their light by rays of their own instead, :meth:`_gather_tiny`).
 """
 from __future__ import annotations
 
