@@ -80,10 +80,8 @@ class RayBundleWalk(StochasticIterationSolver):
     def glossy_sent_radiance(self, send_dir):
         """R^(k-1) of the glossy sides (..., G, 3) into ``send_dir`` (..., G, 3), one row of G per
         bundle direction: the thesis' E f(t, s)."""
-        shape = np.shape(send_dir)
-        d = np.asarray(send_dir, float).reshape(-1, 3)
-        gp = self.glossy_patches
-        return self._walk_sent(np.tile(gp, len(d) // max(len(gp), 1)), d).reshape(shape)
+        gp, d, shape = self._glossy_rows(send_dir)
+        return self._walk_sent(gp, d).reshape(shape)
 
     def sent_environment(self, direction):
         return super().sent_environment(direction) if self.walk_step == 0 else np.zeros((2, 3))

@@ -212,10 +212,7 @@ class StochasticIterationSolver(Method):
         ``send_dir`` may hold several directions' rows, (K, G, 3): they are evaluated together
         (an iteration's K bundle directions; the returned array has its shape).
         """
-        gp = self.glossy_patches
-        shape = np.shape(send_dir)
-        send_dir = np.asarray(send_dir, float).reshape(-1, 3)
-        gp_k = np.tile(gp, len(send_dir) // max(len(gp), 1))
+        gp_k, send_dir, shape = self._glossy_rows(send_dir)
         fsg = self.caustic is None
         out = self.radiance(gp_k, send_dir, first_shot_emission=False, first_shot_glossy=fsg, glossy_iterate=False)
         sc = self.scene
@@ -229,6 +226,13 @@ class StochasticIterationSolver(Method):
         gathered = np.zeros((len(gp_m), 3))
         gathered[live] = weight[live] * got
         return (out + gathered.reshape(m, len(gp_k), 3).mean(axis=0)).reshape(shape)
+
+    def _glossy_rows(self, send_dir):
+        """``send_dir`` (..., G, 3) of :meth:`glossy_sent_radiance` as rows: the glossy sides
+        repeated per direction (K G,), the directions (K G, 3), and the shape to give the result."""
+        gp = self.glossy_patches
+        d = np.asarray(send_dir, float).reshape(-1, 3)
+        return np.tile(gp, len(d) // max(len(gp), 1)), d, np.shape(send_dir)
 
     def _gather(self, points, normals, w):
         """The radiance (N, 3) that reaches ``points`` (N, 3) on surfaces of (triangle) normals
