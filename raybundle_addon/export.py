@@ -213,21 +213,26 @@ def _ray_visible(ob, warn):
 
 
 def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, warn):
-    """For an object whose materials have albedo textures (``converter.textures``) or
-    cut-outs (``converter.cutouts``): ((T, 3, 2) corner UVs, (T,) image index into ``images``
-    (-1 untextured, -2 the corner colors), (T, 3, 3) corner colors of a color attribute, (T,)
-    coverage map index into ``images`` (-1 opaque)), or None.  ``images`` (key -> (index, bpy
-    Image or :class:`.shaders.EvaluatedImage`, is a coverage map)) grows as new images are met."""
+    """For an object whose materials have albedo textures (``converter.textures``), cut-outs
+    (``converter.cutouts``) or normal maps (``converter.normal_maps``): ((T, 3, 2) corner UVs,
+    (T,) image index into ``images`` (-1 untextured, -2 the corner colors), (T, 3, 3) corner
+    colors of a color attribute, (T,) coverage map index into ``images`` (-1 opaque), (T,)
+    normal map index into ``images`` (-1 none), (T,) bool: that map is a bump's), or None.
+    ``images`` (key -> (index, bpy Image or :class:`.shaders.EvaluatedImage`, its kind:
+    "albedo", "alpha" or "normal")) grows as new images are met."""
     for m in slots:
-        converter.convert(m)                  # (cached) fills converter.textures and .cutouts
+        converter.convert(m)                  # (cached) fills converter.textures, .cutouts, .normal_maps
     tex = [converter.texture_of(ob, m) for m in slots] or [None]
     cut = [converter.cutouts.get(m.name_full) if m is not None else None for m in slots] or [None]
-    if not any(tex) and not any(cut):
+    nrm = [converter.normal_maps.get(m.name_full) if m is not None else None for m in slots] or [None]
+    if not any(tex) and not any(cut) and not any(nrm):
         return None
     slot = np.clip(poly_mat[tri_poly], 0, len(tex) - 1)
     uv = np.zeros((len(loops), 3, 2))
     img = np.full(len(loops), -1, np.int64)
     alpha = np.full(len(loops), -1, np.int64)
+    normal = np.full(len(loops), -1, np.int64)
+    bump = np.zeros(len(loops), bool)
     colors = np.zeros((len(loops), 3, 3))
     layers = {}
 
@@ -245,26 +250,36 @@ def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, wa
         uv[sel] = layers[layer.name][loops[sel]]
         return True
 
-    for k, (got, cover) in enumerate(zip(tex, cut)):
+    for k, (got, cover, nmap) in enumerate(zip(tex, cut, nrm)):
         sel = np.nonzero(slot == k)[0]
         if len(sel) == 0:
             continue
+        read = None                               # the UV map this slot's faces hold
         if got is not None and got.attribute is not None:
             colors[sel] = _corner_colors(me, got.attribute, ob, slots[k], warn)[loops[sel]]
             img[sel] = -2
         elif got is not None and read_uv(got.uv, f"the image texture {got.image.name!r}", sel, k):
-            img[sel] = images.setdefault(got.image.name_full, (len(images), got.image, False))[0]
-        if cover is None:
-            continue
-        if cover.uv is not None:                  # a map: through the albedo's UVs, or its own
-            shared = got is not None and got.attribute is None and np.all(img[sel] >= 0)
-            if shared and got.uv != cover.uv:
-                warn(f"object {ob.name!r}: material {slots[k].name!r} reads its cut-out through another UV map than "
-                     f"its albedo: the albedo's ({got.uv or 'the active one'}) is used for both")
-            elif not shared and not read_uv(cover.uv, "a cut-out (Alpha)", sel, k):
+            img[sel] = images.setdefault(got.image.name_full, (len(images), got.image, "albedo"))[0]
+            read = got.uv
+        for what, m, label in (("alpha", cover, "cut-out (Alpha)"), ("normal", nmap, "normal or bump map")):
+            if m is None:
                 continue
-        alpha[sel] = images.setdefault(("alpha", cover.image.name_full), (len(images), cover.image, True))[0]
-    return (uv, img, colors, alpha) if np.any(img != -1) or np.any(alpha != -1) else None
+            if m.uv is not None:                  # a map: through the UVs read already, or its own
+                if read is not None and read != m.uv:
+                    warn(f"object {ob.name!r}: material {slots[k].name!r} reads its {label} through another UV map "
+                         f"than its albedo or cut-out: the first one's ({read or 'the active one'}) is used for all")
+                elif read is None:
+                    if not read_uv(m.uv, f"a {label}", sel, k):
+                        continue
+                    read = m.uv
+            index = images.setdefault((what, m.image.name_full), (len(images), m.image, what))[0]
+            if what == "alpha":
+                alpha[sel] = index
+            else:
+                normal[sel], bump[sel] = index, m.bump
+    if np.all(img == -1) and np.all(alpha == -1) and np.all(normal == -1):
+        return None
+    return uv, img, colors, alpha, normal, bump
 
 
 def _corner_colors(me, name, ob, mat, warn):
@@ -568,7 +583,7 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
     cache = {}
     verts, tris, tmats, tobj, tpoly, tloops, tnorm = [], [], [], [], [], [], []
     # albedo textures and cut-outs: corner UVs, image per triangle, corner colors, coverage map per triangle
-    tuv, timg, tcol, talpha, images = [], [], [], [], {}
+    tuv, timg, tcol, talpha, tnrm, tbump, images = [], [], [], [], [], [], {}
     objects = []
     lights = {"point": [], "sun": [], "area": []}
     portals = []
@@ -638,6 +653,8 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
         timg.append(textured[1] if textured else None)
         tcol.append(textured[2] if textured else None)
         talpha.append(textured[3] if textured else None)
+        tnrm.append(textured[4] if textured else None)
+        tbump.append(textured[5] if textured else None)
         objects.append(info)
         n_vert += len(pos)
         n_tri += len(tri)
@@ -664,19 +681,22 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
         return cls(**{k: np.array([r[k] for r in rows]) for k in rows[0]})
 
     texture = None
-    if any(x is not None and np.any(x != -1) for x in timg + talpha):
+    if any(x is not None and np.any(x != -1) for x in timg + talpha + tnrm):
         def faces(per_object):
             return np.concatenate([np.full(n, -1, np.int64) if x is None else x for (n, _), x in zip(tuv, per_object)])
 
-        face_image, face_alpha = faces(timg), faces(talpha)
+        face_image, face_alpha, face_normal = faces(timg), faces(talpha), faces(tnrm)
+        face_bump = np.concatenate([np.zeros(n, bool) if b is None else b for (n, _), b in zip(tuv, tbump)])
         tcol = [np.zeros((n, 3, 3)) if c is None else c for (n, _), c in zip(tuv, tcol)]
         tuv = [np.zeros((n, 3, 2)) if u is None else u for n, u in tuv]
         from raybundle.scene.textures import SurfaceTexture
 
-        # albedo maps are the image over its mean (the material holds the mean), coverage maps as they are
-        maps = [np.asarray(converter.image_pixels(im), np.float32) if cover else converter.modulation(im)
-                for _, im, cover in sorted(images.values(), key=lambda x: x[0])]
-        texture = SurfaceTexture(maps, face_image, v[t], np.concatenate(tuv), np.concatenate(tcol), face_alpha)
+        # albedo maps are the image over its mean (the material holds the mean), coverage and normal maps
+        # as they are
+        maps = [converter.modulation(im) if kind == "albedo" else np.asarray(converter.image_pixels(im), np.float32)
+                for _, im, kind in sorted(images.values(), key=lambda x: x[0])]
+        texture = SurfaceTexture(maps, face_image, v[t], np.concatenate(tuv), np.concatenate(tcol), face_alpha,
+                                 face_normal, face_bump)
     with _warnings.catch_warnings(record=True) as caught:
         _warnings.simplefilter("always")
         shading = None

@@ -9,7 +9,8 @@ Usage (by :mod:`raybundle_addon.node_graphs`, never imported by the add-on)::
 "images": {image node name: .npy}, "out": .npy}``.  For each task the material is loaded
 from ``LIBRARY.blend`` and copied; in the copy the graph that drives input ``socket`` of node
 ``node`` is rewired into an Emission shader (strength 1) that is the only surface output (a
-value input through a Math node, so that a color is converted to a value as the input does),
+value input through a Math node, so that a color is converted to a value as the input does; a
+normal input, a vector in [-1, 1], as ``(n + 1) / 2``),
 every Image Texture node reads the linear RGBA pixels of its ``.npy`` (H, W, 4) with the
 node's own interpolation, and Cycles bakes the emission (``EMIT``, one sample per texel, no
 margin) of a unit square whose UV maps (``uv_maps``, and the default one) cover [0, 1]^2 once,
@@ -72,6 +73,12 @@ def main(argv):
             value.inputs[1].default_value = 0.0
             nt.links.new(source, value.inputs[0])
             source = value.outputs[0]
+        elif sock.type == "VECTOR":         # a normal (x, y, z) in [-1, 1]: baked as (n + 1) / 2
+            half = nt.nodes.new("ShaderNodeVectorMath")
+            half.operation = "MULTIPLY_ADD"
+            half.inputs[1].default_value = half.inputs[2].default_value = (0.5, 0.5, 0.5)
+            nt.links.new(source, half.inputs[0])
+            source = half.outputs[0]
         nt.links.new(source, emission.inputs["Color"])
         output = nt.nodes.new("ShaderNodeOutputMaterial")
         output.is_active_output = True

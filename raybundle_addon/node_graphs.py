@@ -15,6 +15,12 @@ difference below the bilinear error of the finer grid where images are small (ma
 screen), while large images are baked at their own resolution.  A graph without images is a
 constant, baked into one texel.
 
+A shader's Normal input (a Normal Map node in tangent space, a Bump node, anything between them
+and images read through a UV map) is baked the same way over the unit square, whose frame
+(dP/du, dP/dv, N) is the identity there: the normal (x, y, z) as ``(n + 1) / 2``
+(:mod:`raybundle.scene.textures` reads it in each face's frame).  A normal graph that reads the
+point of the object is not evaluated (it needs the object's own tangent frame).
+
 What the converter does with the baked image (:class:`.shaders.MaterialConverter`): on an
 albedo input (a Diffuse BSDF's Color, a Principled BSDF's Base Color) it is an albedo texture
 on that UV map, like an image texture linked there directly; on any other input its mean is
@@ -122,10 +128,19 @@ def graph_input(mat, sock):
                 continue
         elif node.type in POSITIONAL:
             positional = True
+        elif node.type == "NORMAL_MAP":
+            if node.space != "TANGENT":
+                return f"its Normal Map node is in {node.space.lower()} space (only tangent space is modeled)"
+            if node.uv_map:                 # "" is the active render map, as an image's own
+                uvs.add(node.uv_map)
+        elif node.type == "BUMP":
+            pass
         elif node.type not in PURE:
             return f"it reads a {node.bl_label} node, which depends on the view, the light or more than the point"
         stack += [lk for s in node.inputs for lk in s.links
                   if not getattr(lk, "is_muted", False) and getattr(lk, "is_valid", True)]
+    if positional and sock.type == "VECTOR":
+        return "it reads the point of the object (a procedural bump), which needs the object's own tangent frame"
     if positional:
         return GraphInput(mat.name_full, sock.node.name, sock.identifier, images, "",
                           (OBJECT_BAKE_SIZE, OBJECT_BAKE_SIZE), per_object=True)
@@ -174,6 +189,8 @@ def linked_inputs(mat):
                 src = _follow_reroutes(s.links[0].from_node)
                 if src is not None and not read_directly(s, src):
                     found.append(s)
+            elif s.type == "VECTOR" and s.name == "Normal":       # a normal or bump map
+                found.append(s)
     return found
 
 

@@ -121,6 +121,18 @@ class Coverage:
 
 
 @dataclass(frozen=True)
+class NormalMap:
+    """A material's normal or bump map: ``image`` (an :class:`EvaluatedImage`) holds the normal
+    its nodes give over a unit square (x, y, z in the frame dP/du, dP/dv, N of one metre per UV
+    unit), read through UV map ``uv`` ("" the active render one); ``bump``: a Bump node's, whose
+    slope scales with the surface's metres per UV unit (:mod:`raybundle.scene.textures`)."""
+
+    image: object
+    uv: str = ""
+    bump: bool = False
+
+
+@dataclass(frozen=True)
 class AlbedoTexture:
     """What drives a material's diffuse albedo point by point: an image through a UV map
     (``uv`` the map's name, "" for the active render UV map) or a color attribute
@@ -152,11 +164,14 @@ class MaterialConverter:
         self.textures = {}
         #: material name -> its :class:`Coverage` (cut-out materials only)
         self.cutouts = {}
+        #: material name -> its :class:`NormalMap` (materials with a normal or bump map only)
+        self.normal_maps = {}
         #: (object name, material name) -> the :class:`AlbedoTexture` Blender baked on that object
         self.object_textures = {}
         self._normalizer = {}           # image name -> the material's mean albedo its map divides by
         self._albedo = []               # albedo textures met while converting one material
         self._cutout = []               # coverages met while converting one material
+        self._normal = []               # normal maps met while converting one material
 
     # ------------------------------------------------------------ materials
     def convert(self, mat):
@@ -183,7 +198,7 @@ class MaterialConverter:
             self.warn(f"material {name!r} has no surface shader connected to its output: rendered black")
             return dict(name=name)
         notes = []
-        self._albedo, self._cutout = [], []
+        self._albedo, self._cutout, self._normal = [], [], []
         self._material = mat
         try:
             acc = _Closure()
@@ -195,6 +210,10 @@ class MaterialConverter:
             self.cutouts[name] = self._cutout[0]
             if len(self._cutout) > 1:
                 notes.append("several Principled BSDFs with an Alpha: the first one's is used")
+        if self._normal:
+            self.normal_maps[name] = self._normal[0]
+            if len(self._normal) > 1:
+                notes.append("several shaders with a normal or bump map: the first one's is used for all")
         found = list(dict.fromkeys(t.key for t in self._albedo))
         if len(found) == 1:
             self.textures[name] = self._albedo[0]
@@ -226,7 +245,7 @@ class MaterialConverter:
             acc.diffuse += weight * self.color(node.inputs["Color"], notes)
             if "Roughness" in node.inputs and self.value(node.inputs["Roughness"], notes) > 0:
                 notes.append("Diffuse BSDF roughness (Oren-Nayar) is ignored (Lambert)")
-            self._normal_note(node, notes)
+            self._normal_map(node, notes)
         elif t in ("BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
             color = weight * self.color(node.inputs["Color"], notes)
             r = float(np.clip(self.value(node.inputs["Roughness"], notes), 0.0, 1.0))
@@ -239,10 +258,10 @@ class MaterialConverter:
                 notes.append(f"Glossy BSDF distribution {dist} is approximated by GGX")
             if "Anisotropy" in node.inputs and abs(self.value(node.inputs["Anisotropy"], notes)) > 1e-6:
                 notes.append("anisotropy is ignored (isotropic GGX)")
-            self._normal_note(node, notes)
+            self._normal_map(node, notes)
         elif t == "BSDF_TRANSLUCENT":
             acc.translucent += weight * np.clip(self.color(node.inputs["Color"], notes), 0.0, 1.0)
-            self._normal_note(node, notes)
+            self._normal_map(node, notes)
         elif t in ("BSDF_GLASS", "BSDF_REFRACTION", "BSDF_TRANSPARENT"):
             self._interface(node, weight, acc, notes)
         elif t == "EMISSION":
@@ -285,7 +304,7 @@ class MaterialConverter:
                 acc.principled.append((weight * (1.0 - glass), spec, simple))
             else:                             # all glass: only its emission is left of the rest
                 acc.emission += weight * np.asarray(spec.get("emission", (0.0, 0.0, 0.0)), float)
-            self._normal_note(node, notes)
+            self._normal_map(node, notes)
         else:
             label = node.bl_label if hasattr(node, "bl_label") else t
             raise Unsupported(f"the {label} node ({node.name!r}) is not supported")
@@ -301,7 +320,7 @@ class MaterialConverter:
         rough = self.value(node.inputs["Roughness"], notes) if "Roughness" in node.inputs else 0.0
         glass = node.type == "BSDF_GLASS"
         self._glass(weight, color, color if glass else np.zeros(3), ior, int(glass), rough, acc, notes)
-        self._normal_note(node, notes)
+        self._normal_map(node, notes)
 
     def _glass(self, weight, color, reflection, ior, fresnel, roughness, acc, notes):
         if ior <= 0:
@@ -341,10 +360,25 @@ class MaterialConverter:
             notes.append(f"the cut-out of {sock.node.name!r}, mixed with other shaders, cuts out the whole material")
         self._cutout.append(Coverage(self._evaluated(sock, np.repeat(px, 3, axis=2)), uv))
 
-    def _normal_note(self, node, notes):
+    def _normal_map(self, node, notes):
+        """Record the normal or bump map on shader ``node``'s Normal input: the normal its nodes
+        give, baked by Blender over a unit square (:mod:`.node_graphs`); nothing where it is
+        the surface's own everywhere."""
         sock = node.inputs.get("Normal")
-        if sock is not None and sock.is_linked:
-            notes.append("normal / bump maps are ignored")
+        if sock is None or not sock.is_linked:
+            return
+        got = "it was not evaluated" if self.graphs is None else self.graphs.get(self._material, sock)
+        if isinstance(got, (str, dict)):
+            why = got if isinstance(got, str) else "it was baked on each object"
+            notes.append(f"the normal / bump map of {node.name!r} is not modeled ({why}): the surface's own normal "
+                         "is used")
+            return
+        n = 2.0 * np.asarray(got, np.float32)[..., :3] - 1.0
+        if np.allclose(n, (0.0, 0.0, 1.0), atol=1e-4):
+            return
+        src = _follow_reroutes(sock.links[0].from_node)
+        self._normal.append(NormalMap(self._evaluated(sock, n), self.graphs.uv(self._material, sock),
+                                      src is not None and src.type == "BUMP"))
 
     # --------------------------------------------------------------- inputs
     def color(self, sock, notes):

@@ -323,3 +323,75 @@ def test_a_bake_blender_cannot_finish_falls_back_to_the_sockets_value_with_a_war
     assert any("'Color' is driven by a Color Ramp node (Blender could not bake it (it did not finish" in w
                for w in ex.warnings), ex.warnings
     assert ex.scene.texture is None and np.allclose(ex.scene.materials.diffuse[0], 0.6)
+
+
+def _shaded_plane(kind):
+    """``plane_with_uvs`` (2 m, so a UV unit is 2 m) under a point light, seen from above by an ortho
+    camera, its Diffuse BSDF's Normal from a 64 x 1 float image through a Normal Map node
+    (``kind`` "normal": the normal tilted by 30 degrees one way on the left half, the other way on
+    the right) or a Bump node (``kind`` "bump": the height 0.5 sin(2 pi u) / pi, its slope per UV
+    unit cos(2 pi u), per metre half that)."""
+    from addon_helpers import plane_with_uvs
+
+    plane = plane_with_uvs()
+    u = (np.arange(64) + 0.5) / 64
+    if kind == "normal":
+        th = np.radians(np.where(u < 0.5, 30.0, -30.0))
+        px = (np.stack([np.sin(th), 0 * th, np.cos(th)], axis=1) + 1) / 2
+    else:
+        px = np.repeat((0.5 * np.sin(2 * np.pi * u) / np.pi)[:, None], 3, axis=1)
+    img = bpy.data.images.new(kind, 64, 1, float_buffer=True)
+    img.pixels.foreach_set(np.concatenate([px, np.ones((64, 1))], axis=1).astype(np.float32).ravel())
+    nt = plane.data.materials[0].node_tree
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    if kind == "normal":
+        node = nt.nodes.new("ShaderNodeNormalMap")
+        nt.links.new(tex.outputs["Color"], node.inputs["Color"])
+    else:
+        node = nt.nodes.new("ShaderNodeBump")
+        node.inputs["Strength"].default_value, node.inputs["Distance"].default_value = 1.0, 1.0
+        nt.links.new(tex.outputs["Color"], node.inputs["Height"])
+    nt.links.new(node.outputs["Normal"], nt.nodes["Diffuse BSDF"].inputs["Normal"])
+    add_light("POINT", location=(0.3, -0.2, 1.5), energy=1000.0, shadow_soft_size=0.0)
+    add_camera((0, 0, 3), resolution=(32, 32), ortho_scale=2.0)
+    return plane
+
+
+@pytest.mark.parametrize("kind", ["normal", "bump"])
+def test_normal_and_bump_maps_shade_the_plane_as_in_cycles(fresh, tmp_path, kind):
+    """A Normal Map node (tangent space) and a Bump node on a plane's Diffuse BSDF, evaluated by
+    Blender over a unit square, shade the eye's view as Cycles does pixel by pixel (the bump's
+    slope carried from UV units to metres).  The code before ignored both (with a warning): with
+    the plane's own normal the 95th percentile of the pixels' error was 24% (normal map) and 80%
+    (bump)."""
+    from addon_helpers import render_cycles, render_raybundle
+
+    _shaded_plane(kind)
+    ex = _export()
+    assert not any("normal" in w.lower() for w in ex.warnings), ex.warnings
+    assert ex.scene.texture is not None and ex.scene.texture.has_normal_maps
+    assert bool(ex.scene.texture.face_bump.all()) == (kind == "bump")
+    ref = render_cycles(tmp_path / "cy.exr", samples=64, seed=2)
+    ours = render_raybundle(tmp_path / "rb.exr", iterations=40, seed=2)
+    rel = ours.mean(axis=2) / ref.mean(axis=2) - 1
+    # measured: mean 0.39 / 0.26%, 95th percentile 1.0 / 0.9%, largest 2.1 / 2.0% (normal map / bump)
+    assert abs(rel.mean()) < 0.01 and np.percentile(np.abs(rel), 95) < 0.04, \
+        (rel.mean(), np.percentile(np.abs(rel), 95), np.abs(rel).max())
+
+
+def test_normal_maps_blender_cannot_bake_over_a_unit_square_are_warned_and_left_out(fresh):
+    """An object-space Normal Map and a Bump of a Noise Texture: the plane's own normal, one
+    warning each naming why."""
+    plane = _shaded_plane("normal")
+    nt = plane.data.materials[0].node_tree
+    nt.nodes["Normal Map"].space = "OBJECT"
+    ex = _export()
+    assert any("object space" in w and "normal / bump map" in w for w in ex.warnings), ex.warnings
+    assert ex.scene.texture is None or not ex.scene.texture.has_normal_maps
+    bump = nt.nodes.new("ShaderNodeBump")
+    nt.links.new(nt.nodes.new("ShaderNodeTexNoise").outputs["Fac"], bump.inputs["Height"])
+    nt.links.new(bump.outputs["Normal"], nt.nodes["Diffuse BSDF"].inputs["Normal"])
+    ex = _export()
+    assert any("procedural bump" in w for w in ex.warnings), ex.warnings
+    assert ex.scene.texture is None or not ex.scene.texture.has_normal_maps

@@ -175,6 +175,8 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, ga
     direct = solver.direct
     if direct.n_lights:         # about the shading normal of a smooth-shaded face, as the image's
         n_s = seen_normals(sc.shading, sc.triangle_source[tri], points.point[idx], n, n)
+        if sc.texture is not None and sc.texture.has_normal_maps:     # and of a normal or bump map
+            n_s = sc.texture.shading_normals(sc.triangle_source[tri], points.point[idx], n_s, n)
         e = e + direct.irradiance(points.point[idx], n_s, rng, light_samples, penumbra_samples)
     kd = mats.diffuse_reflectance[m]
     if sc.texture is not None:                  # the texel's albedo: texture detail stays sharp

@@ -298,6 +298,9 @@ class Renderer(ProgressiveImage):
         if sc.shading is not None:               # smooth-shaded faces: Blender's shading normal
             h = np.nonzero(hit)[0]
             normal[h] = seen_normals(sc.shading, sc.triangle_source[tri[h]], point[h], normal[h], -dirs[h])
+        if sc.texture is not None and sc.texture.has_normal_maps:     # normal and bump maps
+            h = np.nonzero(hit)[0]
+            normal[h] = sc.texture.shading_normals(sc.triangle_source[tri[h]], point[h], normal[h], -dirs[h])
         return GBuffer(tri, ts, point, normal,
                        sc.triangle_material[sc.tside_triangle[ts]], -dirs, np.stack([1 - u - v, u, v], axis=1),
                        np.arange(len(self._pixel)) if pixels is None else np.asarray(pixels), weight, bounced, lamps)

@@ -31,6 +31,25 @@ The tracer (:mod:`raybundle.tracing.visibility`) keeps a hit on such a face with
 a patch then receives light on its covered area only (:meth:`SurfaceTexture.triangle_coverage`
 scales its receiving area), so its radiance is that of the surface where it is, and the eye
 sees it with the coverage of each pixel.
+
+**Normal and bump maps.** A face may also have a *normal map* (``face_normal``): the normal
+Blender's nodes give a material's shader (Normal Map, Bump, anything between), evaluated by
+Blender over a unit square whose UV is its position, so that each texel holds the perturbed
+normal ``(x, y, z)`` in the frame (dP/du, dP/dv, N) of a surface with one metre per UV unit.
+On a face, :meth:`SurfaceTexture.shading_normals` turns it into the normal to shade with:
+
+* a *normal map* (``face_bump`` False; Normal Map node, tangent space): ``n' = normalize(x T + y B
+  + z N)``, ``T`` the unit tangent along dP/du in the plane of ``N`` and ``B = s N x T``, ``s``
+  the UV's handedness (MikkTSpace's frame, taken per face rather than per vertex);
+* a *bump* (``face_bump`` True; Bump node): the height's slope is per metre of the surface, so
+  the bake's slope per UV unit, ``-(x, y) / z``, is carried by the dual basis ``(T*, B*)`` of
+  the face's (dP/du, dP/dv) in the plane of ``N``: ``n' = normalize(N + (x T* + y B*) / z)``,
+  Cycles' ``N - distance grad H`` with the gradient in metres (exact for strength 1; a lower
+  strength's blend with ``N`` is scaled with it).
+
+The perturbed normal shades what the eye sees (direct light of lamps and the world, glossy
+lobes); where it would face away from the eye, the point keeps its unperturbed normal.  The
+patches keep their flat normals.
 """
 from __future__ import annotations
 
@@ -55,7 +74,9 @@ class SurfaceTexture:
     factor itself), indexed by :attr:`~raybundle.scene.model.PatchScene.triangle_source`;
     ``face_corners`` (F, 3, 3) [m] and ``face_uv`` (F, 3, 2): the input faces and their
     corner UVs; ``face_color`` (F, 3, 3) or None: their corner colors; ``face_alpha`` (F,) int
-    or None: the map of each face's coverage (its first channel; -1: opaque)."""
+    or None: the map of each face's coverage (its first channel; -1: opaque); ``face_normal``
+    (F,) int or None: the map of each face's normal, its texels the perturbed normal (x, y, z)
+    (-1: none), ``face_bump`` (F,) bool or None: that map is a bump's (module docstring)."""
 
     images: list
     face_image: np.ndarray
@@ -63,12 +84,18 @@ class SurfaceTexture:
     face_uv: np.ndarray
     face_color: np.ndarray | None = None
     face_alpha: np.ndarray | None = None
+    face_normal: np.ndarray | None = None
+    face_bump: np.ndarray | None = None
     _pyramids: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
         self.face_image = np.asarray(self.face_image, np.int64)
         self.face_alpha = (np.full(len(self.face_image), -1, np.int64) if self.face_alpha is None
                            else np.asarray(self.face_alpha, np.int64))
+        self.face_normal = (np.full(len(self.face_image), -1, np.int64) if self.face_normal is None
+                            else np.asarray(self.face_normal, np.int64))
+        self.face_bump = (np.zeros(len(self.face_image), bool) if self.face_bump is None
+                          else np.asarray(self.face_bump, bool))
         self.face_corners = np.asarray(self.face_corners, float)
         self.face_uv = np.asarray(self.face_uv, float)
         if self.face_color is not None:
@@ -86,6 +113,8 @@ class SurfaceTexture:
             d["texture_face_color"] = self.face_color
         if self.has_cutouts:
             d["texture_face_alpha"] = self.face_alpha
+        if self.has_normal_maps:
+            d["texture_face_normal"], d["texture_face_bump"] = self.face_normal, self.face_bump
         return d
 
     @classmethod
@@ -98,7 +127,8 @@ class SurfaceTexture:
             images.append(np.asarray(d["texture_pixels"][k:k + h * w]).reshape(h, w, 3))
             k += h * w
         return cls(images, d["texture_face_image"], d["texture_face_corners"], d["texture_face_uv"],
-                   d.get("texture_face_color"), d.get("texture_face_alpha"))
+                   d.get("texture_face_color"), d.get("texture_face_alpha"), d.get("texture_face_normal"),
+                   d.get("texture_face_bump"))
 
     def lookup(self, image, uv, level=0):
         """Bilinear, repeating lookup (N, 3) of map ``image`` at ``uv`` (N, 2), on ``level`` of
@@ -176,6 +206,53 @@ class SurfaceTexture:
             sel = np.nonzero(k_of == k)[0]
             out[sel] = self.lookup(int(k), self.uv_at(face[sel], points[sel]))[:, 0]
         return np.clip(out, 0.0, 1.0)
+
+    @property
+    def has_normal_maps(self):
+        """Whether any face has a normal or bump map."""
+        return bool(np.any(self.face_normal >= 0))
+
+    def shading_normals(self, face, points, normals, w_eye):
+        """The normals (N, 3) to shade ``points`` (N, 3) on input faces ``face`` (N,) with:
+        ``normals`` (N, 3) (unit, on the side seen) perturbed by the faces' normal or bump maps
+        (module docstring), kept where a face has none or the perturbed normal would not face
+        the eye ``w_eye`` (N, 3)."""
+        face = np.asarray(face, np.int64)
+        out = np.array(normals, float)
+        k_of = self.face_normal[face]
+        mapped = np.nonzero(k_of >= 0)[0]
+        if len(mapped) == 0:
+            return out
+        f, n = face[mapped], out[mapped]
+        c, uv = self.face_corners[f], self.face_uv[f]
+        e1, e2 = c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]
+        d1, d2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+        det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+        inv = np.where(np.abs(det) > 1e-300, 1.0 / np.where(det != 0, det, 1.0), 0.0)[:, None]
+        dpdu = (e1 * d2[:, 1:] - e2 * d1[:, 1:]) * inv          # [e1 e2] [[du1 du2], [dv1 dv2]]^-1
+        dpdv = (e2 * d1[:, :1] - e1 * d2[:, :1]) * inv
+        a = dpdu - np.einsum("ij,ij->i", dpdu, n)[:, None] * n  # in the plane of the normal
+        b = dpdv - np.einsum("ij,ij->i", dpdv, n)[:, None] * n
+        v = np.empty((len(mapped), 3))
+        for k in np.unique(k_of[mapped]):
+            sel = np.nonzero(k_of[mapped] == k)[0]
+            v[sel] = self.lookup(int(k), self.uv_at(f[sel], points[mapped[sel]]))
+        x, y, z = v[:, 0:1], v[:, 1:2], np.maximum(v[:, 2:3], 1e-3)
+        bump = self.face_bump[f]
+        # a normal map: the unit tangent frame (T, B = s N x T, N)
+        t = a / np.maximum(np.linalg.norm(a, axis=1, keepdims=True), 1e-300)
+        s = np.where(np.einsum("ij,ij->i", np.cross(dpdu, dpdv), n) < 0, -1.0, 1.0)[:, None]
+        tangent = x * t + y * s * np.cross(n, t) + z * n
+        # a bump: the slope per UV unit carried by the dual basis of (dP/du, dP/dv)
+        aa, ab, bb = (np.einsum("ij,ij->i", p, q)[:, None] for p, q in ((a, a), (a, b), (b, b)))
+        g = aa * bb - ab * ab
+        g = np.where(g > 1e-300, g, np.inf)
+        dual = n + (x * (bb * a - ab * b) + y * (aa * b - ab * a)) / (g * z)
+        m = np.where(bump[:, None], dual, tangent)
+        m /= np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-300)
+        ok = (np.einsum("ij,ij->i", m, w_eye[mapped]) > 1e-3) & np.all(np.isfinite(m), axis=1) & (np.abs(det) > 0)
+        out[mapped[ok]] = m[ok]
+        return out
 
     def triangle_coverage(self, scene, seed=0):
         """(T,) the mean coverage over each triangle of ``scene`` (1 where opaque), from
