@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..lights.direct import ALL_LIGHTS
+from ..lights.direct import ALL_LIGHTS, light_bits
 from ..lights.sources import ShapeLight
 from ..lights.world_light import WorldLight
 from ..scene.shading import seen_normals
@@ -499,7 +499,10 @@ class Renderer(ProgressiveImage):
         noise is: the floor behind the Cornell blocks) get ``penumbra_samples`` shadow rays
         for that light, a randomly shifted Kronecker set, and one for the others: the flags
         are kept per pixel and light (:func:`~raybundle.lights.direct.light_bits`), so a hall
-        of 13 lamps spends its penumbra rays on the lamps whose shadow edges cross the pixel.  Both choices use earlier passes only,
+        of 13 lamps spends its penumbra rays on the lamps whose shadow edges cross the pixel.
+        Those lamps share the pixel's ``penumbra_samples`` (rounded up, at least one each): the
+        hall's pixels have two to four of them, and 8 each made its passes dear (full materials
+        at 50 s, seeds 3-6: mean error 10.1% -> 9.5%; clay 2.65 / 2.57% -> 2.65 / 2.55%).  Both choices use earlier passes only,
         so every pass stays unbiased.  The first pass, with no earlier samples, treats every
         pixel as a penumbra (with the control variate): its plain one-ray estimate, a
         sixteenth of the image at 5 s, put single lit pixels 50-90% off and made up most of
@@ -522,6 +525,11 @@ class Renderer(ProgressiveImage):
             n_s = int(self.settings.light_samples)
             f = flags.copy()
             more = -(-int(self.settings.penumbra_samples) // n_s)
+            # the pixel's penumbra samples shared by the lights whose shadow edges cross it
+            crossing = np.zeros(len(hf), np.int64)
+            for bit in light_bits(self.direct.n_lights):
+                crossing += (pen_lights & bit) != 0
+            share = -(-more // np.maximum(crossing, 1))
             if u_light is None:       # the pass's own: each pixel's sequences continue over the passes
                 u, sequence = None, (self._light_shift[pixels[hf]], np.full(len(hf), self.passes * more * n_s))
             else:
@@ -530,7 +538,7 @@ class Renderer(ProgressiveImage):
                 g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], u, n_s,
                 mis=mis, diffuse_scale=self.albedo_scale(g.triangle[hf], g.point[hf]), shadow_flags=f,
                 analytic=np.full(len(hf), ALL_LIGHTS) if start else flags[:, 0],
-                penumbra=(pen_lights, more) + sequence, select=self.rng.random(len(hf)))
+                penumbra=(pen_lights, share) + sequence, select=self.rng.random(len(hf)))
             out[hf] += value
             np.bitwise_or.at(self.shadow_flags, pixels[hf], f)
             self.image_rays += self.direct.rays - before

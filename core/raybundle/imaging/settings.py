@@ -38,8 +38,9 @@ class RenderSettings:
     ``gather_share`` of the run's seconds buys, in runs limited by time (none in runs of given
     iterations, which stay reproducible, nor in images formed without a budget of seconds):
     :meth:`Renderer.diffuse_indirect`;
-    ``penumbra_samples``: shadow rays per pass for a light at the pixels where its earlier
-    samples were both seen and blocked (:meth:`Renderer._shade`);
+    ``penumbra_samples``: shadow rays per pass at the pixels where a light's earlier
+    samples were both seen and blocked, shared by the lights whose shadow edges cross the
+    pixel, at least one each (:meth:`Renderer._shade`);
     ``caustic_splats``: with a caustic first shot, its samples per pixel and image pass that
     light-trace the caustic on the surfaces the eye sees into the pixels
     (:meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`), 0 = read it from the patches as the rest of the

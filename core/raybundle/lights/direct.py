@@ -194,8 +194,8 @@ class DirectLighting:
         (:func:`light_bits`).  ``shadow_flags`` (N, 2) uint64, updated in place: in column 0
         the lights a sample reached, in column 1 those a sample facing them found blocked.
 
-        ``penumbra`` ``(mask (N,) uint64, count, shift (N, 3), first (N,) int or None)`` or
-        None: the lights in a point's ``mask`` take ``count`` times as many samples there, on
+        ``penumbra`` ``(mask (N,) uint64, count (int or (N,) ints), shift (N, 3), first (N,) int or
+        None)`` or None: the lights in a point's ``mask`` take ``count`` times as many samples there, on
         the randomly shifted Kronecker (R_3) sequence ``(shift + l beta + j alpha) mod 1`` of
         light ``l`` (``beta`` a fixed irrational offset, so each light has a shift of its own),
         in place of those of ``u``: the penumbra samples cost rays only for the lights whose
@@ -269,7 +269,7 @@ class DirectLighting:
                 on = (mask[base] & bit) != 0
                 if chance is not None:      # a lamp taken by chance gives little here: no penumbra samples
                     on &= picked <= 1.0
-                reps = np.where(on, int(more), 1)
+                reps = np.where(on, more[base] if np.ndim(more) else int(more), 1)
                 pt = np.repeat(base, reps)
                 copy = ranges(0, reps)
                 kron = np.nonzero(np.repeat(on, reps))[0] if first is None else np.arange(len(pt))
