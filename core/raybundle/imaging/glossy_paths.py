@@ -34,7 +34,7 @@ class GlossyEyePaths:
         self.world_light = world_light if self.light_mis else None
         self.rays = 0
 
-    def gather(self, g, idx, u):
+    def gather(self, g, idx, u, world_samples=0):
         """Glossy lobe at pixels ``idx`` by one eye path each (the remedy for sharp lobes).
 
         Sample ``w_i`` from the glossy lobes (GGX around the mirror of the eye
@@ -47,9 +47,12 @@ class GlossyEyePaths:
         what makes glossy-to-glossy paths spiky).  Direct light of the first-shot
         lights is left out of what the rays see: :meth:`DirectLighting.reflected_radiance`
         and the first shot count it.  ``u`` (len(idx), 2): uniforms for the first
-        lobe sample.  Returns ``(light, solved)``, (len(idx), 3) each: what the paths took from
-        the lamps and the world (:meth:`trace`), which does not depend on the solver's
-        iterations, and what they read from the solver.
+        lobe sample.  ``world_samples`` K > 0: the caller took K world samples for these lobes
+        (:meth:`WorldLight.irradiance` with ``lobe``), weighted against the path's first ray with
+        the counts, so the path takes none of its own and weights the sky it meets
+        ``p_g^2 / (p_g^2 + (K p_w)^2)``.  Returns ``(light, solved)``, (len(idx), 3) each: what
+        the paths took from the lamps and the world (:meth:`trace`), which does not depend on the
+        solver's iterations, and what they read from the solver.
         """
         sc, solver = self.scene, self.solver
         e = solver.received()
@@ -63,8 +66,11 @@ class GlossyEyePaths:
         if solver.world_guide is not None:
             seen, at = np.unique(sides, return_inverse=True)
             guide, at = WorldLight.guide_of(solver.world_guide, seen), at.reshape(-1)
-        world_mis = (self.world_light.density(w_i, guide, at), sc.materials.glossy_pdf(m, n, w_i, wo))
+        world_mis = (max(world_samples, 1) * self.world_light.density(w_i, guide, at),
+                     sc.materials.glossy_pdf(m, n, w_i, wo))
         light, solved = self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo), world_mis=world_mis)
+        if world_samples > 0:
+            return light, solved
         return light + self.world_samples(g.point[idx], n, m, wo, guide, at), solved
 
     def world_samples(self, pts, n, m, wo, guide=None, at=None):

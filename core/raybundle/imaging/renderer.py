@@ -547,23 +547,32 @@ class Renderer(ProgressiveImage):
         if len(far):          # the first-shot lights on a translucent surface's far side, let through
             t = hf[far]
             out[t] += kt[far] / np.pi * self.direct.far_side_irradiance(g.point[t], g.normal[t], self.rng)
+        gl = hf[self.glossy_material[g.material[hf]]]
+        lobe_world = 0          # world samples the glossy lobes share with the diffuse one
         if self.world_light is not None and len(hf):
             before = self.world_light.rays
+            lobe = None
+            if self.settings.glossy_gather and self.glossy_paths.world_light is self.world_light and len(gl):
+                at = np.searchsorted(hf, gl)
+                lobe = (self.scene.materials, at, g.material[gl], g.w_eye[gl])
+                lobe_world = self.world_samples
             e = self.world_light.irradiance(g.point[hf], g.normal[hf],
                                             self.rng.random((len(hf), self.world_samples, 3)),
-                                            self.solver.world_guide, self.scene.tside_side[g.tside[hf]])
+                                            self.solver.world_guide, self.scene.tside_side[g.tside[hf]], lobe=lobe)
+            if lobe is not None:
+                e, sky = e
+                out[gl] += sky
             m = g.material[hf]
             w_d = self.scene.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[hf], g.w_eye[hf]))
             scale = self.albedo_scale(g.triangle[hf], g.point[hf])
             out[hf] += w_d * self.scene.materials.diffuse_reflectance[m] / np.pi * e * (1.0 if scale is None else scale)
             self.image_rays += self.world_light.rays - before
-        gl = hf[self.glossy_material[g.material[hf]]]
         gathered = np.zeros_like(out)
         if self.settings.glossy_gather:
             before = self.glossy_paths.rays
             # the lamps and the world the paths meet count with the pass (kept over the solver's
             # restart); what they read from the solver with the gather (dropped at its restart)
-            light, gathered[gl] = self.glossy_paths.gather(g, gl, u_lobe[gl])
+            light, gathered[gl] = self.glossy_paths.gather(g, gl, u_lobe[gl], world_samples=lobe_world)
             out[gl] += light
             self.image_rays += self.glossy_paths.rays - before
             gl = gl[:0]

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..scene.world import World, pixel_of
+from .direct import DirectLighting
 
 #: the guide cells of the sky: bands of polar angle x sectors of azimuth, each a block of the
 #: world image's pixels (module docstring)
@@ -145,16 +146,25 @@ class WorldLight:
         cdf += np.arange(len(g))[:, None]
         return np.where(has, GUIDE_SHARE, 0.0), cdf.ravel(), prob.ravel()
 
-    def irradiance(self, points, normals, u, guide_sums=None, sides=None):
+    def irradiance(self, points, normals, u, guide_sums=None, sides=None, lobe=None):
         """(N, 3) [W/m^2] estimate of the direct irradiance from the world at ``points``
         (N, 3) with unit ``normals`` (N, 3), with ``u`` (N, K, 3) uniforms: K samples each;
         ``guide_sums`` (cells, S): the solver's guide (module docstring) for points on ``sides``
-        (N,), or None (by brightness alone)."""
+        (N,), or None (by brightness alone).
+
+        With ``lobe = (materials, idx, mats, w_out)``, also the radiance [W m^-2 sr^-1] the glossy
+        lobes of materials ``mats`` at the points ``idx`` reflect towards ``w_out`` from the same
+        samples, ``(1/K) sum_k L_w f_g cos / p_w`` each weighted ``(K p_w)^2 / ((K p_w)^2 + p_g^2)``
+        against one lobe-sampled ray (power heuristic with the sample counts, ``p_g`` the lobe's
+        density, :meth:`~raybundle.scene.materials.MaterialTable.glossy_pdf`), which then takes
+        ``p_g^2 / (p_g^2 + (K p_w)^2)`` of the sky it meets: returns ``(E, glossy (len(idx), 3))``.
+        The diffuse lobe's shadow rays serve the glossy lobe too, K of them where it had one."""
         points, normals = np.asarray(points, float), np.asarray(normals, float)
         n, k = u.shape[:2]
         out = np.zeros((n, 3))
+        glossy = None if lobe is None else np.zeros((len(lobe[1]), 3))
         if not self.emits or n == 0:
-            return out
+            return out if lobe is None else (out, glossy)
         rep = np.repeat(np.arange(n), k)
         guide = at = None
         if guide_sums is not None:
@@ -171,4 +181,15 @@ class WorldLight:
             contrib = L[ok] * (cos[ok] / pdf[ok])[:, None]
             for c in range(3):
                 out[:, c] = np.bincount(rep[ok], contrib[:, c], minlength=n)
-        return out / k
+            if lobe is not None and len(lobe[1]):
+                mt, idx, mats, w_out = lobe
+                row = np.full(n, -1)
+                row[idx] = np.arange(len(idx))
+                j = ok[row[rep[ok]] >= 0]
+                r = row[rep[j]]
+                f = mt.brdf(mats[r], normals[rep[j]], -d[j], w_out[r], diffuse=False)
+                w = DirectLighting.mis_weight(k * pdf[j], mt.glossy_pdf(mats[r], normals[rep[j]], d[j], w_out[r]))
+                g = L[j] * f * (cos[j] / pdf[j] * w)[:, None]
+                for c in range(3):
+                    glossy[:, c] = np.bincount(r, g[:, c], minlength=len(idx))
+        return out / k if lobe is None else (out / k, glossy / k)
