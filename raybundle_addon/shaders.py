@@ -36,10 +36,10 @@ model.  A material's node tree is read from its Cycles output node:
   albedo texture on an albedo input (the object's own for a graph baked on each object), its
   mean elsewhere.
 * A **Glass**, **Refraction** or **Transparent BSDF**, or a Principled BSDF's **Transmission
-  Weight** (tinted by its Base Color, the rest of it opaque), is a smooth dielectric interface
-  over its share of the surface (:mod:`raybundle.scene.transmission`): its weight, IOR (1 for
-  Transparent), refraction and reflection tints (none reflected by a Refraction BSDF, which
-  takes no Fresnel loss either); rough glass is rendered smooth, warned.
+  Weight** (tinted by its Base Color, the rest of it opaque), is a dielectric interface over
+  its share of the surface (:mod:`raybundle.scene.transmission`): its weight, IOR (1 for
+  Transparent), roughness, refraction and reflection tints (none reflected by a Refraction
+  BSDF, which takes no Fresnel loss either).
 * A **Translucent BSDF**: its color (times its mix weight) is the light one side lets through
   to the other, diffusely (``translucent``).
 * Anything else (Subsurface, Holdout, groups...) makes the
@@ -58,8 +58,8 @@ from raybundle.scene.textures import modulation_map
 
 #: the diffuse color of faces without a material (Blender's default surface)
 DEFAULT_GREY = 0.8
-#: glass rougher than this is warned about: it is rendered smooth
-ROUGH_GLASS = 0.02
+#: glass rougher than this with Multiscatter GGX is warned about: single scattering loses some of its light
+MULTISCATTER_GLASS = 0.1
 
 
 def _core_supports(fieldname):
@@ -295,7 +295,8 @@ class MaterialConverter:
             if glass > 0:
                 self._glass(weight * glass, np.clip(inputs.get("Base Color", (0.8,) * 3), 0.0, 1.0)[:3],
                             np.clip(inputs.get("Specular Tint", (1.0,) * 3), 0.0, 1.0)[:3],
-                            float(inputs.get("IOR", 1.5)), 1, float(inputs.get("Roughness", 0.5)), acc, notes)
+                            float(inputs.get("IOR", 1.5)), 1, float(inputs.get("Roughness", 0.5)), acc, notes,
+                            getattr(node, "distribution", "MULTI_GGX"))
             spec = principled_to_material(inputs, getattr(node, "distribution", "MULTI_GGX"),
                                           notes.append)
             simple = principled_to_material(inputs, getattr(node, "distribution", "MULTI_GGX"),
@@ -319,16 +320,19 @@ class MaterialConverter:
         ior = self.value(node.inputs["IOR"], notes)
         rough = self.value(node.inputs["Roughness"], notes) if "Roughness" in node.inputs else 0.0
         glass = node.type == "BSDF_GLASS"
-        self._glass(weight, color, color if glass else np.zeros(3), ior, int(glass), rough, acc, notes)
+        self._glass(weight, color, color if glass else np.zeros(3), ior, int(glass), rough, acc, notes,
+                    getattr(node, "distribution", "GGX"))
         self._normal_map(node, notes)
 
-    def _glass(self, weight, color, reflection, ior, fresnel, roughness, acc, notes):
+    def _glass(self, weight, color, reflection, ior, fresnel, roughness, acc, notes, distribution="GGX"):
+        if roughness > MULTISCATTER_GLASS and distribution == "MULTI_GGX":
+            notes.append(f"rough glass (roughness {roughness:.3g}): its Multiscatter GGX is approximated by single "
+                         "scattering (a little darker)")
         if ior <= 0:
             notes.append(f"an IOR of {ior:g} is not physical: 1 is used (no bending)")
             ior = 1.0
-        if roughness > ROUGH_GLASS:
-            notes.append(f"rough glass (roughness {roughness:.3g}) is rendered smooth")
-        acc.transmission.append((weight, np.asarray(color, float), np.asarray(reflection, float), ior, fresnel))
+        acc.transmission.append((weight, np.asarray(color, float), np.asarray(reflection, float), ior, fresnel,
+                                 float(np.clip(roughness, 0.0, 1.0))))
 
     def _coverage(self, sock, weight, notes, invert=False):
         """Record the cut-out given by input ``sock`` (a Principled BSDF's ``Alpha``, a Mix
@@ -542,7 +546,8 @@ class MaterialConverter:
                 self.warn(f"material {name!r}: interfaces of different IOR or kind are mixed: one of their mean "
                           "IOR is used")
             spec.update(transmission=total, transmission_color=tuple(mean(1)), transmission_reflection=tuple(mean(2)),
-                        transmission_ior=float(mean(3)), transmission_fresnel=int(round(float(mean(4)))))
+                        transmission_ior=float(mean(3)), transmission_fresnel=int(round(float(mean(4)))),
+                        transmission_roughness=float(mean(5)))
         return spec
 
     def _flatten_opaque(self, name, acc):

@@ -339,7 +339,7 @@ class Renderer(ProgressiveImage):
             if sc.shading is not None:
                 shade = seen_normals(sc.shading, sc.triangle_source[tri[live]], p,
                                      np.where((np.einsum("ij,ij->i", geo, d) < 0)[:, None], geo, -geo), -d)
-            uniforms = self.rng.random((len(live), 2))
+            uniforms = self.rng.random((len(live), 4 if np.any(sc.materials.transmission_roughness > 0) else 2))
             if depth == 0 and choice is not None:
                 uniforms[:, 1] = choice[live]
             on, new, w = scatter(sc.materials, sc.triangle_material[tri[live]], d, geo, shade, uniforms)

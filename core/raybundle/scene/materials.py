@@ -82,11 +82,11 @@ MIN_ALPHA = 1e-3
 #: glossy lobes below this GGX roughness count as near-mirrors (:mod:`raybundle.app.auto`,
 #: :mod:`raybundle.methods.ray_bundle_walk`)
 NEAR_MIRROR_ROUGHNESS = 0.1
-_MU_TABLE = 65
+_MU_TABLE = 65               # samples of cos(theta_out) in the directional-albedo tables
 #: the transmission parameters and their defaults (an opaque surface)
 _TRANSMISSION_DEFAULTS = {"transmission": 0.0, "transmission_ior": 1.0, "transmission_color": (1.0, 1.0, 1.0),
                           "transmission_reflection": (1.0, 1.0, 1.0), "transmission_fresnel": 1,
-                          "translucent": (0.0, 0.0, 0.0)}  # samples of cos(theta_out) in the directional-albedo tables
+                          "translucent": (0.0, 0.0, 0.0), "transmission_roughness": 0.0}
 
 
 @dataclass
@@ -124,6 +124,8 @@ class MaterialTable:
     translucent : (M, 3) float  kt, Blender's Translucent BSDF: light arriving on one side
         leaves the other, ``f_t = kt / pi`` for ``w_in`` and ``w_out`` on opposite sides of
         the surface (light through a curtain or a lampshade); ``(1 - g) kd + kt <= 1``.
+    transmission_roughness : (M,) float  the interface's GGX roughness (alpha its square) in
+        [0, 1] for the eye's paths (frosted glass); 0 (default) = smooth.
     See the module docstring for the equations.
     """
 
@@ -144,6 +146,7 @@ class MaterialTable:
     transmission_reflection: np.ndarray = None
     transmission_fresnel: np.ndarray = None
     translucent: np.ndarray = None
+    transmission_roughness: np.ndarray = None
     _albedo_tables: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -271,6 +274,10 @@ class MaterialTable:
         if ((eta > 0) & (eta < 1)).any():
             m = int(np.nonzero((eta > 0) & (eta < 1))[0][0])
             raise ValueError(f"material {self.names[m]!r}: specular_ior {eta[m]} must be 0 (no layer) or >= 1")
+        rough = arrays["transmission_roughness"]
+        if ((rough < 0) | (rough > 1)).any():
+            m = int(np.nonzero((rough < 0) | (rough > 1))[0][0])
+            raise ValueError(f"material {self.names[m]!r}: transmission_roughness must lie in [0, 1]")
         if (arrays["transmission"] > 1).any() or (arrays["transmission_ior"] <= 0).any():
             m = int(np.nonzero((arrays["transmission"] > 1) | (arrays["transmission_ior"] <= 0))[0][0])
             raise ValueError(f"material {self.names[m]!r}: transmission must lie in [0, 1] and its IOR be positive")
@@ -609,9 +616,30 @@ def sample_ggx_reflection(alpha, normal, w_out, u):
     where the lobe is seen at grazing angles: eye paths off the side of a glossy block
     carried many times the lamp's light into single pixels (README, 'Where the method is weak').
     """
+    alpha = np.broadcast_to(np.asarray(alpha, float), (len(normal),))
+    h = sample_ggx_visible_normal(alpha, normal, w_out, u)
+    cos_o = np.einsum("ij,ij->i", normal, w_out)
+    h_o = np.einsum("ij,ij->i", h, w_out)
+    w_i = 2 * h_o[:, None] * h - w_out
+    cos_i = np.einsum("ij,ij->i", normal, w_i)
+    ok = (cos_i > 0) & (h_o > 0) & (cos_o > 0)
+    return w_i, np.where(ok, smith_g2_over_g1(alpha, cos_o, cos_i), 0.0)
+
+
+def smith_g2_over_g1(alpha, cos_out, cos_in):
+    """The visible-normal sampler's weight ``G2(w_out, w_in) / G1(w_out)`` (height-correlated
+    Smith), ``(1 + L(w_out)) / (1 + L(w_out) + L(w_in))`` with ``L`` :func:`smith_lambda` of
+    ``|cos|``; at most 1."""
+    lam_o = smith_lambda(alpha, np.abs(cos_out))
+    return (1.0 + lam_o) / (1.0 + lam_o + smith_lambda(alpha, np.abs(cos_in)))
+
+
+def sample_ggx_visible_normal(alpha, normal, w_out, u):
+    """Microfacet normals h (N, 3) of the GGX distribution ``alpha`` (N,) about unit ``normal``
+    (N, 3) drawn from the normals visible from ``w_out`` (N, 3), density
+    ``G1(w_out) (h.w_out)^+ D(h) / cos_out`` (Heitz 2018), for uniforms ``u`` (N, 2)."""
     from ..tracing.sampling import frames_from_normals
 
-    alpha = np.broadcast_to(np.asarray(alpha, float), (len(normal),))
     t, b = frames_from_normals(normal)
     vx, vy = np.einsum("ij,ij->i", w_out, t), np.einsum("ij,ij->i", w_out, b)
     cos_o = np.einsum("ij,ij->i", normal, w_out)
@@ -631,14 +659,7 @@ def sample_ggx_reflection(alpha, normal, w_out, u):
     nh = p1[:, None] * t1 + p2[:, None] * t2 + np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))[:, None] * v
     m = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 1e-12)], axis=1)
     m /= np.linalg.norm(m, axis=1, keepdims=True)
-    h = m[:, :1] * t + m[:, 1:2] * b + m[:, 2:] * normal
-    h_o = np.einsum("ij,ij->i", h, w_out)
-    w_i = 2 * h_o[:, None] * h - w_out
-    cos_i = np.einsum("ij,ij->i", normal, w_i)
-    ok = (cos_i > 0) & (h_o > 0) & (cos_o > 0)
-    lam_o = smith_lambda(alpha, np.where(ok, cos_o, 1.0))
-    weight = np.where(ok, (1.0 + lam_o) / (1.0 + lam_o + smith_lambda(alpha, np.where(ok, cos_i, 1.0))), 0.0)
-    return w_i, weight
+    return m[:, :1] * t + m[:, 1:2] * b + m[:, 2:] * normal
 
 
 def ggx_albedo(alpha, cos_out, n_theta=256, n_phi=128):

@@ -29,13 +29,18 @@ It is used in two ways:
 * **by Fresnel** (:func:`scatter`), for the eye's paths (the image): at each interface the
   eye path is reflected with probability ``F`` (weight the reflection tint) or refracted
   (weight the refraction tint), through up to ``transmission_depth`` interfaces, as Cycles
-  samples a smooth Glass BSDF.
+  samples a smooth Glass BSDF.  A rough interface (``transmission_roughness`` r, GGX of
+  ``alpha = r^2``, single scattering as Cycles' GGX Glass BSDF) first draws a microfacet normal
+  ``h`` from those visible along the path and then reflects or refracts about ``h`` by
+  ``F(h)``, weighted ``G2 / G1`` (Heitz 2018; 0 where the new direction falls on the wrong side
+  of the surface): the eye sees through frosted glass blurred.  The light the bundles and
+  shadow rays carry still passes a rough interface straight on (its shadows are not blurred).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .materials import fresnel_dielectric_cos, fresnel_dielectric_fss
+from .materials import fresnel_dielectric_cos, fresnel_dielectric_fss, sample_ggx_visible_normal, smith_g2_over_g1
 
 
 def pass_probability(materials, mat, cos):
@@ -50,7 +55,8 @@ def pass_probability(materials, mat, cos):
 def scatter(materials, mat, travel, geometric, shading, u):
     """One event of eye paths that meet transmissive materials ``mat`` (N,) travelling along
     ``travel`` (N, 3) at triangles of normal ``geometric`` (N, 3), shaded with ``shading``
-    (N, 3) (either orientation), for uniforms ``u`` (N, 2).
+    (N, 3) (either orientation), for uniforms ``u`` (N, 4) (the last two draw a rough
+    interface's microfacet normal; (N, 2) where no interface is rough).
 
     With probability ``w_t`` the path meets the interface and goes on, reflected with
     probability ``F`` (weight the reflection tint) or refracted (weight the refraction tint;
@@ -69,6 +75,12 @@ def scatter(materials, mat, travel, geometric, shading, u):
     entering = np.einsum("ij,ij->i", np.asarray(geometric, float), d) < 0
     eta = np.asarray(materials.transmission_ior, float)[m]
     eta = np.where(entering, eta, 1.0 / eta)
+    alpha = np.asarray(materials.transmission_roughness, float)[m] ** 2
+    rough = np.nonzero(on & (alpha > 0))[0]
+    surface = n
+    if len(rough):                  # reflect or refract about a visible microfacet normal
+        n = n.copy()
+        n[rough] = sample_ggx_visible_normal(alpha[rough], surface[rough], -d[rough], u[rough, 2:4])
     cos_i = np.clip(-np.einsum("ij,ij->i", n, d), 0.0, 1.0)
     f = fresnel_dielectric_cos(cos_i, eta)
     fresnel = np.asarray(materials.transmission_fresnel)[m] == 1
@@ -82,6 +94,10 @@ def scatter(materials, mat, travel, geometric, shading, u):
     tint = np.where(reflect[:, None], materials.transmission_reflection[m], materials.transmission_color[m])
     absorbed = ~fresnel & reflect                                          # a Refraction BSDF's TIR
     tint = np.where(absorbed[:, None], 0.0, tint)
+    if len(rough):
+        cos_o, cos_n = np.einsum("ij,ij->i", surface[rough], -d[rough]), np.einsum("ij,ij->i", surface[rough], out[rough])
+        side = np.where(reflect[rough], cos_n > 0, cos_n < 0)               # reflected stays, refracted crosses
+        tint[rough] *= np.where(side, smith_g2_over_g1(alpha[rough], cos_o, cos_n), 0.0)[:, None]
     weight[on] *= tint[on]
     return on, out, weight
 
