@@ -36,12 +36,12 @@ def run_options(scene, seconds=None, iterations=None):
     from raybundle.app.plan import RunOptions
 
     rb = getattr(scene, "raybundle", None)
-    depth = transmission_depth(scene)
+    depth = dict(transmission_depth=transmission_depth(scene), glossy_depth=glossy_depth(scene))
     if rb is None:
-        return RunOptions(seconds=seconds, iterations=iterations, transmission_depth=depth)
+        return RunOptions(seconds=seconds, iterations=iterations, **depth)
     names = {f.name for f in fields(RunOptions)} & set(rb.bl_rna.properties.keys())
     values = {name: getattr(rb, name) for name in names}
-    values["transmission_depth"] = depth
+    values.update(depth)
     if seconds is not None or iterations is not None:
         values.update(seconds=seconds, iterations=iterations)
     elif not values["iterations"]:
@@ -60,6 +60,17 @@ def transmission_depth(scene):
     if cycles is None or not hasattr(cycles, "transmission_bounces"):
         return None
     return int(min(cycles.transmission_bounces, cycles.max_bounces))
+
+
+def glossy_depth(scene):
+    """How many reflections on glass an eye path takes in Cycles on ``scene``: its Light Paths'
+    Glossy limit within the Total (Cycles counts a glass's reflections, total internal ones
+    too, as glossy bounces; the default file's 4, a converted file's 64), or None where the
+    scene has no Cycles settings."""
+    cycles = getattr(scene, "cycles", None)
+    if cycles is None or not hasattr(cycles, "glossy_bounces"):
+        return None
+    return int(min(cycles.glossy_bounces, cycles.max_bounces))
 
 
 def from_properties(cls, rb, prefix=""):

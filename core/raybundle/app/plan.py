@@ -43,9 +43,10 @@ class RunOptions:
     or the defaults; ``first_shot``: shoot the lights and small emitters first;
     ``gather_rays``: final-gather rays per pixel next to concave edges (-1: as many as a
     tenth of a timed run buys); ``threads``: the ray tracer's (None: all cores);
-    ``transmission_depth``: the interfaces an eye path is followed through (None: the default
-    of :class:`~raybundle.imaging.settings.RenderSettings`; the add-on passes the file's own Light
-    Paths limit)."""
+    ``transmission_depth``: the interfaces an eye path is followed through, ``glossy_depth``: how
+    many of them may reflect it (None: the defaults of
+    :class:`~raybundle.imaging.settings.RenderSettings`; the add-on passes the file's own Light
+    Paths limits)."""
 
     method: str = StochasticIterationSolver.name
     iterations: int | None = None
@@ -58,6 +59,7 @@ class RunOptions:
     gather_rays: int = -1
     threads: int | None = None
     transmission_depth: int | None = None
+    glossy_depth: int | None = None
 
 
 @dataclass
@@ -119,7 +121,7 @@ def _check_method(method, bake, chains):
 
 
 def _settings(o, sequence):
-    depth = {} if o.transmission_depth is None else {"transmission_depth": int(o.transmission_depth)}
+    depth = {k: int(getattr(o, k)) for k in ("transmission_depth", "glossy_depth") if getattr(o, k) is not None}
     return RenderSettings(seed=int(o.seed), sequence=sequence or DEFAULT_SEQUENCE,
                           bundle_resolution=int(o.bundle_resolution), threads=o.threads,
                           first_shot="auto" if o.first_shot else "none", gather_rays=int(o.gather_rays), **depth)

@@ -309,8 +309,9 @@ class Renderer(ProgressiveImage):
         """Eye rays ``org``, ``dirs`` (N, 3) with first hits ``(tri, t, u, v)`` followed through
         the transmissive surfaces they meet (:func:`~raybundle.scene.transmission.scatter`: by
         Fresnel, reflected or refracted, at the first by the uniforms ``choice`` (N,) where
-        given), up to ``transmission_depth`` interfaces (beyond:
-        black).  Returns the last segments' ``(org, dirs, tri, t, u, v)``, each ray's weight
+        given): as Cycles' transmission and glossy bounces, a path that has been refracted
+        ``transmission_depth`` times or reflected ``glossy_depth`` times ends at the next
+        interface it meets, black.  Returns the last segments' ``(org, dirs, tri, t, u, v)``, each ray's weight
         (N, 3), (N,) bool, whether it was turned, and the area lamps (N, 3) its turned segments
         met before the surface they end on, weighted (or None where the scene has no area lamps).
 
@@ -322,15 +323,22 @@ class Renderer(ProgressiveImage):
         org, dirs = org.copy(), dirs.copy()
         weight = np.ones((len(tri), 3))
         bounced = np.zeros(len(tri), bool)
+        reflections = np.zeros(len(tri), np.int64)
+        refractions = np.zeros(len(tri), np.int64)
         shapes = [light for light in self.direct.area_lights if isinstance(light, ShapeLight)]
         lamps = np.zeros((len(tri), 3)) if shapes else None
         live = np.nonzero(tri >= 0)[0]
-        for depth in range(int(self.settings.transmission_depth) + 1):
+        most_t, most_g = int(self.settings.transmission_depth), int(self.settings.glossy_depth)
+        for depth in range(most_t + most_g + 1):
             live = live[tracer.glass[tri[live]]]
             if len(live) == 0:
                 break
-            if depth == self.settings.transmission_depth:
-                weight[live], tri[live] = 0.0, -1
+            # as Cycles, a path that has spent its transmission or glossy bounces ends at the next
+            # surface it meets (black where that is glass)
+            spent = (refractions[live] >= most_t) | (reflections[live] >= most_g)
+            weight[live[spent]], tri[live[spent]] = 0.0, -1
+            live = live[~spent]
+            if len(live) == 0:
                 break
             d = dirs[live]
             p = org[live] + t[live, None] * d
@@ -344,6 +352,9 @@ class Renderer(ProgressiveImage):
                 uniforms[:, 1] = choice[live]
             on, new, w = scatter(sc.materials, sc.triangle_material[tri[live]], d, geo, shade, uniforms)
             weight[live] *= w
+            turned = np.einsum("ij,ij->i", d, geo) * np.einsum("ij,ij->i", new, geo) < 0
+            reflections[live] += on & turned
+            refractions[live] += on & ~turned
             live = live[on]
             bounced[live] = True
             org[live] = p[on] + tracer.eps * new[on]

@@ -53,8 +53,10 @@ class RenderSettings:
     (:meth:`Renderer.automatic_world_samples`: beside a sun most such rays meet blinds and
     walls, and the few through a window make single pixels bright);
     ``transmission_depth``: the interfaces of glass, refraction and transparent surfaces an eye
-    path is reflected or refracted by before it is cut off (black), Cycles' default
-    transmission bounces (:mod:`raybundle.scene.transmission`, :meth:`Renderer.trace_gbuffer`).
+    path is refracted by before it ends at the next (black), Cycles' default
+    transmission bounces (:mod:`raybundle.scene.transmission`, :meth:`Renderer.trace_gbuffer`);
+    ``glossy_depth``: the reflections on them (total internal ones included) after which a path
+    ends at the next, black, Cycles' default glossy bounces.
     """
 
     bundle_resolution: int = 0
@@ -78,6 +80,7 @@ class RenderSettings:
     caustic_splats: float = 1.0
     world_samples: int = -1
     transmission_depth: int = 12
+    glossy_depth: int = 4
     threads: int | None = None
 
 
@@ -108,5 +111,7 @@ class RenderSettings:
             raise ValueError("gather_share must lie in [0, 1)")
         if not 0 <= int(self.transmission_depth) <= 1024:
             raise ValueError("transmission_depth must lie in [0, 1024]")
+        if not 0 <= int(self.glossy_depth) <= 1024:
+            raise ValueError("glossy_depth must lie in [0, 1024]")
         if not 0.0 <= float(self.caustic_splats) <= 64.0:
             raise ValueError("caustic_splats must lie in [0, 64] (0 = the caustic from the patches)")
