@@ -133,9 +133,7 @@ def graph_input(mat, sock):
                 return f"its Normal Map node is in {node.space.lower()} space (only tangent space is modeled)"
             if node.uv_map:                 # "" is the active render map, as an image's own
                 uvs.add(node.uv_map)
-        elif node.type == "BUMP":
-            pass
-        elif node.type not in PURE:
+        elif node.type not in PURE and node.type != "BUMP":       # a Bump: a function of its inputs' slopes
             return f"it reads a {node.bl_label} node, which depends on the view, the light or more than the point"
         stack += [lk for s in node.inputs for lk in s.links
                   if not getattr(lk, "is_muted", False) and getattr(lk, "is_valid", True)]

@@ -36,7 +36,8 @@ def run_options(scene, seconds=None, iterations=None):
     from raybundle.app.plan import RunOptions
 
     rb = getattr(scene, "raybundle", None)
-    depth = dict(transmission_depth=transmission_depth(scene), glossy_depth=glossy_depth(scene))
+    depth = dict(transmission_depth=light_path_limit(scene, "transmission_bounces"),
+                 glossy_depth=light_path_limit(scene, "glossy_bounces"))
     if rb is None:
         return RunOptions(seconds=seconds, iterations=iterations, **depth)
     names = {f.name for f in fields(RunOptions)} & set(rb.bl_rna.properties.keys())
@@ -51,26 +52,16 @@ def run_options(scene, seconds=None, iterations=None):
     return RunOptions(**values)
 
 
-def transmission_depth(scene):
-    """The interfaces of glass an eye path goes through in Cycles on ``scene``: its Light Paths'
-    Transmission limit within the Total (a path caught in a pane by total internal reflection,
-    seen at its edge, goes on as far; the default file's 12, a converted file's 64), or None
-    where the scene has no Cycles settings (the core's default)."""
+def light_path_limit(scene, bounces):
+    """``scene``'s Cycles Light Paths limit ``bounces`` ("transmission_bounces": the refractions
+    on glass an eye path takes; "glossy_bounces": its reflections there, total internal ones
+    too) within the Total, as Cycles applies it (the default file's 12 and 4, a converted
+    file's 64: the hall's balustrade seen at its edge guides the eye about 24 times), or None
+    where the scene has no Cycles settings (the core's defaults)."""
     cycles = getattr(scene, "cycles", None)
-    if cycles is None or not hasattr(cycles, "transmission_bounces"):
+    if cycles is None or not hasattr(cycles, bounces):
         return None
-    return int(min(cycles.transmission_bounces, cycles.max_bounces))
-
-
-def glossy_depth(scene):
-    """How many reflections on glass an eye path takes in Cycles on ``scene``: its Light Paths'
-    Glossy limit within the Total (Cycles counts a glass's reflections, total internal ones
-    too, as glossy bounces; the default file's 4, a converted file's 64), or None where the
-    scene has no Cycles settings."""
-    cycles = getattr(scene, "cycles", None)
-    if cycles is None or not hasattr(cycles, "glossy_bounces"):
-        return None
-    return int(min(cycles.glossy_bounces, cycles.max_bounces))
+    return int(min(getattr(cycles, bounces), cycles.max_bounces))
 
 
 def from_properties(cls, rb, prefix=""):

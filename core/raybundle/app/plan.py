@@ -43,8 +43,8 @@ class RunOptions:
     or the defaults; ``first_shot``: shoot the lights and small emitters first;
     ``gather_rays``: final-gather rays per pixel next to concave edges (-1: as many as a
     tenth of a timed run buys); ``threads``: the ray tracer's (None: all cores);
-    ``transmission_depth``: the interfaces an eye path is followed through, ``glossy_depth``: how
-    many of them may reflect it (None: the defaults of
+    ``transmission_depth`` and ``glossy_depth``: the refractions and the reflections on glass after
+    which an eye path ends (None: the defaults of
     :class:`~raybundle.imaging.settings.RenderSettings`; the add-on passes the file's own Light
     Paths limits)."""
 

@@ -329,6 +329,7 @@ class Renderer(ProgressiveImage):
         lamps = np.zeros((len(tri), 3)) if shapes else None
         live = np.nonzero(tri >= 0)[0]
         most_t, most_g = int(self.settings.transmission_depth), int(self.settings.glossy_depth)
+        columns = 4 if np.any(sc.materials.transmission_roughness > 0) else 2     # rough ones draw microfacets
         for depth in range(most_t + most_g + 1):
             live = live[tracer.glass[tri[live]]]
             if len(live) == 0:
@@ -347,7 +348,7 @@ class Renderer(ProgressiveImage):
             if sc.shading is not None:
                 shade = seen_normals(sc.shading, sc.triangle_source[tri[live]], p,
                                      np.where((np.einsum("ij,ij->i", geo, d) < 0)[:, None], geo, -geo), -d)
-            uniforms = self.rng.random((len(live), 4 if np.any(sc.materials.transmission_roughness > 0) else 2))
+            uniforms = self.rng.random((len(live), columns))
             if depth == 0 and choice is not None:
                 uniforms[:, 1] = choice[live]
             on, new, w = scatter(sc.materials, sc.triangle_material[tri[live]], d, geo, shade, uniforms)

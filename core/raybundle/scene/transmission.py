@@ -28,7 +28,8 @@ It is used in two ways:
   thrown on the room): left out.
 * **by Fresnel** (:func:`scatter`), for the eye's paths (the image): at each interface the
   eye path is reflected with probability ``F`` (weight the reflection tint) or refracted
-  (weight the refraction tint), through up to ``transmission_depth`` interfaces, as Cycles
+  (weight the refraction tint), until Cycles' transmission or glossy bounces are spent
+  (``transmission_depth``, ``glossy_depth``), as Cycles
   samples a smooth Glass BSDF.  A rough interface (``transmission_roughness`` r, GGX of
   ``alpha = r^2``, single scattering as Cycles' GGX Glass BSDF) first draws a microfacet normal
   ``h`` from those visible along the path and then reflects or refracts about ``h`` by
