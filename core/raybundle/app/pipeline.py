@@ -118,7 +118,7 @@ def make_solver(scene, settings: RenderSettings | None = None, solver=Stochastic
     tracer = RayTracer(scene, threads=settings.threads)
     try:
         _step(stage, stop, f"first shot and solver set-up for {scene.n_patches:,} patches")
-        direct = DirectLighting(scene, tracer, first_shot=settings.first_shot)
+        direct = DirectLighting(scene, tracer, first_shot=settings.first_shot, light_tree=settings.light_tree)
         sequence = make_sequence(settings.sequence, settings.seed)
         return SOLVERS[solver](scene, tracer, direct, sequence, bundle_resolution=settings.bundle_resolution,
                                seed=settings.seed, directions_per_step=settings.directions_per_step,
@@ -151,7 +151,7 @@ def _make_image_method(scene, settings, camera, name, stage, stop):
     _step(stage, stop, f"building the ray tracer over {len(scene.triangles):,} triangles")
     tracer = RayTracer(scene, threads=settings.threads)
     try:
-        direct = DirectLighting(scene, tracer, first_shot=settings.first_shot)
+        direct = DirectLighting(scene, tracer, first_shot=settings.first_shot, light_tree=settings.light_tree)
         return SOLVERS[name](scene, camera if camera is not None else scene.camera, tracer, direct, settings)
     except BaseException:
         tracer.close()

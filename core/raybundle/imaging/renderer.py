@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..lights.direct import ALL_LIGHTS, light_bits
+from ..lights.direct import ALL_LIGHTS
 from ..lights.sources import ShapeLight
 from ..lights.world_light import WorldLight
 from ..scene.shading import seen_normals
@@ -539,8 +539,8 @@ class Renderer(ProgressiveImage):
             more = -(-int(self.settings.penumbra_samples) // n_s)
             # the pixel's penumbra samples shared by the lights whose shadow edges cross it
             crossing = np.zeros(len(hf), np.int64)
-            for bit in light_bits(self.direct.n_lights):
-                crossing += (pen_lights & bit) != 0
+            for bits in self.direct.sampled_apart():
+                crossing += (pen_lights & bits) != 0
             share = -(-more // np.maximum(crossing, 1))
             if u_light is None:       # the pass's own: each pixel's sequences continue over the passes
                 u, sequence = None, (self._light_shift[pixels[hf]], np.full(len(hf), self.passes * more * n_s))

@@ -38,6 +38,10 @@ class RenderSettings:
     ``gather_share`` of the run's seconds buys, in runs limited by time (none in runs of given
     iterations, which stay reproducible, nor in images formed without a budget of seconds):
     :meth:`Renderer.diffuse_indirect`;
+    ``light_tree``: the first-shot lamps and emitting triangles chosen per point by a light
+    tree (:mod:`raybundle.lights.light_tree`), ``light_samples`` of them per point and pass, in
+    place of a shadow ray per lamp: 'on', 'off', or 'auto' (many lamps, or a curved mesh light of
+    many triangles: :meth:`~raybundle.lights.direct.DirectLighting.wants_tree`);
     ``penumbra_samples``: shadow rays per pass at the pixels where a light's earlier
     samples were both seen and blocked, shared by the lights whose shadow edges cross the
     pixel, at least one each (:meth:`Renderer._shade`);
@@ -63,6 +67,7 @@ class RenderSettings:
     sequence: str = DEFAULT_SEQUENCE
     seed: int = 0
     first_shot: str = "auto"
+    light_tree: str = "auto"
     light_samples: int = 1
     image_ray_share: float = 0.0
     resolve_samples: int = 16
@@ -96,6 +101,8 @@ class RenderSettings:
             raise ValueError("image_ray_share must lie in [0, 1) (0 = automatic)")
         if self.first_shot not in ("auto", "none"):
             raise ValueError("first_shot must be 'auto' or 'none'")
+        if self.light_tree not in ("auto", "on", "off"):
+            raise ValueError("light_tree must be 'auto', 'on' or 'off'")
         if not 1 <= int(self.directions_per_step) <= 1024:
             raise ValueError("directions_per_step must lie in [1, 1024]")
         if not 1 <= int(self.glossy_send_rays) <= 64:

@@ -135,41 +135,67 @@ class MeshLight(_Light):
         return rel, triangle_solid_angle(rel[..., 0, :], rel[..., 1, :], rel[..., 2, :])
 
     def _sample_triangles(self, points, u):
-        """:meth:`sample` triangle by triangle.  A triangle k is picked with probability p_k = A_k / A.  If it looks
-        small from the point (its solid angle is surely below :attr:`MIN_SOLID_ANGLE`:
-        ``A_k < MIN_SOLID_ANGLE d^2`` with d the distance to its bounding sphere) a point
-        uniform on it gives ``e = Le cos_l A_k / (r^2 p_k)``; if it looks large, a
-        direction uniform in its solid angle (Arvo's spherical triangle
-        sampling) gives ``e = Le O_k / p_k``.  Both are unbiased; the second keeps
-        the estimate bounded next to the light (a lamp 0.5 mm under a ceiling),
-        where sampling by area has a heavy tail.  Emits from the back only where
-        ``two_sided``."""
+        """:meth:`sample` triangle by triangle: triangle k picked with probability
+        ``p_k = A_k / A``, then sampled by :meth:`sample_triangle`."""
+        n_k = len(self.triangles)
+        k = np.minimum(np.searchsorted(self.cdf, u[:, 0] * self.cdf[-1], side="right"), n_k - 1)
+        y, e = self.sample_triangle(points, k, u[:, 1], u[:, 2])
+        return y, e * (self.area / self.scene.triangle_area[self.triangles[k]])[:, None]
+
+    def sample_triangle(self, points, k, u1, u2):
+        """One sample of the light's triangle ``triangles[k]`` (k (N,)) for each point (N, 3),
+        from uniforms ``u1``, ``u2`` (N,): ``(y (N, 3), e (N, 3))`` as :meth:`sample` returns
+        them, for that triangle alone.  If it looks small from the point (its solid angle is
+        surely below :attr:`MIN_SOLID_ANGLE`: ``A_k < MIN_SOLID_ANGLE d^2`` with d the
+        distance to its bounding sphere) a point uniform on it gives ``e = Le cos_l A_k / r^2``;
+        if it may look large, a direction uniform in its solid angle (Arvo's spherical
+        triangle sampling) gives ``e = Le O_k``.  Both are unbiased; the second keeps the
+        estimate bounded next to the light (a lamp 0.5 mm under a ceiling), where sampling
+        by area has a heavy tail.  Emits from the back only where ``two_sided``."""
         from ..tracing.sampling import sample_spherical_triangle
 
         sc = self.scene
-        n_k = len(self.triangles)
-        k = np.minimum(np.searchsorted(self.cdf, u[:, 0] * self.cdf[-1], side="right"), n_k - 1)
         tri = self.triangles[k]
-        p_k = sc.triangle_area[tri] / self.area
         c = sc.triangle_corners[tri]
-        y = points_on_triangles(c, u[:, 1], u[:, 2])
+        y = points_on_triangles(c, u1, u2)
         normal = sc.triangle_normal[tri]
         v = y - points
         r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
         cos_l = -np.einsum("ij,ij->i", normal, v) / np.sqrt(r2)
         e = cos_l * sc.triangle_area[tri] / r2
-        gap = np.maximum(np.linalg.norm(self._centroid[k] - points, axis=1) - self._radius[k], 0.0)
-        near = np.nonzero(sc.triangle_area[tri] >= self.MIN_SOLID_ANGLE * gap * gap)[0]
+        near = np.nonzero(self._triangle_near(k, points))[0]
         if len(near):
             rel = c[near] - points[near, None, :]
-            d, omega = sample_spherical_triangle(rel[:, 0], rel[:, 1], rel[:, 2], u[near, 1], u[near, 2])
+            d, omega = sample_spherical_triangle(rel[:, 0], rel[:, 1], rel[:, 2], u1[near], u2[near])
             nd = np.einsum("ij,ij->i", normal[near], d)
             t = np.einsum("ij,ij->i", normal[near], rel[:, 0]) / np.where(nd != 0, nd, 1e-300)
             y[near] = points[near] + t[:, None] * d
             cos_l[near] = -nd
             e[near] = omega
         lit = np.where(self.two_sided[k], cos_l != 0, cos_l > 0) & self._off_plane(normal, y, points)
-        return y, (np.abs(e) * lit / p_k)[:, None] * self.radiance
+        return y, (np.abs(e) * lit)[:, None] * self.radiance
+
+    def _triangle_near(self, k, points):
+        """(N,) bool: triangle ``triangles[k]`` may look large from ``points`` (it is then
+        sampled by solid angle; :meth:`sample_triangle`)."""
+        gap = np.maximum(np.linalg.norm(self._centroid[k] - points, axis=1) - self._radius[k], 0.0)
+        return self.scene.triangle_area[self.triangles[k]] >= self.MIN_SOLID_ANGLE * gap * gap
+
+    def triangle_pdf(self, points, k, y):
+        """Density [1/sr] with which :meth:`sample_triangle` draws, from ``points`` (N, 3), the
+        direction to ``y`` (N, 3) on triangle ``triangles[k]``: ``1 / O_k`` where it samples
+        the solid angle, else ``r^2 / (A_k |cos_l|)``."""
+        sc = self.scene
+        tri = self.triangles[k]
+        v = y - points
+        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+        cos_l = np.abs(np.einsum("ij,ij->i", sc.triangle_normal[tri], v)) / np.sqrt(r2)
+        pdf = r2 / (np.maximum(cos_l, 1e-300) * sc.triangle_area[tri])
+        near = np.nonzero(self._triangle_near(k, points))[0]
+        if len(near):
+            rel = sc.triangle_corners[tri[near]] - points[near, None, :]
+            pdf[near] = 1.0 / np.maximum(triangle_solid_angle(rel[:, 0], rel[:, 1], rel[:, 2]), 1e-300)
+        return pdf
 
     def pdf(self, points, k, y):
         """Density [1/sr] with which :meth:`sample` draws, from ``points`` (N, 3), the
@@ -189,19 +215,7 @@ class MeshLight(_Light):
                 idx = np.nonzero(near & (g == gi))[0]
                 pdf[idx] = f["p"][gi] / np.maximum(self._fan_solid_angles(gi, points[idx])[1].sum(axis=1), 1e-300)
             return pdf
-        tri = self.triangles[k]
-        area_k = sc.triangle_area[tri]
-        v = y - points
-        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
-        cos_l = np.abs(np.einsum("ij,ij->i", sc.triangle_normal[tri], v)) / np.sqrt(r2)
-        pdf = r2 / (np.maximum(cos_l, 1e-300) * self.area)
-        gap = np.maximum(np.linalg.norm(self._centroid[k] - points, axis=1) - self._radius[k], 0.0)
-        near = np.nonzero(area_k >= self.MIN_SOLID_ANGLE * gap * gap)[0]
-        if len(near):
-            rel = sc.triangle_corners[tri[near]] - points[near, None, :]
-            omega = triangle_solid_angle(rel[:, 0], rel[:, 1], rel[:, 2])
-            pdf[near] = (area_k[near] / self.area) / np.maximum(omega, 1e-300)
-        return pdf
+        return self.triangle_pdf(points, k, y) * (sc.triangle_area[self.triangles[k]] / self.area)
 
     def in_front(self, origin, normal):
         """(N,) bool: some point of the light lies in front of the planes (origin, normal) (N, 3)."""
@@ -223,24 +237,33 @@ class PointLight(_Light):
     k: int
 
     def sample(self, points, u):
-        to_light = self.position - points
-        dist = np.maximum(np.linalg.norm(to_light, axis=1), 1e-300)
-        travel = -to_light / dist[:, None]
-        y = np.broadcast_to(self.position, points.shape)
-        radius = float(self.lights.radius[self.k])
-        if radius > 0:
-            a, b = frames_from_normals(travel)
-            r = radius * np.sqrt(u[:, 0])
-            phi = 2 * np.pi * u[:, 1]
-            y = y + (r * np.cos(phi))[:, None] * a + (r * np.sin(phi))[:, None] * b
-        v = y - points
-        r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
-        s = self.lights.spot_factor(self.k, travel)
-        return y, (s / r2)[:, None] * self.intensity
+        return sample_point_lights(self.lights, np.full(len(points), self.k), points, u)
 
     def in_front(self, origin, normal):
         r = float(self.lights.radius[self.k])
         return np.einsum("ij,ij->i", self.position - origin, normal) > -r
+
+
+def sample_point_lights(lights, k, points, u):
+    """One sample of point lights ``k`` (N,) (rows of ``lights``, a
+    :class:`~raybundle.scene.model.PointLights`) for each point (N, 3) from uniforms ``u``
+    (N, >= 2): ``(y (N, 3), e (N, 3))`` as :meth:`MeshLight.sample` returns them, ``e = I s / r^2``
+    with ``s`` Cycles' spot attenuation; a light with a radius is sampled on the disc of
+    that radius facing the point."""
+    to_light = lights.position[k] - points
+    dist = np.maximum(np.linalg.norm(to_light, axis=1), 1e-300)
+    travel = -to_light / dist[:, None]
+    y = lights.position[k].astype(float)
+    radius = lights.radius[k]
+    soft = np.nonzero(radius > 0)[0]
+    if len(soft):
+        a, b = frames_from_normals(travel[soft])
+        r = radius[soft] * np.sqrt(u[soft, 0])
+        phi = 2 * np.pi * u[soft, 1]
+        y[soft] += (r * np.cos(phi))[:, None] * a + (r * np.sin(phi))[:, None] * b
+    v = y - points
+    r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
+    return y, (lights.spot_factor(k, travel) / r2)[:, None] * lights.intensity[k]
 
 
 @dataclass

@@ -95,17 +95,16 @@ class PointLights:
         return len(self.position)
 
     def spot_factor(self, k, travel):
-        """(N,) Cycles' spot attenuation of light ``k`` for light travelling along ``travel`` (N, 3)."""
+        """(N,) Cycles' spot attenuation of light ``k`` (an index, or (N,) indices) for light
+        travelling along ``travel`` (N, 3)."""
+        k = np.broadcast_to(k, len(travel))
         axis = self.spot_direction[k]
-        if not np.any(axis):
-            return np.ones(len(travel))
         c = self.spot_cos_half_angle[k]
-        x = travel @ axis - c
+        x = np.einsum("ij,ij->i", travel, axis) - c
         width = (1.0 - c) * self.spot_blend[k]
-        if width <= 0:
-            return (x > 0).astype(float)
-        t = np.clip(x / width, 0.0, 1.0)
-        return t * t * (3.0 - 2.0 * t)
+        t = np.clip(x / np.where(width > 0, width, 1.0), 0.0, 1.0)
+        spot = np.where(width > 0, t * t * (3.0 - 2.0 * t), (x > 0).astype(float))
+        return np.where(np.any(axis != 0, axis=1), spot, 1.0)
 
     def to_arrays(self, prefix="point_light_"):
         return {prefix + k: getattr(self, k) for k in
