@@ -41,7 +41,8 @@ def test_merged_chains_pool_their_sums_and_counts():
     diffuse = [same_resolve(r).diffuse_indirect() for r in rs]
     # (the projection is a CG solve to a relative 1e-10 of its residual: linear to about 1e-5)
     assert np.allclose(fresh.diffuse_indirect(), 0.5 * (diffuse[0] + diffuse[1]), rtol=1e-4, atol=1e-9)
-    assert np.allclose(fresh.pass_sum / fresh.passes, 0.5 * sum(r.pass_sum / r.passes for r in rs), rtol=1e-12)
+    assert np.allclose(fresh.pass_sum, sum(r.pass_sum for r in rs), rtol=1e-12)
+    assert np.array_equal(fresh.pass_samples, sum(r.pass_samples for r in rs))
     counts = sum(r.emission_count for r in rs)
     assert np.allclose(fresh.emission_sum, sum(r.emission_sum for r in rs)) and np.array_equal(fresh.emission_count,
                                                                                              counts)

@@ -55,9 +55,9 @@ def test_image_of_point_lit_plane_matches_closed_form():
     r = pipeline.make_renderer(sc, RenderSettings(resolve_samples=1))
     samples = []
     for _ in range(300):
-        before = r.pass_sum.copy()
+        before, n_before = r.pass_sum.copy(), r.pass_samples.copy()
         r.image_pass()
-        samples.append(r.pass_sum - before)
+        samples.append((r.pass_sum - before) / (r.pass_samples - n_before)[:, None])
     samples = np.array(samples)
     img = samples.mean(axis=0)
     se = samples.std(axis=0, ddof=1) / np.sqrt(len(samples))
@@ -199,7 +199,7 @@ def test_penumbra_pixels_get_more_shadow_rays():
         r = pipeline.make_renderer(sc, RenderSettings(seed=5, penumbra_samples=n_pen))
         for _ in range(24):
             r.image_pass()
-        images[n_pen] = (r.pass_sum / r.passes)[:, 0].reshape(16, 16)
+        images[n_pen] = (r.pass_sum / r.pass_samples[:, None])[:, 0].reshape(16, 16)
         pen_flags = (r.shadow_flags[:, 0] & r.shadow_flags[:, 1] != 0).reshape(16, 16)
     ref = penumbra_reference(r).reshape(16, 16)
     pen = pen_flags & (ref > 0)
@@ -269,7 +269,7 @@ def test_penumbra_rays_go_to_the_lamp_whose_shadow_edge_crosses_the_pixel():
     n_pix = 16 * 16
     assert all(k <= 2 * n_pix + 7 * p for k, p in rays[:3]), rays[:3]
     assert rays[-1][1] >= 64
-    err = (r.pass_sum / r.passes)[:, 0] - penumbra_reference(r)
+    err = (r.pass_sum / r.pass_samples[:, None])[:, 0] - penumbra_reference(r)
     assert abs(err.mean()) < 4.5 * err.std(ddof=1) / np.sqrt(n_pix), (err.mean(), err.std())
     r.tracer.close()
 
@@ -300,7 +300,7 @@ def test_faint_lamps_are_chosen_by_their_contribution():
         rays.append((r.direct.rays - before, pen))
     n_pix = 16 * 16
     assert all(k - p < 3 * n_pix for k, p in rays[:3]), rays[:3]
-    err = (r.pass_sum / r.passes)[:, 0] - penumbra_reference(r)
+    err = (r.pass_sum / r.pass_samples[:, None])[:, 0] - penumbra_reference(r)
     assert abs(err.mean()) < 4.5 * err.std(ddof=1) / np.sqrt(n_pix), (err.mean(), err.std())
     r.tracer.close()
 
@@ -324,7 +324,7 @@ def test_the_first_pass_is_exact_where_the_lamp_is_wholly_seen():
     assert len(open_floor) >= 32
     lamp = np.broadcast_to(v[[4, 5, 6, 7]], (len(open_floor), 4, 3))
     want = 0.5 / np.pi * polygon_irradiance(g.point[open_floor], np.tile([0, 0, 1.0], (len(open_floor), 1)), lamp)
-    got = r.pass_sum[open_floor, 0]
+    got = r.pass_sum[open_floor, 0] / r.pass_samples[open_floor]
     assert np.allclose(got, want, rtol=1e-9, atol=0), np.abs(got / want - 1).max()
     r.tracer.close()
 
@@ -353,7 +353,7 @@ def test_lit_edges_converge_faster_than_independent_jitter():
                                                sun_lights=suns, two_sided=True), RenderSettings(seed=seed))
         for _ in range(passes):
             r.image_pass()
-        img = (r.pass_sum[:, 0] / r.passes).reshape(16, 16)
+        img = (r.pass_sum[:, 0] / r.pass_samples).reshape(16, 16)
         r.tracer.close()
         assert np.abs(img - radiance * cover)[~edge].max() < 1e-9      # inside and outside: exact
         err.append((img - radiance * cover)[edge])

@@ -158,9 +158,9 @@ def _pass_values(scene, light_tree, passes, seed, tree_class=None):
     out = []
     rays = r.direct.rays
     for _ in range(passes):
-        before = r.pass_sum.copy()
+        before, n_before = r.pass_sum.copy(), r.pass_samples.copy()
         r.image_pass()
-        out.append(r.pass_sum - before)
+        out.append((r.pass_sum - before) / (r.pass_samples - n_before)[:, None])
     rays = (r.direct.rays - rays) / passes
     r.tracer.close()
     return np.array(out), rays
@@ -233,9 +233,9 @@ def test_the_lobes_rays_and_the_trees_samples_combine_without_bias():
         assert (r.direct.tree is not None) == (TREE_MODE == "on")
         out = []
         for _ in range(passes):
-            before = r.pass_sum + r.gather_sum
+            before, n_before, g_before = r.pass_sum.copy(), r.pass_samples.copy(), r.gather_sum.copy()
             r.image_pass()
-            out.append((r.pass_sum + r.gather_sum - before).sum(axis=1))
+            out.append(((r.pass_sum - before) / (r.pass_samples - n_before)[:, None] + r.gather_sum - g_before).sum(axis=1))
         r.tracer.close()
         runs.append(np.array(out))
     mean = 0.5 * (runs[0].mean(axis=0) + runs[1].mean(axis=0))

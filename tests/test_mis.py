@@ -109,9 +109,9 @@ def pass_values(scene, mis, passes, seed):
         assert (r.glossy_paths.world_light is not None) == mis         # world samples only with MIS
     out = []
     for _ in range(passes):
-        before = r.pass_sum + r.gather_sum
+        before, n_before, g_before = r.pass_sum.copy(), r.pass_samples.copy(), r.gather_sum.copy()
         r.image_pass()
-        out.append(r.pass_sum + r.gather_sum - before)
+        out.append((r.pass_sum - before) / (r.pass_samples - n_before)[:, None] + r.gather_sum - g_before)
     r.tracer.close()
     return np.array(out)
 

@@ -33,7 +33,7 @@ def batch_means(renderer, batches, per_batch):
         acc = np.zeros(3)
         snap = (r.pass_sum.copy(), r.passes, r.glossy_sum.copy(), r.glossy_iterations,
                 s.mean_incoming * s.averaged, r.emission_sum.copy(), r.emission_count.copy(),
-                r.gather_sum.copy(), r.gather_passes)
+                r.gather_sum.copy(), r.gather_passes, r.pass_samples.copy())
         for _ in range(per_batch):
             s.step()
             if not s.diffuse_only:
@@ -43,7 +43,7 @@ def batch_means(renderer, batches, per_batch):
                 r.image_pass()
         if b == 0:
             continue      # burn-in: the start-up transient (bias O(1/m)) stays out
-        d_direct = (r.pass_sum - snap[0]) / max(r.passes - snap[1], 1)
+        d_direct = (r.pass_sum - snap[0]) / np.maximum(r.pass_samples - snap[9], 1)[:, None]
         d_glossy = (r.glossy_sum - snap[2]) / max(r.glossy_iterations - snap[3], 1)
         e_batch = (s.mean_incoming * s.averaged - snap[4]) / per_batch
         d_emission = (r.emission_sum - snap[5]) / np.maximum(r.emission_count - snap[6], 1)[:, None]

@@ -120,7 +120,7 @@ def _pane_under_the_sun(seed, iterations, theta=30.0):
     assert r.tracer.glass is not None
     r.run(iterations=iterations)
     r.tracer.close()
-    return (r.pass_sum / r.passes).reshape(64, 64, 3).mean(axis=2), cam
+    return (r.pass_sum / r.pass_samples[:, None]).reshape(64, 64, 3).mean(axis=2), cam
 
 
 def test_a_pane_passes_the_sun_and_the_eye_by_fresnel():

@@ -56,6 +56,9 @@ class MeshLight(_Light):
 
     #: triangles that may look larger than this [sr] are sampled by solid angle, others by area
     MIN_SOLID_ANGLE = 0.5
+    #: a curved light (no planar parts) whose area is at least this share of its bounding
+    #: sphere's is compact (a sphere, a blob): sampled by its bounding cone (:meth:`_sample_cone`)
+    COMPACT_SHARE = 0.5
 
     def __post_init__(self):
         c = self.scene.triangle_corners[self.triangles]
@@ -63,6 +66,15 @@ class MeshLight(_Light):
         self._radius = np.linalg.norm(c - self._centroid[:, None], axis=2).max(axis=1)
         self.planes = light_planes(self)
         self._fans = plane_fans(self)
+        #: a compact light's bounding sphere (centre, radius) and its triangles to trace, or None
+        self._cone = None
+        if self._fans is None:
+            centre = 0.5 * (c.reshape(-1, 3).min(axis=0) + c.reshape(-1, 3).max(axis=0))
+            radius = float(np.linalg.norm(c.reshape(-1, 3) - centre, axis=1).max())
+            if self.area >= self.COMPACT_SHARE * 4.0 * np.pi * radius * radius:
+                from ..tracing.visibility import TriangleSet
+
+                self._cone = (centre, radius, TriangleSet(c))
         #: points closer than this to the plane of the part sampled lie in it (the light itself, or
         #: a surface flush with it): it sends them nothing, as a plane sends nothing along itself
         #: (sampled by solid angle from a point of the light, its outline looked like a hemisphere)
@@ -83,6 +95,14 @@ class MeshLight(_Light):
         angle, then Arvo's sampling in it: ``e = Le O_g / p_g``, bounded next to the
         light however finely it is meshed).  Other lights: triangle by triangle
         (:meth:`_sample_triangles`)."""
+        if self._cone is not None:
+            out = self._outside(points)
+            if out.all():
+                return self._sample_cone(points, u)
+            y, e = self._sample_triangles(points, u)
+            if out.any():
+                y[out], e[out] = self._sample_cone(points[out], u[out])
+            return y, e
         if self._fans is None:
             return self._sample_triangles(points, u)
         f = self._fans
@@ -116,6 +136,57 @@ class MeshLight(_Light):
             e[idx] = total
         lit = np.where(f["two_sided"][g], cos_l != 0, cos_l > 0) & self._off_plane(normal, y, points)
         return y, (np.abs(e) * lit / f["p"][g])[:, None] * self.radiance
+
+    def selection_estimate(self, points, normals):
+        """As :meth:`_Light.selection_estimate`; for a compact light, from outside its bounding
+        sphere, the bound ``Le O cos(max(theta_i - theta_u, 0))`` (O and theta_u the sphere's
+        solid angle and half-angle, theta_i the angle of its centre from the normal), with no
+        ray traced."""
+        if self._cone is None:
+            return super().selection_estimate(points, normals)
+        out = self._outside(points)
+        est = np.full(len(points), float(np.mean(self.radiance)) * 2.0 * np.pi)    # inside: a hemisphere
+        if out.any():
+            w, cos_u, omega = self._cone_solid_angle(points[out])
+            cos_i = np.einsum("ij,ij->i", normals[out], w)
+            sin_i, sin_u = np.sqrt(np.maximum(1 - cos_i * cos_i, 0)), np.sqrt(np.maximum(1 - cos_u * cos_u, 0))
+            cos_near = np.where(cos_i >= cos_u, 1.0, cos_i * cos_u + sin_i * sin_u)
+            est[out] = float(np.mean(self.radiance)) * omega * np.maximum(cos_near, 0.0)
+        return est
+
+    def _outside(self, points):
+        """(N,) bool: ``points`` lie outside a compact light's bounding sphere."""
+        centre, radius, _ = self._cone
+        return np.linalg.norm(points - centre, axis=1) > radius * (1.0 + 1e-9)
+
+    def _cone_solid_angle(self, points):
+        """The bounding sphere's direction (N, 3), cos of its half-angle and solid angle (N,) [sr]
+        from ``points`` outside it."""
+        centre, radius, _ = self._cone
+        v = centre - points
+        d = np.linalg.norm(v, axis=1)
+        cos_max = np.sqrt(np.maximum(1.0 - (radius / d) ** 2, 0.0))
+        return v / d[:, None], cos_max, 2.0 * np.pi * (1.0 - cos_max)
+
+    def _sample_cone(self, points, u):
+        """:meth:`sample` of a compact light from ``points`` outside its bounding sphere: a
+        direction uniform in the cone the sphere fills (solid angle O), traced to the light's own
+        triangles; where it meets one on an emitting side, ``e = Le O``, else 0.  Unbiased for any
+        shape inside the sphere; for a sphere, no sample falls on its far side (by area, half
+        did, and its own front hid them), and what remains random is only ``cos_x``."""
+        w, cos_max, omega = self._cone_solid_angle(points)
+        cos_t = 1.0 - u[:, 1] * (1.0 - cos_max)
+        sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
+        phi = 2.0 * np.pi * u[:, 2]
+        a, b = frames_from_normals(w)
+        d = cos_t[:, None] * w + (sin_t * np.cos(phi))[:, None] * a + (sin_t * np.sin(phi))[:, None] * b
+        k, t = self._cone[2].first_hit(points, d)
+        hit = k >= 0
+        kk = np.maximum(k, 0)
+        cos_l = -np.einsum("ij,ij->i", self.scene.triangle_normal[self.triangles[kk]], d)
+        lit = hit & np.where(self.two_sided[kk], cos_l != 0, cos_l > 0)
+        y = np.where(hit[:, None], points + np.where(hit, t, 0.0)[:, None] * d, self._cone[0])
+        return y, (omega * lit)[:, None] * self.radiance
 
     def _off_plane(self, normal, y, points):
         """(N,) bool: ``points`` lie off the plane through ``y`` of ``normal`` (N, 3) each."""
@@ -203,6 +274,15 @@ class MeshLight(_Light):
         ``p / O`` where the part (or triangle) looks large (solid-angle sampling), else
         ``p r^2 / (A_part |cos_l|) = r^2 / (A |cos_l|)`` (area sampling)."""
         sc = self.scene
+        if self._cone is not None:
+            out = self._outside(points)
+            pdf = np.empty(len(points))
+            if (~out).any():
+                i = ~out
+                pdf[i] = self.triangle_pdf(points[i], k[i], y[i]) * (sc.triangle_area[self.triangles[k[i]]] / self.area)
+            if out.any():
+                pdf[out] = 1.0 / np.maximum(self._cone_solid_angle(points[out])[2], 1e-300)
+            return pdf
         if self._fans is not None:
             f = self._fans
             g = f["tri_group"][k]
