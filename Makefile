@@ -19,7 +19,7 @@ NO_NEWEST := the newest Blender's environment (no working Python 3.13: the suite
 NO_OLDEST := the oldest Blender's environment (no working Python 3.11: the zip was not installed into bpy 4.2, NumPy 1.26)
 SKIPPED := $(if $(PY_NEWEST),,$(NO_NEWEST))$(if $(PY_OLDEST),,$(NO_OLDEST))
 
-.PHONY: demo test test-newest test-suite test-chains test-oldest bench bench-blender bench-boxes bench-interiors bench-bake bench-scale \
+.PHONY: demo test test-newest test-suite test-chains test-oldest bench bench-blender bench-boxes bench-lights bench-interiors bench-bake bench-scale \
         bench-invariance extension cycles-reference demo-scenes test-blender-versions golden golden-check clean FORCE
 
 ifeq ($(PYTHON),)
@@ -94,6 +94,12 @@ bench-blender: $(STAMP)
 bench-boxes: $(STAMP)
 	$(PY) tools/bench_blender.py cornell --times 5 10 30 60 120 --out out/bench-cornell --max-cycles-seconds 260
 	$(PY) tools/bench_blender.py cornell-glossy --times 5 10 30 60 120 --out out/bench-cornell-glossy --reference-samples 4096 --max-cycles-seconds 200
+
+# Many lights: Veach's multiple-importance test scene (demo_scenes/lights) against Cycles from the same
+# file at 30 and 90 s, references committed (about 10 minutes on 2 cores)
+bench-lights: $(STAMP)
+	$(PY) tools/bench_blender.py demo_scenes/lights/veach-mis.blend --references demo_scenes/lights/references \
+	    --times 30 90 --max-cycles-seconds 200 --out out/bench-lights
 
 # Real rooms (demo_scenes/interiors) in clay (the view layer's Material Override), RAYBUNDLE against
 # Cycles from the same file at 320 x 180, references committed (about 25 minutes a room on 2 cores)

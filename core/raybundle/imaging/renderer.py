@@ -956,4 +956,5 @@ class Renderer(ProgressiveImage):
                  "triangles": int(len(self.scene.triangles)), "resolution": [self.camera.width, self.camera.height],
                  "bundle_resolution": solver.bundle_resolution, "sequence": self.settings.sequence,
                  "seed": self.settings.seed, "diffuse_only": bool(solver.diffuse_only),
-                 "first_shot_lights": self.direct.n_lights, "cancelled": cancelled, **solver.report()}
+                 "first_shot_lights": self.direct.n_lights, "light_tree": self.direct.tree is not None,
+                 "cancelled": cancelled, **solver.report()}

@@ -221,4 +221,5 @@ class PathTracer(ProgressiveImage, Method):
                 "patches": int(self.scene.n_patches), "triangles": int(len(self.scene.triangles)),
                 "resolution": [self.camera.width, self.camera.height], "sampler": "halton" if self.qmc else "prng",
                 "sequence": self.settings.sequence, "seed": self.settings.seed, "diffuse_only": False,
-                "first_shot_lights": self.direct.n_lights, "cancelled": cancelled}
+                "first_shot_lights": self.direct.n_lights, "light_tree": self.direct.tree is not None,
+                "cancelled": cancelled}
