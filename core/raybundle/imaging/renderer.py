@@ -631,8 +631,10 @@ class Renderer(ProgressiveImage):
     #: error is above NOISY_CUT times the image's mean one
     NOISY_SHARE = 0.02
     NOISY_CUT = 16.0
-    #: ... each taking up to this many times the extra samples of an edge
+    #: ... each taking up to this many times the extra samples of an edge, all of them together at
+    #: most NOISY_BUDGET samples per pixel of the image
     NOISY_MAX_FACTOR = 16
+    NOISY_BUDGET = 0.5
 
     def _noisy_pixels(self):
         """Pixels whose per-pass estimates vary most: the standard error of their
@@ -654,8 +656,12 @@ class Renderer(ProgressiveImage):
         cap = max(1, int(len(se2) * self.NOISY_SHARE))
         if len(idx) > cap:
             idx = np.sort(idx[np.argsort(se2[idx])[-cap:]])
-        factor = np.clip(np.rint(np.sqrt(se2[idx] / max(cut, 1e-300))), 1, self.NOISY_MAX_FACTOR).astype(np.int64)
-        return idx, factor
+        factor = np.clip(np.rint(np.sqrt(se2[idx] / max(cut, 1e-300))), 1, self.NOISY_MAX_FACTOR)
+        # at most NOISY_BUDGET extra samples per pixel of the image, on average
+        budget = self.NOISY_BUDGET * len(se2) / max(self.settings.emission_edge_samples, 1)
+        if factor.sum() > budget:
+            factor = np.maximum(np.floor(factor * budget / factor.sum()), 1.0)
+        return idx, factor.astype(np.int64)
 
     def _add_emission(self, pixels, le):
         """Add emission samples ``le`` (N, 3) seen in ``pixels`` (N,) (repeats allowed)."""
