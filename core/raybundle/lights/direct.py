@@ -51,6 +51,23 @@ def may_light(light, points, normals):
     return ok
 
 
+class TreeLights:
+    """The light tree's lamps as one light for the estimators that take every light on its own
+    (the per-patch first shot and its caustics, bakes, the far side of translucent surfaces):
+    each sample an emitter chosen at its point (:meth:`DirectLighting.tree_sample`), so their
+    cost does not grow with the lamps."""
+
+    def __init__(self, direct):
+        self.direct = direct
+
+    def sample(self, points, u, normals):
+        y, e, _ = self.direct.tree_sample(points, normals, u)
+        return y, e
+
+    def in_front(self, origin, normal):
+        return np.ones(len(origin), bool)
+
+
 class DirectLighting:
     """First-shot lights of a scene and the direct-illumination estimators."""
 
@@ -172,7 +189,7 @@ class DirectLighting:
         with ``unshadowed``, also E without the visibility test (4th item).  ``crossed``: an
         (N,) bool array to mark the points whose shadow ray passed a cut-out or glass.
         """
-        y, e = light.sample(points, u)
+        y, e = light.sample(points, u, normals) if isinstance(light, TreeLights) else light.sample(points, u)
         return self.shadowed(points, normals, y, e, unshadowed, crossed)
 
     def shadowed(self, points, normals, y, e, unshadowed=False, crossed=None):
@@ -203,6 +220,14 @@ class DirectLighting:
 
     def light_list(self):
         return self.area_lights + self.point_lights
+
+    def sampled_lights(self):
+        """The lights the per-light estimators sample apart: :meth:`light_list`, or with a light
+        tree, its lamps as one (:class:`TreeLights`) and the suns."""
+        if self.tree is None:
+            return self.light_list()
+        lights = self.light_list()
+        return [TreeLights(self)] + [lights[li] for li in self.suns]
 
     def sampled_apart(self):
         """The light masks (:func:`light_bits`) sampled apart in :meth:`reflected_radiance`:
@@ -442,7 +467,7 @@ class DirectLighting:
         stratified over the light's triangles and their areas.  ``rng``: a Generator."""
         out = np.zeros((len(points), 3))
         alpha = kronecker_alpha(3)
-        for light in self.light_list():
+        for light in self.sampled_lights():
             sharp = (isinstance(light, PointLight) and float(light.lights.radius[light.k]) == 0.0) or \
                 (isinstance(light, SunLight) and light.angle == 0.0)
             n_s = 1 if sharp else max(1, int(samples_per_light))
@@ -488,7 +513,7 @@ class DirectLighting:
         far side of surfaces at ``points`` seen along ``normals`` (N, 3): what a translucent
         surface lets through (shadow rays from just behind it)."""
         out = np.zeros((len(points), 3))
-        for light in self.light_list():
+        for light in self.sampled_lights():
             out += self.light_samples_at(points, -normals, light, rng.random((len(points), 3)))[0]
         return out
 

@@ -38,7 +38,7 @@ class PatchFirstShot:
         self.receiving_area = sc.patch_area[sc.side_patch] if receiving_area is None else receiving_area
         self.rng = rng
         self.scene = sc
-        self.lights = direct.light_list()
+        self.lights = direct.sampled_lights()
         n_t, n_l = len(sc.tside_triangle), len(self.lights)
         self._e_sum = np.zeros((n_t, n_l, 3))
         self._d_sum = np.zeros((n_t, n_l, 3))
