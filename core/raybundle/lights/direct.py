@@ -533,14 +533,14 @@ class DirectLighting:
         ``distance`` (N,) [m] (inf where nothing is met), also the area lights (not geometry)
         the rays meet before it (:meth:`~raybundle.lights.sources.ShapeLight.hit`)."""
         out = np.zeros((len(origins), 3))
-        for light in self.area_lights if distance is not None else ():
+        for li, light in enumerate(self.area_lights if distance is not None else ()):
             if not isinstance(light, ShapeLight):
                 continue
             met, y = light.hit(origins, w_in, distance)
             i = np.nonzero(met)[0]
             if len(i):
                 p_l = samples_per_light * (light.pdf(origins[i], y[i]) if self.tree is None else self.tree_pdf(
-                    np.full(len(i), self.area_lights.index(light)), np.zeros(len(i), np.int64), origins[i],
+                    np.full(len(i), li), np.zeros(len(i), np.int64), origins[i],
                     normals[i], y[i]))
                 p_g = self.scene.materials.glossy_pdf(mats[i], normals[i], w_in[i], w_out[i])
                 out[i] += self.mis_weight(p_g, p_l)[:, None] * light.radiance
