@@ -445,7 +445,8 @@ class Renderer(ProgressiveImage):
         # pixels whose earlier samples disagree (the edge of a visible light, which is
         # also where a lamp lights a narrow rim) get extra samples (one R_2 sequence per pixel)
         # for both the emission average and this pass's estimate, the mean of 1 + k
-        # samples: chosen from earlier passes only, so every pass stays unbiased
+        # samples: chosen from earlier passes only, so every pass stays unbiased; the pixel's
+        # image is the mean of all its samples (``pass_samples``), not of its passes
         lo, hi = self._emission_range
         noisy, factor = self._noisy_pixels()
         extra_pix = np.union1d(np.nonzero(lo < hi)[0], noisy)
@@ -681,8 +682,8 @@ class Renderer(ProgressiveImage):
         self._add_emission(pix, le)
 
     def _subpixel_sequence(self, pixels, k):
-        """``k`` (or (N,) counts) sub-pixel positions in each of ``pixels``, continuing one randomly shifted
-        R_2 sequence per pixel (:func:`~raybundle.tracing.sampling.kronecker_alpha`) from
+        """``k`` (or (N,) counts) sub-pixel positions in each of ``pixels``, continuing one
+        randomly shifted R_2 sequence per pixel (:func:`~raybundle.tracing.sampling.kronecker_alpha`) from
         pass to pass: returns (pixel ids (N k,), positions (N k, 3)), the third column the
         choice at the first interface of glass the eye path meets (:meth:`trace_gbuffer`), on a
         1-D Kronecker sequence per pixel: over a pixel's samples, the share reflected by a pane
@@ -863,7 +864,8 @@ class Renderer(ProgressiveImage):
         """The current estimate (H, W, 3) float32; ``diffuse`` = precomputed diffuse
         indirect; ``preview``: resolve it with one sub-pixel sample (fast, aliased);
         ``gather_seconds``: the automatic final gather's budget (:meth:`diffuse_indirect`)."""
-        img = self.pass_sum / np.maximum(self.pass_samples, 1)[:, None] + self.emission_sum / np.maximum(self.emission_count, 1)[:, None]
+        img = (self.pass_sum / np.maximum(self.pass_samples, 1)[:, None]
+               + self.emission_sum / np.maximum(self.emission_count, 1)[:, None])
         if self.gather_passes:
             img = img + self.gather_sum / self.gather_passes
         if self.caustic_splats is not None and self.caustic_splats.samples:

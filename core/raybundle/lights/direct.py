@@ -123,7 +123,10 @@ class DirectLighting:
             bits = light_bits(len(lights))
             self.tree_mask = np.bitwise_or.reduce(bits[[li for li in range(len(lights)) if li not in self.suns]])
             #: per emitter, its radiance (N, 3) (0 for point lights, which no ray meets)
-            self.tree_radiance = np.array([getattr(lights[li], "radiance", np.zeros(3)) for li in self.tree.light], float)
+            radiance = np.array([getattr(light, "radiance", np.zeros(3)) for light in lights], float)
+            self.tree_radiance = radiance[self.tree.light]
+            #: per light, its row of the scene's point lights (-1: not a point light)
+            self._point_row = np.array([light.k if isinstance(light, PointLight) else -1 for light in lights])
 
     @property
     def n_lights(self):
@@ -152,17 +155,16 @@ class DirectLighting:
         y, e = np.zeros((len(points), 3)), np.zeros((len(points), 3))
         em = np.where(p > 0, em, -1)
         lid = np.where(em >= 0, tree.light[np.maximum(em, 0)], -1)
-        pl = np.nonzero([isinstance(lights[li], PointLight) for li in range(len(lights))])[0]
-        i = np.nonzero(np.isin(lid, pl))[0]
+        row = np.where(lid >= 0, self._point_row[np.maximum(lid, 0)], -1)
+        i = np.nonzero(row >= 0)[0]
         if len(i):                  # the point lights at once
-            k = np.array([lights[li].k if li in pl else 0 for li in range(len(lights))])[lid[i]]
-            y[i], e[i] = sample_point_lights(self.scene.point_lights, k, points[i], u[i, 1:])
-        for li in np.unique(lid[lid >= 0]):
+            y[i], e[i] = sample_point_lights(self.scene.point_lights, row[i], points[i], u[i, 1:])
+        for li in np.unique(lid[(lid >= 0) & (row < 0)]):      # the others light by light
             light = lights[li]
             i = np.nonzero(lid == li)[0]
             if isinstance(light, MeshLight):
                 y[i], e[i] = light.sample_triangle(points[i], tree.k[em[i]], u[i, 1], u[i, 2])
-            elif not isinstance(light, PointLight):
+            else:
                 y[i], e[i] = light.sample(points[i], np.stack([u[i, 1], u[i, 2], u0[i]], axis=1))
         e /= np.where(p > 0, p, 1.0)[:, None]
         return y, e, em
@@ -265,7 +267,7 @@ class DirectLighting:
         c = np.zeros((len(points), len(lights)))
         for li, light in enumerate(lights):
             base = reach[li]
-            if li != TREE and exact[li] is not None:
+            if exact[li] is not None:
                 here, irr, ok = exact[li]
                 c[here[ok], li] = irr[ok] * float(np.mean(light.radiance))
                 base = np.setdiff1d(base, here[ok], assume_unique=True)
@@ -313,6 +315,11 @@ class DirectLighting:
         keeps ``shift`` per pixel and advances ``first`` by ``count n`` every pass continues
         one sequence per pixel and light over the passes, so a penumbra's shadow rays stay
         stratified over the light across passes, not only within one.
+
+        With a light tree (:attr:`tree`) its ``samples_per_light`` samples per point
+        (:meth:`tree_sample`, penumbra samples as for one light, each sample flagging its own
+        lamp's bit) stand for every lamp, the suns one each; the control variate and ``select``
+        are then not used.
 
         ``select`` (N,) uniforms or None: lamps chosen by their contribution
         (:meth:`_selection`): a lamp whose unoccluded contribution at a point is a small share of

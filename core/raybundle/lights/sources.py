@@ -93,7 +93,8 @@ class MeshLight(_Light):
         on it (``e = Le cos_l A_g / (r^2 p_g)``); where it may look large, a direction
         uniform in its whole solid angle (a fan triangle of its outline by its solid
         angle, then Arvo's sampling in it: ``e = Le O_g / p_g``, bounded next to the
-        light however finely it is meshed).  Other lights: triangle by triangle
+        light however finely it is meshed).  A compact light (a sphere), from outside its bounding
+        sphere: by the sphere's cone (:meth:`_sample_cone`).  Other lights: triangle by triangle
         (:meth:`_sample_triangles`)."""
         if self._cone is not None:
             out = self._outside(points)
