@@ -455,7 +455,9 @@ class Renderer(ProgressiveImage):
         value, gathered, gl = self._shade(g, u, None, np.arange(n))
         k = np.full(len(extra_pix), int(self.settings.emission_edge_samples))
         k[np.searchsorted(extra_pix, noisy)] *= factor
-        if len(extra_pix) and self.settings.emission_edge_samples > 0:
+        count = np.ones(n)                 # the samples this pass takes in each pixel
+        if len(extra_pix) and k[0] > 0:
+            count[extra_pix] += k
             pix, jitter = self._subpixel_sequence(extra_pix, k)
             gx = self.trace_gbuffer(jitter, pixels=pix)
             le, _ = self.seen_radiance(gx)
@@ -465,9 +467,6 @@ class Renderer(ProgressiveImage):
             for total, more in ((value, extra), (gathered, extra_g)):
                 summed = np.stack([np.bincount(row, more[:, c], minlength=len(extra_pix)) for c in range(3)], axis=1)
                 total[extra_pix] = (total[extra_pix] + summed) / (k + 1)[:, None]
-        count = np.ones(n)
-        if len(extra_pix) and self.settings.emission_edge_samples > 0:
-            count[extra_pix] += k
         self.pass_sum += value * count[:, None]
         self.pass_samples += count
         self.gather_sum += gathered
@@ -644,8 +643,8 @@ class Renderer(ProgressiveImage):
         where a pixel's direct light changes by orders of magnitude across it), and per pixel
         how many times an edge's extra samples it takes: ``sqrt(se^2 / cut)`` rounded, 1 to
         :data:`NOISY_MAX_FACTOR` (samples in proportion to the standard deviation, which
-        minimises the summed squared error for their number; the error of the Veach test
-        scene was mostly ten pixels on the edge of a 3 cm lamp's reflection in a near-mirror)."""
+        minimises the summed squared error for their number: the edge of a small lamp's
+        reflection in a near-mirror)."""
         if self.passes < 4:
             return np.zeros(0, np.int64), np.zeros(0, np.int64)
         # passes of k samples: sum_p k_p (y_p - m)^2 estimates passes x the per-sample variance

@@ -140,8 +140,7 @@ class DirectLighting:
         """Whether ``light_tree='auto'`` builds a light tree: many lamps, each of which would
         otherwise cost a shadow ray at every point.  A few lamps are each sampled at every
         point: the tree's one choice among them ignores the BRDF, so a sharp lobe's small bright
-        lamp, chosen rarely, was left to the lobe's rays (the Veach test scene's plates at 30 s:
-        the error 31% -> 130%)."""
+        lamp, chosen rarely, is left to the lobe's rays (README, the table of methods)."""
         return sum(not isinstance(light, SunLight) for light in lights) > cls.TREE_MIN_LIGHTS
 
     def tree_sample(self, points, normals, u):

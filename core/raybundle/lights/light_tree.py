@@ -152,7 +152,7 @@ def emitter_bounds(lights):
             theta_o = np.where(light.two_sided, np.pi, 0.0)
             energy = float(np.mean(light.radiance)) * sc.triangle_area[light.triangles]
         elif isinstance(light, ShapeLight):
-            corners = np.array([light.center + a * light.axis_u + b * light.axis_v for a in (-1, 1) for b in (-1, 1)])
+            corners = light.corners()
             k, box = np.zeros(1, np.int64), np.stack([corners.min(axis=0), corners.max(axis=0)])[None]
             axis, theta_o = light.normal[None], np.zeros(1)
             energy = np.array([float(np.mean(light.radiance)) * light.area])

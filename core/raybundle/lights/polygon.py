@@ -145,8 +145,7 @@ def light_polygon_irradiance(light, points, normals):
                 exact[lit] = False
         return out, exact
     if isinstance(light, ShapeLight) and not light.ellipse:
-        corners = np.array([light.center + a * light.axis_u + b * light.axis_v
-                            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+        corners = light.corners()
         lit = (points - light.center) @ light.normal > 0
         out = np.zeros(len(points))
         if lit.any():        # by its outline: most points see it whole, Lambert's sum over 4 corners

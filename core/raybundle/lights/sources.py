@@ -477,9 +477,13 @@ class ShapeLight(_Light):
                 out[near] = 1.0 / np.maximum(omega, 1e-300)
         return out
 
+    def corners(self):
+        """(4, 3) the rectangle's corners [m] in order around its outline (an ellipse's box)."""
+        return np.array([self.center + a * self.axis_u + b * self.axis_v
+                         for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+
     def in_front(self, origin, normal):
-        corners = [self.center + a * self.axis_u + b * self.axis_v for a in (-1, 1) for b in (-1, 1)]
-        return np.any([np.einsum("ij,ij->i", c - origin, normal) > 0 for c in corners], axis=0)
+        return np.any([np.einsum("ij,ij->i", c - origin, normal) > 0 for c in self.corners()], axis=0)
 
 
 @dataclass
