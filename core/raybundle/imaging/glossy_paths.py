@@ -16,7 +16,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..lights.direct import DirectLighting
-from ..lights.world_light import WorldLight
 
 
 class GlossyEyePaths:
@@ -34,7 +33,7 @@ class GlossyEyePaths:
         self.world_light = world_light if self.light_mis else None
         self.rays = 0
 
-    def gather(self, g, idx, u, world_samples=0):
+    def gather(self, g, idx, u, world_samples=0, guide=None):
         """Glossy lobe at pixels ``idx`` by one eye path each (the remedy for sharp lobes).
 
         Sample ``w_i`` from the glossy lobes (GGX around the mirror of the eye
@@ -50,7 +49,8 @@ class GlossyEyePaths:
         lobe sample.  ``world_samples`` K > 0: the caller took K world samples for these lobes
         (:meth:`WorldLight.irradiance` with ``lobe``), weighted against the path's first ray with
         the counts, so the path takes none of its own and weights the sky it meets
-        ``p_g^2 / (p_g^2 + (K p_w)^2)``.  Returns ``(light, solved)``, (len(idx), 3) each: what
+        ``p_g^2 / (p_g^2 + (K p_w)^2)``; ``guide``: the ``(guide, at)`` they were drawn by
+        (:meth:`WorldLight.guide_at`; None: the sides' guide now).  Returns ``(light, solved)``, (len(idx), 3) each: what
         the paths took from the lamps and the world (:meth:`trace`), which does not depend on the
         solver's iterations, and what they read from the solver.
         """
@@ -61,11 +61,9 @@ class GlossyEyePaths:
         w_i, weight = sc.materials.sample_glossy(m, n, wo, u)
         if self.world_light is None or len(idx) == 0:
             return self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo) if self.light_mis else None)
-        sides = sc.tside_side[g.tside[idx]]
-        guide = at = None
-        if solver.world_guide is not None:
-            seen, at = np.unique(sides, return_inverse=True)
-            guide, at = WorldLight.guide_of(solver.world_guide, seen), at.reshape(-1)
+        if guide is None:
+            guide = self.world_light.guide_at(solver.world_guide, sc.tside_side[g.tside[idx]])
+        guide, at = guide
         world_mis = (max(world_samples, 1) * self.world_light.density(w_i, guide, at),
                      sc.materials.glossy_pdf(m, n, w_i, wo))
         light, solved = self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo), world_mis=world_mis)

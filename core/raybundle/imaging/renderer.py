@@ -571,16 +571,20 @@ class Renderer(ProgressiveImage):
             out[t] += kt[far] / np.pi * self.direct.far_side_irradiance(g.point[t], g.normal[t], self.rng)
         gl = hf[self.glossy_material[g.material[hf]]]
         lobe_world = 0          # world samples the glossy lobes share with the diffuse one
+        lobe_guide = None       # ... and the guide they were drawn by, for the lobes' MIS
         if self.world_light is not None and len(hf):
             before = self.world_light.rays
             lobe = None
+            sides = self.scene.tside_side[g.tside[hf]]
+            guide = self.world_light.guide_at(self.solver.world_guide, sides)
             if self.settings.glossy_gather and self.glossy_paths.world_light is self.world_light and len(gl):
                 at = np.searchsorted(hf, gl)
                 lobe = (self.scene.materials, at, g.material[gl], g.w_eye[gl])
-                lobe_world = self.world_samples
+                lobe_world, lobe_guide = self.world_samples, (guide[0], guide[1][at])
+            # the unblocked samples teach the sides' guide (for the next passes)
             e = self.world_light.irradiance(g.point[hf], g.normal[hf],
                                             self.rng.random((len(hf), self.world_samples, 3)),
-                                            self.solver.world_guide, self.scene.tside_side[g.tside[hf]], lobe=lobe)
+                                            guide, lobe=lobe, learn=sides)
             if lobe is not None:
                 e, sky = e
                 out[gl] += sky
@@ -594,7 +598,8 @@ class Renderer(ProgressiveImage):
             before = self.glossy_paths.rays
             # the lamps and the world the paths meet count with the pass (kept over the solver's
             # restart); what they read from the solver with the gather (dropped at its restart)
-            light, gathered[gl] = self.glossy_paths.gather(g, gl, u_lobe[gl], world_samples=lobe_world)
+            light, gathered[gl] = self.glossy_paths.gather(g, gl, u_lobe[gl], world_samples=lobe_world,
+                                                           guide=lobe_guide)
             out[gl] += light
             self.image_rays += self.glossy_paths.rays - before
             gl = gl[:0]

@@ -12,6 +12,18 @@ a direction uniform in solid angle inside the pixel, so that ``pdf(w) = P_pixel 
 shadow ray per sample.  Every pixel that sends light can be drawn, so the estimate is
 unbiased.  Bright skies and suns seen through windows are found at once, where cosine
 sampling or the patch solution meet them by chance or smear them over a patch.
+
+Through a room's windows most of the sky is hidden: drawn by brightness alone, 1.7% of the
+living room's samples reached the sky (the interior bench, README).  Each side then draws
+``GUIDE_SHARE`` of its samples by a *guide*, a distribution over cells of the sky: what the
+solver's bundles brought the side from each cell, and what the image passes' own samples on
+that side found open (:meth:`WorldLight.learn`: ``L cos / pdf`` of each unblocked sample by its
+cell, an unbiased estimate of the cell's share of the side's irradiance, whichever density drew
+it).  A bundle direction crosses a window rarely (16 directions per iteration against the
+passes' thousands of samples per side), so once a side has ``LEARNED_EQUAL`` unblocked samples
+its learned guide weighs as much as the bundles', and more as they grow.  The guide is spread
+over each cell's neighbours and mixed with the brightness (1 - ``GUIDE_SHARE``): every pixel
+that sends light keeps a density, so the estimate stays unbiased whatever the guide.
 """
 from __future__ import annotations
 
@@ -26,6 +38,10 @@ GUIDE_ROWS, GUIDE_COLS = 16, 32
 GUIDE_CELLS = GUIDE_ROWS * GUIDE_COLS
 #: the share of a side's samples drawn by its guide (the rest by the world's brightness alone)
 GUIDE_SHARE = 0.8
+#: unblocked samples of a side's own after which its learned guide weighs as much as the
+#: bundles' (in proportion to them, up to LEARNED_MAX of them: 16 times as much)
+LEARNED_EQUAL = 4
+LEARNED_MAX = 64
 
 
 def guide_cell(directions, h, w):
@@ -45,6 +61,12 @@ def _blurred(g):
     out[:, 1:] += a[:, :-1]
     out[:, :-1] += a[:, 1:]
     return out.reshape(len(g), GUIDE_CELLS)
+
+
+def _normalized(g):
+    """Rows of ``g`` (U, cells) divided by their sums (rows of zeros stay zero)."""
+    total = g.sum(axis=1, keepdims=True)
+    return g / np.where(total > 0, total, 1.0)
 
 
 def _pixel_cell(row, col, h, w):
@@ -80,6 +102,11 @@ class WorldLight:
         _, radius = tracer.scene.bounding_sphere
         self.far = 4.0 * radius + 1.0
         self.rays = 0
+        # what the samples of :meth:`learn` found open, per side seen: the side's row
+        # (-1: none yet), per row the sums by guide cell (rows, cells) and the unblocked samples
+        self._row = np.full(tracer.scene.n_sides, -1, np.int64)
+        self._learned = np.zeros((0, GUIDE_CELLS), np.float32)
+        self._hits = np.zeros(0, np.int64)
 
     def sample(self, u, guide=None, sides=None):
         """``(directions (N, 3), pdf (N,) [1/sr], radiance (N, 3))`` for uniforms ``u`` (N, 3),
@@ -132,12 +159,29 @@ class WorldLight:
         row, col = pixel_of(np.asarray(directions, float), self.h, self.w)
         return self._density(row * self.w + col, row, guide, sides)
 
+    def guide_at(self, bundle_sums, sides):
+        """``(guide, at)`` for points on ``sides`` (N,): the :meth:`sample` guide of the sides
+        they are on and each point's place among them (module docstring).  ``bundle_sums``
+        (cells, S) or None: what the solver's bundles brought each side from each cell; the
+        sides' learned sums (:meth:`learn`) are mixed in by their unblocked samples."""
+        seen, at = np.unique(np.asarray(sides), return_inverse=True)
+        g = np.zeros((len(seen), GUIDE_CELLS))
+        if bundle_sums is not None:
+            g += _normalized(bundle_sums[:, seen].T.astype(float))
+        rows = self._row[seen]
+        has = np.nonzero(rows >= 0)[0]
+        if len(has):
+            weight = np.minimum(self._hits[rows[has]], LEARNED_MAX) / LEARNED_EQUAL
+            g[has] += _normalized(self._learned[rows[has]].astype(float)) * weight[:, None]
+        return self.guide_of(g), at.reshape(-1)
+
     @staticmethod
-    def guide_of(guide_sums, sides):
-        """The ``guide`` of :meth:`sample` for ``sides`` (U,) from the solver's sums (cells, S):
-        per side its share (U,) and, flattened side by side, each cell's probability (U cells,)
-        and cumulative probability plus the side's place in ``sides`` (U cells,)."""
-        g = _blurred(guide_sums[:, sides].T.astype(float))
+    def guide_of(sums):
+        """The ``guide`` of :meth:`sample` for U sides from ``sums`` (U, cells) over the sky's
+        cells: per side its share (U,) and, flattened side by side, each cell's probability
+        (U cells,) and cumulative probability plus the side's place (U cells,); a side without
+        sums draws by brightness alone (share 0)."""
+        g = _blurred(np.asarray(sums, float))
         total = g.sum(axis=1)
         has = total > 0
         prob = g / np.where(has, total, 1.0)[:, None]
@@ -146,11 +190,27 @@ class WorldLight:
         cdf += np.arange(len(g))[:, None]
         return np.where(has, GUIDE_SHARE, 0.0), cdf.ravel(), prob.ravel()
 
-    def irradiance(self, points, normals, u, guide_sums=None, sides=None, lobe=None):
+    def learn(self, sides, directions, value):
+        """Add unblocked samples to the learned guide: on ``sides`` (M,), along the unit
+        ``directions`` (M, 3) towards the sky, each with ``value`` (M,) = max_c L_w cos / pdf."""
+        if len(sides) == 0:
+            return
+        new = np.unique(sides[self._row[sides] < 0])
+        if len(new):
+            self._row[new] = len(self._hits) + np.arange(len(new))
+            self._learned = np.vstack([self._learned, np.zeros((len(new), GUIDE_CELLS), np.float32)])
+            self._hits = np.concatenate([self._hits, np.zeros(len(new), np.int64)])
+        rows = self._row[sides]
+        cells = guide_cell(directions, self.h, self.w)
+        np.add.at(self._learned, (rows, cells), value.astype(np.float32))
+        self._hits += np.bincount(rows, minlength=len(self._hits))
+
+    def irradiance(self, points, normals, u, guide=None, lobe=None, learn=None):
         """(N, 3) [W/m^2] estimate of the direct irradiance from the world at ``points``
         (N, 3) with unit ``normals`` (N, 3), with ``u`` (N, K, 3) uniforms: K samples each;
-        ``guide_sums`` (cells, S): the solver's guide (module docstring) for points on ``sides``
-        (N,), or None (by brightness alone).
+        ``guide`` = ``(guide, at)`` of :meth:`guide_at` for the points, or None (by brightness
+        alone).  ``learn`` (N,): the points' sides, whose learned guide the unblocked samples
+        join (:meth:`learn`; the ``guide`` given is the one they were drawn by).
 
         With ``lobe = (materials, idx, mats, w_out)``, also the radiance [W m^-2 sr^-1] the glossy
         lobes of materials ``mats`` at the points ``idx`` reflect towards ``w_out`` from the same
@@ -166,11 +226,8 @@ class WorldLight:
         if not self.emits or n == 0:
             return out if lobe is None else (out, glossy)
         rep = np.repeat(np.arange(n), k)
-        guide = at = None
-        if guide_sums is not None:
-            seen, at = np.unique(np.asarray(sides), return_inverse=True)
-            guide, at = self.guide_of(guide_sums, seen), at[rep]
-        d, pdf, L = self.sample(u.reshape(-1, 3), guide, at)
+        g, at = (None, None) if guide is None else (guide[0], guide[1][rep])
+        d, pdf, L = self.sample(u.reshape(-1, 3), g, at)
         cos = np.einsum("ij,ij->i", normals[rep], d)
         live = np.nonzero((cos > 0) & (pdf > 0))[0]
         if len(live):
@@ -179,6 +236,8 @@ class WorldLight:
             self.rays += len(live)
             ok = live[~blocked]
             contrib = L[ok] * (cos[ok] / pdf[ok])[:, None]
+            if learn is not None:
+                self.learn(np.asarray(learn)[rep[ok]], d[ok], contrib.max(axis=1))
             for c in range(3):
                 out[:, c] = np.bincount(rep[ok], contrib[:, c], minlength=n)
             if lobe is not None and len(lobe[1]):
