@@ -132,7 +132,12 @@ class StochasticIterationSolver(Method):
         self.glossy_mask = mats.is_glossy[pm]
         self.layered_sides = np.nonzero(mats.has_layer[pm])[0]      # diffuse lobe under a specular layer
         self.glossy_patches = np.nonzero(self.glossy_mask)[0]
-        self._glossy_points = _SidePoints(scene, self.glossy_mask)    # for glossy_sent_radiance
+        #: per glossy side: its lobe's light is sent by gather rays (a sharp or strong lobe)
+        #: rather than from the iterate (:meth:`glossy_sent_radiance`)
+        self.traced_lobe = self.sharp_lobes(mats, pm[self.glossy_patches])
+        traced_mask = np.zeros(scene.n_sides, bool)
+        traced_mask[self.glossy_patches[self.traced_lobe]] = True
+        self._glossy_points = _SidePoints(scene, traced_mask)    # for glossy_sent_radiance
         self.diffuse_only = len(self.glossy_patches) == 0
         albedo = self.kd_over_pi * np.pi
         if len(self.glossy_patches):
@@ -193,11 +198,28 @@ class StochasticIterationSolver(Method):
         return self.radiance(self._all_patches, send_dir, first_shot_emission=False,
                              first_shot_glossy=self.caustic is None)
 
+    #: a glossy lobe is sent from the iterate (thesis 3.3) where its albedo (at cos 0.7) over
+    #: alpha^2 is at most this, by gather rays where it is more (:meth:`sharp_lobes`)
+    ITERATE_LOBE_PEAK = 2.0
+
+    @classmethod
+    def sharp_lobes(cls, mats, m):
+        """(len(m),) bool: the glossy lobes of materials ``m`` whose sent radiance goes by gather
+        rays.  The iterate's ``E_j f_g(t_j, s_j)`` has a tail that grows with the lobe's peak,
+        about ``rho_g / (pi alpha^2)``; a weak, rough lobe (the clear coat of a varnished floor or
+        panelling: rho_g 5%, alpha 0.15-0.2) has a peak below its diffuse lobe's, and its rays
+        had cost most of an iteration (the interior bench's living room: 17k such sides, 32 rays
+        each per iteration)."""
+        m = np.asarray(m)
+        rho = mats.albedo(m, np.full(len(m), 0.7), diffuse=False).max(axis=1)
+        return rho > cls.ITERATE_LOBE_PEAK * mats.alpha[m] ** 2
+
     def glossy_sent_radiance(self, send_dir):
         """Radiance (G, 3) the glossy sides send into ``send_dir`` (G, 3): their diffuse
-        lobe from the iterate, the glossy lobe by the mean of ``glossy_send_rays``
-        lobe-sampled gather rays each (2 rather than 1, which measured ahead on ``cornell-glossy``;
-        4 gained nothing more: README, 'Measured choices behind the defaults').
+        lobe from the iterate; a sharp glossy lobe (:meth:`sharp_lobes`) by the mean of
+        ``glossy_send_rays`` lobe-sampled gather rays each (2 rather than 1, which measured
+        ahead on ``cornell-glossy``; 4 gained nothing more: README, 'Measured choices behind the
+        defaults'), a weak rough one from the iterate, ``E_j f_g(t_j, s_j)`` (thesis 3.3).
 
         ``S_j = Le_j + W_d kd/pi (E_j + E1_j + Ec_j) + weight L(y, -w_i)`` with ``w_i`` drawn
         from side j's glossy lobe for the viewer direction ``s_j`` (``weight = f cos / pdf``,
@@ -214,7 +236,14 @@ class StochasticIterationSolver(Method):
         """
         gp_k, send_dir, shape = self._glossy_rows(send_dir)
         fsg = self.caustic is None
-        out = self.radiance(gp_k, send_dir, first_shot_emission=False, first_shot_glossy=fsg, glossy_iterate=False)
+        traced = np.tile(self.traced_lobe, len(gp_k) // max(len(self.glossy_patches), 1))
+        out = np.empty((len(gp_k), 3))
+        by_iterate = ~traced
+        out[by_iterate] = self.radiance(gp_k[by_iterate], send_dir[by_iterate], first_shot_emission=False,
+                                        first_shot_glossy=fsg)
+        gp_k, send_dir = gp_k[traced], send_dir[traced]
+        out[traced] = self.radiance(gp_k, send_dir, first_shot_emission=False, first_shot_glossy=fsg,
+                                    glossy_iterate=False)
         sc = self.scene
         m = self.glossy_send_rays
         gp_m, send_m = np.tile(gp_k, m), np.tile(send_dir, (m, 1))
@@ -225,7 +254,8 @@ class StochasticIterationSolver(Method):
         got, _ = self._gather(pts[live], n[live], w_i[live])
         gathered = np.zeros((len(gp_m), 3))
         gathered[live] = weight[live] * got
-        return (out + gathered.reshape(m, len(gp_k), 3).mean(axis=0)).reshape(shape)
+        out[traced] += gathered.reshape(m, len(gp_k), 3).mean(axis=0)
+        return out.reshape(shape)
 
     def _glossy_rows(self, send_dir):
         """``send_dir`` (..., G, 3) of :meth:`glossy_sent_radiance` as rows: the glossy sides
@@ -362,7 +392,7 @@ class StochasticIterationSolver(Method):
         gp = self.glossy_patches
         if len(gp):                   # what the glossy sides send along each direction, in batches
             toward = np.sign(self.normal[gp] @ d.T).T[:, :, None] * d[:, None, :]          # (K, G, 3)
-            per = max(1, self.GLOSSY_SEND_BATCH // (len(gp) * self.glossy_send_rays))
+            per = max(1, self.GLOSSY_SEND_BATCH // (max(self.traced_lobe.sum(), 1) * self.glossy_send_rays))
             s_glossy = np.concatenate([self.glossy_sent_radiance(toward[i:i + per]) for i in range(0, k_dirs, per)])
         E = np.zeros((n, 3))
         e_glossy = t_glossy = None
