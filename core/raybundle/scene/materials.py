@@ -662,7 +662,7 @@ def sample_ggx_visible_normal(alpha, normal, w_out, u):
     return m[:, :1] * t + m[:, 1:2] * b + m[:, 2:] * normal
 
 
-def ggx_albedo(alpha, cos_out, n_theta=256, n_phi=128):
+def ggx_albedo(alpha, cos_out, n_theta=256, n_phi=32):
     """Directional albedo of the untinted GGX lobe, integral of lobe * cos_i dw_i:
     ``E`` of :func:`ggx_fresnel_moments`, a midpoint rule over the unit square of
     :func:`sample_ggx_reflection` (visible normals), ``a = E_u[G2 / G1(w_o)]``, with the
@@ -740,7 +740,7 @@ def fresnel_f82_fss(f0, b):
     return f0 + (1.0 - f0) / 21.0 - b / 126.0
 
 
-def ggx_fresnel_moments(alpha, cos_out, eta=0.0, f82=None, n_theta=256, n_phi=128):
+def ggx_fresnel_moments(alpha, cos_out, eta=0.0, f82=None, n_theta=256, n_phi=32):
     """Fresnel-weighted directional moments of the untinted GGX lobe, by a midpoint rule
     over the visible-normal sampler's unit square, ``u_1 = 1 - (1 - t)^3`` (Jacobian
     ``3 (1 - t)^2``) to resolve the lobe's tail, the rim of the visible-normal disc.  With
@@ -753,6 +753,11 @@ def ggx_fresnel_moments(alpha, cos_out, eta=0.0, f82=None, n_theta=256, n_phi=12
       reflections, which is what Cycles tabulates as ``ggx_gen_schlick_ior_s`` for its
       layering estimate;
     * ``F82`` (K, 3) = E[w F82(c)] if ``f82 = (f0, b)`` is given.
+
+    The lobe is smooth in the azimuth: 256 x 32 points give the albedo of 256 x 128 to 1e-7
+    (within 2e-5 of a 16x finer rule, :func:`ggx_albedo`) in a quarter of the time, and each
+    distinct layered material's table takes one such quadrature per row of the mu table at
+    set-up.
     """
     cos_out = np.atleast_1d(np.asarray(cos_out, float))
     t = (np.arange(n_theta) + 0.5) / n_theta
