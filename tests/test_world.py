@@ -303,7 +303,20 @@ def _floor_points(solver, rng, n):
     return pts, normals, solver.scene.tside_side[solver.scene.seen_tside(tri, down)]
 
 
-def test_the_bundles_guide_sky_samples_through_an_opening_without_bias():
+@pytest.fixture(scope="module")
+def floor_solver():
+    """The solver of :func:`_floor_under_a_roof_with_an_opening` after 60 iterations (its
+    bundles' guide of the sky), shared by the tests that only read it."""
+    s = pipeline.make_solver(pipeline.prepare(_floor_under_a_roof_with_an_opening(), patches=4000),
+                             RenderSettings(seed=2))
+    assert s.separate_world()
+    for _ in range(60):
+        s.step()
+    yield s
+    s.tracer.close()
+
+
+def test_the_bundles_guide_sky_samples_through_an_opening_without_bias(floor_solver):
     """A floor under a roof with an opening in it, under a world bright above: most of the sky
     is behind the roof, so drawn by brightness alone most shadow rays from the floor are
     blocked (94% here).  After 60 iterations, a floor point draws by its side's guide (the sky
@@ -313,26 +326,20 @@ def test_the_bundles_guide_sky_samples_through_an_opening_without_bias():
     mixture pdf off by the guide's share moved the mean by 6.5 SE)."""
     from raybundle.lights.world_light import WorldLight
 
-    sc = _floor_under_a_roof_with_an_opening()
-    s = pipeline.make_solver(pipeline.prepare(sc, patches=4000), RenderSettings(seed=2))
-    try:
-        assert s.separate_world()
-        for _ in range(60):
-            s.step()
-        wl = WorldLight(sc.world, s.tracer)
-        rng = np.random.default_rng(5)
-        n = 3000
-        pts, normals, sides = _floor_points(s, rng, n)
-        plain = wl.irradiance(pts, normals, rng.random((n, 1, 3))).sum(axis=1)
-        guided = wl.irradiance(pts, normals, rng.random((n, 1, 3)), wl.guide_at(s.world_guide, sides)).sum(axis=1)
-        se = np.sqrt(plain.var() / n + guided.var() / n)
-        assert abs(plain.mean() - guided.mean()) < 4.5 * se, (plain.mean(), guided.mean(), se)
-        assert guided.var() < 0.5 * plain.var(), (guided.var(), plain.var())
-    finally:
-        s.tracer.close()
+    s = floor_solver
+    sc = s.scene
+    wl = WorldLight(sc.world, s.tracer)
+    rng = np.random.default_rng(5)
+    n = 3000
+    pts, normals, sides = _floor_points(s, rng, n)
+    plain = wl.irradiance(pts, normals, rng.random((n, 1, 3))).sum(axis=1)
+    guided = wl.irradiance(pts, normals, rng.random((n, 1, 3)), wl.guide_at(s.world_guide, sides)).sum(axis=1)
+    se = np.sqrt(plain.var() / n + guided.var() / n)
+    assert abs(plain.mean() - guided.mean()) < 4.5 * se, (plain.mean(), guided.mean(), se)
+    assert guided.var() < 0.5 * plain.var(), (guided.var(), plain.var())
 
 
-def test_the_pixels_own_sky_samples_teach_the_guide_without_bias():
+def test_the_pixels_own_sky_samples_teach_the_guide_without_bias(floor_solver):
     """The same floor under a roof with an opening: the sky samples of a few passes (four per
     point, eight passes) teach each floor side which cells of the sky are open from it
     (:meth:`WorldLight.learn`).  Drawn by that learned guide, the mean irradiance is the same as by
@@ -341,26 +348,20 @@ def test_the_pixels_own_sky_samples_teach_the_guide_without_bias():
     alone on these points)."""
     from raybundle.lights.world_light import WorldLight
 
-    sc = _floor_under_a_roof_with_an_opening()
-    s = pipeline.make_solver(pipeline.prepare(sc, patches=4000), RenderSettings(seed=2))
-    try:
-        assert s.separate_world()
-        for _ in range(60):
-            s.step()
-        wl = WorldLight(sc.world, s.tracer)
-        rng = np.random.default_rng(5)
-        pts, normals, sides = _floor_points(s, rng, 3000)
-        for _ in range(8):                       # the passes: samples drawn by the guide they teach
-            wl.irradiance(pts, normals, rng.random((len(pts), 4, 3)), wl.guide_at(s.world_guide, sides), learn=sides)
-        plain = wl.irradiance(pts, normals, rng.random((len(pts), 1, 3))).sum(axis=1)
-        guided = wl.irradiance(pts, normals, rng.random((len(pts), 1, 3)), wl.guide_at(s.world_guide, sides)).sum(axis=1)
-        bundles_only = WorldLight(sc.world, s.tracer)
-        old = bundles_only.irradiance(pts, normals, rng.random((len(pts), 1, 3)),
-                                      bundles_only.guide_at(s.world_guide, sides)).sum(axis=1)
-        n = len(pts)
-        se = np.sqrt(plain.var() / n + guided.var() / n)
-        assert abs(plain.mean() - guided.mean()) < 4.5 * se, (plain.mean(), guided.mean(), se)
-        assert guided.var() < 0.35 * plain.var(), (guided.var(), plain.var())
-        assert guided.var() < 0.6 * old.var(), (guided.var(), old.var())
-    finally:
-        s.tracer.close()
+    s = floor_solver
+    sc = s.scene
+    wl = WorldLight(sc.world, s.tracer)
+    rng = np.random.default_rng(5)
+    pts, normals, sides = _floor_points(s, rng, 3000)
+    for _ in range(8):                       # the passes: samples drawn by the guide they teach
+        wl.irradiance(pts, normals, rng.random((len(pts), 4, 3)), wl.guide_at(s.world_guide, sides), learn=sides)
+    plain = wl.irradiance(pts, normals, rng.random((len(pts), 1, 3))).sum(axis=1)
+    guided = wl.irradiance(pts, normals, rng.random((len(pts), 1, 3)), wl.guide_at(s.world_guide, sides)).sum(axis=1)
+    bundles_only = WorldLight(sc.world, s.tracer)
+    old = bundles_only.irradiance(pts, normals, rng.random((len(pts), 1, 3)),
+                                  bundles_only.guide_at(s.world_guide, sides)).sum(axis=1)
+    n = len(pts)
+    se = np.sqrt(plain.var() / n + guided.var() / n)
+    assert abs(plain.mean() - guided.mean()) < 4.5 * se, (plain.mean(), guided.mean(), se)
+    assert guided.var() < 0.35 * plain.var(), (guided.var(), plain.var())
+    assert guided.var() < 0.6 * old.var(), (guided.var(), old.var())
