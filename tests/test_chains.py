@@ -1,5 +1,6 @@
 """Independent chains: their exact merge (:mod:`raybundle.app.chains`) and chains on a Dask
 ``LocalCluster`` of 2 worker processes (:mod:`raybundle.app.distributed`)."""
+import gc
 import os
 import threading
 import time
@@ -153,6 +154,42 @@ def test_the_chains_see_the_workers_whatever_the_clients_refresh_left(cluster):
     client.sync(client._update_scheduler_info)                   # what the periodic refresh does
     assert client._scheduler_identity["workers"] == {}           # the cache the old poll could read
     assert _workers(client) == set(lc.scheduler_info["workers"]) and len(_workers(client)) == 2
+
+
+def test_an_earlier_runs_late_release_of_the_same_scene_loses_nothing(cluster):
+    """A run's scene release travels on the client's batched stream, the next run's scatter on
+    an rpc of its own: when the release of the same scene lands after the new scatter (held
+    back here until it returns), a scene scattered under its content hash was forgotten and
+    every chain failed with "lost data" (a CI failure of the lost-worker test)."""
+    from raybundle.app.distributed import render_chains
+    from raybundle.app.plan import Plan
+
+    _, client = cluster
+    sc = pipeline.prepare(scenes.furnace(resolution=(8, 8)), patches=100)
+    plan = Plan("stochastic-iteration", 100, 3, None, RenderSettings(seed=2, **SETTINGS))
+    send, scatter, held = client._send_to_scheduler, client.scatter, []
+
+    def late(msg):
+        (held.append if msg.get("op") == "client-releases-keys" else send)(msg)
+
+    def scatter_then_release(*args, **kwargs):
+        out = scatter(*args, **kwargs)
+        gc.collect()
+        for msg in held:
+            send(msg)
+        held.clear()
+        time.sleep(0.2)
+        return out
+
+    client._send_to_scheduler, client.scatter = late, scatter_then_release
+    try:
+        for _ in range(2):
+            _, merged, its = render_chains(sc, plan, client=client, report_seconds=0.2)
+            assert its == [3, 3] and merged.chains == 2
+    finally:
+        del client._send_to_scheduler, client.scatter                # the class's own again
+        for msg in held:
+            send(msg)
 
 
 def furnace_chains_with(client, accident):

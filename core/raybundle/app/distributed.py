@@ -96,7 +96,9 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
         n = int(chains_count or len(addresses))
         if n < 1 or not addresses:
             raise ValueError("no workers to run chains on")
-        scene_future = client.scatter(scene, broadcast=True)
+        # a key of its own (not the scene's hash): an earlier run's release of the same scene's
+        # key reaches the scheduler on another stream and may land after this scatter
+        scene_future = client.scatter(scene, broadcast=True, hash=False)
         base = asdict(settings)
         renderer = make_renderer(scene, settings, solver=plan.method)     # the client's: merges, resolves
         # the chains iterate until the deadline; the client's resolve then has the final image's
