@@ -599,8 +599,13 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
         if viewport and ob.original.hide_render:
             continue
         if kind == "LIGHT":
-            if not (getattr(ob, "visible_diffuse", True) or getattr(ob, "visible_glossy", True)):
+            rays = [getattr(ob, f"visible_{k}", True) for k in ("diffuse", "glossy", "transmission")]
+            if not (rays[0] or rays[1]):
                 continue
+            if not all(rays):
+                off = ", ".join(k for k, on in zip(("diffuse", "glossy", "transmission"), rays) if not on)
+                warn(f"light {ob.original.name!r}: ray visibility ({off} off) is not supported; "
+                     "it lights every surface as if all were on")
             if getattr(getattr(ob.data, "cycles", None), "is_portal", False):
                 portals.append(ob.original.name)
                 continue

@@ -160,6 +160,20 @@ def test_light_units(light_scene):
     assert np.allclose(area.radiance[1 - k_rect], P / (math.pi * math.pi * 0.04))
 
 
+def test_a_lights_partial_ray_visibility_is_warned(light_scene):
+    """Cycles keeps a light with its glossy rays off out of highlights; raybundle does not
+    model per-ray-type visibility of lights and says so (before: silently fully visible).
+    With neither diffuse nor glossy rays the light is left out."""
+    lit = add_light("POINT", (0, 0, 2), energy=10.0)
+    lit.name, lit.visible_glossy = "no_highlight", False
+    dark = add_light("POINT", (1, 0, 2), energy=10.0)
+    dark.visible_diffuse = dark.visible_glossy = False
+    ex = export()
+    assert len(ex.scene.point_lights) == 1
+    said = [w for w in ex.warnings if "ray visibility" in w]
+    assert len(said) == 1 and "'no_highlight'" in said[0] and "glossy off" in said[0], ex.warnings
+
+
 def test_light_temperature_and_unnormalized(light_scene):
     pt = add_light("POINT", (0, 0, 2), energy=10.0, shadow_soft_size=0.5)
     pt.data.normalize = False
