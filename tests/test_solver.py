@@ -103,6 +103,30 @@ def test_glossy_furnace_with_its_lobes_sent_from_the_iterate(monkeypatch):
     r.tracer.close()
 
 
+def test_glossy_furnace_with_its_weak_lobes_gathered_by_chance(monkeypatch):
+    """A traced lobe that is a small share of what its side reflects is gathered along a
+    direction only with chance share / GATHER_SHARE, weighted by the inverse: unbiased (the
+    glossy furnace converges to its exact radiance, SE < 2%) at a fraction of the gather rays.
+    Here every lobe takes its chance (GATHER_SHARE 4, a quarter or less)."""
+    from raybundle.methods.stochastic_iteration import StochasticIterationSolver
+
+    monkeypatch.setattr(StochasticIterationSolver, "GATHER_SHARE", 4.0)
+    r = furnace_renderer(True, "stratified", directions=8)
+    s = r.solver
+    traced = s.gather_chance[s.traced_lobe]
+    assert len(traced) and traced.max() <= 0.25
+    gathered = []
+    gather = s._gather
+    s._gather = lambda points, normals, w: (gathered.append(len(points)), gather(points, normals, w))[1]
+    patch, img = batch_means(r, 12, 16)
+    # (a lobe's rays below its horizon are not traced: about 13% of them here)
+    per_direction = sum(gathered) / s.stats.directions / s.glossy_send_rays
+    assert 0.75 * traced.sum() < per_direction < 1.05 * traced.sum(), (per_direction, traced.sum(), len(traced))
+    assert_converged(patch, r.scene.analytic_radiance, max_se=0.02)
+    assert_converged(img, r.scene.analytic_radiance, max_se=0.02)
+    r.tracer.close()
+
+
 def test_glossy_furnace_image_without_gather():
     """The thesis' own eye estimator E_i f(t_i, w_eye) per iteration (glossy_gather off)."""
     r = furnace_renderer(True, "prng", glossy_gather=False)

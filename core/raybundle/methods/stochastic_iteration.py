@@ -138,6 +138,13 @@ class StochasticIterationSolver(Method):
         traced_mask = np.zeros(scene.n_sides, bool)
         traced_mask[self.glossy_patches[self.traced_lobe]] = True
         self._glossy_points = _SidePoints(scene, traced_mask)    # for glossy_sent_radiance
+        gpm = pm[self.glossy_patches]
+        rho_g = mats.albedo(gpm, np.full(len(gpm), 0.7), diffuse=False).max(axis=1)
+        rho_d = np.pi * self.kd_over_pi[self.glossy_patches].max(axis=1)
+        #: per glossy side: the chance its traced lobe is gathered along a direction
+        #: (:meth:`glossy_sent_radiance`), its lobe's share of what it reflects over GATHER_SHARE
+        self.gather_chance = np.clip(rho_g / np.maximum(rho_g + rho_d, 1e-12) / self.GATHER_SHARE,
+                                     self.LEAST_GATHER_CHANCE, 1.0)
         self.diffuse_only = len(self.glossy_patches) == 0
         albedo = self.kd_over_pi * np.pi
         if len(self.glossy_patches):
@@ -198,6 +205,12 @@ class StochasticIterationSolver(Method):
         return self.radiance(self._all_patches, send_dir, first_shot_emission=False,
                              first_shot_glossy=self.caustic is None)
 
+    #: a traced lobe that reflects less than this share of what its side reflects (a white
+    #: plastic's 5% specular over its diffuse lobe) is gathered along a direction only with
+    #: chance share / GATHER_SHARE (at least LEAST_GATHER_CHANCE), weighted by the inverse
+    GATHER_SHARE = 0.25
+    LEAST_GATHER_CHANCE = 1.0 / 16.0
+
     #: a glossy lobe is sent from the iterate (thesis 3.3) where its albedo (at cos 0.7) over
     #: alpha^2 is at most this, by gather rays where it is more (:meth:`sharp_lobes`)
     ITERATE_LOBE_PEAK = 2.0
@@ -219,7 +232,10 @@ class StochasticIterationSolver(Method):
         lobe from the iterate; a sharp glossy lobe (:meth:`sharp_lobes`) by the mean of
         ``glossy_send_rays`` lobe-sampled gather rays each (2 rather than 1, which measured
         ahead on ``cornell-glossy``; 4 gained nothing more: README, 'Measured choices behind the
-        defaults'), a weak rough one from the iterate, ``E_j f_g(t_j, s_j)`` (thesis 3.3).
+        defaults'), a weak rough one from the iterate, ``E_j f_g(t_j, s_j)`` (thesis 3.3).  A
+        traced lobe that is a small share of what its side reflects is gathered only with the
+        side's ``gather_chance`` q, its gathered part weighted 1 / q (Russian roulette: unbiased;
+        a white plastic's 5% specular lobe needs its gather rays in a fifth of the directions).
 
         ``S_j = Le_j + W_d kd/pi (E_j + E1_j + Ec_j) + weight L(y, -w_i)`` with ``w_i`` drawn
         from side j's glossy lobe for the viewer direction ``s_j`` (``weight = f cos / pdf``,
@@ -241,9 +257,13 @@ class StochasticIterationSolver(Method):
         by_iterate = ~traced
         out[by_iterate] = self.radiance(gp_k[by_iterate], send_dir[by_iterate], first_shot_emission=False,
                                         first_shot_glossy=fsg)
+        chance = np.tile(self.gather_chance, len(gp_k) // max(len(self.glossy_patches), 1))[traced]
+        rows = np.nonzero(traced)[0]
         gp_k, send_dir = gp_k[traced], send_dir[traced]
-        out[traced] = self.radiance(gp_k, send_dir, first_shot_emission=False, first_shot_glossy=fsg,
-                                    glossy_iterate=False)
+        out[rows] = self.radiance(gp_k, send_dir, first_shot_emission=False, first_shot_glossy=fsg,
+                                  glossy_iterate=False)
+        go = np.nonzero(self.grid_rng.random(len(rows)) < chance)[0]      # the lobes gathered this time
+        rows, gp_k, send_dir = rows[go], gp_k[go], send_dir[go]
         sc = self.scene
         m = self.glossy_send_rays
         gp_m, send_m = np.tile(gp_k, m), np.tile(send_dir, (m, 1))
@@ -254,7 +274,7 @@ class StochasticIterationSolver(Method):
         got, _ = self._gather(pts[live], n[live], w_i[live])
         gathered = np.zeros((len(gp_m), 3))
         gathered[live] = weight[live] * got
-        out[traced] += gathered.reshape(m, len(gp_k), 3).mean(axis=0)
+        out[rows] += gathered.reshape(m, len(gp_k), 3).mean(axis=0) / chance[go, None]
         return out.reshape(shape)
 
     def _glossy_rows(self, send_dir):
@@ -392,7 +412,8 @@ class StochasticIterationSolver(Method):
         gp = self.glossy_patches
         if len(gp):                   # what the glossy sides send along each direction, in batches
             toward = np.sign(self.normal[gp] @ d.T).T[:, :, None] * d[:, None, :]          # (K, G, 3)
-            per = max(1, self.GLOSSY_SEND_BATCH // (max(self.traced_lobe.sum(), 1) * self.glossy_send_rays))
+            gathered = self.gather_chance[self.traced_lobe].sum()
+            per = max(1, int(self.GLOSSY_SEND_BATCH // (max(gathered, 1.0) * self.glossy_send_rays)))
             s_glossy = np.concatenate([self.glossy_sent_radiance(toward[i:i + per]) for i in range(0, k_dirs, per)])
         E = np.zeros((n, 3))
         e_glossy = t_glossy = None
