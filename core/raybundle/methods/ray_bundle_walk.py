@@ -77,11 +77,10 @@ class RayBundleWalk(StochasticIterationSolver):
         and the first shot's reflection, later the previous step's reflected light."""
         return self._walk_sent(self._all_patches, send_dir)
 
-    def glossy_sent_radiance(self, send_dir):
-        """R^(k-1) of the glossy sides (..., G, 3) into ``send_dir`` (..., G, 3), one row of G per
-        bundle direction: the thesis' E f(t, s)."""
-        gp, d, shape = self._glossy_rows(send_dir)
-        return self._walk_sent(gp, d).reshape(shape)
+    def glossy_sent(self, gi, send_dir):
+        """R^(k-1) of the glossy sides ``glossy_patches[gi]`` (N,) into ``send_dir`` (N, 3): the
+        thesis' E f(t, s)."""
+        return self._walk_sent(self.glossy_patches[gi], send_dir)
 
     def sent_environment(self, direction):
         return super().sent_environment(direction) if self.walk_step == 0 else np.zeros((2, 3))

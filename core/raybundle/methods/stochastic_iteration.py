@@ -250,14 +250,20 @@ class StochasticIterationSolver(Method):
         ``send_dir`` may hold several directions' rows, (K, G, 3): they are evaluated together
         (an iteration's K bundle directions; the returned array has its shape).
         """
-        gp_k, send_dir, shape = self._glossy_rows(send_dir)
+        gi, send_dir, shape = self._glossy_rows(send_dir)
+        return self.glossy_sent(gi, send_dir).reshape(shape)
+
+    def glossy_sent(self, gi, send_dir):
+        """:meth:`glossy_sent_radiance` of the glossy sides ``glossy_patches[gi]`` (N,) into
+        ``send_dir`` (N, 3): (N, 3), one row each."""
+        gp_k = self.glossy_patches[gi]
         fsg = self.caustic is None
-        traced = np.tile(self.traced_lobe, len(gp_k) // max(len(self.glossy_patches), 1))
+        traced = self.traced_lobe[gi]
         out = np.empty((len(gp_k), 3))
         by_iterate = ~traced
         out[by_iterate] = self.radiance(gp_k[by_iterate], send_dir[by_iterate], first_shot_emission=False,
                                         first_shot_glossy=fsg)
-        chance = np.tile(self.gather_chance, len(gp_k) // max(len(self.glossy_patches), 1))[traced]
+        chance = self.gather_chance[gi][traced]
         rows = np.nonzero(traced)[0]
         gp_k, send_dir = gp_k[traced], send_dir[traced]
         out[rows] = self.radiance(gp_k, send_dir, first_shot_emission=False, first_shot_glossy=fsg,
@@ -275,14 +281,15 @@ class StochasticIterationSolver(Method):
         gathered = np.zeros((len(gp_m), 3))
         gathered[live] = weight[live] * got
         out[rows] += gathered.reshape(m, len(gp_k), 3).mean(axis=0) / chance[go, None]
-        return out.reshape(shape)
+        return out
 
     def _glossy_rows(self, send_dir):
-        """``send_dir`` (..., G, 3) of :meth:`glossy_sent_radiance` as rows: the glossy sides
-        repeated per direction (K G,), the directions (K G, 3), and the shape to give the result."""
-        gp = self.glossy_patches
+        """``send_dir`` (..., G, 3) of :meth:`glossy_sent_radiance` as rows: the glossy sides'
+        places in ``glossy_patches`` repeated per direction (K G,), the directions (K G, 3), and
+        the shape to give the result."""
+        g = len(self.glossy_patches)
         d = np.asarray(send_dir, float).reshape(-1, 3)
-        return np.tile(gp, len(d) // max(len(gp), 1)), d, np.shape(send_dir)
+        return np.tile(np.arange(g), len(d) // max(g, 1)), d, np.shape(send_dir)
 
     def _gather(self, points, normals, w):
         """The radiance (N, 3) that reaches ``points`` (N, 3) on surfaces of (triangle) normals
@@ -410,11 +417,20 @@ class StochasticIterationSolver(Method):
         s_fixed = np.vstack([self.sent_radiance(self.normal), np.zeros((2, 3))])
         directional = not self.world.is_constant
         gp = self.glossy_patches
-        if len(gp):                   # what the glossy sides send along each direction, in batches
-            toward = np.sign(self.normal[gp] @ d.T).T[:, :, None] * d[:, None, :]          # (K, G, 3)
-            gathered = self.gather_chance[self.traced_lobe].sum()
-            per = max(1, int(self.GLOSSY_SEND_BATCH // (max(gathered, 1.0) * self.glossy_send_rays)))
-            s_glossy = np.concatenate([self.glossy_sent_radiance(toward[i:i + per]) for i in range(0, k_dirs, per)])
+        if len(gp):
+            # what the glossy sides send along each direction, for those a bundle line leaves
+            # from (most small sides send along none of an iteration's few directions), in batches
+            place = np.full(n, -1)
+            place[gp] = np.arange(len(gp))
+            used = [place[np.unique(b.sender[b.sender >= 0])] for b in bundles]
+            used = [u[u >= 0] for u in used]
+            start = np.concatenate([[0], np.cumsum([len(u) for u in used])])
+            gi = np.concatenate(used)
+            dk = d[np.repeat(np.arange(k_dirs), np.diff(start))]
+            toward = np.sign(np.einsum("ij,ij->i", self.normal[gp[gi]], dk))[:, None] * dk
+            per = max(1, self.GLOSSY_SEND_BATCH // self.glossy_send_rays)
+            s_glossy = np.concatenate([self.glossy_sent(gi[i:i + per], toward[i:i + per])
+                                       for i in range(0, len(gi), per)] + [np.zeros((0, 3))])
         E = np.zeros((n, 3))
         e_glossy = t_glossy = None
         if not self.diffuse_only:     # the new glossy iterate (senders use the old one)
@@ -428,7 +444,7 @@ class StochasticIterationSolver(Method):
             S = s_fixed                   # rows that change with d are set anew for each d
             S[-2:] = self.sent_environment(d[k])
             if len(gp):
-                S[gp] = s_glossy[k]
+                S[gp[used[k]]] = s_glossy[start[k]:start[k + 1]]
             sender = bundle.sender
             if directional:
                 sender = np.where((sender < 0) & (bundle.travel_sign < 0), -2, sender)
