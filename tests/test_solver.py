@@ -119,7 +119,7 @@ def test_glossy_furnace_with_its_weak_lobes_gathered_by_chance(monkeypatch):
     gather = s._gather
     s._gather = lambda points, normals, w: (gathered.append(len(points)), gather(points, normals, w))[1]
     patch, img = batch_means(r, 12, 16)
-    # (a side is gathered for only where a bundle line leaves it, not below its lobe's horizon)
+    # (only the sides a bundle line leaves from are gathered, and no ray below a lobe's horizon)
     per_direction = sum(gathered) / s.stats.directions / s.glossy_send_rays
     assert 0.2 * traced.sum() < per_direction < 1.05 * traced.sum(), (per_direction, traced.sum(), len(traced))
     assert_converged(patch, r.scene.analytic_radiance, max_se=0.02)
