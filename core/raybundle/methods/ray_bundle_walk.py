@@ -77,7 +77,7 @@ class RayBundleWalk(StochasticIterationSolver):
         and the first shot's reflection, later the previous step's reflected light."""
         return self._walk_sent(self._all_patches, send_dir)
 
-    def glossy_sent(self, gi, send_dir):
+    def glossy_sent_radiance(self, gi, send_dir):
         """R^(k-1) of the glossy sides ``glossy_patches[gi]`` (N,) into ``send_dir`` (N, 3): the
         thesis' E f(t, s)."""
         return self._walk_sent(self.glossy_patches[gi], send_dir)

@@ -227,8 +227,9 @@ class StochasticIterationSolver(Method):
         rho = mats.albedo(m, np.full(len(m), 0.7), diffuse=False).max(axis=1)
         return rho > cls.ITERATE_LOBE_PEAK * mats.alpha[m] ** 2
 
-    def glossy_sent_radiance(self, send_dir):
-        """Radiance (G, 3) the glossy sides send into ``send_dir`` (G, 3): their diffuse
+    def glossy_sent_radiance(self, gi, send_dir):
+        """Radiance (N, 3) the glossy sides ``glossy_patches[gi]`` (N,) send into ``send_dir``
+        (N, 3), one row each (an iteration's directions batched together): their diffuse
         lobe from the iterate; a sharp glossy lobe (:meth:`sharp_lobes`) by the mean of
         ``glossy_send_rays`` lobe-sampled gather rays each (2 rather than 1, which measured
         ahead on ``cornell-glossy``; 4 gained nothing more: README, 'Measured choices behind the
@@ -246,16 +247,7 @@ class StochasticIterationSolver(Method):
         left out (j's first shot and caustic shot carry it).  The
         thesis' ``E_j f(t_j, s_j)`` is unbiased too, but heavy-tailed for sharp lobes: a
         random pair (t_j, s_j) rarely falls into the lobe, and then with a value ~ 1/alpha^2.
-
-        ``send_dir`` may hold several directions' rows, (K, G, 3): they are evaluated together
-        (an iteration's K bundle directions; the returned array has its shape).
         """
-        gi, send_dir, shape = self._glossy_rows(send_dir)
-        return self.glossy_sent(gi, send_dir).reshape(shape)
-
-    def glossy_sent(self, gi, send_dir):
-        """:meth:`glossy_sent_radiance` of the glossy sides ``glossy_patches[gi]`` (N,) into
-        ``send_dir`` (N, 3): (N, 3), one row each."""
         gp_k = self.glossy_patches[gi]
         fsg = self.caustic is None
         traced = self.traced_lobe[gi]
@@ -282,14 +274,6 @@ class StochasticIterationSolver(Method):
         gathered[live] = weight[live] * got
         out[rows] += gathered.reshape(m, len(gp_k), 3).mean(axis=0) / chance[go, None]
         return out
-
-    def _glossy_rows(self, send_dir):
-        """``send_dir`` (..., G, 3) of :meth:`glossy_sent_radiance` as rows: the glossy sides'
-        places in ``glossy_patches`` repeated per direction (K G,), the directions (K G, 3), and
-        the shape to give the result."""
-        g = len(self.glossy_patches)
-        d = np.asarray(send_dir, float).reshape(-1, 3)
-        return np.tile(np.arange(g), len(d) // max(g, 1)), d, np.shape(send_dir)
 
     def _gather(self, points, normals, w):
         """The radiance (N, 3) that reaches ``points`` (N, 3) on surfaces of (triangle) normals
@@ -429,7 +413,7 @@ class StochasticIterationSolver(Method):
             dk = d[np.repeat(np.arange(k_dirs), np.diff(start))]
             toward = np.sign(np.einsum("ij,ij->i", self.normal[gp[gi]], dk))[:, None] * dk
             per = max(1, self.GLOSSY_SEND_BATCH // self.glossy_send_rays)
-            s_glossy = np.concatenate([self.glossy_sent(gi[i:i + per], toward[i:i + per])
+            s_glossy = np.concatenate([self.glossy_sent_radiance(gi[i:i + per], toward[i:i + per])
                                        for i in range(0, len(gi), per)] + [np.zeros((0, 3))])
         E = np.zeros((n, 3))
         e_glossy = t_glossy = None
