@@ -8,14 +8,16 @@ the lobe reflects are shared with the light samples by multiple importance sampl
 (power heuristic) when ``glossy_mis`` is on, and so is the world where it changes with
 direction: at the visible point one world sample per path (by brightness, guided by what the
 bundles brought each side from the sky: :class:`~raybundle.lights.world_light.WorldLight`)
-shares the sky the lobe reflects with the path's first ray if it leaves the scene.
-Radiance in [W m^-2 sr^-1].
+shares the sky the lobe reflects with the path's first ray if it leaves the scene.  A path
+that meets glass passes straight on or is mirrored by its interface, as the eye's own path is
+(:meth:`GlossyEyePaths.trace`).  Radiance in [W m^-2 sr^-1].
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..lights.direct import DirectLighting
+from ..scene.transmission import mirror_probability, pass_probability, scatter, solver_share
 
 
 class GlossyEyePaths:
@@ -31,6 +33,8 @@ class GlossyEyePaths:
         # ... and so do world samples (``world_light``, a world that changes with direction) and
         # the lobe's rays that leave the scene
         self.world_light = world_light if self.light_mis else None
+        #: per material, the mean share of the rays its surface stops (1 where nothing passes)
+        self._kept = solver_share(scene.materials)[0]
         self.rays = 0
 
     def gather(self, g, idx, u, world_samples=0, guide=None):
@@ -108,19 +112,25 @@ class GlossyEyePaths:
         against the light samples (:meth:`~raybundle.lights.direct.DirectLighting.lobe_hits_light`);
         with ``world_mis = (p_w, p_g)`` (N,) each, the world sampling's and the lobe's densities of
         the first rays, those that leave the scene see the world weighted ``p_g^2 / (p_g^2 + p_w^2)``
-        (:meth:`world_samples` takes the rest)."""
+        (:meth:`world_samples` takes the rest).  A transmissive surface's interface is followed
+        as a mirror (:meth:`_interfaces`) while the path has rays left; at the last ray its patch
+        stands in, reflecting what it receives less the first shot and the caustic shot, which it
+        would throw as a caustic (:meth:`~raybundle.methods.stochastic_iteration.
+        StochasticIterationSolver.radiance`'s ``sharp_incoming``)."""
         sc, mats, solver = self.scene, self.scene.materials, self.solver
         out = np.zeros((len(pts), 3))
         light = np.zeros((len(pts), 3))
         pix = np.arange(len(pts))                     # which output row each path belongs to
         m = wo = None
+        mirrored = np.zeros(len(pts), bool)          # the path's last turn was a glass interface's mirror
         depth = max(1, int(self.settings.glossy_gather_depth))
         for bounce in range(depth):
             if len(pix) == 0:
                 break
             if bounce:
-                w_i, weight = mats.sample_glossy(m, n, wo, self.rng.random((len(pix), 2)))
-                throughput = throughput * weight
+                lobe = np.nonzero(~mirrored)[0]        # the mirrored ones have their direction already
+                w_i[lobe], weight = mats.sample_glossy(m[lobe], n[lobe], wo[lobe], self.rng.random((len(lobe), 2)))
+                throughput[lobe] *= weight
             live = np.nonzero(np.any(throughput > 0, axis=1))[0]
             tri, t, bu, bv = self.tracer.first_hit(pts[live] + n[live] * self.tracer.eps, w_i[live])
             self.rays += len(live)
@@ -130,7 +140,8 @@ class GlossyEyePaths:
                 dist = np.where(hit, t, np.inf)
                 le = self.direct.lobe_hits_light(pts[live], m_from[live], n[live], wo_from[live], w_i[live], tri,
                                                  pts[live] + np.where(hit, t, 0.0)[:, None] * w_i[live],
-                                                 self.settings.light_samples, distance=dist)
+                                                 self.settings.light_samples, distance=dist,
+                                                 mirrored=mirrored[live] if bounce else None)
                 np.add.at(light, pix[live], throughput[live] * le)
             if sc.world.emits:      # paths that leave the scene see the world
                 gone = live[~hit]
@@ -143,13 +154,18 @@ class GlossyEyePaths:
             ts = sc.seen_tside(tri, w_i[live])
             patch = sc.tside_side[ts]
             e_hit = self.surface_values(e, vert, ts, bary)
+            s_hit = None if solver.mirror_over_pi is None else solver.sharp_incoming(patch)
             hit_m = sc.triangle_material[tri]
             hit_n = sc.tside_normal[ts]
             w_back = -w_i[live]
             go_on = (mats.is_glossy[hit_m] & (np.einsum("ij,ij->i", hit_n, w_back) > 0)
                      if bounce + 1 < depth else np.zeros(len(live), bool))
             L = solver.radiance(patch, w_back, diffuse_incoming=e_hit, first_shot_emission=False,
-                                glossy_iterate=False, first_shot_glossy=light_mis is None)
+                                glossy_iterate=False, first_shot_glossy=light_mis is None, sharp_incoming=s_hit)
+            turn, scale = np.zeros(len(live), bool), None
+            if self.tracer.glass is not None and bounce + 1 < depth:
+                turn, turn_dir, turn_w, scale = self._interfaces(tri, hit_n, w_i[live], w_back)
+                go_on &= ~turn
             gi = np.nonzero(go_on)[0]
             if light_mis is not None and len(gi):
                 # the lamps in the glossy lobe of a hit the path goes on from: light samples, MIS-weighted
@@ -158,15 +174,64 @@ class GlossyEyePaths:
                 lit = self.direct.reflected_radiance(hp, hit_n[gi], hit_m[gi], w_back[gi], self.rng,
                                                      self.settings.light_samples, mis=np.ones(len(gi), bool),
                                                      diffuse_scale=np.zeros((len(gi), 3)))
+                if scale is not None:
+                    lit *= scale[gi, None]
                 np.add.at(light, pix[live[gi]], throughput[live[gi]] * lit)
-            stop = ~go_on
+            stop = ~go_on & ~turn
             if stop.any():   # paths that end here use the iterate for the hit's own glossy lobe,
                 s_idx = np.nonzero(stop)[0]      # spread evenly once a lobe has been followed
                 L[s_idx] = solver.radiance(patch[s_idx], w_back[s_idx], diffuse_incoming=e_hit[s_idx],
-                                           first_shot_emission=False, glossy_as_diffuse=bounce > 0)
-            np.add.at(out, pix[live], throughput[live] * L)
+                                           first_shot_emission=False, glossy_as_diffuse=bounce > 0,
+                                           sharp_incoming=None if s_hit is None else s_hit[s_idx])
+            throughput = throughput[live]
+            if scale is not None:         # the opaque rest of a transmissive surface, less its interface
+                rest = np.nonzero(self.tracer.glass[tri] & ~turn)[0]
+                e_mirror = e_hit[rest] - (0.0 if s_hit is None else s_hit[rest])
+                L[rest] = np.maximum(L[rest] - solver.mirror_over_pi[patch[rest]] * e_mirror, 0.0)
+                throughput[rest] *= scale[rest, None]
+            L[turn] = 0.0
+            np.add.at(out, pix[live], throughput * L)
             pts = pts[live] + t[:, None] * w_i[live]
-            keep = np.nonzero(go_on)[0]
+            w_i = w_i[live]
+            if turn.any():
+                w_i[turn], throughput[turn] = turn_dir, throughput[turn] * turn_w
+            keep = np.nonzero(go_on | turn)[0]
             pix, m, n, wo = pix[live][keep], hit_m[keep], hit_n[keep], w_back[keep]
-            pts, throughput = pts[keep], throughput[live][keep]
+            pts, throughput, w_i, mirrored = pts[keep], throughput[keep], w_i[keep], turn[keep]
         return light, out
+
+    def _interfaces(self, tri, normal, travel, w_back):
+        """Where the paths' rays met (and stopped on, :meth:`~raybundle.tracing.visibility.
+        RayTracer.first_hit`) a transmissive surface (triangles ``tri`` (N,), seen side's
+        ``normal``, along ``travel``, back ``w_back``, (N, 3) each): its interface's mirror.  A
+        hit that does not pass is the interface's reflection with probability
+        ``r = w_t F / (1 - P)`` (:func:`~raybundle.scene.transmission.mirror_probability`, ``P``
+        :func:`~raybundle.scene.transmission.pass_probability`): the path goes on mirrored, as
+        the eye's path does (:func:`~raybundle.scene.transmission.scatter`, weighted by the
+        reflection tint), where the patch would spread the light its interface reflects over the
+        hemisphere (a lamp-lit pane glowing in a floor's reflection).  Otherwise it ends on the
+        opaque rest, whose radiance the caller weights by ``scale`` = ``kept / (1 - P - w_t F)``
+        (``kept`` the patch's mean share of stopped rays,
+        :func:`~raybundle.scene.transmission.solver_share`: the patch's reflectance is over it),
+        so that both branches together are unbiased.  A rough interface reflects about a visible
+        microfacet normal, chosen with the smooth interface's ``F``.  Returns ``(turn (N,) bool,
+        directions (T, 3), weights (T, 3), scale (N,))``, ``scale`` 1 off transmissive surfaces
+        (None where no ray met one)."""
+        sc, mats = self.scene, self.scene.materials
+        turn, scale = np.zeros(len(tri), bool), np.ones(len(tri))
+        g = np.nonzero(self.tracer.glass[tri])[0]
+        if len(g) == 0:
+            return turn, np.zeros((0, 3)), np.zeros((0, 3)), None
+        mg = sc.triangle_material[tri[g]]
+        cos = np.einsum("ij,ij->i", normal[g], w_back[g])
+        kept = 1.0 - pass_probability(mats, mg, cos)
+        a = mirror_probability(mats, mg, cos)
+        go = self.rng.random(len(g)) * kept < a
+        turn[g[go]] = True
+        left = kept[~go] - a[~go]
+        scale[g[~go]] = np.where(left > 1e-9, self._kept[mg[~go]] / np.maximum(left, 1e-9), 0.0)
+        t = g[go]
+        u = np.zeros((len(t), 4))
+        u[:, 2:] = self.rng.random((len(t), 2))         # u0 = u1 = 0: on the interface, reflected
+        _, d, w = scatter(mats, sc.triangle_material[tri[t]], travel[t], sc.triangle_normal[tri[t]], normal[t], u)
+        return turn, d, w, scale

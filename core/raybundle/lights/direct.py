@@ -530,14 +530,15 @@ class DirectLighting:
         return np.where(a2 > 0, a2 / np.maximum(a2 + b2, 1e-300), 0.0)
 
     def lobe_hits_light(self, origins, mats, normals, w_out, w_in, triangles, hits, samples_per_light=1,
-                        distance=None):
+                        distance=None, mirrored=None):
         """Emitted radiance (N, 3) of first-shot mesh lights met by lobe-sampled rays,
         MIS-weighted against light sampling (:meth:`reflected_radiance` with ``mis``):
         ``Le w_g``, ``w_g = p_g^2 / (p_g^2 + (n p_l)^2)``.  ``origins``, ``normals``,
         ``w_out``, ``w_in`` (N, 3) at the surface the rays leave along ``w_in``;
         ``triangles`` (N,) the triangles met (-1 none) at points ``hits`` (N, 3).  With
         ``distance`` (N,) [m] (inf where nothing is met), also the area lights (not geometry)
-        the rays meet before it (:meth:`~raybundle.lights.sources.ShapeLight.hit`)."""
+        the rays meet before it (:meth:`~raybundle.lights.sources.ShapeLight.hit`).  ``mirrored``
+        (N,) bool or None: rays a glass interface reflected, which no light sample takes: weight 1."""
         out = np.zeros((len(origins), 3))
         for li, light in enumerate(self.area_lights if distance is not None else ()):
             if not isinstance(light, ShapeLight):
@@ -549,7 +550,8 @@ class DirectLighting:
                     np.full(len(i), li), np.zeros(len(i), np.int64), origins[i],
                     normals[i], y[i]))
                 p_g = self.scene.materials.glossy_pdf(mats[i], normals[i], w_in[i], w_out[i])
-                out[i] += self.mis_weight(p_g, p_l)[:, None] * light.radiance
+                w = self.mis_weight(p_g, p_l)
+                out[i] += (w if mirrored is None else np.where(mirrored[i], 1.0, w))[:, None] * light.radiance
         li = np.where(triangles >= 0, self.triangle_light[np.maximum(triangles, 0)], -1)
         for l_id in np.unique(li[li >= 0]):
             light = self.area_lights[l_id]
@@ -561,5 +563,6 @@ class DirectLighting:
             p_l = samples_per_light * (light.pdf(origins[i], k, hits[i]) if self.tree is None else
                                        self.tree_pdf(np.full(len(i), l_id), k, origins[i], normals[i], hits[i]))
             p_g = self.scene.materials.glossy_pdf(mats[i], normals[i], w_in[i], w_out[i])
-            out[i] += (lit * self.mis_weight(p_g, p_l))[:, None] * light.radiance
+            w = self.mis_weight(p_g, p_l)
+            out[i] += (lit * (w if mirrored is None else np.where(mirrored[i], 1.0, w)))[:, None] * light.radiance
         return out

@@ -292,8 +292,9 @@ class StochasticIterationSolver(Method):
             xs = sc.side_facing(tri[hit], back)
             ok = xs >= 0
             rows = np.nonzero(hit)[0][ok]
+            sharp = None if self.mirror_over_pi is None else self.sharp_incoming(xs[ok])
             got[rows] = self.radiance(xs[ok], back[ok], diffuse_incoming=self.received()[xs[ok]],
-                                      first_shot_emission=False)
+                                      first_shot_emission=False, sharp_incoming=sharp)
         if self.world.emits:
             got[~hit] = self.world.radiance(w[~hit])
         return got, ~hit
@@ -474,7 +475,7 @@ class StochasticIterationSolver(Method):
 
     # ------------------------------------------------------------- estimates
     def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True, glossy_iterate=True,
-                 first_shot_glossy=True, glossy_as_diffuse=False):
+                 first_shot_glossy=True, glossy_as_diffuse=False, sharp_incoming=None):
         """Outgoing radiance (N, 3) of the sides ``patch`` (N,) towards ``w_out`` (N, 3):
 
         ``Le + W_d(w_out) kd/pi (E + E1 + Ec) + E f_g(t, w_out) + sum_l E1_l f_g(w_l, w_out)
@@ -487,6 +488,11 @@ class StochasticIterationSolver(Method):
         (for estimators that already count direct light); ``glossy_iterate=False``
         leaves out ``E f_g(t, w_out)`` and ``Ec f_g`` (for estimators that trace that lobe further);
         ``first_shot_glossy=False`` leaves out ``E1_l f_g`` (carried by the caustic shot).
+        A transmissive side's interface reflects its incoming light less ``E1 + Ec``, which
+        it would send as a caustic (``mirror_over_pi``; the iterate and the caustic shot agree on
+        that): with ``diffuse_incoming``, ``sharp_incoming`` (N, 3) is its ``E1 + Ec`` part
+        (:meth:`sharp_incoming`; the radiance is kept at least 0 where ``diffuse_incoming`` is
+        interpolated and this is not), None: the interface reflects all of ``diffuse_incoming``.
         ``glossy_as_diffuse``: the glossy terms as if the lobe spread its incoming light
         evenly, ``rho_g(w_out) / pi (E + sum_l E1_l + Ec)`` (E over all of this iterate's
         directions) with ``rho_g`` the lobe's
@@ -514,7 +520,9 @@ class StochasticIterationSolver(Method):
             e = diffuse_incoming
         L += self._diffuse_weighted(self.kd_over_pi[sel] * e, pm, cos)
         if self.mirror_over_pi is not None and diffuse_incoming is None:    # the iterate sent on
-            L -= self.mirror_over_pi[sel] * (fs.E[sel].sum(axis=1) + (0.0 if cs is None else cs.E[sel]))
+            L -= self.mirror_over_pi[sel] * self.sharp_incoming(sel)
+        elif self.mirror_over_pi is not None and sharp_incoming is not None:
+            L = np.maximum(L - self.mirror_over_pi[sel] * sharp_incoming, 0.0)
         if len(self.translucent_sides):       # the iterate's light on the other side, or the running average's
             source = self.received() if diffuse_incoming is not None else (
                 self.incoming + fs.E.sum(axis=1) + (0.0 if cs is None else cs.E))
@@ -565,6 +573,12 @@ class StochasticIterationSolver(Method):
         """(S, 3) [W/m^2] all the light each side receives, running average: :meth:`indirect_incoming`
         plus the first shot."""
         return self.indirect_incoming() + self.first_shot.E.sum(axis=1)
+
+    def sharp_incoming(self, sides=slice(None)):
+        """(S, 3) [W/m^2] the part of :meth:`received` that comes straight from the first-shot
+        lights or by the caustic shot, ``E1 + Ec``, of all sides or of ``sides`` (N,)."""
+        fs, cs = self.first_shot, self.caustic
+        return fs.E[sides].sum(axis=1) + (0.0 if cs is None else cs.E[sides])
 
     def translucent_radiance(self, received):
         """(S, 3) [W m^-2 sr^-1] the radiance each translucent side sends on from what its

@@ -25,7 +25,10 @@ It is used in two ways:
   the patches of a transmissive surface hold the light it reflects, as a cut-out's
   (:func:`solver_share`): spread over the hemisphere, where the eye sees it mirrored.  What it
   reflects of the first-shot lights' direct light is a caustic (a lamp's image in the pane,
-  thrown on the room): left out.
+  thrown on the room): left out.  The glossy lobes' eye paths that stop there go on mirrored
+  with probability ``w_t F / (1 - P)`` (:func:`mirror_probability`,
+  :meth:`~raybundle.imaging.glossy_paths.GlossyEyePaths.trace`), so a floor sees the room in a
+  balustrade, not the light the pane's patches spread.
 * **by Fresnel** (:func:`scatter`), for the eye's paths (the image): at each interface the
   eye path is reflected with probability ``F`` (weight the reflection tint) or refracted
   (weight the refraction tint), until Cycles' transmission or glossy bounces are spent
@@ -44,13 +47,26 @@ import numpy as np
 from .materials import fresnel_dielectric_cos, fresnel_dielectric_fss, sample_ggx_visible_normal, smith_g2_over_g1
 
 
+def _fresnel(materials, mat, cos):
+    """(N,) the interface's Fresnel reflectance ``F(|cos|, max(eta, 1 / eta))`` for materials
+    ``mat`` (N,), 0 for a Refraction BSDF (no Fresnel reflection)."""
+    eta = np.asarray(materials.transmission_ior, float)[mat]
+    f = fresnel_dielectric_cos(np.abs(cos), np.maximum(eta, 1.0 / eta))
+    return np.where(np.asarray(materials.transmission_fresnel)[mat] == 1, f, 0.0)
+
+
 def pass_probability(materials, mat, cos):
     """(N,) probability that a ray meeting materials ``mat`` (N,) at ``|cos|`` (N,) (of its
     angle to the surface normal) passes straight through (module docstring)."""
-    eta = np.asarray(materials.transmission_ior, float)[mat]
-    f = fresnel_dielectric_cos(np.abs(cos), np.maximum(eta, 1.0 / eta))
-    t = np.where(np.asarray(materials.transmission_fresnel)[mat] == 1, 1.0 - f, 1.0)
+    t = 1.0 - _fresnel(materials, mat, cos)
     return np.asarray(materials.transmission, float)[mat] * t * materials.transmission_color[mat].mean(axis=1)
+
+
+def mirror_probability(materials, mat, cos):
+    """(N,) probability ``w_t F`` that a ray meeting materials ``mat`` (N,) at ``|cos|`` (N,) is
+    reflected by the interface (0 for a Refraction BSDF): the share of the hits
+    :func:`pass_probability` keeps that an eye path follows as a mirror's (:func:`scatter`)."""
+    return np.asarray(materials.transmission, float)[mat] * _fresnel(materials, mat, cos)
 
 
 def scatter(materials, mat, travel, geometric, shading, u):
