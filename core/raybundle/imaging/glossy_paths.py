@@ -116,7 +116,7 @@ class GlossyEyePaths:
         as a mirror (:meth:`_interfaces`) while the path has rays left; at the last ray its patch
         stands in, reflecting what it receives less the first shot and the caustic shot, which it
         would throw as a caustic (:meth:`~raybundle.methods.stochastic_iteration.
-        StochasticIterationSolver.radiance`'s ``sharp_incoming``)."""
+        StochasticIterationSolver.radiance`'s ``sharp_interfaces``)."""
         sc, mats, solver = self.scene, self.scene.materials, self.solver
         out = np.zeros((len(pts), 3))
         light = np.zeros((len(pts), 3))
@@ -154,14 +154,13 @@ class GlossyEyePaths:
             ts = sc.seen_tside(tri, w_i[live])
             patch = sc.tside_side[ts]
             e_hit = self.surface_values(e, vert, ts, bary)
-            s_hit = None if solver.mirror_over_pi is None else solver.sharp_incoming(patch)
             hit_m = sc.triangle_material[tri]
             hit_n = sc.tside_normal[ts]
             w_back = -w_i[live]
             go_on = (mats.is_glossy[hit_m] & (np.einsum("ij,ij->i", hit_n, w_back) > 0)
                      if bounce + 1 < depth else np.zeros(len(live), bool))
             L = solver.radiance(patch, w_back, diffuse_incoming=e_hit, first_shot_emission=False,
-                                glossy_iterate=False, first_shot_glossy=light_mis is None, sharp_incoming=s_hit)
+                                glossy_iterate=False, first_shot_glossy=light_mis is None, sharp_interfaces=True)
             turn, scale = np.zeros(len(live), bool), None
             if self.tracer.glass is not None and bounce + 1 < depth:
                 turn, turn_dir, turn_w, scale = self._interfaces(tri, hit_n, w_i[live], w_back)
@@ -182,11 +181,11 @@ class GlossyEyePaths:
                 s_idx = np.nonzero(stop)[0]      # spread evenly once a lobe has been followed
                 L[s_idx] = solver.radiance(patch[s_idx], w_back[s_idx], diffuse_incoming=e_hit[s_idx],
                                            first_shot_emission=False, glossy_as_diffuse=bounce > 0,
-                                           sharp_incoming=None if s_hit is None else s_hit[s_idx])
+                                           sharp_interfaces=True)
             throughput = throughput[live]
             if scale is not None:         # the opaque rest of a transmissive surface, less its interface
                 rest = np.nonzero(self.tracer.glass[tri] & ~turn)[0]
-                e_mirror = e_hit[rest] - (0.0 if s_hit is None else s_hit[rest])
+                e_mirror = e_hit[rest] - solver.sharp_incoming(patch[rest])
                 L[rest] = np.maximum(L[rest] - solver.mirror_over_pi[patch[rest]] * e_mirror, 0.0)
                 throughput[rest] *= scale[rest, None]
             L[turn] = 0.0

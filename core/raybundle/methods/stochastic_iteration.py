@@ -121,6 +121,8 @@ class StochasticIterationSolver(Method):
             kept, kd, mirror = solver_share(mats)
             self.tside_open_area *= kept[scene.triangle_material[scene.tside_triangle]]
             self.mirror_over_pi = mirror[pm] / np.pi
+            #: (S,) bool: the sides whose interface reflects (``mirror_over_pi`` > 0)
+            self.transmissive_side = np.any(self.mirror_over_pi > 0, axis=1)
         self.area = np.bincount(scene.tside_side, self.tside_open_area, minlength=scene.n_sides)
         self.reconstruction = LinearReconstruction(scene, self.tside_open_area)
         self.kd_over_pi = kd[pm] / np.pi          # (P, 3)
@@ -292,9 +294,8 @@ class StochasticIterationSolver(Method):
             xs = sc.side_facing(tri[hit], back)
             ok = xs >= 0
             rows = np.nonzero(hit)[0][ok]
-            sharp = None if self.mirror_over_pi is None else self.sharp_incoming(xs[ok])
             got[rows] = self.radiance(xs[ok], back[ok], diffuse_incoming=self.received()[xs[ok]],
-                                      first_shot_emission=False, sharp_incoming=sharp)
+                                      first_shot_emission=False, sharp_interfaces=True)
         if self.world.emits:
             got[~hit] = self.world.radiance(w[~hit])
         return got, ~hit
@@ -475,7 +476,7 @@ class StochasticIterationSolver(Method):
 
     # ------------------------------------------------------------- estimates
     def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True, glossy_iterate=True,
-                 first_shot_glossy=True, glossy_as_diffuse=False, sharp_incoming=None):
+                 first_shot_glossy=True, glossy_as_diffuse=False, sharp_interfaces=False):
         """Outgoing radiance (N, 3) of the sides ``patch`` (N,) towards ``w_out`` (N, 3):
 
         ``Le + W_d(w_out) kd/pi (E + E1 + Ec) + E f_g(t, w_out) + sum_l E1_l f_g(w_l, w_out)
@@ -490,9 +491,9 @@ class StochasticIterationSolver(Method):
         ``first_shot_glossy=False`` leaves out ``E1_l f_g`` (carried by the caustic shot).
         A transmissive side's interface reflects its incoming light less ``E1 + Ec``, which
         it would send as a caustic (``mirror_over_pi``; the iterate and the caustic shot agree on
-        that): with ``diffuse_incoming``, ``sharp_incoming`` (N, 3) is its ``E1 + Ec`` part
-        (:meth:`sharp_incoming`; the radiance is kept at least 0 where ``diffuse_incoming`` is
-        interpolated and this is not), None: the interface reflects all of ``diffuse_incoming``.
+        that); with ``diffuse_incoming`` it does so only with ``sharp_interfaces``, the sides'
+        own ``E1 + Ec`` (:meth:`sharp_incoming`) taken out of it (the radiance kept at least 0
+        where ``diffuse_incoming`` is interpolated), and otherwise reflects all of it.
         ``glossy_as_diffuse``: the glossy terms as if the lobe spread its incoming light
         evenly, ``rho_g(w_out) / pi (E + sum_l E1_l + Ec)`` (E over all of this iterate's
         directions) with ``rho_g`` the lobe's
@@ -521,8 +522,9 @@ class StochasticIterationSolver(Method):
         L += self._diffuse_weighted(self.kd_over_pi[sel] * e, pm, cos)
         if self.mirror_over_pi is not None and diffuse_incoming is None:    # the iterate sent on
             L -= self.mirror_over_pi[sel] * self.sharp_incoming(sel)
-        elif self.mirror_over_pi is not None and sharp_incoming is not None:
-            L = np.maximum(L - self.mirror_over_pi[sel] * sharp_incoming, 0.0)
+        elif self.mirror_over_pi is not None and sharp_interfaces:
+            i = np.nonzero(self.transmissive_side[patch])[0]
+            L[i] = np.maximum(L[i] - self.mirror_over_pi[patch[i]] * self.sharp_incoming(patch[i]), 0.0)
         if len(self.translucent_sides):       # the iterate's light on the other side, or the running average's
             source = self.received() if diffuse_incoming is not None else (
                 self.incoming + fs.E.sum(axis=1) + (0.0 if cs is None else cs.E))
