@@ -13,7 +13,10 @@ Registers the add-on in the ``bpy`` module, opens the file, renders its scene
 with the ``RAYBUNDLE`` engine through ``bpy.ops.render.render`` (the same code
 path as ``blender -b SCENE.blend -E RAYBUNDLE -o //out -f 1``, with Blender's
 render-time depsgraph: render modifier levels, render visibility) and writes
-the linear radiance as a 32-bit float EXR (plus an sRGB PNG preview beside it).
+the linear radiance as a 32-bit float multilayer EXR as Blender names it: a
+``<view layer>.Combined`` pass (RGBA) for each view layer the file renders (its enabled
+ones, or the active one alone with Render Single Layer), plus an sRGB PNG preview of each
+beside it (``OUT.png`` for one layer, ``OUT.<view layer>.png`` for several).
 Options not given come from the file's ``scene.raybundle`` settings; those given are
 handed to the render directly (:func:`.engine.render_options`), the file is not changed.
 
@@ -107,7 +110,7 @@ def _main(argv, interrupted):
     import bpy
 
     from raybundle.app.cli import ProgressBar
-    from raybundle.util.io import write_exr, write_png
+    from raybundle.util.io import write_layers_exr, write_png
 
     from . import engine, register
 
@@ -139,10 +142,11 @@ def _main(argv, interrupted):
     scene.render.engine = "RAYBUNDLE"
 
     bar = ProgressBar()
-    state = {"job": None, "outcome_image": None}
+    state = {"job": None, "layers": {}}
 
     def observe(job, event):
         state["job"] = job
+        state["layers"].setdefault(job.depsgraph.view_layer.name, job)
         if interrupted.is_set():          # Ctrl-C before the job existed
             job.stop.set()
         # the exported scene once its world is in it (a world Blender renders arrives after the layout)
@@ -180,8 +184,11 @@ def _main(argv, interrupted):
 
     stats = LAST_RUN.get(scene.name, {}).get("stats", {})
     header = {"raybundle_" + k: v for k, v in stats.items() if isinstance(v, (int, float, str))}
-    write_exr(args.out, job.last_image, header)
-    write_png(os.path.splitext(args.out)[0] + ".png", job.last_image)
+    layers = {name: j.last_image for name, j in state["layers"].items() if j.last_image is not None}
+    write_layers_exr(args.out, layers, header)
+    stem = os.path.splitext(args.out)[0]
+    for name, image in layers.items():
+        write_png(f"{stem}.png" if len(layers) == 1 else f"{stem}.{name}.png", image)
     for w in LAST_RUN.get(scene.name, {}).get("warnings", []):
         print(f"warning: {w}", file=sys.stderr)
     cancelled = job.stop.is_set()

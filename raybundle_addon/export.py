@@ -32,6 +32,9 @@ Lights (Blender's units, as Cycles converts them; ``blender.md`` §4.4)
     dropped: area ``L = P / pi``, point/spot ``I = P r^2 / 4`` for radius r > 0, sun
     ``E = strength x pi tan^2(angle / 2)`` for angle > 0.
 
+    A light's own node tree scales its color (:mod:`.light_nodes`).  With Cast Shadow off
+    (``use_shadow``) nothing blocks its direct light, as in Cycles.
+
     A light portal (an area light with Portal on) guides Cycles' sampling of the world and
     emits nothing: it is left out (noted once), since bundles reach the world through the
     openings without it.
@@ -57,6 +60,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .light_nodes import light_node_factor
 from .node_graphs import start_graph_bake
 from .shaders import MaterialConverter
 from .world import camera_view, start_world_export
@@ -219,7 +223,7 @@ def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, wa
     colors of a color attribute, (T,) coverage map index into ``images`` (-1 opaque), (T,)
     normal map index into ``images`` (-1 none), (T,) bool: that map is a bump's), or None.
     ``images`` (key -> (index, bpy Image or :class:`.shaders.EvaluatedImage`, its kind:
-    "albedo", "alpha" or "normal")) grows as new images are met."""
+    "albedo", "alpha" or "normal", read at the nearest texel)) grows as new images are met."""
     for m in slots:
         converter.convert(m)                  # (cached) fills converter.textures, .cutouts, .normal_maps
     tex = [converter.texture_of(ob, m) for m in slots] or [None]
@@ -259,7 +263,8 @@ def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, wa
             colors[sel] = _corner_colors(me, got.attribute, ob, slots[k], warn)[loops[sel]]
             img[sel] = -2
         elif got is not None and read_uv(got.uv, f"the image texture {got.image.name!r}", sel, k):
-            img[sel] = images.setdefault(got.image.name_full, (len(images), got.image, "albedo"))[0]
+            img[sel] = images.setdefault((got.image.name_full, got.closest),
+                                         (len(images), got.image, "albedo", got.closest))[0]
             read = got.uv
         for what, m, label in (("alpha", cover, "cut-out (Alpha)"), ("normal", nmap, "normal or bump map")):
             if m is None:
@@ -272,7 +277,7 @@ def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, wa
                     if not read_uv(m.uv, f"a {label}", sel, k):
                         continue
                     read = m.uv
-            index = images.setdefault((what, m.image.name_full), (len(images), m.image, what))[0]
+            index = images.setdefault((what, m.image.name_full), (len(images), m.image, what, False))[0]
             if what == "alpha":
                 alpha[sel] = index
             else:
@@ -323,9 +328,16 @@ def light_color(ld):
 def convert_light(ld, M, warn):
     """(kind, dict) for a bpy Light ``ld`` with world matrix ``M`` (4, 4):
     kind "point" (position, intensity, spot_*, radius), "sun" (direction,
-    irradiance, angle) or "area" (center, axis_u, axis_v, normal, shape, radiance).
-    Formulas: module docstring."""
-    color = light_color(ld)
+    irradiance, angle) or "area" (center, axis_u, axis_v, normal, shape, radiance), each with
+    ``shadow`` (1, or 0 with Cast Shadow off).  Formulas: module docstring."""
+    got = _convert_light(ld, M, warn)
+    if got is not None:
+        got[1]["shadow"] = float(bool(getattr(ld, "use_shadow", True)))
+    return got
+
+
+def _convert_light(ld, M, warn):
+    color = light_color(ld) * light_node_factor(ld, warn)
     power = float(ld.energy)
     normalize = bool(getattr(ld, "normalize", True))
     pos = M[:3, 3].copy()
@@ -609,6 +621,8 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
             if getattr(getattr(ob.data, "cycles", None), "is_portal", False):
                 portals.append(ob.original.name)
                 continue
+            if not inst.is_instance:
+                _unmodeled_features(ob.original, warn)
             got = convert_light(ob.data, M, warn)
             if got is not None:
                 lights[got[0]].append(got[1])
@@ -636,6 +650,10 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
             slots = [s.material for s in ob.material_slots] if len(ob.material_slots) else list(me.materials)
             if override is not None:
                 slots = [override] * max(1, len(slots))
+            left_out = [converter.left_out(m) for m in slots]
+            if any(left_out):                     # faces of a volume without a surface
+                keep = ~np.array(left_out)[np.clip(mi[tp], 0, len(slots) - 1)]
+                tri, loops, tp = tri[keep], loops[keep], tp[keep]
             textured = _texture_uvs(me, ob, slots, tp, mi, loops, converter, images, warn)
             info = ObjectInfo(ob.name, ob.original.name, me.name, bool(inst.is_instance),
                               inst.parent.name if inst.is_instance and inst.parent else None,
@@ -696,12 +714,14 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
         tuv = [np.zeros((n, 3, 2)) if u is None else u for n, u in tuv]
         from raybundle.scene.textures import SurfaceTexture
 
-        # albedo maps are the image over its mean (the material holds the mean), coverage and normal maps
-        # as they are
-        maps = [converter.modulation(im) if kind == "albedo" else np.asarray(converter.image_pixels(im), np.float32)
-                for _, im, kind in sorted(images.values(), key=lambda x: x[0])]
-        texture = SurfaceTexture(maps, face_image, v[t], np.concatenate(tuv), np.concatenate(tcol), face_alpha,
-                                 face_normal, face_bump)
+        # albedo maps are the image over its mean (the material holds the mean; a byte sRGB image's
+        # texels encoded, as Cycles keeps them), coverage and normal maps as they are
+        ordered = sorted(images.values(), key=lambda x: x[0])
+        maps = [converter.albedo_map(im) if kind == "albedo" else (np.asarray(converter.image_pixels(im), np.float32),
+                                                                   None) for _, im, kind, _ in ordered]
+        texture = SurfaceTexture([m for m, _ in maps], face_image, v[t], np.concatenate(tuv), np.concatenate(tcol),
+                                 face_alpha, face_normal, face_bump, encoded=[e for _, e in maps],
+                                 closest=[closest for *_, closest in ordered])
     with _warnings.catch_warnings(record=True) as caught:
         _warnings.simplefilter("always")
         shading = None

@@ -136,15 +136,18 @@ class NormalMap:
 class AlbedoTexture:
     """What drives a material's diffuse albedo point by point: an image through a UV map
     (``uv`` the map's name, "" for the active render UV map) or a color attribute
-    (``attribute`` its name, "" for the active render one)."""
+    (``attribute`` its name, "" for the active render one); ``closest``: the Image Texture node
+    reads the nearest texel (Closest interpolation), else it interpolates linearly."""
 
     image: object = None
     uv: str = ""
     attribute: str | None = None
+    closest: bool = False
 
     @property
     def key(self):
-        return ("attribute", self.attribute) if self.attribute is not None else (self.image.name_full, self.uv)
+        return (("attribute", self.attribute) if self.attribute is not None else
+                (self.image.name_full, self.uv, self.closest))
 
 
 class MaterialConverter:
@@ -166,6 +169,8 @@ class MaterialConverter:
         self.cutouts = {}
         #: material name -> its :class:`NormalMap` (materials with a normal or bump map only)
         self.normal_maps = {}
+        #: names of the materials with a volume and no surface shader: their faces are left out
+        self.volume_only = set()
         #: (object name, material name) -> the :class:`AlbedoTexture` Blender baked on that object
         self.object_textures = {}
         self._normalizer = {}           # image name -> the material's mean albedo its map divides by
@@ -189,6 +194,11 @@ class MaterialConverter:
         if nt is None:
             return self._viewport(mat)
         out = nt.get_output_node("CYCLES") or nt.get_output_node("ALL")
+        if out is not None and not out.inputs["Surface"].is_linked and out.inputs["Volume"].is_linked:
+            self.warn(f"material {name!r}: volumes are not modeled: its faces, which have no surface shader, are left "
+                      "out (Cycles renders the volume inside them)")
+            self.volume_only.add(name)
+            return dict(name=name)
         if out is not None:
             for socket in ("Volume", "Displacement"):
                 if socket in out.inputs and out.inputs[socket].is_linked:
@@ -223,6 +233,12 @@ class MaterialConverter:
         for n in dict.fromkeys(notes):        # once each, in order
             self.warn(f"material {name!r}: {n}")
         return self._flatten(name, acc)
+
+    def left_out(self, mat):
+        """Whether the faces of material ``mat`` (a bpy Material or None) are left out: a volume
+        without a surface shader, which Cycles renders as a medium with no surface."""
+        self.convert(mat)
+        return mat is not None and mat.name_full in self.volume_only
 
     def _viewport(self, mat):
         return self._clip(dict(name=mat.name_full, diffuse=tuple(mat.diffuse_color[:3])), mat.name_full)
@@ -399,10 +415,13 @@ class MaterialConverter:
                     uv = _uv_source(node) if node.type == "TEX_IMAGE" else None
                     albedo = _is_albedo(sock)
                     if albedo and uv is not None:
-                        self._albedo.append(AlbedoTexture(node.image, uv))
+                        self._albedo.append(AlbedoTexture(node.image, uv, closest=node.interpolation == "Closest"))
                         if node.extension != "REPEAT":
                             notes.append(f"image texture {node.image.name!r}: {node.extension.lower()} extension "
                                          "is treated as repeat")
+                        if node.interpolation not in ("Linear", "Closest"):
+                            notes.append(f"image texture {node.image.name!r}: {node.interpolation} interpolation is "
+                                         "treated as Linear")
                         return mean
                     why = ("its texture coordinates are not a UV map" if albedo else
                            "only textures on a Diffuse Color or Base Color are modelled")
@@ -508,6 +527,19 @@ class MaterialConverter:
         if mean is None:
             return modulation_map(px)[0]
         return np.where(mean > 0, px / np.where(mean > 0, mean, 1.0), 1.0).astype(np.float32)
+
+    def albedo_map(self, image):
+        """``(texels (H, W, 3), encoded)`` of ``image``'s albedo map
+        (:class:`raybundle.scene.textures.SurfaceTexture`): a byte image in the sRGB color space as
+        Cycles keeps it, its encoded texels with ``encoded`` the inverse of its linear mean
+        (the lookup decodes after interpolating, as Cycles does); any other its
+        :meth:`modulation` and None."""
+        if self._normalizer.get(image.name_full) is None and _srgb_bytes(image):
+            px = _image_bytes(image)
+            if px is not None:
+                mean = self.image_mean(image)
+                return px, np.where(mean > 0, 1.0 / np.where(mean > 0, mean, 1.0), 1.0)
+        return self.modulation(image), None
 
     def image_pixels(self, image):
         """(H, W, 3) linear RGB of ``image`` (row 0 at the bottom), or None without pixel data."""
@@ -702,16 +734,29 @@ def _uv_source(tex_node):
     return None
 
 
+def _srgb_bytes(image):
+    """Whether ``image`` (a bpy Image) holds bytes in the sRGB color space, which Cycles keeps
+    encoded and decodes after interpolating."""
+    return (not getattr(image, "is_float", True) and
+            getattr(getattr(image, "colorspace_settings", None), "name", "") == "sRGB")
+
+
+def _image_bytes(image):
+    """(H, W, 3) the encoded values of a byte sRGB image (row 0 at the bottom), or None."""
+    px = image_rgba(image, decode=False)
+    return None if px is None else np.ascontiguousarray(px[..., :3])
+
+
 def _image_pixels(image):
     """(H, W, 3) linear RGB of an image's pixels (None without data), row 0 at the bottom."""
     px = image_rgba(image)
     return None if px is None else np.ascontiguousarray(px[..., :3])
 
 
-def image_rgba(image):
+def image_rgba(image, decode=True):
     """(H, W, 4) float32 linear RGB and alpha of an image's pixels (None without data), row 0
     at the bottom.  Byte images in an sRGB color space hold encoded values in
-    ``Image.pixels``: their colors are decoded first."""
+    ``Image.pixels``: their colors are decoded first (with ``decode``; else as they are)."""
     try:
         w, h = image.size
         ch = image.channels
@@ -725,7 +770,7 @@ def image_rgba(image):
         return None
     px = px.reshape(h, w, ch)
     rgb = px[..., :3] if ch >= 3 else np.repeat(px[..., :1], 3, axis=2)
-    if not image.is_float and image.colorspace_settings.name in ("sRGB",):
+    if decode and _srgb_bytes(image):
         rgb = srgb_to_linear(rgb)
     alpha = px[..., 3:4] if ch in (2, 4) else np.ones((h, w, 1), np.float32)
     if ch == 2:

@@ -280,3 +280,38 @@ def textured_plane():
     add_light("POINT", location=(0.3, -0.2, 1.5), energy=1000.0, shadow_soft_size=0.0)
     add_camera((0, 0, 3), resolution=(32, 32), ortho_scale=2.0)
     return plane, px
+
+
+def regions_agree(ours, theirs, grid=8, sigmas=4.5, floor=0.002):
+    """Compare two renders of one file, each given by two seeds ``(A, B)`` (H, W, 3): the
+    ``grid`` x ``grid`` regions' means of ``(A + B) / 2``, channel by channel, each within
+    ``sigmas`` standard errors of the difference, the standard error of each side's region mean
+    ``sqrt(mean((A - B)^2) / (4 n))`` over the region's n pixels, plus ``floor`` times the region's
+    mean (where both sides are almost free of noise, a lamp's direct light on an open floor, a
+    difference of float rounding and sub-pixel patterns is not a wrong image).  Returns
+    ``(ok, z)``: whether every region agrees and the regions' (grid, grid, 3) differences in
+    units of that tolerance over ``sigmas``."""
+    def region(x):
+        h, w = x.shape[:2]
+        return x[:h - h % grid, :w - w % grid].reshape(grid, h // grid, grid, w // grid, 3)
+
+    diff = np.zeros((grid, grid, 3))
+    var = np.zeros((grid, grid, 3))
+    for (a, b), sign in ((ours, 1.0), (theirs, -1.0)):
+        ra, rb = region(a), region(b)
+        n = ra.shape[1] * ra.shape[3]
+        diff += sign * 0.5 * (ra + rb).mean(axis=(1, 3))
+        var += ((ra - rb) ** 2).mean(axis=(1, 3)) / (4 * n)
+    mean = 0.5 * (region(theirs[0]) + region(theirs[1])).mean(axis=(1, 3))
+    z = sigmas * diff / np.maximum(sigmas * np.sqrt(var) + floor * np.abs(mean), 1e-30)
+    return bool(np.all(np.abs(z) <= sigmas)), z
+
+
+def assert_like_cycles(ours, theirs):
+    """Two seeds of ours and of Cycles' render of one file (``(A, B)`` each): the image means
+    within 3% and :func:`regions_agree` (the 8 x 8 regions within 4.5 standard errors)."""
+    ratio = float(np.mean(ours) / np.mean(theirs))
+    ok, z = regions_agree(ours, theirs)
+    print(f"mean x{ratio:.4f}, regions |z| max {np.abs(z).max():.2f}")
+    assert ratio == pytest.approx(1.0, abs=0.03), ratio
+    assert ok, np.round(np.abs(z).max(axis=-1), 1)

@@ -108,3 +108,45 @@ def test_cli_ctrl_c_at_once_is_heard(cornell_blend, tmp_path, delay):
     _, err = p.communicate(timeout=60)
     assert p.returncode == 130 and "Traceback" not in err, err[-2000:]
     assert ("nothing written" in err and not out.exists()) or ("stopped early" in err and out.exists()), err
+
+
+def test_cli_writes_each_view_layer_as_blender_renders_it(tmp_path, addon):  # noqa: F811
+    """A file with two view layers, the second without the tall block (its collection excluded):
+    the command writes a multilayer EXR with a ``<view layer>.Combined`` RGBA pass for each, and
+    each equals that layer as Blender renders and writes it itself (F12, multilayer EXR) with the
+    same seed and iterations (it wrote the last layer alone, as plain RGB)."""
+    import make_demo_scenes as mds
+
+    from raybundle.util.io import exr_layers
+
+    mds.reset()
+    mds.build_cornell(resolution=(32, 32))
+    scene = bpy.context.scene
+    blocks = bpy.data.collections.new("blocks")
+    scene.collection.children.link(blocks)
+    tall = next(ob for ob in scene.objects if "tall" in ob.name.lower())
+    for c in tall.users_collection:
+        c.objects.unlink(tall)
+    blocks.objects.link(tall)
+    second = scene.view_layers.new("No Block")
+    second.layer_collection.children["blocks"].exclude = True
+    first = scene.view_layers[0].name
+    rb = scene.raybundle
+    rb.iterations, rb.seed, rb.patches = 6, 2, 600
+    blend = str(tmp_path / "layers.blend")
+    mds.save(blend)
+    r = cli(blend, "--out", tmp_path / "cli.exr")
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert sorted(exr_layers(tmp_path / "cli.exr")) == sorted([first, "No Block"])
+    assert (tmp_path / "cli.No Block.png").exists()
+    scene.render.engine = "RAYBUNDLE"
+    st = scene.render.image_settings
+    if hasattr(st, "media_type"):             # Blender 5: the multilayer kind is a media type
+        st.media_type = "MULTI_LAYER_IMAGE"
+    st.file_format, st.color_depth = "OPEN_EXR_MULTILAYER", "32"
+    scene.render.filepath = str(tmp_path / "blender.exr")
+    bpy.ops.render.render(write_still=True)
+    for name in (first, "No Block"):
+        ours, blenders = read_exr(tmp_path / "cli.exr", name), read_exr(tmp_path / "blender.exr", name)
+        assert np.array_equal(ours, blenders), (name, np.abs(ours - blenders).max())
+    assert not np.allclose(read_exr(tmp_path / "cli.exr", first), read_exr(tmp_path / "cli.exr", "No Block"))

@@ -469,3 +469,40 @@ def test_a_glowing_sphere_is_sampled_by_its_bounding_cone():
         ratio.append(cone.mean() / exact)
         assert cone.var() < 0.05 * area_e.var()
     assert np.mean(ratio) == pytest.approx(1.0, abs=0.01) and np.ptp(ratio) < 0.03, ratio
+
+
+@pytest.mark.parametrize("tree", ["off", "on"])
+def test_a_lamp_with_cast_shadow_off_lights_through_a_blocker(tree):
+    """Lamps with ``shadow`` 0 (Blender's Cast Shadow off) light a floor under a blocking plane as
+    if the plane were not there: per pixel and per light sample (:meth:`light_samples_at`, which
+    the bakes, the first shot and the caustic shot take), each lamp on its own and through the
+    light tree, with the same samples (the estimates are equal); a lamp that casts shadows beside
+    them is still blocked."""
+    rng = np.random.default_rng(3)
+    n = 6
+    pos = np.column_stack([rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(2.0, 3.0, n)])
+    floor = [(-3, -3, 0), (3, -3, 0), (3, 3, 0), (-3, 3, 0)]
+    lid = [(-2, -2, 1), (2, -2, 1), (2, 2, 1), (-2, 2, 1)]
+    mats = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.5, 0.5))])
+
+    def scene(blocker, shadow):
+        v = floor + (lid if blocker else [])
+        t = [[0, 1, 2], [0, 2, 3]] + ([[4, 5, 6], [4, 6, 7]] if blocker else [])
+        return build_scene(np.array(v, float), t, [0] * len(t), mats, two_sided=True,
+                           point_lights=PointLights(pos, np.full((n, 3), 20.0), radius=np.full(n, 0.2),
+                                                    shadow=shadow))
+
+    pts = np.column_stack([rng.uniform(-1.5, 1.5, (500, 2)), np.zeros(500)])
+    up = np.tile([0, 0, 1.0], (500, 1))
+    got = {}
+    for key, sc in (("open", scene(False, np.zeros(n))), ("shadowless", scene(True, np.zeros(n))),
+                    ("one casts", scene(True, np.eye(n)[0]))):
+        tr = RayTracer(sc)
+        dl = DirectLighting(sc, tr, light_tree=tree)
+        got[key] = (dl.reflected_radiance(pts, up, np.zeros(500, int), up, np.random.default_rng(5)),
+                    dl.irradiance(pts, up, np.random.default_rng(6), samples_per_light=2))
+        tr.close()
+    for a, b in zip(got["open"], got["shadowless"]):
+        assert np.allclose(a, b), np.abs(a - b).max()
+    for a, b in zip(got["one casts"], got["open"]):            # the first lamp's sixth is blocked
+        assert a.mean() < 0.95 * b.mean()

@@ -284,3 +284,22 @@ def test_a_world_seen_whole_in_a_pixel_is_the_filters_mean_of_its_view():
         assert np.allclose(got[i, j], want), (i, j)
     flat = World(np.ones((4, 8, 3)), view=np.full((24, 32, 3), 2.0), view_camera=cam.with_resolution(32, 24))
     assert np.allclose(flat.view_pixel_means(cam), 2.0)
+
+
+def test_an_encoded_map_is_decoded_after_the_lookup_and_kept_by_the_npz_arrays():
+    """A map of sRGB-encoded texels (a byte sRGB image, as Cycles keeps it): a lookup midway
+    between two texels decodes the interpolated encoded value (not the mean of the decoded ones)
+    and scales it; Closest reads the nearest texel; pyramid levels average decoded values; the
+    ``.npz`` arrays keep both settings."""
+    from raybundle.scene.textures import SurfaceTexture, srgb_to_linear
+
+    enc = np.array([[[0.8, 0.8, 0.8], [0.1, 0.1, 0.1]]], np.float32)           # 1 x 2 texels
+    scale = np.array([2.0, 2.0, 2.0])
+    corners, uv = np.zeros((1, 3, 3)), np.zeros((1, 3, 2))
+    tex = SurfaceTexture([enc, enc], [0], corners, uv, encoded=[scale, None], closest=[False, True])
+    mid = np.array([[0.5, 0.5]])                          # halfway between the texel centres 0.25, 0.75
+    assert np.allclose(tex.lookup(0, mid), 2.0 * srgb_to_linear(0.45))
+    assert np.allclose(tex.lookup(1, np.array([[0.3, 0.5]])), 0.8)
+    assert np.allclose(tex.level(0, 1), 2.0 * 0.5 * (srgb_to_linear(0.8) + srgb_to_linear(0.1)))
+    back = SurfaceTexture.from_arrays(tex.to_arrays())
+    assert np.allclose(back.encoded[0], scale) and back.encoded[1] is None and back.closest == [False, True]

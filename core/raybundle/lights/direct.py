@@ -60,10 +60,6 @@ class TreeLights:
     def __init__(self, direct):
         self.direct = direct
 
-    def sample(self, points, u, normals):
-        y, e, _ = self.direct.tree_sample(points, normals, u)
-        return y, e
-
     def in_front(self, origin, normal):
         return np.ones(len(origin), bool)
 
@@ -97,7 +93,7 @@ class DirectLighting:
                              if np.any(pl.intensity[k] > 0)]
         al = scene.area_lights
         self.area_lights += [ShapeLight(al.center[k], al.axis_u[k], al.axis_v[k], al.normal[k], bool(al.shape[k] == 1),
-                                        float(al.area[k]), al.radiance[k]) for k in range(len(al))
+                                        float(al.area[k]), al.radiance[k], bool(al.shadow[k] > 0)) for k in range(len(al))
                              if np.any(al.radiance[k] > 0)]
         # mesh-light triangles: which light (index into light_list()) and which of its triangles
         self.triangle_light = np.full(len(scene.triangles), -1, np.int64)
@@ -108,12 +104,14 @@ class DirectLighting:
                 self.triangle_light_k[light.triangles] = np.arange(len(light.triangles))
         sl = scene.sun_lights
         far = 4.0 * tracer.radius + 1.0
-        self.point_lights += [SunLight(sl.direction[k], sl.irradiance[k], float(sl.angle[k]), far)
+        self.point_lights += [SunLight(sl.direction[k], sl.irradiance[k], float(sl.angle[k]), far, bool(sl.shadow[k] > 0))
                               for k in range(len(sl)) if np.any(sl.irradiance[k] > 0)]
         #: lamps and emitting triangles chosen by their contribution (:mod:`raybundle.lights.light_tree`)
         #: in :meth:`reflected_radiance`, or None: each light sampled on its own
         self.tree = None
         lights = self.light_list()
+        #: per light of :meth:`light_list`, whether anything blocks its direct light (Cast Shadow)
+        self.casts_shadow = np.array([light.shadow for light in lights], bool)
         self.suns = [li for li, light in enumerate(lights) if isinstance(light, SunLight)]
         if light_tree == "on" or (light_tree == "auto" and self.wants_tree(lights)):
             self.tree = build_light_tree(lights)
@@ -189,12 +187,27 @@ class DirectLighting:
         includes visibility, so ``E f(travel, w_out)`` is the reflected radiance;
         with ``unshadowed``, also E without the visibility test (4th item).  ``crossed``: an
         (N,) bool array to mark the points whose shadow ray passed a cut-out or glass.
+        A light that casts no shadow (:attr:`casts_shadow`) is not blocked.
         """
-        y, e = light.sample(points, u, normals) if isinstance(light, TreeLights) else light.sample(points, u)
-        return self.shadowed(points, normals, y, e, unshadowed, crossed)
+        if isinstance(light, TreeLights):
+            y, e, em = self.tree_sample(points, normals, u)
+            unblocked = self.shadowless(em)
+        else:
+            y, e = light.sample(points, u)
+            unblocked = None if light.shadow else True
+        return self.shadowed(points, normals, y, e, unshadowed, crossed, unblocked)
 
-    def shadowed(self, points, normals, y, e, unshadowed=False, crossed=None):
-        """:meth:`light_samples_at` for light samples ``y``, ``e`` (N, 3) drawn already."""
+    def shadowless(self, emitters):
+        """(N,) bool: the tree's ``emitters`` (N,) (-1 none) whose light casts no shadow, or None
+        when every light casts one."""
+        if self.casts_shadow.all():
+            return None
+        return ~self.casts_shadow[self.tree.light[np.maximum(emitters, 0)]] & (emitters >= 0)
+
+    def shadowed(self, points, normals, y, e, unshadowed=False, crossed=None, unblocked=None):
+        """:meth:`light_samples_at` for light samples ``y``, ``e`` (N, 3) drawn already;
+        ``unblocked`` (True, (N,) bool or None): the samples of lights that cast no shadow, which
+        no shadow ray tests."""
         v = y - points
         r = np.sqrt(np.maximum(np.einsum("ij,ij->i", v, v), 1e-300))
         w = v / r[:, None]                      # from the point towards the light
@@ -202,6 +215,8 @@ class DirectLighting:
         e *= np.maximum(cos_x, 0.0)[:, None]
         free = e.copy() if unshadowed else None
         live = np.any(e > 0, axis=1)
+        if unblocked is not None:
+            live &= ~np.broadcast_to(unblocked, live.shape)
         if live.any():
             eps = self.tracer.eps
             # shadow ray from just above the surface *to the light sample itself*
@@ -410,13 +425,15 @@ class DirectLighting:
                     uk[kron] = (light_shift + (start + s)[:, None] * alpha) % 1.0
                 if li == TREE:
                     y, e, em = self.tree_sample(p, nrm, uk)
+                    unblocked = self.shadowless(em)
                 else:
                     y, e = light.sample(p, uk)
+                    unblocked = None if light.shadow else True
                 if shadow_flags is None and f_d is None:
-                    e, travel, cos_x = self.shadowed(p, nrm, y, e)
+                    e, travel, cos_x = self.shadowed(p, nrm, y, e, unblocked=unblocked)
                     live = np.any(e > 0, axis=1)
                 else:
-                    e, travel, cos_x, free = self.shadowed(p, nrm, y, e, unshadowed=True)
+                    e, travel, cos_x, free = self.shadowed(p, nrm, y, e, unshadowed=True, unblocked=unblocked)
                     live, blocked = self._seen_blocked(e, free)
                     if shadow_flags is not None and li == TREE:     # each sample its own light's bit
                         lb = bits[self.tree.light[np.maximum(em, 0)]]

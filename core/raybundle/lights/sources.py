@@ -29,7 +29,10 @@ from ..tracing.sampling import (
 
 
 class _Light:
-    """What every light class shares: :meth:`selection_estimate`."""
+    """What every light class shares: :meth:`selection_estimate`; :attr:`shadow`, whether
+    anything blocks its direct light (False: Blender's Cast Shadow off)."""
+
+    shadow = True
 
     def selection_estimate(self, points, normals):
         """Lamp selection's guess (N,) of the light's unoccluded irradiance [W/m^2, mean of
@@ -317,6 +320,10 @@ class PointLight(_Light):
     lights: object
     k: int
 
+    @property
+    def shadow(self):
+        return bool(self.lights.shadow[self.k] > 0)
+
     def sample(self, points, u):
         return sample_point_lights(self.lights, np.full(len(points), self.k), points, u)
 
@@ -365,6 +372,7 @@ class ShapeLight(_Light):
     ellipse: bool
     area: float
     radiance: np.ndarray
+    shadow: bool = True
 
     def sample(self, points, u):
         if self.ellipse:
@@ -496,6 +504,7 @@ class SunLight(_Light):
     irradiance: np.ndarray
     angle: float
     far: float
+    shadow: bool = True
 
     def sample(self, points, u):
         cos_max = np.cos(0.5 * self.angle)

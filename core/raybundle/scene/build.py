@@ -115,7 +115,7 @@ def _world_and_suns(world, sun_lights):
         if sun is not None:
             sun_lights = SunLights(np.vstack([sun_lights.direction, sun["direction"]]),
                                    np.vstack([sun_lights.irradiance, sun["irradiance"]]),
-                                   np.append(sun_lights.angle, sun["angle"]))
+                                   np.append(sun_lights.angle, sun["angle"]), np.append(sun_lights.shadow, 1.0))
     return world, sun_lights
 
 

@@ -67,7 +67,9 @@ class PointLights:
     ``spot_direction`` (L, 3) the unit axis the light travels along (zeros: a
     point light, the same in every direction); ``spot_cos_half_angle`` (L,)
     cos(spot_size / 2); ``spot_blend`` (L,) Blender's blend in [0, 1];
-    ``radius`` (L,) Blender's ``shadow_soft_size`` [m] (soft shadows; 0 = ideal point).
+    ``radius`` (L,) Blender's ``shadow_soft_size`` [m] (soft shadows; 0 = ideal point);
+    ``shadow`` (L,) 1 where the light casts shadows, 0 where nothing blocks its direct light
+    (Blender's Cast Shadow off, ``Light.use_shadow``).
 
     Blender's point or spot light of power P [W] has I = P / (4 pi) W/sr; the
     cone does not renormalise it (``blender.md`` §4.4).  A spot's intensity
@@ -81,6 +83,7 @@ class PointLights:
     spot_cos_half_angle: np.ndarray = None
     spot_blend: np.ndarray = None
     radius: np.ndarray = None
+    shadow: np.ndarray = None
 
     def __post_init__(self):
         self.position = _rows(np.zeros((0, 3)) if self.position is None else self.position, -1, 3, what="point lights")
@@ -90,6 +93,7 @@ class PointLights:
         self.spot_cos_half_angle = _rows(self.spot_cos_half_angle, n, 0, -1.0, what="point lights")
         self.spot_blend = _rows(self.spot_blend, n, 0, what="point lights")
         self.radius = _rows(self.radius, n, 0, what="point lights")
+        self.shadow = _rows(self.shadow, n, 0, 1.0, what="point lights")
 
     def __len__(self):
         return len(self.position)
@@ -108,39 +112,46 @@ class PointLights:
 
     def to_arrays(self, prefix="point_light_"):
         return {prefix + k: getattr(self, k) for k in
-                ("position", "intensity", "spot_direction", "spot_cos_half_angle", "spot_blend", "radius")}
+                ("position", "intensity", "spot_direction", "spot_cos_half_angle", "spot_blend", "radius", "shadow")}
 
     @classmethod
     def from_arrays(cls, d, prefix="point_light_"):
         return cls(**{k: d.get(prefix + k) for k in
-                      ("position", "intensity", "spot_direction", "spot_cos_half_angle", "spot_blend", "radius")})
+                      ("position", "intensity", "spot_direction", "spot_cos_half_angle", "spot_blend", "radius",
+                       "shadow")})
 
 
 @dataclass
 class SunLights:
     """Distant lights: ``direction`` (L, 3) unit travel direction of the light,
     ``irradiance`` (L, 3) [W/m^2] on a plane facing the light (Blender's sun
-    strength times color), ``angle`` (L,) angular diameter [rad] (soft shadows)."""
+    strength times color), ``angle`` (L,) angular diameter [rad] (soft shadows), ``shadow``
+    (L,) as :class:`PointLights`'."""
 
     direction: np.ndarray = None
     irradiance: np.ndarray = None
     angle: np.ndarray = None
+    shadow: np.ndarray = None
 
     def __post_init__(self):
         self.direction = _rows(np.zeros((0, 3)) if self.direction is None else self.direction, -1, 3, what="sun lights")
         n = len(self.direction)
         self.irradiance = _rows(self.irradiance, n, 3, what="sun lights")
         self.angle = _rows(self.angle, n, 0, what="sun lights")
+        self.shadow = _rows(self.shadow, n, 0, 1.0, what="sun lights")
 
     def __len__(self):
         return len(self.direction)
 
     def to_arrays(self, prefix="sun_light_"):
-        return {prefix + k: getattr(self, k) for k in ("direction", "irradiance", "angle")}
+        return {prefix + k: getattr(self, k) for k in ("direction", "irradiance", "angle", "shadow")}
 
     @classmethod
     def from_arrays(cls, d, prefix="sun_light_"):
-        return cls(**{k: d.get(prefix + k) for k in ("direction", "irradiance", "angle")})
+        return cls(**{k: d.get(prefix + k) for k in ("direction", "irradiance", "angle", "shadow")})
+
+
+_AREA_FIELDS = ("center", "axis_u", "axis_v", "normal", "shape", "radiance", "shadow")
 
 
 @dataclass
@@ -151,8 +162,8 @@ class AreaLights:
     ``center`` (L, 3) [m]; ``axis_u``, ``axis_v`` (L, 3) half-extent vectors along
     the light's local X and Y [m]; ``normal`` (L, 3) the emitting direction
     (Blender: local -Z); ``shape`` (L,) 0 = rectangle, 1 = ellipse;
-    ``radiance`` (L, 3) [W m^-2 sr^-1].  Blender's area light of power P has
-    L = P / (pi A) with A = 4 |u| |v| (rectangle) or pi |u| |v| (ellipse).
+    ``radiance`` (L, 3) [W m^-2 sr^-1]; ``shadow`` (L,) as :class:`PointLights`'.  Blender's
+    area light of power P has L = P / (pi A) with A = 4 |u| |v| (rectangle) or pi |u| |v| (ellipse).
     """
 
     center: np.ndarray = None
@@ -161,6 +172,7 @@ class AreaLights:
     normal: np.ndarray = None
     shape: np.ndarray = None
     radiance: np.ndarray = None
+    shadow: np.ndarray = None
 
     def __post_init__(self):
         self.center = _rows(np.zeros((0, 3)) if self.center is None else self.center, -1, 3, what="area lights")
@@ -170,6 +182,7 @@ class AreaLights:
         self.normal = _rows(self.normal, n, 3, what="area lights")
         self.shape = _rows(self.shape, n, 0, what="area lights").astype(np.int64)
         self.radiance = _rows(self.radiance, n, 3, what="area lights")
+        self.shadow = _rows(self.shadow, n, 0, 1.0, what="area lights")
 
     def __len__(self):
         return len(self.center)
@@ -181,11 +194,11 @@ class AreaLights:
         return np.where(self.shape == 1, np.pi * uv, 4.0 * uv)
 
     def to_arrays(self, prefix="area_light_"):
-        return {prefix + k: getattr(self, k) for k in ("center", "axis_u", "axis_v", "normal", "shape", "radiance")}
+        return {prefix + k: getattr(self, k) for k in _AREA_FIELDS}
 
     @classmethod
     def from_arrays(cls, d, prefix="area_light_"):
-        return cls(**{k: d.get(prefix + k) for k in ("center", "axis_u", "axis_v", "normal", "shape", "radiance")})
+        return cls(**{k: d.get(prefix + k) for k in _AREA_FIELDS})
 
 
 @dataclass

@@ -5,7 +5,11 @@ A textured material's diffuse reflectance varies over a surface as
 mean color (what :class:`~raybundle.scene.materials.MaterialTable` holds) and ``M`` the
 *modulation map*, the image divided by its mean color per channel (mean 1), looked
 up bilinearly with repeat at the point's UV (as Cycles' Image Texture node with
-Linear interpolation and Repeat extension does; texel centres at (i + 0.5) / W).
+Linear interpolation and Repeat extension does; texel centres at (i + 0.5) / W), or at the
+nearest texel (Closest interpolation).  A byte image in the sRGB color space is kept as Cycles
+keeps it, its texels sRGB-encoded: a lookup interpolates the encoded values, then decodes them
+and scales them by the inverse of the image's linear mean (interpolating the decoded values
+instead makes the blend between a bright and a dark texel brighter than Cycles').
 
 The solver keeps one variable per patch side, so a patch reflects with its mean
 albedo ``kd_m * mean_patch(M)`` (:meth:`SurfaceTexture.side_means`: the modulation
@@ -76,7 +80,10 @@ class SurfaceTexture:
     corner UVs; ``face_color`` (F, 3, 3) or None: their corner colors; ``face_alpha`` (F,) int
     or None: the map of each face's coverage (its first channel; -1: opaque); ``face_normal``
     (F,) int or None: the map of each face's normal, its texels the perturbed normal (x, y, z)
-    (-1: none), ``face_bump`` (F,) bool or None: that map is a bump's (module docstring)."""
+    (-1: none), ``face_bump`` (F,) bool or None: that map is a bump's (module docstring).
+    ``encoded`` (one per map, or None for none): None for a map of linear values, or the (3,)
+    scale of a map whose texels are sRGB-encoded (``M = scale * decode(lookup)``); ``closest``
+    (one bool per map, or None for none): the map is read at the nearest texel."""
 
     images: list
     face_image: np.ndarray
@@ -86,6 +93,8 @@ class SurfaceTexture:
     face_alpha: np.ndarray | None = None
     face_normal: np.ndarray | None = None
     face_bump: np.ndarray | None = None
+    encoded: list | None = None
+    closest: list | None = None
     _pyramids: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -101,6 +110,11 @@ class SurfaceTexture:
         if self.face_color is not None:
             self.face_color = np.asarray(self.face_color, float)
         self.images = [np.ascontiguousarray(im, np.float32) for im in self.images]
+        self.encoded = [None if e is None or not np.all(np.isfinite(e)) else np.asarray(e, float).reshape(3)
+                        for e in (self.encoded or [None] * len(self.images))]
+        self.closest = [bool(c) for c in (self.closest if self.closest is not None else [False] * len(self.images))]
+        if len(self.encoded) != len(self.images) or len(self.closest) != len(self.images):
+            raise ValueError("texture: 'encoded' and 'closest' need one entry per map")
 
     def to_arrays(self):
         """Flat arrays for a scene's ``.npz`` (``texture_*``): the maps one after another."""
@@ -115,6 +129,9 @@ class SurfaceTexture:
             d["texture_face_alpha"] = self.face_alpha
         if self.has_normal_maps:
             d["texture_face_normal"], d["texture_face_bump"] = self.face_normal, self.face_bump
+        if any(e is not None for e in self.encoded) or any(self.closest):
+            d["texture_encoded"] = np.array([np.full(3, np.nan) if e is None else e for e in self.encoded]).reshape(-1, 3)
+            d["texture_closest"] = np.array(self.closest, bool)
         return d
 
     @classmethod
@@ -126,33 +143,45 @@ class SurfaceTexture:
         for h, w in np.asarray(d["texture_image_shapes"], np.int64).reshape(-1, 2):
             images.append(np.asarray(d["texture_pixels"][k:k + h * w]).reshape(h, w, 3))
             k += h * w
+        encoded = d.get("texture_encoded")
         return cls(images, d["texture_face_image"], d["texture_face_corners"], d["texture_face_uv"],
                    d.get("texture_face_color"), d.get("texture_face_alpha"), d.get("texture_face_normal"),
-                   d.get("texture_face_bump"))
+                   d.get("texture_face_bump"), None if encoded is None else list(np.asarray(encoded, float)),
+                   d.get("texture_closest"))
 
     def lookup(self, image, uv, level=0):
-        """Bilinear, repeating lookup (N, 3) of map ``image`` at ``uv`` (N, 2), on ``level`` of
-        its pyramid (0: the map itself; each level the 2 x 2 means of the one below)."""
+        """Repeating lookup (N, 3) of map ``image`` at ``uv`` (N, 2), bilinear or at the nearest
+        texel (:attr:`closest`), on ``level`` of its pyramid (0: the map itself, decoded after the
+        lookup where its texels are sRGB-encoded; each next level the 2 x 2 means of the one below,
+        of decoded values)."""
         im = self.level(image, level)
         h, w = im.shape[:2]
         x = uv[:, 0] * w - 0.5
         y = uv[:, 1] * h - 0.5
-        x0, y0 = np.floor(x), np.floor(y)
-        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-        x0, y0 = x0.astype(np.int64) % w, y0.astype(np.int64) % h
-        x1, y1 = (x0 + 1) % w, (y0 + 1) % h
-        return ((1 - fy) * ((1 - fx) * im[y0, x0] + fx * im[y0, x1])
-                + fy * ((1 - fx) * im[y1, x0] + fx * im[y1, x1]))
+        if self.closest[image] and level == 0:
+            out = im[np.floor(y + 0.5).astype(np.int64) % h, np.floor(x + 0.5).astype(np.int64) % w]
+        else:
+            x0, y0 = np.floor(x), np.floor(y)
+            fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+            x0, y0 = x0.astype(np.int64) % w, y0.astype(np.int64) % h
+            x1, y1 = (x0 + 1) % w, (y0 + 1) % h
+            out = ((1 - fy) * ((1 - fx) * im[y0, x0] + fx * im[y0, x1])
+                   + fy * ((1 - fx) * im[y1, x0] + fx * im[y1, x1]))
+        if level == 0 and self.encoded[image] is not None:
+            out = srgb_to_linear(out) * self.encoded[image]
+        return out
 
     def level(self, image, level):
-        """Level ``level`` of map ``image``'s pyramid (kept once made): level 0 is the map, each
-        next level the means of 2 x 2 texels (an odd row or column is averaged with the first,
-        as the map repeats)."""
+        """Level ``level`` of map ``image``'s pyramid (kept once made): level 0 is the map as
+        stored, each next level the means of 2 x 2 texels of decoded values (an odd row or column
+        is averaged with the first, as the map repeats)."""
         if level == 0:
             return self.images[image]
         key = (image, level)
         if key not in self._pyramids:
             im = self.level(image, level - 1)
+            if level == 1 and self.encoded[image] is not None:
+                im = srgb_to_linear(im) * self.encoded[image]
             for axis in (0, 1):
                 if im.shape[axis] > 1:
                     if im.shape[axis] % 2:
@@ -308,6 +337,12 @@ class SurfaceTexture:
             got = self.lookup(int(m), at, int(lev))
             mean[textured[sel]] = got.reshape(len(sel), int(n), -1).mean(axis=1)
         return mean
+
+
+def srgb_to_linear(c):
+    """The sRGB transfer function's inverse (IEC 61966-2-1), elementwise."""
+    c = np.asarray(c, float)
+    return np.where(c <= 0.04045, c / 12.92, ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4)
 
 
 def modulation_map(image):

@@ -86,13 +86,72 @@ def write_exr(path, rgb, header=None):
             f.write(tmp)
 
 
-def read_exr(path):
-    """Read an EXR's RGB (or RGBA) channels as (H, W, 3) float32, row 0 at the top."""
+def write_layers_exr(path, layers, header=None):
+    """Write view layers as a multilayer FLOAT EXR as Blender names them: each ``name -> (H, W, 3
+    or 4)`` linear image of ``layers`` as channels ``<name>.Combined.R``, ``.G``, ``.B``, ``.A``
+    (alpha 1 where an image has none).  Row 0 is the top; ``header`` adds string attributes.
+    Non-finite pixels raise ValueError."""
+    import OpenEXR
+
+    channels = {}
+    for name, img in layers.items():
+        img = np.asarray(img, dtype=np.float32)
+        if img.ndim != 3 or img.shape[2] not in (3, 4):
+            raise ValueError(f"view layer {name!r}: expected an (H, W, 3 or 4) image, got {img.shape}")
+        if not np.isfinite(img).all():
+            raise ValueError(f"refusing to write {path}: view layer {name!r} has "
+                             f"{int((~np.isfinite(img)).sum())} non-finite values")
+        for k, c in enumerate("RGBA"):
+            channels[f"{name}.Combined.{c}"] = np.ascontiguousarray(img[..., k] if k < img.shape[2] else
+                                                                    np.ones(img.shape[:2], np.float32))
+    hdr = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for k, v in (header or {}).items():
+        hdr[k] = str(v)
+    with atomic_path(path) as tmp:
+        with OpenEXR.File(hdr, channels) as f:
+            f.write(tmp)
+
+
+def _exr_channels(f):
+    """Every channel of an open EXR ``f`` over all its parts (Blender 5 writes a view layer a part)."""
+    parts = getattr(f, "parts", None) or []
+    if len(parts) <= 1:
+        return f.channels()
+    out = {}
+    for part in parts:
+        out.update(part.channels)
+    return out
+
+
+def exr_layers(path):
+    """The view layers of a multilayer EXR (:func:`write_layers_exr`, Blender's own, in one part or
+    a part each), by name; empty for a plain RGB(A) EXR."""
     import OpenEXR
 
     with OpenEXR.File(os.fspath(path)) as f:
-        ch = f.channels()
-        key = "RGB" if "RGB" in ch else "RGBA"
+        return sorted(k[:-len(".Combined")] for k in _exr_channels(f) if k.endswith(".Combined"))
+
+
+def read_exr(path, layer=None):
+    """Read an EXR's RGB as (H, W, 3) float32, row 0 at the top: a plain RGB(A) file's, or a
+    multilayer file's view layer ``layer`` (its ``<layer>.Combined`` pass); ``layer`` may be left
+    out when the file has one.  A file without such channels raises ValueError."""
+    import OpenEXR
+
+    with OpenEXR.File(os.fspath(path)) as f:
+        ch = _exr_channels(f)
+        if layer is None:
+            for key in ("RGB", "RGBA"):
+                if key in ch:
+                    return np.array(ch[key].pixels[..., :3], dtype=np.float32)
+            found = sorted(k[:-len(".Combined")] for k in ch if k.endswith(".Combined"))
+            if len(found) != 1:
+                raise ValueError(f"{path}: " + (f"{len(found)} view layers ({', '.join(found)}): say which" if found
+                                                else "no RGB channels and no view layer's Combined pass"))
+            layer = found[0]
+        key = f"{layer}.Combined"
+        if key not in ch:
+            raise ValueError(f"{path}: no view layer {layer!r} (it has {[k for k in ch if k.endswith('.Combined')]})")
         return np.array(ch[key].pixels[..., :3], dtype=np.float32)
 
 
