@@ -33,7 +33,8 @@ Lights (Blender's units, as Cycles converts them; ``blender.md`` §4.4)
     ``E = strength x pi tan^2(angle / 2)`` for angle > 0.
 
     A light's own node tree scales its color (:mod:`.light_nodes`).  With Cast Shadow off
-    (``use_shadow``) nothing blocks its direct light, as in Cycles.
+    (``use_shadow``) nothing blocks its direct light, as in Cycles; its light and shadow linking
+    is :mod:`.light_linking`'s.
 
     A light portal (an area light with Portal on) guides Cycles' sampling of the world and
     emits nothing: it is left out (noted once), since bundles reach the world through the
@@ -60,6 +61,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .light_linking import LinkSets
 from .light_nodes import light_node_factor
 from .node_graphs import start_graph_bake
 from .shaders import MaterialConverter
@@ -73,15 +75,16 @@ UNMODELED_TYPES = {"CURVES": "hair curves", "POINTCLOUD": "point clouds (e.g. Ge
 
 
 def _unmodeled_features(ob, warn):
-    """Warn about what Cycles renders on object ``ob`` (an original) that the export leaves out:
-    hair particles drawn as strands, light linking."""
+    """Warn about what Cycles renders on object ``ob`` (an original mesh-like object) that the
+    export leaves out: hair particles drawn as strands, light linking on an emitting mesh."""
     for ps in getattr(ob, "particle_systems", ()):
         st = ps.settings
         if st.type == "HAIR" and st.render_type == "PATH":
             warn(f"object {ob.name!r}: hair particles ({ps.name!r}) are not rendered")
     link = getattr(ob, "light_linking", None)
     if link is not None and (getattr(link, "receiver_collection", None) or getattr(link, "blocker_collection", None)):
-        warn(f"object {ob.name!r}: light linking is not modeled: every light lights and shadows everything")
+        warn(f"object {ob.name!r}: light linking on a mesh is not modeled (on lamps it is): its emission lights "
+             "everything and everything shadows it")
 
 
 @dataclass
@@ -598,6 +601,7 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
     tuv, timg, tcol, talpha, tnrm, tbump, images = [], [], [], [], [], [], {}
     objects = []
     lights = {"point": [], "sun": [], "area": []}
+    link_sets = LinkSets()
     portals = []
     n_vert = n_tri = 0
     for inst in depsgraph.object_instances:
@@ -621,10 +625,9 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
             if getattr(getattr(ob.data, "cycles", None), "is_portal", False):
                 portals.append(ob.original.name)
                 continue
-            if not inst.is_instance:
-                _unmodeled_features(ob.original, warn)
             got = convert_light(ob.data, M, warn)
             if got is not None:
+                got[1]["link"] = link_sets.set_of(ob.original)
                 lights[got[0]].append(got[1])
             continue
         if not inst.is_instance:
@@ -731,7 +734,8 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
                          sun_lights=group(SunLights, lights["sun"]), area_lights=group(AreaLights, lights["area"]),
                          world=world, camera=camera, two_sided=True,
                          triangle_solid=np.zeros(len(t), bool),    # two-sided surfaces are never solids
-                         name=name or scene.name, texture=texture, shading=shading)
+                         name=name or scene.name, texture=texture, shading=shading,
+                         linking=link_sets.linking([(o.original, o.instancer) for o in objects], np.concatenate(tobj)))
     for w in caught:
         warn(str(w.message))
     _warn_overlaps(v[t], np.concatenate(tobj), objects, warn)

@@ -175,14 +175,21 @@ def test_point_light_with_radius_far_away_is_inverse_square(rng):
     assert np.allclose(got[:, 0], exact, rtol=1e-3), (got[:, 0], exact)
 
 
-def test_npz_keeps_sides_lights_and_world(tmp_path):
+def test_npz_keeps_sides_lights_linking_and_world(tmp_path):
+    from raybundle.scene.linking import LightLinking
+
     sc = blender_cornell(flip=[1, 5], environment=(0.1, 0.2, 0.3))
     sc.point_lights = PointLights([[0, 0, 1.0]], [[2.0, 2, 2]], spot_direction=[[0, 0, -1]],
-                                  spot_cos_half_angle=[0.5], spot_blend=[0.2], radius=[0.1])
+                                  spot_cos_half_angle=[0.5], spot_blend=[0.2], radius=[0.1], shadow=[0], link=[1])
     sc.sun_lights = SunLights([[0, 0, -1.0]], [[1.0, 1, 1]], [0.01])
     sc.area_lights = AreaLights([[0, 0, 0.5]], [[0.1, 0, 0]], [[0, 0.2, 0]], [[0, 0, -1]], [1], [[5.0, 5, 5]])
+    groups = np.arange(len(sc.triangles)) % 2
+    sc.linking = LightLinking(groups, [[1, 1], [0, 1]], [[1, 1], [1, 0]])
     sc.save_npz(tmp_path / "s.npz")
     back = load_npz(tmp_path / "s.npz")
+    assert np.array_equal(back.linking.receives, [[1, 1], [0, 1]]) and np.array_equal(back.linking.blocks,
+                                                                                      [[1, 1], [1, 0]])
+    assert np.array_equal(back.link_groups(np.arange(len(back.triangles))), groups[back.triangle_source])
     assert back.triangle_two_sided.all() and back.n_sides == 2 * back.n_patches
     assert back.world.is_constant and np.allclose(back.world.image[0, 0], [0.1, 0.2, 0.3])
     for group in ("point_lights", "sun_lights", "area_lights"):

@@ -506,3 +506,51 @@ def test_a_lamp_with_cast_shadow_off_lights_through_a_blocker(tree):
         assert np.allclose(a, b), np.abs(a - b).max()
     for a, b in zip(got["one casts"], got["open"]):            # the first lamp's sixth is blocked
         assert a.mean() < 0.95 * b.mean()
+
+
+@pytest.mark.parametrize("tree", ["off", "on"])
+def test_a_linked_lamp_lights_only_its_receivers_and_only_its_blockers_shadow_it(tree):
+    """Light and shadow linking (:mod:`raybundle.scene.linking`): lamps of link set 1 light floor A
+    and not floor B, and the plane over A (group 2) does not block them; an unlinked lamp beside
+    them (set 0) lights both floors and is blocked.  Per pixel and per light sample, each lamp on
+    its own and through the light tree: on A the linked lamps give what they give with no plane
+    (the same samples), on B nothing."""
+    from raybundle.scene.linking import LightLinking
+
+    rng = np.random.default_rng(4)
+    n = 6
+    pos = np.column_stack([rng.uniform(-1, 1, n), rng.uniform(-1, 1, n), rng.uniform(2.0, 3.0, n)])
+    mats = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.5, 0.5))])
+    quads = {"A": [(-3, -3, 0), (0, -3, 0), (0, 3, 0), (-3, 3, 0)], "B": [(0, -3, 0), (3, -3, 0), (3, 3, 0), (0, 3, 0)],
+             "plane": [(-2.5, -2, 1), (-0.5, -2, 1), (-0.5, 2, 1), (-2.5, 2, 1)]}
+    links = LightLinking([0, 0, 1, 1, 2, 2], [[1, 1, 1], [1, 0, 1]], [[1, 1, 1], [1, 1, 0]])
+
+    def scene(names, link, linking):
+        v = np.array([c for k in names for c in quads[k]], float)
+        t = [[4 * i, 4 * i + 1, 4 * i + 2] for i in range(len(names))] + \
+            [[4 * i, 4 * i + 2, 4 * i + 3] for i in range(len(names))]
+        src = [2 * i for i in range(len(names))] + [2 * i + 1 for i in range(len(names))]
+        return build_scene(v, t, [0] * len(t), mats, two_sided=True, triangle_source=src, linking=linking,
+                           point_lights=PointLights(pos, np.full((n, 3), 20.0), radius=np.full(n, 0.2), link=link))
+
+    on_a = np.column_stack([rng.uniform(-2.4, -0.6, (400, 1)), rng.uniform(-1.9, 1.9, (400, 1)), np.zeros(400)])
+    on_b = on_a * [-1, 1, 0]
+    up = np.tile([0, 0, 1.0], (400, 1))
+
+    def estimates(sc, points, groups):
+        tr = RayTracer(sc)
+        dl = DirectLighting(sc, tr, light_tree=tree)
+        got = (dl.reflected_radiance(points, up, np.zeros(400, int), up, np.random.default_rng(5), receivers=groups),
+               dl.irradiance(points, up, np.random.default_rng(6), samples_per_light=2, receivers=groups))
+        tr.close()
+        return got
+
+    open_a = estimates(scene(["A", "B"], np.zeros(n), None), on_a, None)
+    linked = scene(["A", "B", "plane"], np.ones(n), links)
+    for a, b in zip(estimates(linked, on_a, np.zeros(400, int)), open_a):
+        assert np.allclose(a, b), np.abs(a - b).max()
+    for b in estimates(linked, on_b, np.ones(400, int)):
+        assert np.all(b == 0)
+    one_unlinked = scene(["A", "B", "plane"], np.r_[0, np.ones(n - 1)], links)
+    for a, b in zip(estimates(one_unlinked, on_b, np.ones(400, int)), open_a):
+        assert 0 < a.mean() < 0.5 * b.mean()               # the unlinked lamp's sixth reaches B

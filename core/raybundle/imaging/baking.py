@@ -177,7 +177,8 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, ga
         n_s = seen_normals(sc.shading, sc.triangle_source[tri], points.point[idx], n, n)
         if sc.texture is not None and sc.texture.has_normal_maps:     # and of a normal or bump map
             n_s = sc.texture.shading_normals(sc.triangle_source[tri], points.point[idx], n_s, n)
-        e = e + direct.irradiance(points.point[idx], n_s, rng, light_samples, penumbra_samples)
+        e = e + direct.irradiance(points.point[idx], n_s, rng, light_samples, penumbra_samples,
+                                  receivers=sc.link_groups(tri))
     kd = mats.diffuse_reflectance[m]
     if sc.texture is not None:                  # the texel's albedo: texture detail stays sharp
         kd = kd * sc.texture.at(sc.triangle_source[tri], points.point[idx])
@@ -189,7 +190,8 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, ga
         far = np.nonzero(np.any(kt > 0, axis=1))[0]
         if direct.n_lights and len(far):               # the first-shot lights on its far side
             out[idx[far]] += kt[far] / np.pi * direct.irradiance(points.point[idx[far]], -n[far], rng,
-                                                                 light_samples, penumbra_samples)
+                                                                 light_samples, penumbra_samples,
+                                                                 receivers=sc.link_groups(tri[far]))
     return out
 
 

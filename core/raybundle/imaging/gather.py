@@ -110,7 +110,8 @@ class FinalGather:
                     if len(c):
                         h = hit[c]
                         e_hit[c] = rec.at(self.vert_indirect, ts[c], bary[c]) + sv.direct.irradiance(
-                            origin[h] + w[h] * dist[h, None], sc.tside_normal[ts[c]], rng, self.near_light_samples)
+                            origin[h] + w[h] * dist[h, None], sc.tside_normal[ts[c]], rng, self.near_light_samples,
+                            receivers=sc.link_groups(tri[h]))
                 L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False,
                                      glossy_iterate=False, first_shot_glossy=self.first_shot_glossy)
                 L[hit] += self.glossy_reflected(origin[hit] + w[hit] * dist[hit, None], ts, -w[hit], rng)

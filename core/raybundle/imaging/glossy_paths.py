@@ -64,13 +64,15 @@ class GlossyEyePaths:
         m, n, wo = g.material[idx], g.normal[idx], g.w_eye[idx]
         w_i, weight = sc.materials.sample_glossy(m, n, wo, u)
         if self.world_light is None or len(idx) == 0:
-            return self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo) if self.light_mis else None)
+            return self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo) if self.light_mis else None,
+                              groups=sc.link_groups(g.triangle[idx]))
         if guide is None:
             guide = self.world_light.guide_at(solver.world_guide, sc.tside_side[g.tside[idx]])
         guide, at = guide
         world_mis = (max(world_samples, 1) * self.world_light.density(w_i, guide, at),
                      sc.materials.glossy_pdf(m, n, w_i, wo))
-        light, solved = self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo), world_mis=world_mis)
+        light, solved = self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo), world_mis=world_mis,
+                                   groups=sc.link_groups(g.triangle[idx]))
         if world_samples > 0:
             return light, solved
         return light + self.world_samples(g.point[idx], n, m, wo, guide, at), solved
@@ -99,7 +101,7 @@ class GlossyEyePaths:
         out[ok] = L[ok] * f * (cos[ok] / p_w[ok] * w)[:, None]
         return out
 
-    def trace(self, pts, n, w_i, throughput, e, vert, light_mis=None, world_mis=None):
+    def trace(self, pts, n, w_i, throughput, e, vert, light_mis=None, world_mis=None, groups=None):
         """Radiance (N, 3) arriving at ``pts`` (N, 3) with normals ``n`` along ``w_i``
         (N, 3), times ``throughput`` (N, 3), as ``(light, solved)`` (N, 3) each: the lamps and
         the world the paths meet, and what they read from the solver where each ray lands
@@ -116,7 +118,8 @@ class GlossyEyePaths:
         as a mirror (:meth:`_interfaces`) while the path has rays left; at the last ray its patch
         stands in, reflecting what it receives less the first shot and the caustic shot, which it
         would throw as a caustic (:meth:`~raybundle.methods.stochastic_iteration.
-        StochasticIterationSolver.radiance`'s ``sharp_interfaces``)."""
+        StochasticIterationSolver.radiance`'s ``sharp_interfaces``).  ``groups`` (N,) or None: the
+        link groups of ``pts`` (:mod:`raybundle.scene.linking`)."""
         sc, mats, solver = self.scene, self.scene.materials, self.solver
         out = np.zeros((len(pts), 3))
         light = np.zeros((len(pts), 3))
@@ -141,7 +144,8 @@ class GlossyEyePaths:
                 le = self.direct.lobe_hits_light(pts[live], m_from[live], n[live], wo_from[live], w_i[live], tri,
                                                  pts[live] + np.where(hit, t, 0.0)[:, None] * w_i[live],
                                                  self.settings.light_samples, distance=dist,
-                                                 mirrored=mirrored[live] if bounce else None)
+                                                 mirrored=mirrored[live] if bounce else None,
+                                                 receivers=None if groups is None else groups[live])
                 np.add.at(light, pix[live], throughput[live] * le)
             if sc.world.emits:      # paths that leave the scene see the world
                 gone = live[~hit]
@@ -172,7 +176,8 @@ class GlossyEyePaths:
                 hp = pts[live[gi]] + t[gi, None] * w_i[live[gi]]
                 lit = self.direct.reflected_radiance(hp, hit_n[gi], hit_m[gi], w_back[gi], self.rng,
                                                      self.settings.light_samples, mis=np.ones(len(gi), bool),
-                                                     diffuse_scale=np.zeros((len(gi), 3)))
+                                                     diffuse_scale=np.zeros((len(gi), 3)),
+                                                     receivers=sc.link_groups(tri[gi]))
                 if scale is not None:
                     lit *= scale[gi, None]
                 np.add.at(light, pix[live[gi]], throughput[live[gi]] * lit)
@@ -197,6 +202,7 @@ class GlossyEyePaths:
             keep = np.nonzero(go_on | turn)[0]
             pix, m, n, wo = pix[live][keep], hit_m[keep], hit_n[keep], w_back[keep]
             pts, throughput, w_i, mirrored = pts[keep], throughput[keep], w_i[keep], turn[keep]
+            groups = None if groups is None else sc.link_groups(tri[keep])
         return light, out
 
     def _interfaces(self, tri, normal, travel, w_back):

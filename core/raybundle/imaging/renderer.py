@@ -560,7 +560,8 @@ class Renderer(ProgressiveImage):
                 g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], u, n_s,
                 mis=mis, diffuse_scale=self.albedo_scale(g.triangle[hf], g.point[hf]), shadow_flags=f,
                 analytic=np.full(len(hf), ALL_LIGHTS) if start else flags[:, 0],
-                penumbra=(pen_lights, share) + sequence, select=self.rng.random(len(hf)))
+                penumbra=(pen_lights, share) + sequence, select=self.rng.random(len(hf)),
+                receivers=self.scene.link_groups(g.triangle[hf]))
             out[hf] += value
             np.bitwise_or.at(self.shadow_flags, pixels[hf], f)
             self.image_rays += self.direct.rays - before
@@ -568,7 +569,8 @@ class Renderer(ProgressiveImage):
         far = np.nonzero(np.any(kt > 0, axis=1))[0] if self.direct.n_lights else []
         if len(far):          # the first-shot lights on a translucent surface's far side, let through
             t = hf[far]
-            out[t] += kt[far] / np.pi * self.direct.far_side_irradiance(g.point[t], g.normal[t], self.rng)
+            out[t] += kt[far] / np.pi * self.direct.far_side_irradiance(g.point[t], g.normal[t], self.rng,
+                                                                       self.scene.link_groups(g.triangle[t]))
         gl = hf[self.glossy_material[g.material[hf]]]
         lobe_world = 0          # world samples the glossy lobes share with the diffuse one
         lobe_guide = None       # ... and the guide they were drawn by, for the lobes' MIS

@@ -117,7 +117,8 @@ class CausticShot:
         for li in np.unique(light):
             sel = np.nonzero(light == li)[0]
             e[sel], travel[sel], _ = fs.direct.light_samples_at(pts[sel], nrm[sel], fs.lights[li],
-                                                              rng.random((len(sel), 3)))
+                                                              rng.random((len(sel), 3)),
+                                                              receivers=sc.link_groups(sc.tside_triangle[ts[sel]]))
         s, weight = sc.materials.sample_glossy(sc.side_material[side[t_idx]], nrm, -travel, u[:, 2:])
         carried = (self.tside_area[t_idx] / p)[:, None] * e * weight   # [W]
         live = np.nonzero(np.any(carried > 0, axis=1))[0]

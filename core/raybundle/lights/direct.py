@@ -93,7 +93,8 @@ class DirectLighting:
                              if np.any(pl.intensity[k] > 0)]
         al = scene.area_lights
         self.area_lights += [ShapeLight(al.center[k], al.axis_u[k], al.axis_v[k], al.normal[k], bool(al.shape[k] == 1),
-                                        float(al.area[k]), al.radiance[k], bool(al.shadow[k] > 0)) for k in range(len(al))
+                                        float(al.area[k]), al.radiance[k], bool(al.shadow[k] > 0), int(al.link[k]))
+                             for k in range(len(al))
                              if np.any(al.radiance[k] > 0)]
         # mesh-light triangles: which light (index into light_list()) and which of its triangles
         self.triangle_light = np.full(len(scene.triangles), -1, np.int64)
@@ -104,7 +105,8 @@ class DirectLighting:
                 self.triangle_light_k[light.triangles] = np.arange(len(light.triangles))
         sl = scene.sun_lights
         far = 4.0 * tracer.radius + 1.0
-        self.point_lights += [SunLight(sl.direction[k], sl.irradiance[k], float(sl.angle[k]), far, bool(sl.shadow[k] > 0))
+        self.point_lights += [SunLight(sl.direction[k], sl.irradiance[k], float(sl.angle[k]), far, bool(sl.shadow[k] > 0),
+                                       int(sl.link[k]))
                               for k in range(len(sl)) if np.any(sl.irradiance[k] > 0)]
         #: lamps and emitting triangles chosen by their contribution (:mod:`raybundle.lights.light_tree`)
         #: in :meth:`reflected_radiance`, or None: each light sampled on its own
@@ -112,6 +114,11 @@ class DirectLighting:
         lights = self.light_list()
         #: per light of :meth:`light_list`, whether anything blocks its direct light (Cast Shadow)
         self.casts_shadow = np.array([light.shadow for light in lights], bool)
+        #: per light of :meth:`light_list`, its link set, and the scene's linking (None when no light
+        #: is linked: every light lights every surface)
+        self.light_link = np.array([light.link for light in lights], np.int64)
+        self.linking = scene.linking if self.light_link.any() else None
+        self._index = {id(light): li for li, light in enumerate(lights)}
         self.suns = [li for li, light in enumerate(lights) if isinstance(light, SunLight)]
         if light_tree == "on" or (light_tree == "auto" and self.wants_tree(lights)):
             self.tree = build_light_tree(lights)
@@ -180,34 +187,39 @@ class DirectLighting:
                 light.pdf(points[i], y[i])
         return out
 
-    def light_samples_at(self, points, normals, light, u, unshadowed=False, crossed=None):
+    def light_samples_at(self, points, normals, light, u, unshadowed=False, crossed=None, receivers=None):
         """One sample of every point's irradiance from one light.
 
         Returns ``(E (N,3) [W/m^2], travel (N,3), cos_x (N,))`` where E already
         includes visibility, so ``E f(travel, w_out)`` is the reflected radiance;
         with ``unshadowed``, also E without the visibility test (4th item).  ``crossed``: an
         (N,) bool array to mark the points whose shadow ray passed a cut-out or glass.
-        A light that casts no shadow (:attr:`casts_shadow`) is not blocked.
+        ``receivers``: the points' link groups (:meth:`~raybundle.scene.model.PatchScene.link_groups`)
+        or None.  A light that casts no shadow (:attr:`casts_shadow`) is not blocked; a linked
+        light lights only the groups it reaches and is blocked only by those that block it
+        (:mod:`raybundle.scene.linking`).
         """
         if isinstance(light, TreeLights):
             y, e, em = self.tree_sample(points, normals, u)
-            unblocked = self.shadowless(em)
+            ids = np.where(em >= 0, self.tree.light[np.maximum(em, 0)], -1)
         else:
             y, e = light.sample(points, u)
-            unblocked = None if light.shadow else True
-        return self.shadowed(points, normals, y, e, unshadowed, crossed, unblocked)
+            ids = self._index[id(light)]
+        return self.shadowed(points, normals, y, e, unshadowed, crossed, ids, receivers)
 
-    def shadowless(self, emitters):
-        """(N,) bool: the tree's ``emitters`` (N,) (-1 none) whose light casts no shadow, or None
-        when every light casts one."""
-        if self.casts_shadow.all():
-            return None
-        return ~self.casts_shadow[self.tree.light[np.maximum(emitters, 0)]] & (emitters >= 0)
-
-    def shadowed(self, points, normals, y, e, unshadowed=False, crossed=None, unblocked=None):
-        """:meth:`light_samples_at` for light samples ``y``, ``e`` (N, 3) drawn already;
-        ``unblocked`` (True, (N,) bool or None): the samples of lights that cast no shadow, which
-        no shadow ray tests."""
+    def shadowed(self, points, normals, y, e, unshadowed=False, crossed=None, lights=None, receivers=None):
+        """:meth:`light_samples_at` for light samples ``y``, ``e`` (N, 3) drawn already from
+        ``lights`` (an index into :meth:`light_list`, or (N,) of them, -1 for none; None: lights
+        that cast shadows and are not linked)."""
+        unblocked = link = None
+        if lights is not None:
+            ids = np.maximum(lights, 0)
+            if not self.casts_shadow.all():
+                unblocked = ~self.casts_shadow[ids]
+            if self.linking is not None:
+                link = self.light_link[ids]
+                if receivers is not None:
+                    e *= self.linking.receives[link, receivers][:, None]
         v = y - points
         r = np.sqrt(np.maximum(np.einsum("ij,ij->i", v, v), 1e-300))
         w = v / r[:, None]                      # from the point towards the light
@@ -227,7 +239,8 @@ class DirectLighting:
             self.rays += int(live.sum())
             through = None if crossed is None else np.zeros(len(org), bool)
             blocked = self.tracer.occluded(org, seg / np.maximum(dist, 1e-300)[:, None],
-                                           np.maximum(dist - 2 * eps, 0.0), crossed=through)
+                                           np.maximum(dist - 2 * eps, 0.0), crossed=through,
+                                           link=None if link is None else np.broadcast_to(link, live.shape)[live])
             if through is not None:
                 crossed[np.nonzero(live)[0][through]] = True
             idx = np.nonzero(live)[0][blocked]
@@ -299,7 +312,7 @@ class DirectLighting:
         return samples_per_light * len(self.area_lights) + len(self.point_lights)
 
     def reflected_radiance(self, points, normals, mats, w_out, u, samples_per_light=1, mis=None, diffuse_scale=None,
-                           shadow_flags=None, analytic=False, penumbra=None, select=None):
+                           shadow_flags=None, analytic=False, penumbra=None, select=None, receivers=None):
         """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
 
         Unbiased estimate with ``samples_per_light`` shadow rays per area light
@@ -342,6 +355,9 @@ class DirectLighting:
         A lamp taken by chance at a point (``P < 1``: a small share of the light there) takes no
         penumbra samples there.
 
+        ``receivers`` (N,) or None: the points' link groups; a linked light lights only those it
+        reaches (:mod:`raybundle.scene.linking`).
+
         ``analytic`` (bool, (N,) bool, or (N,) uint64 mask of lights): the diffuse lobe of
         polygonal lights (:func:`light_polygon_irradiance`) with the exact unoccluded irradiance as a control variate,
         ``f_d (Le I(x) - mean_s (e_s - e_s V_s))``, ``e_s`` the sample's unshadowed
@@ -374,6 +390,8 @@ class DirectLighting:
         for li in own:
             light = lights[li]
             base = np.nonzero(may_light(light, points, normals))[0]
+            if self.linking is not None and receivers is not None:
+                base = base[self.linking.receives[self.light_link[li], receivers[base]]]
             here = base[(an[base] & bits[li]) != 0] if len(cv) and isinstance(light, (MeshLight, ShapeLight)) else []
             ex = light_polygon_irradiance(light, points[here], normals[here]) if len(here) else None
             reach[li] = base
@@ -425,15 +443,16 @@ class DirectLighting:
                     uk[kron] = (light_shift + (start + s)[:, None] * alpha) % 1.0
                 if li == TREE:
                     y, e, em = self.tree_sample(p, nrm, uk)
-                    unblocked = self.shadowless(em)
+                    ids = np.where(em >= 0, self.tree.light[np.maximum(em, 0)], -1)
                 else:
                     y, e = light.sample(p, uk)
-                    unblocked = None if light.shadow else True
+                    ids = li
+                rec = None if receivers is None else receivers[pt]
                 if shadow_flags is None and f_d is None:
-                    e, travel, cos_x = self.shadowed(p, nrm, y, e, unblocked=unblocked)
+                    e, travel, cos_x = self.shadowed(p, nrm, y, e, lights=ids, receivers=rec)
                     live = np.any(e > 0, axis=1)
                 else:
-                    e, travel, cos_x, free = self.shadowed(p, nrm, y, e, unshadowed=True, unblocked=unblocked)
+                    e, travel, cos_x, free = self.shadowed(p, nrm, y, e, unshadowed=True, lights=ids, receivers=rec)
                     live, blocked = self._seen_blocked(e, free)
                     if shadow_flags is not None and li == TREE:     # each sample its own light's bit
                         lb = bits[self.tree.light[np.maximum(em, 0)]]
@@ -468,7 +487,7 @@ class DirectLighting:
                 out[:, c] += np.bincount(pt, acc[:, c], minlength=n)
         return out
 
-    def irradiance(self, points, normals, rng, samples_per_light=16, penumbra_samples=None):
+    def irradiance(self, points, normals, rng, samples_per_light=16, penumbra_samples=None, receivers=None):
         """Direct irradiance (N, 3) [W/m^2] of the first-shot lights at surface points
         with unit ``normals`` (N, 3), for bakes, where a point's value is final.
 
@@ -487,7 +506,8 @@ class DirectLighting:
         ratio is a binomial proportion whose error (up to 1 / (2 sqrt(n))) dominated
         the bake's error (README, 'Measured choices behind the defaults'), and few points are
         in a penumbra.  A point's samples are a randomly shifted Kronecker (R_3) set,
-        stratified over the light's triangles and their areas.  ``rng``: a Generator."""
+        stratified over the light's triangles and their areas.  ``rng``: a Generator; ``receivers``
+        (N,) or None: the points' link groups (:meth:`light_samples_at`)."""
         out = np.zeros((len(points), 3))
         alpha = kronecker_alpha(3)
         for light in self.sampled_lights():
@@ -497,7 +517,7 @@ class DirectLighting:
             shift = rng.random((len(points), 3))
             analytic = None if sharp else light_polygon_irradiance(light, points, normals)
 
-            def shadow_sums(p, nrm, sh, first, last):
+            def shadow_sums(p, nrm, sh, first, last, rec=receivers):
                 """Sums of the shadowed and unshadowed estimates of samples first..last-1,
                 and whether some sample was seen and some blocked or passed a cut-out or glass (whose
                 outcome was random: a point whose few samples all passed by chance would keep them)."""
@@ -505,7 +525,7 @@ class DirectLighting:
                 lit, shade = np.zeros(len(p), bool), np.zeros(len(p), bool)
                 for s in range(first, last):
                     e, _, _, free = self.light_samples_at(p, nrm, light, (sh + s * alpha) % 1.0, unshadowed=True,
-                                                          crossed=shade)
+                                                          crossed=shade, receivers=rec)
                     seen += e
                     total += free
                     reached, blocked = self._seen_blocked(e, free)
@@ -519,7 +539,8 @@ class DirectLighting:
             n_penumbra = 16 * n_s if penumbra_samples is None else int(penumbra_samples)
             if len(more) and n_penumbra > n_s:
                 n_pts[more] = n_penumbra
-                s_more, t_more, _ = shadow_sums(points[more], normals[more], shift[more], n_s, n_penumbra)
+                s_more, t_more, _ = shadow_sums(points[more], normals[more], shift[more], n_s, n_penumbra,
+                                                None if receivers is None else receivers[more])
                 seen[more] += s_more
                 total[more] += t_more
             if analytic is None:
@@ -531,13 +552,14 @@ class DirectLighting:
                                 seen / n_pts[:, None])
         return out
 
-    def far_side_irradiance(self, points, normals, rng):
+    def far_side_irradiance(self, points, normals, rng, receivers=None):
         """(N, 3) [W/m^2] one sample per light of the first-shot lights' direct irradiance on the
         far side of surfaces at ``points`` seen along ``normals`` (N, 3): what a translucent
-        surface lets through (shadow rays from just behind it)."""
+        surface lets through (shadow rays from just behind it); ``receivers`` as
+        :meth:`light_samples_at`'s."""
         out = np.zeros((len(points), 3))
         for light in self.sampled_lights():
-            out += self.light_samples_at(points, -normals, light, rng.random((len(points), 3)))[0]
+            out += self.light_samples_at(points, -normals, light, rng.random((len(points), 3)), receivers=receivers)[0]
         return out
 
     @staticmethod
@@ -547,7 +569,7 @@ class DirectLighting:
         return np.where(a2 > 0, a2 / np.maximum(a2 + b2, 1e-300), 0.0)
 
     def lobe_hits_light(self, origins, mats, normals, w_out, w_in, triangles, hits, samples_per_light=1,
-                        distance=None, mirrored=None):
+                        distance=None, mirrored=None, receivers=None):
         """Emitted radiance (N, 3) of first-shot mesh lights met by lobe-sampled rays,
         MIS-weighted against light sampling (:meth:`reflected_radiance` with ``mis``):
         ``Le w_g``, ``w_g = p_g^2 / (p_g^2 + (n p_l)^2)``.  ``origins``, ``normals``,
@@ -555,12 +577,16 @@ class DirectLighting:
         ``triangles`` (N,) the triangles met (-1 none) at points ``hits`` (N, 3).  With
         ``distance`` (N,) [m] (inf where nothing is met), also the area lights (not geometry)
         the rays meet before it (:meth:`~raybundle.lights.sources.ShapeLight.hit`).  ``mirrored``
-        (N,) bool or None: rays a glass interface reflected, which no light sample takes: weight 1."""
+        (N,) bool or None: rays a glass interface reflected, which no light sample takes: weight 1.
+        ``receivers`` (N,) or None: the link groups of the points the rays leave; a linked area
+        light counts only where it lights them."""
         out = np.zeros((len(origins), 3))
         for li, light in enumerate(self.area_lights if distance is not None else ()):
             if not isinstance(light, ShapeLight):
                 continue
             met, y = light.hit(origins, w_in, distance)
+            if self.linking is not None and receivers is not None:
+                met &= self.linking.receives[light.link, receivers]
             i = np.nonzero(met)[0]
             if len(i):
                 p_l = samples_per_light * (light.pdf(origins[i], y[i]) if self.tree is None else self.tree_pdf(

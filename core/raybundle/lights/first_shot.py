@@ -76,7 +76,8 @@ class PatchFirstShot:
             at = np.nonzero(may_light(light, pts, nrm))[0]       # elsewhere the light gives nothing
             if len(at) == 0:
                 continue
-            e, travel, _ = self.direct.light_samples_at(pts[at], nrm[at], light, u_l[at])
+            e, travel, _ = self.direct.light_samples_at(pts[at], nrm[at], light, u_l[at],
+                                                        receivers=sc.link_groups(sc.tside_triangle[tri[at]]))
             self._e_sum[tri[at], li] += e
             self._d_sum[tri[at], li] += e.sum(axis=1, keepdims=True) * travel
         self._count[tri] += 1

@@ -30,9 +30,11 @@ from ..tracing.sampling import (
 
 class _Light:
     """What every light class shares: :meth:`selection_estimate`; :attr:`shadow`, whether
-    anything blocks its direct light (False: Blender's Cast Shadow off)."""
+    anything blocks its direct light (False: Blender's Cast Shadow off); :attr:`link`, its link
+    set (:mod:`raybundle.scene.linking`; 0: no linking)."""
 
     shadow = True
+    link = 0
 
     def selection_estimate(self, points, normals):
         """Lamp selection's guess (N,) of the light's unoccluded irradiance [W/m^2, mean of
@@ -324,6 +326,10 @@ class PointLight(_Light):
     def shadow(self):
         return bool(self.lights.shadow[self.k] > 0)
 
+    @property
+    def link(self):
+        return int(self.lights.link[self.k])
+
     def sample(self, points, u):
         return sample_point_lights(self.lights, np.full(len(points), self.k), points, u)
 
@@ -373,6 +379,7 @@ class ShapeLight(_Light):
     area: float
     radiance: np.ndarray
     shadow: bool = True
+    link: int = 0
 
     def sample(self, points, u):
         if self.ellipse:
@@ -505,6 +512,7 @@ class SunLight(_Light):
     angle: float
     far: float
     shadow: bool = True
+    link: int = 0
 
     def sample(self, points, u):
         cos_max = np.cos(0.5 * self.angle)

@@ -168,7 +168,7 @@ class PathTracer(ProgressiveImage, Method):
             if direct.n_lights:
                 before = direct.rays
                 out[row] += throughput * direct.reflected_radiance(x, nrm, mat, w_out, u_light, 1, mis=glossy,
-                                                                   diffuse_scale=tex)
+                                                                   diffuse_scale=tex, receivers=sc.link_groups(tri))
                 self.image_rays += direct.rays - before
             # the next direction: one lobe, chosen by its albedo
             a_d = mats.albedo(mat, cos_o, glossy=False)

@@ -44,6 +44,7 @@ the direction sequences to drive.
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
@@ -212,6 +213,9 @@ class SingleRayIteration(ProgressiveImage, Method):
             raise ValueError(f"{self.name} draws its photons from the PRNG, not {settings.sequence!r} "
                              "(the direction sequences drive the bundle methods' global directions)")
         self.scene, self.camera, self.tracer, self.direct, self.settings = scene, camera, tracer, direct, settings
+        if direct.linking is not None or not direct.casts_shadow.all():
+            warnings.warn(f"{self.name} traces every lamp's photons to every surface: light linking and Cast Shadow "
+                          "off are not honoured (the other methods honour them)", stacklevel=2)
         self.emission = LightEmission(scene, tracer)
         self.solver = ImagePasses(tracer, SolverStats(), name=self.name)
         self.rng = np.random.default_rng([settings.seed, 13])

@@ -428,7 +428,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
                      scene.point_lights, scene.camera, scene.analytic_radiance, scene.name,
                      scene.dropped_triangles, scene.triangle_solid[src], scene.triangle_two_sided[src],
                      scene.sun_lights, scene.area_lights, scene.world, tags, texture=scene.texture,
-                     shading=scene.shading)
+                     shading=scene.shading, linking=scene.linking)
     return out, n_cut
 
 
@@ -765,7 +765,7 @@ def _cut_once(scene, own, n, p0, plane, eps, next_id, meet):
                       scene.dropped_triangles, scene.triangle_solid[rows], scene.triangle_two_sided[rows],
                       scene.sun_lights, scene.area_lights, scene.world,
                       np.concatenate([old_tag[keep], tags]), texture=scene.texture,
-                      shading=scene.shading), rows
+                      shading=scene.shading, linking=scene.linking), rows
 
 
 def straddling(tracer, scene, faces, tol):

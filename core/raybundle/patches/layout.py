@@ -165,7 +165,7 @@ def _rebuilt(scene: PatchScene, vertices, triangles, row) -> PatchScene:
                       scene.triangle_source[row], scene.materials, scene.point_lights, scene.camera,
                       scene.analytic_radiance, scene.name, scene.dropped_triangles, scene.triangle_solid[row],
                       scene.triangle_two_sided[row], scene.sun_lights, scene.area_lights, scene.world,
-                      texture=scene.texture, shading=scene.shading)
+                      texture=scene.texture, shading=scene.shading, linking=scene.linking)
 
 
 def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene:

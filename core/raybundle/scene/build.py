@@ -15,12 +15,13 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
                 triangle_patch=None, triangle_source=None, analytic_radiance=None, name="",
                 area_epsilon=1e-14, triangle_solid=None, two_sided=False,
                 sun_lights=None, area_lights=None, environment=None, texture=None, world=None,
-                shading=None) -> PatchScene:
+                shading=None, linking=None) -> PatchScene:
     """Validate raw triangles and make a :class:`PatchScene`.
 
     ``texture``: a :class:`~raybundle.scene.textures.SurfaceTexture` whose faces are the
     input triangles (indexed like ``triangle_source``); ``shading``: their
-    :class:`~raybundle.scene.shading.ShadingNormals`, the same way.
+    :class:`~raybundle.scene.shading.ShadingNormals`, and ``linking`` their
+    :class:`~raybundle.scene.linking.LightLinking`, the same way.
 
     ``two_sided``: bool or (T,) bool, Blender's semantics when true (module
     docstring); the default, one-sided, is the core's own convention.
@@ -91,6 +92,7 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
     sun_lights = SunLights() if sun_lights is None else SunLights(**vars(sun_lights))
     area_lights = AreaLights() if area_lights is None else AreaLights(**vars(area_lights))
     _check_lights(point_lights, sun_lights, area_lights)
+    _check_linking(linking, src, point_lights, sun_lights, area_lights)
     try:
         if world is None:
             world = World.constant(np.zeros(3) if environment is None else environment)
@@ -103,7 +105,7 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
     ar = None if analytic_radiance is None else np.asarray(analytic_radiance, float).reshape(3)
     solid = None if triangle_solid is None else np.asarray(triangle_solid, bool).reshape(-1)[keep] & ~two
     return PatchScene(v, t, m, patch, src, materials, point_lights, camera, ar, name, dropped, solid,
-                      two, sun_lights, area_lights, world, texture=texture, shading=shading)
+                      two, sun_lights, area_lights, world, texture=texture, shading=shading, linking=linking)
 
 
 def _world_and_suns(world, sun_lights):
@@ -115,8 +117,20 @@ def _world_and_suns(world, sun_lights):
         if sun is not None:
             sun_lights = SunLights(np.vstack([sun_lights.direction, sun["direction"]]),
                                    np.vstack([sun_lights.irradiance, sun["irradiance"]]),
-                                   np.append(sun_lights.angle, sun["angle"]), np.append(sun_lights.shadow, 1.0))
+                                   np.append(sun_lights.angle, sun["angle"]), np.append(sun_lights.shadow, 1.0),
+                                   np.append(sun_lights.link, 0))
     return world, sun_lights
+
+
+def _check_linking(linking, source, *lights):
+    """A :class:`SceneError` for link sets the linking does not have, or input faces it does not cover."""
+    sets = np.concatenate([np.asarray(lg.link, np.int64) for lg in lights])
+    n_sets = 1 if linking is None else linking.n_sets
+    if len(sets) and (sets.min() < 0 or sets.max() >= n_sets):
+        raise SceneError(f"light link sets must lie in [0, {n_sets}): the scene's light linking has {n_sets}")
+    if linking is not None and len(source) and source.max() >= len(linking.face_group):
+        raise SceneError(f"light linking: a link group for {len(linking.face_group)} input faces, "
+                         f"where the triangles come from {int(source.max()) + 1}")
 
 
 def _check_some_light(has_emitter, point_lights, sun_lights, area_lights, world):

@@ -69,7 +69,8 @@ class PointLights:
     cos(spot_size / 2); ``spot_blend`` (L,) Blender's blend in [0, 1];
     ``radius`` (L,) Blender's ``shadow_soft_size`` [m] (soft shadows; 0 = ideal point);
     ``shadow`` (L,) 1 where the light casts shadows, 0 where nothing blocks its direct light
-    (Blender's Cast Shadow off, ``Light.use_shadow``).
+    (Blender's Cast Shadow off, ``Light.use_shadow``); ``link`` (L,) the light's link set
+    (:mod:`raybundle.scene.linking`; 0: it lights everything and everything blocks it).
 
     Blender's point or spot light of power P [W] has I = P / (4 pi) W/sr; the
     cone does not renormalise it (``blender.md`` §4.4).  A spot's intensity
@@ -84,6 +85,7 @@ class PointLights:
     spot_blend: np.ndarray = None
     radius: np.ndarray = None
     shadow: np.ndarray = None
+    link: np.ndarray = None
 
     def __post_init__(self):
         self.position = _rows(np.zeros((0, 3)) if self.position is None else self.position, -1, 3, what="point lights")
@@ -94,6 +96,7 @@ class PointLights:
         self.spot_blend = _rows(self.spot_blend, n, 0, what="point lights")
         self.radius = _rows(self.radius, n, 0, what="point lights")
         self.shadow = _rows(self.shadow, n, 0, 1.0, what="point lights")
+        self.link = _rows(self.link, n, 0, what="point lights").astype(np.int64)
 
     def __len__(self):
         return len(self.position)
@@ -112,13 +115,14 @@ class PointLights:
 
     def to_arrays(self, prefix="point_light_"):
         return {prefix + k: getattr(self, k) for k in
-                ("position", "intensity", "spot_direction", "spot_cos_half_angle", "spot_blend", "radius", "shadow")}
+                ("position", "intensity", "spot_direction", "spot_cos_half_angle", "spot_blend", "radius", "shadow",
+                 "link")}
 
     @classmethod
     def from_arrays(cls, d, prefix="point_light_"):
         return cls(**{k: d.get(prefix + k) for k in
                       ("position", "intensity", "spot_direction", "spot_cos_half_angle", "spot_blend", "radius",
-                       "shadow")})
+                       "shadow", "link")})
 
 
 @dataclass
@@ -126,12 +130,13 @@ class SunLights:
     """Distant lights: ``direction`` (L, 3) unit travel direction of the light,
     ``irradiance`` (L, 3) [W/m^2] on a plane facing the light (Blender's sun
     strength times color), ``angle`` (L,) angular diameter [rad] (soft shadows), ``shadow``
-    (L,) as :class:`PointLights`'."""
+    and ``link`` (L,) as :class:`PointLights`'."""
 
     direction: np.ndarray = None
     irradiance: np.ndarray = None
     angle: np.ndarray = None
     shadow: np.ndarray = None
+    link: np.ndarray = None
 
     def __post_init__(self):
         self.direction = _rows(np.zeros((0, 3)) if self.direction is None else self.direction, -1, 3, what="sun lights")
@@ -139,19 +144,20 @@ class SunLights:
         self.irradiance = _rows(self.irradiance, n, 3, what="sun lights")
         self.angle = _rows(self.angle, n, 0, what="sun lights")
         self.shadow = _rows(self.shadow, n, 0, 1.0, what="sun lights")
+        self.link = _rows(self.link, n, 0, what="sun lights").astype(np.int64)
 
     def __len__(self):
         return len(self.direction)
 
     def to_arrays(self, prefix="sun_light_"):
-        return {prefix + k: getattr(self, k) for k in ("direction", "irradiance", "angle", "shadow")}
+        return {prefix + k: getattr(self, k) for k in ("direction", "irradiance", "angle", "shadow", "link")}
 
     @classmethod
     def from_arrays(cls, d, prefix="sun_light_"):
-        return cls(**{k: d.get(prefix + k) for k in ("direction", "irradiance", "angle", "shadow")})
+        return cls(**{k: d.get(prefix + k) for k in ("direction", "irradiance", "angle", "shadow", "link")})
 
 
-_AREA_FIELDS = ("center", "axis_u", "axis_v", "normal", "shape", "radiance", "shadow")
+_AREA_FIELDS = ("center", "axis_u", "axis_v", "normal", "shape", "radiance", "shadow", "link")
 
 
 @dataclass
@@ -162,7 +168,7 @@ class AreaLights:
     ``center`` (L, 3) [m]; ``axis_u``, ``axis_v`` (L, 3) half-extent vectors along
     the light's local X and Y [m]; ``normal`` (L, 3) the emitting direction
     (Blender: local -Z); ``shape`` (L,) 0 = rectangle, 1 = ellipse;
-    ``radiance`` (L, 3) [W m^-2 sr^-1]; ``shadow`` (L,) as :class:`PointLights`'.  Blender's
+    ``radiance`` (L, 3) [W m^-2 sr^-1]; ``shadow`` and ``link`` (L,) as :class:`PointLights`'.  Blender's
     area light of power P has L = P / (pi A) with A = 4 |u| |v| (rectangle) or pi |u| |v| (ellipse).
     """
 
@@ -173,6 +179,7 @@ class AreaLights:
     shape: np.ndarray = None
     radiance: np.ndarray = None
     shadow: np.ndarray = None
+    link: np.ndarray = None
 
     def __post_init__(self):
         self.center = _rows(np.zeros((0, 3)) if self.center is None else self.center, -1, 3, what="area lights")
@@ -183,6 +190,7 @@ class AreaLights:
         self.shape = _rows(self.shape, n, 0, what="area lights").astype(np.int64)
         self.radiance = _rows(self.radiance, n, 3, what="area lights")
         self.shadow = _rows(self.shadow, n, 0, 1.0, what="area lights")
+        self.link = _rows(self.link, n, 0, what="area lights").astype(np.int64)
 
     def __len__(self):
         return len(self.center)
@@ -231,6 +239,8 @@ class PatchScene:
         lines (:mod:`raybundle.patches.contacts`); corners weld only when their tags agree
     texture : :class:`~raybundle.scene.textures.SurfaceTexture` or None  image textures on
         the diffuse albedo of the input faces (kept through subdivision)
+    linking : :class:`~raybundle.scene.linking.LightLinking` or None  which input faces each
+        lamp lights and which block it (Blender's light and shadow linking)
     """
 
     vertices: np.ndarray
@@ -253,6 +263,7 @@ class PatchScene:
     texture: object = None
     #: :class:`~raybundle.scene.shading.ShadingNormals` of smooth-shaded faces, or None
     shading: object = None
+    linking: object = None
 
     def __post_init__(self):
         if self.triangle_two_sided is None:
@@ -453,6 +464,13 @@ class PatchScene:
         ts = self.tside_facing(triangle, direction)
         return np.where(ts >= 0, self.tside_side[np.maximum(ts, 0)], -1)
 
+    def link_groups(self, triangles):
+        """(N,) the link groups (:mod:`raybundle.scene.linking`) of ``triangles`` (N,), or None when
+        the scene has no light linking."""
+        if self.linking is None:
+            return None
+        return self.linking.face_group[self.triangle_source[np.asarray(triangles, np.int64)]]
+
     def seen_tside(self, triangle, ray_direction):
         """(N,) the tside a ray travelling along ``ray_direction`` meets on ``triangle``.
         The back of a one-sided triangle maps to its front (whose normal then faces
@@ -488,6 +506,8 @@ class PatchScene:
             d.update(self.texture.to_arrays())
         if self.shading is not None:
             d.update(self.shading.to_arrays())
+        if self.linking is not None:
+            d.update(self.linking.to_arrays())
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
                 np.savez_compressed(f, **d)

@@ -44,6 +44,7 @@ def load_npz(path) -> PatchScene:
 
 def _scene_from_arrays(path, d):
     """:func:`load_npz`'s scene from the file's arrays ``d``."""
+    from .linking import LightLinking
     from .shading import ShadingNormals
     from .textures import SurfaceTexture
 
@@ -63,4 +64,5 @@ def _scene_from_arrays(path, d):
                        triangle_source=d.get("triangle_source"), triangle_solid=d.get("triangle_solid"),
                        two_sided=d.get("triangle_two_sided", False),
                        analytic_radiance=d.get("analytic_radiance"), name=str(d.get("name", "")),
-                       texture=SurfaceTexture.from_arrays(d), shading=ShadingNormals.from_arrays(d))
+                       texture=SurfaceTexture.from_arrays(d), shading=ShadingNormals.from_arrays(d),
+                       linking=LightLinking.from_arrays(d))

@@ -229,11 +229,13 @@ class RayTracer:
         t = np.concatenate([p[1] for p in parts]).astype(float)
         return tri, t, np.concatenate([p[2] for p in parts]), np.concatenate([p[3] for p in parts])
 
-    def occluded(self, origins, directions, distances, crossed=None):
+    def occluded(self, origins, directions, distances, crossed=None, link=None):
         """(N,) bool: is anything hit between ``origins`` and ``distances`` along ``directions``?
         (A cut-out with the probability of its coverage where the ray meets it, a transmissive
         surface with the probability that the ray does not pass it.)  ``crossed``: an (N,) bool
-        array to mark the rays that passed such a surface (the outcome was random)."""
+        array to mark the rays that passed such a surface (the outcome was random).  ``link``
+        (scalar or (N,) int, or None): the rays' light link sets, whose light only the
+        triangles of the groups that block it stop (:mod:`raybundle.scene.linking`)."""
         origins = np.asarray(origins, float)
         directions = np.broadcast_to(np.asarray(directions, float), origins.shape)
         dist = np.asarray(distances, np.float32)
@@ -243,13 +245,43 @@ class RayTracer:
                              dists=np.ascontiguousarray(dist[a:b]))
 
         hit = np.concatenate(self._map_chunks(work, len(origins))) != -1
+        linking = self.scene.linking
+        partial = None
+        if linking is not None and link is not None:      # rays some triangles do not stop
+            link = np.broadcast_to(np.asarray(link, np.int64), hit.shape)
+            partial = hit & ~linking.blocks[link].all(axis=1)
         if self._through is not None and hit.any():
-            sel = np.nonzero(hit)[0]
+            sel = np.nonzero(hit if partial is None else hit & ~partial)[0]
             o, d = origins[sel], directions[sel]
             tri, t, _, _ = self._through_surfaces(o, d, *self._first_hits(o, d))
             hit[sel] = (tri >= 0) & (t < dist[sel])
             if crossed is not None:
                 crossed[sel[~hit[sel]]] = True
+        if partial is not None and partial.any():
+            sel = np.nonzero(partial)[0]
+            hit[sel] = self._linked_hits(origins[sel], directions[sel], dist[sel], link[sel])
+        return hit
+
+    def _linked_hits(self, origins, directions, dist, link):
+        """:meth:`occluded` for rays of link sets ``link`` (N,): traced on past every triangle
+        whose group does not block their set, up to ``dist`` (N,)."""
+        sc = self.scene
+        blocks, group = sc.linking.blocks, sc.linking.face_group
+        hit = np.zeros(len(origins), bool)
+        start = np.zeros(len(origins))
+        todo = np.arange(len(origins))
+        for _ in range(_MAX_PASSES):
+            o = origins[todo] + start[todo, None] * directions[todo]
+            hits = self._first_hits(o, directions[todo])
+            tri, t, _, _ = hits if self._through is None else self._through_surfaces(o, directions[todo], *hits)
+            met = (tri >= 0) & (start[todo] + t < dist[todo])
+            stops = met & blocks[link[todo], group[sc.triangle_source[np.maximum(tri, 0)]]]
+            hit[todo[stops]] = True
+            go = met & ~stops
+            start[todo[go]] += t[go] + self.eps
+            todo = todo[go]
+            if todo.size == 0:
+                break
         return hit
 
     def open_fraction(self, points_per_triangle=32, refine_points=512, seed=0):
