@@ -78,7 +78,7 @@ test-chains: $(STAMP)
 test-oldest:
 ifneq ($(PY_OLDEST),)
 	$(MAKE) --no-print-directory $(OLDEST)/.installed
-	$(OLDEST)/bin/python -m pytest -q tests/test_extension.py
+	$(OLDEST)/bin/python -m pytest -q tests/test_extension.py tests/test_blender_walk.py
 endif
 
 # Every method on the built-in scenes, 60 s each (12 minutes on 2 cores, plus 10 minutes per missing

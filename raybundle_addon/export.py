@@ -46,7 +46,14 @@ Materials override
 
 World
     :mod:`.world`: a constant Background is read directly, any other node tree is
-    evaluated by Blender into an equirectangular image; no world is black.
+    evaluated by Blender into an equirectangular image; no world is black.  A view layer's
+    World Override replaces the scene's world, as in Cycles.
+
+Settings that change Cycles' image and are not modeled are warned when they differ from
+Blender's defaults (:func:`_unmodeled_settings`): bounce limits, clamping, caustics off, Fast
+GI, culling, a texture size limit, the world's ray visibility and shadows, the view layer's
+Environment and Surfaces filters, Freestyle, multi-view; per object and lamp, shadow terminator
+offsets and a lamp's max bounces.
 
 Camera
     Lens, sensor size and fit, shift, pixel aspect, clip start, resolution x
@@ -204,6 +211,62 @@ def world_normals(n, M):
     length: by the inverse transpose of its 3 x 3 part (a non-uniform scale tilts them)."""
     out = n @ np.linalg.pinv(M[:3, :3]).astype(np.float32)
     return out / np.maximum(np.linalg.norm(out, axis=-1, keepdims=True), 1e-30)
+
+
+#: Cycles' defaults of its bounce limits: below them a file cuts light paths short on purpose
+_BOUNCES = {"max_bounces": 12, "diffuse_bounces": 4, "glossy_bounces": 4, "transmission_bounces": 12,
+            "transparent_max_bounces": 8}
+
+
+def _unmodeled_settings(scene, view_layer, world, warn):
+    """Warn about the scene, view layer and world settings that change Cycles' image and are not
+    modeled, where they differ from Blender's defaults (the module docstring lists them)."""
+    cy = getattr(scene, "cycles", None)
+    if cy is not None:
+        low = [f"{k.replace('_', ' ')} {getattr(cy, k)}" for k, d in _BOUNCES.items() if getattr(cy, k, d) < d]
+        if low:
+            warn(f"Cycles' bounce limits below its defaults ({', '.join(low)}) are not applied: raybundle renders "
+                 "every bounce")
+        if getattr(cy, "sample_clamp_direct", 0) > 0 or 0 < getattr(cy, "sample_clamp_indirect", 0) < 10:
+            warn("Cycles' sample clamping below its defaults is not applied (the image is not clamped)")
+        if not (getattr(cy, "caustics_reflective", True) and getattr(cy, "caustics_refractive", True)):
+            warn("Cycles' caustics settings (reflective or refractive off) are not applied: raybundle renders caustics")
+        if getattr(cy, "use_fast_gi", False):
+            warn("Fast GI approximation is not applied: raybundle renders full global illumination")
+        if getattr(cy, "use_camera_cull", False) or getattr(cy, "use_distance_cull", False):
+            warn("camera and distance culling is not modeled: culled objects are rendered")
+        if getattr(cy, "texture_limit_render", "OFF") != "OFF":
+            warn(f"the texture size limit ({cy.texture_limit_render}) is not applied: textures are read at full size")
+    if world is not None:
+        vis = getattr(world, "cycles_visibility", None)
+        off = [k for k in ("camera", "diffuse", "glossy", "transmission", "scatter") if not getattr(vis, k, True)]
+        if off:
+            warn(f"world {world.name!r}: world ray visibility is not modeled ({', '.join(off)} off): every ray sees it")
+        wc = getattr(world, "cycles", None)
+        if not getattr(wc, "use_shadows", True):
+            warn(f"world {world.name!r}: world shadows off is not modeled: its light is shadowed")
+        if getattr(wc, "max_bounces", 1024) < 1024:
+            warn(f"world {world.name!r}: its max bounces ({wc.max_bounces}) is not applied")
+    off = [label for key, label in (("use_sky", "Environment"), ("use_solid", "Surfaces"))
+           if not getattr(view_layer, key, True)]
+    if off:
+        warn(f"view layer {view_layer.name!r}: the view layer's filter ({', '.join(off)} off) is not modeled")
+    if scene.render.use_freestyle and getattr(view_layer, "use_freestyle", False):
+        warn("Freestyle lines are not drawn")
+    if scene.render.use_multiview:
+        warn("multi-view (stereo) is not supported: one view is rendered")
+
+
+def _object_settings(ob, warn):
+    """Warn about object ``ob``'s settings that change Cycles' image and are not modeled: shadow
+    terminator offsets other than Blender's defaults (normal 0, geometry 0.1, shading 0)."""
+    cy = getattr(ob, "cycles", None)
+    found = [(getattr(holder, k, d), d) for holder, k, d in (
+        (ob, "shadow_terminator_normal_offset", 0.0), (ob, "shadow_terminator_geometry_offset", 0.1),
+        (ob, "shadow_terminator_shading_offset", 0.0), (cy, "shadow_terminator_offset", 0.0),
+        (cy, "shadow_terminator_geometry_offset", 0.1))]
+    if any(abs(v - d) > 1e-6 for v, d in found):
+        warn(f"object {ob.name!r}: shadow terminator offsets are not modeled")
 
 
 def _ray_visible(ob, warn):
@@ -538,7 +601,9 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
     if cam_ob is not None:
         cam_ob = cam_ob.evaluated_get(depsgraph)
     camera = export_camera(cam_ob, render, size, border, warn) if cam_ob is not None or require_camera else None
-    pending = start_world_export(scene.world, warn, camera_view(cam_ob, render, camera, border))
+    world = getattr(depsgraph.view_layer, "world_override", None) or scene.world
+    _unmodeled_settings(scene, depsgraph.view_layer, world, warn)
+    pending = start_world_export(world, warn, camera_view(cam_ob, render, camera, border))
     try:
         result = _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
                                   pending.now if defer_world else pending.finish(), t0)
@@ -626,12 +691,17 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
                 portals.append(ob.original.name)
                 continue
             got = convert_light(ob.data, M, warn)
+            bounces = getattr(getattr(ob.data, "cycles", None), "max_bounces", 1024)
+            if bounces < 1024:
+                warn(f"light {ob.original.name!r}: its max bounces ({bounces}) is not applied: raybundle renders every "
+                     "bounce of its light")
             if got is not None:
                 got[1]["link"] = link_sets.set_of(ob.original)
                 lights[got[0]].append(got[1])
             continue
         if not inst.is_instance:
             _unmodeled_features(ob.original, warn)
+            _object_settings(ob.original, warn)
         if not inst.show_self or not _ray_visible(ob, warn):
             continue
         me, temp = (ob.data, False) if kind == "MESH" else (None, True)

@@ -466,6 +466,31 @@ def test_world_is_evaluated_by_blender_in_the_cores_layout(fresh):
     assert angle[rows].max() < 1.0, angle[rows].max()
 
 
+def test_a_view_layers_world_override_is_its_world(fresh):
+    """A view layer's World Override replaces the scene's world, as Cycles renders it (the scene's
+    world was exported: a blue sky where the layer asks for a red one); and settings that change
+    Cycles' image and are not modeled (bounce limits, clamping, culling, the world's ray
+    visibility, the view layer's Environment filter) are warned, each once."""
+    add_camera((0, 0, 10))
+    v, f = quad()
+    add_object("plate", v, f, [node_material("white")])
+    set_world((0.1, 0.2, 0.9), 1.0)
+    red = set_world((0.9, 0.1, 0.1), 1.0)
+    scene = bpy.context.scene
+    scene.world = bpy.data.worlds["world"]
+    if not hasattr(scene.view_layers[0], "world_override"):
+        pytest.skip("this Blender has no World Override")
+    scene.view_layers[0].world_override = red
+    assert np.allclose(export().scene.world.image.reshape(-1, 3).mean(axis=0), (0.9, 0.1, 0.1), atol=1e-6)
+    scene.cycles.max_bounces, scene.cycles.sample_clamp_direct, scene.cycles.use_camera_cull = 2, 5.0, True
+    red.cycles_visibility.camera = False
+    scene.view_layers[0].use_sky = False
+    text = "\n".join(export().warnings)
+    for expected in ("bounce limits below its defaults (max bounces 2)", "sample clamping", "culling is not modeled",
+                     "world ray visibility is not modeled (camera off)", "filter (Environment off)"):
+        assert text.count(expected) == 1, (expected, text)
+
+
 def test_material_override_and_portals(fresh):
     """The view layer's Material Override replaces every material, the lamp's emission too
     (Cycles' clay render); a light portal is no lamp."""
