@@ -403,7 +403,8 @@ def convert_light(ld, M, warn):
 
 
 def _convert_light(ld, M, warn):
-    color = light_color(ld) * light_node_factor(ld, warn)
+    factor, profile = light_node_factor(ld, warn)
+    color = light_color(ld) * factor
     power = float(ld.energy)
     normalize = bool(getattr(ld, "normalize", True))
     pos = M[:3, 3].copy()
@@ -418,8 +419,9 @@ def _convert_light(ld, M, warn):
         intensity = color * power / (4 * math.pi)
         if not normalize and r > 0:
             intensity = intensity * math.pi * r * r
+        axes = M[:3, :3].T / np.maximum(np.linalg.norm(M[:3, :3], axis=0), 1e-30)[:, None]
         d = dict(position=pos, intensity=intensity, radius=r, spot_direction=np.zeros(3),
-                 spot_cos_half_angle=-1.0, spot_blend=0.0)
+                 spot_cos_half_angle=-1.0, spot_blend=0.0, profile=profile, axes=axes)
         if getattr(ld, "use_soft_falloff", False) and r > 0:
             warn(f"light {ld.name!r}: soft falloff is not modelled (a sphere light is used)")
         if ld.type == "SPOT":
@@ -774,6 +776,13 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
     def group(cls, rows):
         if not rows:
             return cls()
+        profiles = [r.pop("profile") for r in rows if "profile" in r]
+        if profiles:          # photometric profiles: an index into their list, -1 for none
+            kept = [p for p in profiles if p is not None]
+            index = iter(range(len(kept)))
+            for r, p in zip(rows, profiles):
+                r["profile"] = -1 if p is None else next(index)
+            return cls(**{k: np.array([r[k] for r in rows]) for k in rows[0]}, profiles=kept)
         return cls(**{k: np.array([r[k] for r in rows]) for k in rows[0]})
 
     texture = None

@@ -347,7 +347,7 @@ NODES = {
        "ShaderNodeNormal ShaderNodeVectorTransform ShaderNodeTexPointDensity ShaderNodeRadialTiling "
        "ShaderNodeSqueeze ShaderNodeLightInfo ShaderNodeRaycast ShaderNodeShadowRaycast ShaderNodeLightAccumulation "
        "ShaderNodeLightEvaluation ShaderNodeLightIterInternalInput ShaderNodeLightIterInternalOutput".split()},
-    "ShaderNodeTexIES": ("W", "its IES texture"),
+    "ShaderNodeTexIES": ("M", T_LIGHTS + "test_an_ies_profile_shapes_a_lamps_light_as_in_cycles"),
     **{n: _UNSUPPORTED for n in
        "ShaderNodeBsdfHair ShaderNodeBsdfHairPrincipled ShaderNodeBsdfRayPortal ShaderNodeBsdfSheen ShaderNodeBsdfToon "
        "ShaderNodeBsdfMetallic ShaderNodeBsdfVelvet ShaderNodeEeveeSpecular ShaderNodeHoldout "

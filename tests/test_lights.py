@@ -554,3 +554,37 @@ def test_a_linked_lamp_lights_only_its_receivers_and_only_its_blockers_shadow_it
     one_unlinked = scene(["A", "B", "plane"], np.r_[0, np.ones(n - 1)], links)
     for a, b in zip(estimates(one_unlinked, on_b, np.ones(400, int)), open_a):
         assert 0 < a.mean() < 0.5 * b.mean()               # the unlinked lamp's sixth reaches B
+
+
+def test_an_ies_file_is_read_as_cycles_reads_it():
+    """:func:`raybundle.lights.ies.parse_ies`: the candela values times the multiplier, ballast and
+    photometric factors and 4 pi / 177.83; a type C quadrant mirrored to the full circle; the
+    profile's values at its grid's directions (v from straight down, h = atan2(x, y) + pi), 0
+    above its last vertical angle, and never above :attr:`Profile.peak`; type A refused with a
+    one-line error; the ``.npz`` arrays keep the profiles."""
+    from raybundle.lights.ies import CANDELA_TO_STRENGTH, IESError, parse_ies
+
+    head = "IESNA:LM-63-2002\n[TEST] x\nTILT=NONE\n1 1000 2.0 4 3 {kind} 2 0.1 0.1 0.0\n0.5 1.0 100\n"
+    text = head.format(kind=1) + "0 30 60 90\n0 45 90\n100 200 300 0\n100 400 500 0\n100 600 700 0\n"
+    p = parse_ies(text)
+    assert np.allclose(np.degrees(p.h_angles), [0, 45, 90, 135, 180, 225, 270, 315, 360])
+    assert np.allclose(p.values[[0, 1, 2]] / CANDELA_TO_STRENGTH,
+                       [[100, 200, 300, 0], [100, 400, 500, 0], [100, 600, 700, 0]])
+    assert np.allclose(p.values[4], p.values[0]) and np.allclose(p.values[6], p.values[2])
+
+    def direction(h, v):
+        h, v = np.radians(h) - np.pi, np.radians(v)
+        return np.array([[np.sin(v) * np.sin(h), np.sin(v) * np.cos(h), -np.cos(v)]])
+
+    assert p.at(direction(45, 30))[0] == pytest.approx(400 * CANDELA_TO_STRENGTH)
+    assert p.at(direction(90, 60))[0] == pytest.approx(700 * CANDELA_TO_STRENGTH)
+    assert p.at(direction(45, 120))[0] == 0.0
+    rng = np.random.default_rng(1)
+    d = rng.normal(size=(20000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    assert p.at(d).max() <= p.peak
+    with pytest.raises(IESError, match="type 3"):
+        parse_ies(head.format(kind=3) + "0 30 60 90\n0 45 90\n" + "1 " * 12)
+    lights = PointLights([[0, 0, 1.0]], [[1.0, 1, 1]], profile=[0], profiles=[p])
+    back = PointLights.from_arrays(lights.to_arrays())
+    assert np.allclose(back.profiles[0].values, p.values) and back.profile[0] == 0

@@ -89,7 +89,8 @@ class DirectLighting:
                                                   mats.emission[m].astype(float),
                                                   scene.triangle_two_sided[tri], scene))
         pl = scene.point_lights
-        self.point_lights = [PointLight(pl.position[k], pl.intensity[k], pl, k) for k in range(len(pl))
+        self.point_lights = [PointLight(pl.position[k], pl.intensity[k] * pl.peak_factor(k), pl, k)
+                             for k in range(len(pl))
                              if np.any(pl.intensity[k] > 0)]
         al = scene.area_lights
         self.area_lights += [ShapeLight(al.center[k], al.axis_u[k], al.axis_v[k], al.normal[k], bool(al.shape[k] == 1),

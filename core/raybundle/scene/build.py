@@ -210,9 +210,13 @@ def _check_lights(point, sun, area):
     """Lights must be finite, non-negative, and have usable directions and sizes."""
     for label, group in (("point/spot", point), ("sun", sun), ("area", area)):
         for k, a in vars(group).items():
+            if k == "profiles":
+                continue
             a = np.asarray(a, float)
             if not np.isfinite(a).all():
                 raise SceneError(f"{label} light {k} has non-finite values")
+    if len(point) and (point.profile.max() >= len(point.profiles) or point.profile.min() < -1):
+        raise SceneError(f"point lights: profile indices must lie in [-1, {len(point.profiles)})")
     if (point.intensity < 0).any() or (point.radius < 0).any() or (sun.irradiance < 0).any() \
             or (sun.angle < 0).any() or (area.radiance < 0).any():
         raise SceneError("light intensities, irradiances, radiances and sizes must be non-negative")

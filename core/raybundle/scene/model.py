@@ -70,7 +70,10 @@ class PointLights:
     ``radius`` (L,) Blender's ``shadow_soft_size`` [m] (soft shadows; 0 = ideal point);
     ``shadow`` (L,) 1 where the light casts shadows, 0 where nothing blocks its direct light
     (Blender's Cast Shadow off, ``Light.use_shadow``); ``link`` (L,) the light's link set
-    (:mod:`raybundle.scene.linking`; 0: it lights everything and everything blocks it).
+    (:mod:`raybundle.scene.linking`; 0: it lights everything and everything blocks it);
+    ``profile`` (L,) the light's photometric profile in ``profiles`` (a list of
+    :class:`~raybundle.lights.ies.Profile`; -1: none) and ``axes`` (L, 3, 3) its own frame (rows:
+    its local X, Y and Z axes in the world, unit), in which the profile is looked up.
 
     Blender's point or spot light of power P [W] has I = P / (4 pi) W/sr; the
     cone does not renormalise it (``blender.md`` §4.4).  A spot's intensity
@@ -86,6 +89,9 @@ class PointLights:
     radius: np.ndarray = None
     shadow: np.ndarray = None
     link: np.ndarray = None
+    profile: np.ndarray = None
+    axes: np.ndarray = None
+    profiles: list = None
 
     def __post_init__(self):
         self.position = _rows(np.zeros((0, 3)) if self.position is None else self.position, -1, 3, what="point lights")
@@ -97,13 +103,17 @@ class PointLights:
         self.radius = _rows(self.radius, n, 0, what="point lights")
         self.shadow = _rows(self.shadow, n, 0, 1.0, what="point lights")
         self.link = _rows(self.link, n, 0, what="point lights").astype(np.int64)
+        self.profile = _rows(self.profile, n, 0, -1.0, what="point lights").astype(np.int64)
+        self.axes = (np.tile(np.eye(3), (n, 1, 1)) if self.axes is None else
+                     _rows(self.axes, n, 9, what="point lights").reshape(n, 3, 3))
+        self.profiles = list(self.profiles or [])
 
     def __len__(self):
         return len(self.position)
 
     def spot_factor(self, k, travel):
-        """(N,) Cycles' spot attenuation of light ``k`` (an index, or (N,) indices) for light
-        travelling along ``travel`` (N, 3)."""
+        """(N,) the directional factor of light ``k`` (an index, or (N,) indices) for light
+        travelling along ``travel`` (N, 3): Cycles' spot attenuation times the light's profile."""
         k = np.broadcast_to(k, len(travel))
         axis = self.spot_direction[k]
         c = self.spot_cos_half_angle[k]
@@ -111,18 +121,43 @@ class PointLights:
         width = (1.0 - c) * self.spot_blend[k]
         t = np.clip(x / np.where(width > 0, width, 1.0), 0.0, 1.0)
         spot = np.where(width > 0, t * t * (3.0 - 2.0 * t), (x > 0).astype(float))
-        return np.where(np.any(axis != 0, axis=1), spot, 1.0)
+        out = np.where(np.any(axis != 0, axis=1), spot, 1.0)
+        for p in np.unique(self.profile[k][self.profile[k] >= 0]):
+            i = np.nonzero(self.profile[k] == p)[0]
+            out[i] *= self.profiles[p].at(np.einsum("nij,nj->ni", self.axes[k[i]], travel[i]))
+        return out
+
+    def peak_factor(self, k):
+        """An upper bound of light ``k``'s :meth:`spot_factor` (its profile's peak, or 1)."""
+        p = int(self.profile[k])
+        return 1.0 if p < 0 else self.profiles[p].peak
 
     def to_arrays(self, prefix="point_light_"):
-        return {prefix + k: getattr(self, k) for k in
-                ("position", "intensity", "spot_direction", "spot_cos_half_angle", "spot_blend", "radius", "shadow",
-                 "link")}
+        d = {prefix + k: getattr(self, k) for k in
+             ("position", "intensity", "spot_direction", "spot_cos_half_angle", "spot_blend", "radius", "shadow",
+              "link", "profile")}
+        d[prefix + "axes"] = self.axes.reshape(-1, 9)
+        if self.profiles:           # the profiles' grids one after another
+            d[prefix + "profile_shapes"] = np.array([p.values.shape for p in self.profiles], np.int64)
+            for part in ("h_angles", "v_angles", "values"):
+                d[prefix + "profile_" + part] = np.concatenate([getattr(p, part).ravel() for p in self.profiles])
+        return d
 
     @classmethod
     def from_arrays(cls, d, prefix="point_light_"):
+        profiles = []
+        if prefix + "profile_shapes" in d:
+            from ..lights.ies import Profile
+
+            at = np.zeros(3, np.int64)
+            for nh, nv in np.asarray(d[prefix + "profile_shapes"], np.int64):
+                h = d[prefix + "profile_h_angles"][at[0]:at[0] + nh]
+                v = d[prefix + "profile_v_angles"][at[1]:at[1] + nv]
+                profiles.append(Profile(h, v, d[prefix + "profile_values"][at[2]:at[2] + nh * nv]))
+                at += (nh, nv, nh * nv)
         return cls(**{k: d.get(prefix + k) for k in
                       ("position", "intensity", "spot_direction", "spot_cos_half_angle", "spot_blend", "radius",
-                       "shadow", "link")})
+                       "shadow", "link", "profile", "axes")}, profiles=profiles)
 
 
 @dataclass
