@@ -83,15 +83,11 @@ UNMODELED_TYPES = {"CURVES": "hair curves", "POINTCLOUD": "point clouds (e.g. Ge
 
 def _unmodeled_features(ob, warn):
     """Warn about what Cycles renders on object ``ob`` (an original mesh-like object) that the
-    export leaves out: hair particles drawn as strands, light linking on an emitting mesh."""
+    export leaves out: hair particles drawn as strands."""
     for ps in getattr(ob, "particle_systems", ()):
         st = ps.settings
         if st.type == "HAIR" and st.render_type == "PATH":
             warn(f"object {ob.name!r}: hair particles ({ps.name!r}) are not rendered")
-    link = getattr(ob, "light_linking", None)
-    if link is not None and (getattr(link, "receiver_collection", None) or getattr(link, "blocker_collection", None)):
-        warn(f"object {ob.name!r}: light linking on a mesh is not modeled (on lamps it is): its emission lights "
-             "everything and everything shadows it")
 
 
 @dataclass
@@ -267,6 +263,23 @@ def _object_settings(ob, warn):
         (cy, "shadow_terminator_geometry_offset", 0.1))]
     if any(abs(v - d) > 1e-6 for v, d in found):
         warn(f"object {ob.name!r}: shadow terminator offsets are not modeled")
+
+
+def _warn_large_linked_emitters(sc, tobj, objects, warn):
+    """One warning naming the linked emitting meshes too large for the first shot
+    (:func:`raybundle.lights.sources.small_emitters`): the bundles carry their light to every
+    surface, so their light linking is not applied."""
+    from raybundle.lights.sources import small_emitters
+
+    if sc.linking is None or not sc.linking.face_emitter.any():
+        return
+    emitter = sc.linking.face_emitter[sc.triangle_source]
+    linked = (emitter > 0) & sc.materials.is_emitter[sc.triangle_material]
+    linked &= ~np.isin(sc.triangle_material, small_emitters(sc))
+    names = sorted({objects[o].original for o in np.unique(tobj[sc.triangle_source[linked]])})
+    if names:
+        warn(f"emitting mesh{'es' if len(names) > 1 else ''} {', '.join(repr(n) for n in names[:3])}: too large for the "
+             "first shot, so their light linking is not applied (their light reaches every surface)")
 
 
 def _ray_visible(ob, warn):
@@ -663,7 +676,7 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
         return mat_index[key]
 
     cache = {}
-    verts, tris, tmats, tobj, tpoly, tloops, tnorm = [], [], [], [], [], [], []
+    verts, tris, tmats, tobj, tpoly, tloops, tnorm, temit = [], [], [], [], [], [], [], []
     # albedo textures and cut-outs: corner UVs, image per triangle, corner colors, coverage map per triangle
     tuv, timg, tcol, talpha, tnrm, tbump, images = [], [], [], [], [], [], {}
     objects = []
@@ -743,6 +756,7 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
         verts.append(pos @ M[:3, :3].T.astype(np.float64) + M[:3, 3])
         tris.append(tri.astype(np.int64) + n_vert)
         tobj.append(np.full(len(tri), len(objects), np.int32))
+        temit.append(link_sets.set_of(ob.original))          # an emitting mesh's own link set
         tpoly.append(tp)
         tloops.append(loops)
         tnorm.append(None if cn is None else world_normals(cn[loops], M))
@@ -814,9 +828,11 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
                          world=world, camera=camera, two_sided=True,
                          triangle_solid=np.zeros(len(t), bool),    # two-sided surfaces are never solids
                          name=name or scene.name, texture=texture, shading=shading,
-                         linking=link_sets.linking([(o.original, o.instancer) for o in objects], np.concatenate(tobj)))
+                         linking=link_sets.linking([(o.original, o.instancer) for o in objects], np.concatenate(tobj),
+                                                   np.array(temit, np.int64)))
     for w in caught:
         warn(str(w.message))
+    _warn_large_linked_emitters(sc, np.concatenate(tobj), objects, warn)
     _warn_overlaps(v[t], np.concatenate(tobj), objects, warn)
     _warn_curved_glass(sc, np.concatenate(tobj), objects, warn)
     far = float(np.sqrt(((v - camera.position) ** 2).sum(axis=1).max())) if camera is not None else 0.0

@@ -10,9 +10,10 @@ renders what it computes):
 - a lamp lights (or is blocked by) an object whose state is Include, and, when no object of its
   collection is included, every object not excluded.
 
-Lamps with the same two collections share a link set.  Objects are grouped by how every link
-set treats them; a collection instance's objects take the instancer's state where it has one.
-Light linking set on an emitting mesh is not modeled (the export warns).
+Lamps (and emitting meshes) with the same two collections share a link set.  Objects are
+grouped by how every link set treats them; a collection instance's objects take the
+instancer's state where it has one.  An emitting mesh's linking applies to the first shot of
+its light (:mod:`raybundle.scene.linking`).
 """
 from __future__ import annotations
 
@@ -49,13 +50,13 @@ class _Rule:
 
 
 class LinkSets:
-    """The link sets of a scene's lamps, made as lamps are met (:meth:`set_of`)."""
+    """The link sets of a scene's emitters, made as they are met (:meth:`set_of`)."""
 
     def __init__(self):
         self._sets = {}             # (receiver name, blocker name) -> (index, receives rule, blocks rule)
 
     def set_of(self, ob):
-        """The link set of lamp object ``ob`` (an original): 0 without linking."""
+        """The link set of emitter ``ob`` (an original lamp or mesh object): 0 without linking."""
         link = getattr(ob, "light_linking", None)
         receivers = getattr(link, "receiver_collection", None)
         blockers = getattr(link, "blocker_collection", None)
@@ -66,10 +67,11 @@ class LinkSets:
             self._sets[key] = (len(self._sets) + 1, _Rule(receivers), _Rule(blockers))
         return self._sets[key][0]
 
-    def linking(self, objects, triangle_object):
+    def linking(self, objects, triangle_object, emitters=None):
         """The :class:`~raybundle.scene.linking.LightLinking` of ``objects`` ((original name,
         instancer name or None) each) whose triangles are ``triangle_object`` (T,) (indices into
-        ``objects``), or None when no lamp is linked."""
+        ``objects``), with ``emitters`` (len(objects),) the link set of each object's own emission
+        (:meth:`set_of`; None: none), or None when nothing is linked."""
         from raybundle.scene.linking import LightLinking
 
         if not self._sets:
@@ -83,4 +85,5 @@ class LinkSets:
         ones = np.ones((1, len(combos)), bool)
         receives = np.vstack([ones, combos[:, 0::2].T])
         blocks = np.vstack([ones, combos[:, 1::2].T])
-        return LightLinking(np.asarray(group).reshape(-1)[triangle_object], receives, blocks)
+        emitter = None if emitters is None else np.asarray(emitters, np.int64)[triangle_object]
+        return LightLinking(np.asarray(group).reshape(-1)[triangle_object], receives, blocks, emitter)

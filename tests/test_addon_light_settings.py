@@ -179,3 +179,41 @@ def test_an_ies_texture_blender_cannot_read_is_warned(fresh):
     text = "\n".join(export_scene(bpy.context.evaluated_depsgraph_get()).warnings)
     assert text.count("light 'point': its node tree is not modeled (the IES Texture 'IES Texture' has no text") == 1, \
         text
+
+
+def test_light_linking_on_an_emitting_mesh_as_in_cycles(fresh, tmp_path):
+    """A small glowing quad (the first shot's) whose receiver collection includes floor tile A
+    only and whose blocker collection excludes the block: as Cycles renders the same file (its
+    linking was warned and not applied before)."""
+    from raybundle_addon.properties import LAST_RUN
+
+    floor_and_block()
+    bpy.data.objects.remove(bpy.data.objects["floor"])
+    for name, x0, x1 in (("tile A", -4, 0), ("tile B", 0, 4)):
+        add_object(name, [(x0, -4, 0), (x1, -4, 0), (x1, 4, 0), (x0, 4, 0)], [(0, 1, 2, 3)],
+                   [node_material(name, color=(0.5, 0.5, 0.5))])
+    glow = add_object("glow", [(-0.3, -0.3, 2.2), (0.3, -0.3, 2.2), (0.3, 0.3, 2.2), (-0.3, 0.3, 2.2)],
+                      [(0, 1, 2, 3)], [node_material("glow", kind="emission", color=(1.0, 0.9, 0.8), strength=60.0)])
+    receivers, blockers = bpy.data.collections.new("lit"), bpy.data.collections.new("blocking")
+    receivers.objects.link(bpy.data.objects["tile A"])
+    blockers.objects.link(bpy.data.objects["block"])
+    blockers.collection_objects[0].light_linking.link_state = "EXCLUDE"
+    glow.light_linking.receiver_collection = receivers
+    glow.light_linking.blocker_collection = blockers
+    assert_like_cycles(*against_cycles(tmp_path))
+    assert not [w for w in LAST_RUN[bpy.context.scene.name]["warnings"] if "linking" in w]
+
+
+def test_linking_on_an_emitting_mesh_too_large_for_the_first_shot_is_warned(fresh):
+    """An emitting mesh as large as the floor goes through the bundles, which carry its light to
+    every surface: its linking is warned, once, naming it."""
+    from raybundle_addon.export import export_scene
+
+    floor_and_block()
+    glow = add_object("ceiling", [(-4, -4, 3), (4, -4, 3), (4, 4, 3), (-4, 4, 3)], [(0, 1, 2, 3)],
+                      [node_material("glow", kind="emission", strength=2.0)])
+    receivers = bpy.data.collections.new("lit")
+    receivers.objects.link(bpy.data.objects["floor"])
+    glow.light_linking.receiver_collection = receivers
+    text = "\n".join(export_scene(bpy.context.evaluated_depsgraph_get()).warnings)
+    assert text.count("emitting mesh 'ceiling': too large for the first shot") == 1, text

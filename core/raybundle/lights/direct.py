@@ -81,13 +81,19 @@ class DirectLighting:
         self.first_shot_material = np.zeros(len(mats), bool)
         self.area_lights: list[MeshLight] = []
         if first_shot == "auto":
+            emitter = (None if scene.linking is None else
+                       scene.linking.face_emitter[scene.triangle_source])     # each face's link set
             for m in small_emitters(scene, small_fraction):
-                tri = np.nonzero(scene.triangle_material == m)[0]
+                every = np.nonzero(scene.triangle_material == m)[0]
                 self.first_shot_material[m] = True
-                cdf = np.cumsum(scene.triangle_area[tri])
-                self.area_lights.append(MeshLight(int(m), tri, cdf / cdf[-1], float(scene.triangle_area[tri].sum()),
-                                                  mats.emission[m].astype(float),
-                                                  scene.triangle_two_sided[tri], scene))
+                sets = np.zeros(len(every), np.int64) if emitter is None else emitter[every]
+                for s in np.unique(sets):         # one light per link set of the material's faces
+                    tri = every[sets == s]
+                    cdf = np.cumsum(scene.triangle_area[tri])
+                    light = MeshLight(int(m), tri, cdf / cdf[-1], float(scene.triangle_area[tri].sum()),
+                                      mats.emission[m].astype(float), scene.triangle_two_sided[tri], scene)
+                    light.link = int(s)
+                    self.area_lights.append(light)
         pl = scene.point_lights
         self.point_lights = [PointLight(pl.position[k], pl.intensity[k] * pl.peak_factor(k), pl, k)
                              for k in range(len(pl))
@@ -608,5 +614,7 @@ class DirectLighting:
                                        self.tree_pdf(np.full(len(i), l_id), k, origins[i], normals[i], hits[i]))
             p_g = self.scene.materials.glossy_pdf(mats[i], normals[i], w_in[i], w_out[i])
             w = self.mis_weight(p_g, p_l)
+            if self.linking is not None and receivers is not None:
+                lit = lit & self.linking.receives[light.link, receivers[i]]
             out[i] += (lit * (w if mirrored is None else np.where(mirrored[i], 1.0, w)))[:, None] * light.radiance
         return out

@@ -151,10 +151,11 @@ class PathTracer(ProgressiveImage, Method):
             sampled = direct.triangle_light[tri] >= 0
             if depth > 0:
                 le[sampled] = 0.0
-                p_pt, p_mat, p_n, p_wo, p_glossy = (a[h] for a in prev)
+                p_pt, p_mat, p_n, p_wo, p_glossy, p_tri = (a[h] for a in prev)
                 g = np.nonzero(sampled & p_glossy)[0]
                 if len(g):
-                    le[g] = direct.lobe_hits_light(p_pt[g], p_mat[g], p_n[g], p_wo[g], w[g], tri[g], x[g], 1)
+                    le[g] = direct.lobe_hits_light(p_pt[g], p_mat[g], p_n[g], p_wo[g], w[g], tri[g], x[g], 1,
+                                                   receivers=sc.link_groups(p_tri[g]))
             out[row] += throughput * le
             # surfaces that reflect, seen from their front
             f = np.nonzero((cos_o > 0) & self._reflects[mat])[0]
@@ -201,7 +202,7 @@ class PathTracer(ProgressiveImage, Method):
                 live = np.ones(len(row), bool)
             live &= np.any(throughput > 0, axis=1)
             k = np.nonzero(live)[0]
-            prev = (x[k], mat[k], nrm[k], w_out[k], take_glossy[k])
+            prev = (x[k], mat[k], nrm[k], w_out[k], take_glossy[k], tri[k])
             org, w = x[k] + nrm[k] * tr.eps, w_next[k]
             row, pix, throughput = row[k], pix[k], throughput[k]
         return out
