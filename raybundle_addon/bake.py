@@ -539,7 +539,7 @@ class BakeJob:
                             info.first_triangle + tx.triangle, tx.bary)
         # a million texels: a quarter of the shadow rays where they all agree (exact there: the
         # light is integrated analytically) and 4 times as many in a penumbra, which neighbouring
-        # texels share (16 times as many everywhere took several times as long: README, 'Measured
+        # texels share (16 times as many everywhere took several times as long: docs/benchmarks.md, 'Measured
         # choices behind the defaults')
         n = self.bake.light_samples
         values = baked_radiance(self.solver, pts, max(1, n // 4), rng, penumbra_samples=4 * n)

@@ -262,7 +262,7 @@ def test_frosted_glass_blurs_what_the_eye_sees_through_it_as_in_cycles(fresh, tm
     rel = col[lit] / col_ref[lit] - 1
     # measured: RMS 3.0%, largest 14% (the dark gaps, where the blur's tails are), mean x0.997;
     # at roughness 0.05: 0.8%, 2.3%, x1.000; at 0.5 the tails are narrower than Cycles' and the
-    # mean x0.971 (README, 'Glass')
+    # mean x0.971 (docs/manual.md, 'Glass')
     assert np.sqrt((rel ** 2).mean()) < 0.06 and np.abs(rel).max() < 0.3, rel
     assert ours.mean() / ref.mean() == pytest.approx(1.0, abs=0.015)
 
@@ -273,7 +273,7 @@ def test_a_glass_of_water_refracts_what_is_behind_it_as_in_cycles(fresh, tmp_pat
     overlapping its inner wall by 2 mm as modellers do) on a table before a striped wall: what
     the eye sees through glass, water and glass again, region by region against Cycles.  The
     table and wall emit (no lamp, a black world), so the image is the eye's paths alone; the
-    light under a glass on a lit table is a caustic, spread as a soft shadow here (warned; README,
+    light under a glass on a lit table is a caustic, spread as a soft shadow here (warned; docs/benchmarks.md,
     'Glass').  Cycles limits refractions (transmission bounces, 12) and reflections (glossy
     bounces, 64 in these tests' settings) apart; counting all of a path's interfaces against the
     12, as the code before did, cut the paths caught in the base and the water's walls: the

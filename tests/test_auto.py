@@ -1,6 +1,6 @@
 """The ``auto`` method (:mod:`raybundle.app.auto`): it decides from what it measures in a scene.
 
-The rule comes from the methods bench (README); these tests check that the figures it reads
+The rule comes from the methods bench (docs/benchmarks.md); these tests check that the figures it reads
 are right (against hand computations on the built-in boxes), that the choice follows them on
 rooms no test or bench tuned it on (seeded random layouts), and that the CLI prints the choice
 and writes it to ``--stats``.

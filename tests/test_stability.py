@@ -1,7 +1,7 @@
 """Where the methods fail (issue 9): small bright lights, near-mirrors, albedo close to 1,
 repeated, back-to-back and thin faces.
 
-Each test pins a behaviour the methods bench measured (README, "Where each method fails"):
+Each test pins a behaviour the methods bench measured (docs/benchmarks.md, "Where each method fails"):
 the failure itself where a method has one (a warning says so), and that nothing turns into
 NaN, Inf or unbounded energy.  Noise is measured, not assumed: two seeds' images differ by
 sqrt(2) times one image's noise (relative RMSE, :func:`raybundle.app.metrics.image_error`,
@@ -67,7 +67,7 @@ def test_near_mirror_stays_finite_and_bounded_and_the_walk_warns():
 def test_albedo_close_to_one_converges_only_slower():
     """Grey furnace, albedo 0.95 (1/(1 - a) = 20): the iteration still converges to
     Le / (1 - a) within 4.5 SE, with a longer burn-in batch; measured, its iterates'
-    correlation time grows with 1/(1 - a) (README)."""
+    correlation time grows with 1/(1 - a) (docs/benchmarks.md)."""
     sc = pipeline.prepare(scenes.furnace(resolution=(16, 16), albedo=0.95), patches=300)
     r = pipeline.make_renderer(sc, RenderSettings(sequence="prng", seed=0, resolve_samples=4))
     patch, img = batch_means(r, 8, 120)

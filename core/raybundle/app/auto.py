@@ -4,7 +4,7 @@
 glossy lobes carry, the glossy area that is nearly a mirror, the small emitters and lights
 the first shot takes, and the area that emits.  :func:`choose` turns those figures into a
 :class:`Choice` with a one-line reason, from what the methods bench measured
-(``python -m raybundle bench``; the figures are in the README, 'Measured choices behind the defaults'):
+(``python -m raybundle bench``; the figures are in the docs/benchmarks.md, 'Measured choices behind the defaults'):
 
 * no glossy lobe anywhere: the bundle iteration's view-independent path
   (``stochastic-iteration``), which measured ahead of radiosity and path tracing on ``cornell``
@@ -115,6 +115,6 @@ def choose(scene) -> Choice:
         why += (f"; {100 * f.near_mirror_share:.0f}% of the glossy reflection is near-mirror "
                 f"(roughness < {NEAR_MIRROR_ROUGHNESS}), seen through the camera's glossy bounces")
     # path tracing as the randomised quasi-Monte Carlo walk, which measured ahead of the PRNG's
-    # on every bench scene (README, 'Measured choices behind the defaults')
+    # on every bench scene (docs/benchmarks.md, 'Measured choices behind the defaults')
     sequence = "halton" if method == "path-tracing" else None
     return Choice(method, DEFAULT_PATCHES, "auto", f"{why}; {light}", f, sequence)

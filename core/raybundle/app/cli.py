@@ -221,7 +221,7 @@ def build_parser():
                    help="rays per bundle side (0 = auto)")
     r.add_argument("--gather-rays", type=bounded_number(int, -1, 65536, "an integer in [-1, 65536]"), default=-1,
                    help="final-gather rays per pixel next to concave edges and contacts: -1 (default) as many as "
-                        "a tenth of a --time run buys, none with --iterations; N a fixed count, reproducible")
+                        "a quarter of a --time run buys, none with --iterations; N a fixed count, reproducible")
     r.add_argument("--threads", type=POSITIVE_INT, default=None)
     d = r.add_mutually_exclusive_group()
     d.add_argument("--workers", type=POSITIVE_INT, help="run that many independent chains on a local Dask "

@@ -41,8 +41,8 @@ class RunOptions:
     ``seconds`` (the whole run from its start, set-up included; neither: 30 s);
     ``patches`` (0: one patch per triangle) and ``sequence``: None leaves them to ``auto``
     or the defaults; ``first_shot``: shoot the lights and small emitters first;
-    ``gather_rays``: final-gather rays per pixel next to concave edges (-1: as many as a
-    tenth of a timed run buys); ``threads``: the ray tracer's (None: all cores);
+    ``gather_rays``: final-gather rays per pixel next to concave edges (-1: as many as
+    ``RenderSettings.gather_share``, a quarter, of a timed run buys); ``threads``: the ray tracer's (None: all cores);
     ``transmission_depth`` and ``glossy_depth``: the refractions and the reflections on glass after
     which an eye path ends (None: the defaults of
     :class:`~raybundle.imaging.settings.RenderSettings`; the add-on passes the file's own Light

@@ -37,7 +37,7 @@ class CausticSplats:
         averaged over all samples drawn.  Read from the patches, the caustic is a side
         average, interpolated: sharp caustics (a glossy floor throwing the lamp onto the
         walls, with the shadow of a block in it) came out blurred over a patch or two,
-        most of the glossy box's bias, which the splats measured to cut (README, 'Measured
+        most of the glossy box's bias, which the splats measured to cut (docs/benchmarks.md, 'Measured
         choices behind the defaults')."""
         cs, sc = self.caustic, self.scene
         before = self.direct.rays
@@ -57,7 +57,7 @@ class CausticSplats:
         normal, plane) through their centres, normalised by the weights used: a density
         estimate whose kernel shrinks to a pixel once the samples are many (consistent).
         A photon lands in one pixel, so unfiltered the splats are a pixel-sized Poisson
-        count, which measured worse than filtered on ``cornell-glossy`` (README, 'Measured
+        count, which measured worse than filtered on ``cornell-glossy`` (docs/benchmarks.md, 'Measured
         choices behind the defaults')."""
         n = len(self.pixel)
         img = self.sum / max(self.samples, 1)

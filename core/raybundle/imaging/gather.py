@@ -231,7 +231,7 @@ class EdgeGather:
         fit) averages what an edge does to its triangles beside the edge, so it is wrong on its
         triangles away from the edge too: in the interior bench's hall a pillar's face, one
         patch 1.26 m tall whose top meets the lit ceiling, had its indirect light 30% too high a
-        metre below, where no probe found the ceiling (README, 'Measured choices')."""
+        metre below, where no probe found the ceiling (docs/benchmarks.md, 'Measured choices')."""
         sc, known = self.scene, self._flags
         side = sc.tside_side[tsides]
         new = np.unique(side[known[side] < 0])

@@ -1,7 +1,7 @@
 """Camera images from a solver: the measurement M L_n averaged over iterations.
 
 The pixel value is the box-filtered (one pixel wide) radiance seen through the
-pixel.  It is split into three parts, each estimated where it is cheapest and
+pixel.  It is split into four parts, each estimated where it is cheapest and
 sharpest:
 
 * **emission seen** by the eye (and the world where nothing is hit): its
@@ -269,7 +269,7 @@ class Renderer(ProgressiveImage):
         (no first-shot lights in ``direct``), else 0.  A sky through windows is then all the
         direct light, which patches a window wide carry with their finite-element error;
         beside a sun (a lamp, or one split out of the world) the world is a small part whose
-        samples mostly meet the blinds and walls (README, 'Real interiors')."""
+        samples mostly meet the blinds and walls (docs/benchmarks.md, 'Real interiors')."""
         if setting >= 0:
             return int(setting)
         world = self.scene.world
@@ -430,7 +430,7 @@ class Renderer(ProgressiveImage):
         samples), so a pixel's passes cover it evenly from the first ones on: an edge's
         coverage converges faster than with independent positions (the R_d sequence of the
         lobe and light samples, d up to 16, moved its first two coordinates only a few
-        percent of a pixel from pass to pass: README, the table of methods).
+        percent of a pixel from pass to pass: docs/benchmarks.md, the table of methods).
         Keeps the G-buffer for :meth:`accumulate_glossy`."""
         t0 = time.perf_counter()
         u = self.pass_sampler.next()
@@ -630,7 +630,7 @@ class Renderer(ProgressiveImage):
     #: the first pass's extra emission samples per pixel (at least 4; at most FIRST_EDGE_RAYS in
     #: all): the edges of lights and window bars they find get samples of their own from then on
     #: (:meth:`seen_radiance` reads the sky beside a bar only once a pixel is known to hold one;
-    #: README, 'Real interiors')
+    #: docs/benchmarks.md, 'Real interiors')
     FIRST_EDGE_SAMPLES = 16
     FIRST_EDGE_RAYS = 4_000_000
 
@@ -744,7 +744,7 @@ class Renderer(ProgressiveImage):
         (:meth:`~raybundle.imaging.gather.EdgeGather.automatic_rays`).  Once its budget is spent
         (a machine slower than at the probe, sides first seen by a sub-pixel sample probed for
         edges then), the automatic gather leaves the remaining sub-pixel samples to the patch
-        values (:func:`sample_gather_rays`; README, 'Real interiors').
+        values (:func:`sample_gather_rays`; docs/benchmarks.md, 'Real interiors').
         """
         t_start = time.perf_counter()
         sc = self.scene

@@ -152,7 +152,7 @@ class DirectLighting:
         """Whether ``light_tree='auto'`` builds a light tree: many lamps, each of which would
         otherwise cost a shadow ray at every point.  A few lamps are each sampled at every
         point: the tree's one choice among them ignores the BRDF, so a sharp lobe's small bright
-        lamp, chosen rarely, is left to the lobe's rays (README, the table of methods)."""
+        lamp, chosen rarely, is left to the lobe's rays (docs/benchmarks.md, the table of methods)."""
         return sum(not isinstance(light, SunLight) for light in lights) > cls.TREE_MIN_LIGHTS
 
     def tree_sample(self, points, normals, u):
@@ -511,7 +511,7 @@ class DirectLighting:
         samples blocked, some not) get ``penumbra_samples`` in all (default 16 times
         ``samples_per_light``): there the shadow
         ratio is a binomial proportion whose error (up to 1 / (2 sqrt(n))) dominated
-        the bake's error (README, 'Measured choices behind the defaults'), and few points are
+        the bake's error (docs/benchmarks.md, 'Measured choices behind the defaults'), and few points are
         in a penumbra.  A point's samples are a randomly shifted Kronecker (R_3) set,
         stratified over the light's triangles and their areas.  ``rng``: a Generator; ``receivers``
         (N,) or None: the points' link groups (:meth:`light_samples_at`)."""

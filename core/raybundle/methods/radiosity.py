@@ -46,7 +46,7 @@ class RadiositySolver(StochasticIterationSolver):
     #: Jacobi sweeps per step
     SWEEPS = 4
     #: matrix entries a sweep multiplies in the time of one traced bundle ray (rounded from a
-    #: timing on `cornell`: README, 'Measured choices behind the defaults')
+    #: timing on `cornell`: docs/benchmarks.md, 'Measured choices behind the defaults')
     SWEEP_ENTRIES_PER_RAY = 600.0
 
     def __init__(self, scene, tracer, direct, sequence, **kwargs):
@@ -68,7 +68,7 @@ class RadiositySolver(StochasticIterationSolver):
         multiply-adds cost about what ``3 n (n + 1) / SWEEP_ENTRIES_PER_RAY`` bundle rays do, so
         the image passes keep their share of the time (with rays alone, the O(n^2) sweeps
         starved them: the direct light stayed one pass's worth of noise for a long time on
-        ``cornell``; README, 'Measured choices behind the defaults')."""
+        ``cornell``; docs/benchmarks.md, 'Measured choices behind the defaults')."""
         n = len(self.area)
         return self.stats.rays + self.stats.iterations * self.SWEEPS * 3 * n * (n + 1) / self.SWEEP_ENTRIES_PER_RAY
 

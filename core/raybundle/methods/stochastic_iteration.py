@@ -39,7 +39,7 @@ operator), a glossy side keeps one of them drawn at random; the K bundles go
 to Embree as one threaded query and everything else per iteration (first-shot
 refinement, sent radiance of diffuse sides) is shared, which on the Cornell box measured
 more directions per second and a lower image error at a fixed time than one direction per
-iteration (README, 'Measured choices behind the defaults').
+iteration (docs/benchmarks.md, 'Measured choices behind the defaults').
 The first shot's glossy reflection leaves glossy sides by lobe-sampled rays
 (:mod:`raybundle.lights.caustics`), not through the bundles.
 
@@ -234,7 +234,7 @@ class StochasticIterationSolver(Method):
         (N, 3), one row each (an iteration's directions batched together): their diffuse
         lobe from the iterate; a sharp glossy lobe (:meth:`sharp_lobes`) by the mean of
         ``glossy_send_rays`` lobe-sampled gather rays each (2 rather than 1, which measured
-        ahead on ``cornell-glossy``; 4 gained nothing more: README, 'Measured choices behind the
+        ahead on ``cornell-glossy``; 4 gained nothing more: docs/benchmarks.md, 'Measured choices behind the
         defaults'), a weak rough one from the iterate, ``E_j f_g(t_j, s_j)`` (thesis 3.3).  A
         traced lobe that is a small share of what its side reflects is gathered only with the
         side's ``gather_chance`` q, its gathered part weighted 1 / q (Russian roulette: unbiased;
@@ -499,7 +499,7 @@ class StochasticIterationSolver(Method):
         directions) with ``rho_g`` the lobe's
         directional albedo: the end of an eye path that has already followed glossy lobes,
         where ``E f_g(t, w_out)`` for one direction ``t`` is heavy-tailed (a near-mirror lobe
-        lined up with ``t`` makes single pixels far too bright: README, 'Measured choices behind
+        lined up with ``t`` makes single pixels far too bright: docs/benchmarks.md, 'Measured choices behind
         the defaults').
         """
         mats = self.scene.materials

@@ -60,7 +60,8 @@ from .layout import (bisect_long, cut_at_contacts, edge_for_patches, longest_edg
                      subdivide)
 
 #: the patch count of a scene laid out without an explicit one (sides; the count that measured best
-#: at a fixed time across scene sizes: README, 'Measured choices behind the defaults'; :mod:`raybundle.app.auto`)
+#: at a fixed time across scene sizes: docs/benchmarks.md, 'Measured choices behind the defaults';
+#: :mod:`raybundle.app.auto`)
 DEFAULT_PATCHES = 4000
 #: cube-map cells per face edge for the normal direction of a cluster (150 directions; odd, so
 #: that axis-aligned normals lie mid-cell, never on a border rounding could flip)
@@ -352,7 +353,7 @@ def world_view_classes(tracer, points, normals, rays=WORLD_VIEW_RAYS, seed=0):
     A cluster is one unknown: the facets of a window's reveal out in the sky and those
     inside the room share its mean irradiance, so the inner ones send the sky's light on
     into the room, a finite-element leak that no patch count finer than the scene's frames
-    and reveals are thin removes (README, 'Real interiors').  Clusters therefore keep sides
+    and reveals are thin removes (docs/benchmarks.md, 'Real interiors').  Clusters therefore keep sides
     of different classes apart (module docstring).
 
     The rays of a side are one cosine-weighted spiral (ray k at ``sin theta = sqrt((k + 1/2) /

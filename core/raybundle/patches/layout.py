@@ -181,7 +181,7 @@ def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene
     # faces the user meshed finer than the patches are cut too: a ceiling cut into a grid over
     # a lamp hanging under it must still trap the lamp's upper light.  Up to CONTACT_ALL_MAX
     # triangles all of them (crossings too: a post through a floor); beyond, the cut is a
-    # per-triangle loop, too slow for every triangle of a large scene (README, 'Where the method
+    # per-triangle loop, too slow for every triangle of a large scene (docs/benchmarks.md, 'Where the method
     # is weak'), so only those found straddling a gap or piercing a surface.
     tol = CONTACT_SHARE * max_edge
     todo = np.zeros(len(scene.triangles), bool)

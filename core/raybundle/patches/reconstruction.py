@@ -30,7 +30,7 @@ functions, and, as ``c_s`` is the centroid, each fit keeps the cluster's mean.
 The image and the bakes read the diffuse indirect light through :meth:`projected` (the
 caustic first shot, sharp-edged, through :meth:`averaged`: :meth:`smooth_and_sharp`).  Tried and dropped: sending each diffuse
 side's first shot into the bundles from its projection at the point a bundle line leaves
-it (no change of the Cornell error, more solver time: README, 'Measured choices behind the
+it (no change of the Cornell error, more solver time: docs/benchmarks.md, 'Measured choices behind the
 defaults'): a patch-wide linear fit of a steep fall-off is no closer near the edge than the
 patch mean.
 """
@@ -107,7 +107,7 @@ class LinearReconstruction:
         """Side values (S, C) -> (V, C): :meth:`projected` of ``side_values - sharp`` plus
         :meth:`averaged` of ``sharp`` (S, C) (the caustic first shot: sharp-edged and
         noisy, which a projection would ring on; projected, it measured worse on ``cornell-glossy``:
-        README, 'Measured choices behind the defaults')."""
+        docs/benchmarks.md, 'Measured choices behind the defaults')."""
         return self.smooth_and_sharp_many([(side_values, sharp)])[0]
 
     def smooth_and_sharp_many(self, pairs):

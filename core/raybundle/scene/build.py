@@ -157,7 +157,7 @@ def coincident_triangles(v, t, m, two_sided, merge=True):
 
     Along a bundle line, hits closer than the tracer's ``eps`` are one surface: only one of
     two coincident triangles takes part in each line's transfer, so a duplicated face
-    receives on about half of its lines (a furnace's duplicated block came out dark: README,
+    receives on about half of its lines (a furnace's duplicated block came out dark: docs/benchmarks.md,
     'Where the method is weak'),
     and for a one-sided face with a reversed copy behind it (a sheet seen from both sides),
     eye rays and bundle lines meet the black back half of the time (half the sheet black,

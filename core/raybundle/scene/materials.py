@@ -344,7 +344,7 @@ class MaterialTable:
         By reciprocity this is also the hemispherical reflectance for light
         arriving from w_out.  The GGX part comes from a table in cos_out,
         integrated once per distinct alpha (:func:`ggx_albedo`, a quadrature worth caching:
-        README, 'Measured choices behind the defaults'), linearly interpolated.
+        docs/benchmarks.md, 'Measured choices behind the defaults'), linearly interpolated.
         """
         mat = np.asarray(mat)
         mu = np.clip(np.asarray(cos_out, float), 0.0, 1.0)
@@ -614,7 +614,7 @@ def sample_ggx_reflection(alpha, normal, w_out, u):
     ``E[weight * L(w_i)]`` is the lobe's reflected radiance (untinted).  Drawing h from
     D(h) (n.h) instead gave ``G2 (h.w_out) / (cos_out cos_h)``, up to about 2 / alpha
     where the lobe is seen at grazing angles: eye paths off the side of a glossy block
-    carried many times the lamp's light into single pixels (README, 'Where the method is weak').
+    carried many times the lamp's light into single pixels (docs/benchmarks.md, 'Where the method is weak').
     """
     alpha = np.broadcast_to(np.asarray(alpha, float), (len(normal),))
     h = sample_ggx_visible_normal(alpha, normal, w_out, u)
@@ -816,7 +816,7 @@ def principled_material(base_color, metallic=0.0, roughness=0.5, ior=1.5, specul
     Measured against Cycles (a plane under a white world, radiance = directional albedo),
     the mapping matches it up to Cycles' own lookup-table interpolation, where a plain
     Mix(Diffuse, Glossy GGX) with fac = metallic + (1 - metallic) F0, or even the best
-    constant Mix per material, is far off, most for dark bases (the figures: README,
+    constant Mix per material, is far off, most for dark bases (the figures: docs/benchmarks.md,
     'Measured choices behind the defaults').  ``tests/test_principled.py``
     re-measures a dozen of these points.
     """

@@ -11,7 +11,7 @@ def unique_rows(a):
     lexicographic order of the values) and each row's value id.  By one 1-D sort of a
     mixed-radix key of the columns (the widest made dense ranks first, one by one, while their
     spans are too wide for 63 bits), else by one lexsort; np.unique on rows sorts them as opaque bytes, much slower on
-    millions of rows (README, 'Measured choices behind the defaults')."""
+    millions of rows (docs/benchmarks.md, 'Measured choices behind the defaults')."""
     a = np.asarray(a)
     if len(a) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
