@@ -62,3 +62,14 @@ def test_every_relative_link_of_the_readme_and_the_docs_exists():
                 if anchor not in headings:
                     bad.append((page.name, target))
     assert not bad, bad
+
+
+def test_no_docstring_or_comment_quotes_a_before_and_after_figure_or_a_date():
+    """Docstrings and comments in ``core/`` and ``raybundle_addon/`` state contracts and equations:
+    before-and-after figures (``3.27% -> 2.92%``) and dates belong to docs/benchmarks.md and
+    CHANGELOG.md."""
+    figure = re.compile(r"\d(\.\d+)?\s*%\s*(->|→)|(->|→)\s*\d+(\.\d+)?\s*(/\s*\d+(\.\d+)?\s*)?%|\b20\d\d-\d\d-\d\d\b")
+    found = [f"{path.relative_to(ROOT)}:{k}" for path in [*ROOT.glob("core/raybundle/**/*.py"),
+                                                           *ROOT.glob("raybundle_addon/*.py")]
+             for k, line in enumerate(path.read_text().split("\n"), 1) if figure.search(line)]
+    assert not found, found

@@ -21,8 +21,7 @@ wall's direct light falls to zero towards the ceiling): there the hit's direct
 irradiance is estimated at the hit point itself
 (:meth:`~raybundle.lights.direct.DirectLighting.irradiance`, ``near_light_samples`` shadow
 rays per light).  ``tests/test_baking.py`` pins the corner profile against a
-brute-force integral; on the Cornell bake (280 iterations) 6% of the rays land near,
-and the error falls from 1.23% to 0.97% (1.36% reading the Gouraud average).
+brute-force integral.
 
 Bakes gather at every vertex and corner (:func:`raybundle.imaging.baking.baked_radiance`);
 images only where the patch values are not to be trusted (on the patches that
@@ -134,7 +133,7 @@ class FinalGather:
         The iterate's ``E f_g(t, w_out)`` would be the plain choice, but a gather reads it
         once, from one direction ``t``: a sharp lobe lined up with ``t`` makes single
         gather rays hundreds of times too bright, and unlike the image's per-iteration
-        terms nothing averages them (``cornell-glossy`` at 30 s: 15% error with it, 4% without the gather)."""
+        terms nothing averages them."""
         sv, sc = self.solver, self.scene
         out = np.zeros((len(points), 3))
         mat = sc.triangle_material[sc.tside_triangle[tside]]
@@ -169,8 +168,7 @@ def near_edge_tsides(scene, tracer, rng, tsides=None, probes=PROBES, reach=1.0, 
     above them (a concave edge, a contact, an object close by): any of ``probes`` (one count,
     or (N,) per side) cosine-distributed rays from uniformly random points of the side meets
     a surface within that distance.  Sides that reflect no diffuse light are never flagged.
-    (On ``cornell`` one patch size flags 22% of the sides, two 31%, for the same image error:
-    1.45% and 1.43% with 1,024 rays.)  Traced about ``chunk`` rays at a time: an image asks
+    Traced about ``chunk`` rays at a time: an image asks
     only for the sides its pixels see, whatever the scene's size."""
     tsides = np.arange(len(scene.tside_triangle)) if tsides is None else np.asarray(tsides, np.int64)
     counts = np.broadcast_to(np.asarray(probes, np.int64), len(tsides))
@@ -204,10 +202,7 @@ class EdgeGather:
     MIN_GATHER_RAYS = 32
     #: how many times ``v / b^2`` rays the gather needs to pay (:meth:`automatic_rays`).  The
     #: gather's rays are stratified, so its noise falls faster than ``v / n``, and a probe's
-    #: rays miss the rare bright ones, so ``v`` comes out low: the two about cancel.  On
-    #: ``cornell`` after 180 iterations (unbiased patches, where a gather of 50-75 rays at 10 s
-    #: did harm) the probe measures ``v / b^2`` 255-685, in the interior bench's dining room
-    #: 44-58 and in its hall at most 32, where the gather takes the error at 60 s from 5.6% to 4%
+    #: rays miss the rare bright ones, so ``v`` comes out low: the two about cancel
     NOISE_MARGIN = 1.0
     #: the probe: up to this many points on flagged sides, this many gather rays each (16 rays
     #: left the estimate of ``b^2``, a difference of two near numbers, so noisy that ``v / b^2``
@@ -229,9 +224,7 @@ class EdgeGather:
         triangle sides with :data:`PROBES` rays in all, shared by area
         (:meth:`~raybundle.scene.model.PatchScene.tside_samples`).  A patch's value (a cluster's linear
         fit) averages what an edge does to its triangles beside the edge, so it is wrong on its
-        triangles away from the edge too: in the interior bench's hall a pillar's face, one
-        patch 1.26 m tall whose top meets the lit ceiling, had its indirect light 30% too high a
-        metre below, where no probe found the ceiling (docs/benchmarks.md, 'Measured choices')."""
+        triangles away from the edge too (docs/benchmarks.md, 'Measured choices')."""
         sc, known = self.scene, self._flags
         side = sc.tside_side[tsides]
         new = np.unique(side[known[side] < 0])

@@ -508,9 +508,7 @@ class Renderer(ProgressiveImage):
         (one per pixel): each pixel's light samples then continue, light by light, one randomly
         shifted R_3 sequence over the passes, the penumbra samples of pass p taking indices
         p c .. p c + c - 1 (c = ``penumbra_samples``), the others the first of those.  A penumbra's
-        shadow rays thus stay stratified over the light across passes (the interior bench's
-        hall, lit mostly by a 33 m^2 panel through its openings, at fixed work: direct light's
-        noise per image 3.27% -> 2.92%).
+        shadow rays thus stay stratified over the light across passes.
 
         The diffuse lobe of polygonal lights takes their exact unoccluded irradiance
         as a control variate (:meth:`~raybundle.lights.direct.DirectLighting.reflected_radiance`
@@ -522,13 +520,11 @@ class Renderer(ProgressiveImage):
         for that light, a randomly shifted Kronecker set, and one for the others: the flags
         are kept per pixel and light (:func:`~raybundle.lights.direct.light_bits`), so a hall
         of 13 lamps spends its penumbra rays on the lamps whose shadow edges cross the pixel.
-        Those lamps share the pixel's ``penumbra_samples`` (rounded up, at least one each): the
-        hall's pixels have two to four of them, and 8 each made its passes dear (full materials
-        at 50 s, seeds 3-6: mean error 10.1% -> 9.5%; clay 2.65 / 2.57% -> 2.65 / 2.55%).  Both choices use earlier passes only,
-        so every pass stays unbiased.  The first pass, with no earlier samples, treats every
-        pixel as a penumbra (with the control variate): its plain one-ray estimate, a
-        sixteenth of the image at 5 s, put single lit pixels 50-90% off and made up most of
-        the per-pass noise there (``cornell`` at 5 s: 3.4 / 3.2% -> 2.9 / 2.8%)."""
+        Those lamps share the pixel's ``penumbra_samples`` (rounded up, at least one each), so a
+        pixel's penumbra costs the same however many lamps cross it.  Both choices use earlier
+        passes only, so every pass stays unbiased.  The first pass, with no earlier samples,
+        treats every pixel as a penumbra (with the control variate), so single lit pixels are
+        not left to a plain one-ray estimate."""
         out = np.zeros((len(g.triangle), 3))
         h = np.nonzero(g.hit)[0]
         front = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]) > 0
@@ -611,9 +607,7 @@ class Renderer(ProgressiveImage):
         """(pixels,) uint64: per pixel, the lights whose earlier shadow rays there or in one of
         its four neighbours both reached and missed the light.  A light that a small blocker
         hides from 1% of a pixel's view is found blocked by one pass in a hundred, whose
-        estimate then drops to nothing: the neighbours' flags find such pixels sooner (the
-        hall's stair block speckled; fixed work, direct light's noise per image 2.77% -> 2.40%,
-        with 9 passes in place of 12)."""
+        estimate then drops to nothing: the neighbours' flags find such pixels sooner."""
         f = self.shadow_flags
         pen = (f[:, 0] & f[:, 1]).reshape(self.camera.height, self.camera.width)
         out = pen.copy()
@@ -831,9 +825,7 @@ class Renderer(ProgressiveImage):
     #: the image's final gather reads the patch values at every hit, however near
     #: (:class:`~raybundle.imaging.gather.FinalGather`'s ``near`` 0): the direct light estimated
     #: at hits within a patch size of the gathering point (bakes do, where a vertex's value is
-    #: final) cost 6 times as much per ray in the interior bench's hall (13 lamps) and took no
-    #: noise away; at 60 s it had 48 rays per pixel where it now has about 350: 4.44 / 4.18% ->
-    #: 4.04 / 3.80% (seeds 3, 4)
+    #: final) costs many times as much per ray where lamps are many and takes no noise away
     GATHER_NEAR = 0.0
 
     def automatic_gather_pays(self, gather_seconds):
@@ -891,13 +883,9 @@ class Renderer(ProgressiveImage):
         rays: :meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.work_rays`; the first call also
         makes the first pass, whose rays, with every pixel a penumbra, are set-up, not the
         passes' average; passes grow when penumbrae are found, so the ratio is re-read every
-        time).  By default s = 0.2 for diffuse scenes, against 0.25: ``cornell`` at 5 s 2.65 /
-        2.53% against 2.90 / 2.80%, at 30 s 1.27 / 1.19% against 1.28 / 1.23% (seeds 3, 4; 0.15:
-        2.51 / 2.73% at 5 s); and 0.55 with glossy lobes, whose eye paths the passes trace and
-        whose caustic they splat: ``cornell-glossy`` (seeds 3-6) at 5 s 9.6% mean against 10.8%
-        at 0.35, at 30 s 3.46% against 3.76% (0.45: 3.55%), the 99.9th percentile of the
-        per-pixel error 0.20-0.23 against 0.26-0.27 on three of the seeds (0.36 on the fourth
-        at both); at 120 s 2.03 / 1.78% (seeds 3, 4)."""
+        time).  By default s = 0.2 for diffuse scenes and 0.55 with glossy lobes, whose eye paths
+        the passes trace and whose caustic they splat (docs/benchmarks.md, 'Measured choices
+        behind the defaults')."""
         self._planned = None
         solver = self.solver
         if self.passes == 0:

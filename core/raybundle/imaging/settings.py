@@ -9,83 +9,82 @@ from ..tracing.sampling import DEFAULT_SEQUENCE
 
 @dataclass
 class RenderSettings:
-    """Settings shared by the CLI, the add-on and the bench (plain values only).
+    """Settings shared by the CLI, the add-on and the bench (plain values only); each field is
+    documented beside it.  :meth:`validate` checks them before any work."""
 
-    ``bundle_resolution``: rays per side of each bundle grid (0 = about one
-    cell per patch, :func:`~raybundle.methods.stochastic_iteration.auto_bundle_resolution`); ``sequence``: the
-    random sequence name; ``light_samples``: shadow rays per light per pixel per
-    image pass; ``image_ray_share``: fraction of traced rays spent on image
-    passes (the rest on bundles), 0 = automatic: 0.2 for diffuse scenes, 0.55 where the
-    passes' eye paths also carry glossy lobes (:meth:`Renderer.step`); ``resolve_samples``: sub-pixel positions for
-    the diffuse indirect part; ``smooth``: interpolate patch values;
-    ``glossy_gather``: estimate the glossy lobe seen by the eye with one
-    importance-sampled eye ray per pixel and pass (see :meth:`~raybundle.imaging.glossy_paths.GlossyEyePaths.gather`)
-    instead of the per-iteration ``E f(t, w_eye)``, following up to
-    ``glossy_gather_depth`` glossy bounces; ``emission_edge_samples``:
-    extra samples per pass (a jittered s x s grid, rounded to a square) for the
-    pixels on the edge of a visible emitter and those whose passes disagree
-    most (:meth:`Renderer._noisy_pixels`); ``directions_per_step``: bundle directions
-    per iteration, traced together (:meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.step`);
-    ``caustics``: the first shot's glossy reflection by lobe-sampled rays (:mod:`raybundle.lights.caustics`)
-    instead of through the bundles; ``glossy_mis``: with ``glossy_gather``, the mesh lights a
-    glossy lobe reflects are estimated by light samples and by the lobe's ray together
-    (multiple importance sampling, power heuristic) instead of by light samples alone;
-    ``glossy_send_rays``: lobe-sampled rays per glossy side and bundle direction that gather
-    what the side's glossy lobe sends
-    (:meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.glossy_sent_radiance`);
-    ``gather_rays``: final-gather rays per pixel where the patch values are not to be trusted
-    (next to concave edges and contacts, :mod:`raybundle.imaging.gather`), 0 = none, -1 = as many as
-    ``gather_share`` of the run's seconds buys, in runs limited by time (none in runs of given
-    iterations, which stay reproducible, nor in images formed without a budget of seconds):
-    :meth:`Renderer.diffuse_indirect`;
-    ``light_tree``: the first-shot lamps and emitting triangles chosen per point by a light
-    tree (:mod:`raybundle.lights.light_tree`), ``light_samples`` of them per point and pass, in
-    place of a shadow ray per lamp: 'on', 'off', or 'auto' (many lamps, or a curved mesh light of
-    many triangles: :meth:`~raybundle.lights.direct.DirectLighting.wants_tree`);
-    ``penumbra_samples``: shadow rays per pass at the pixels where a light's earlier
-    samples were both seen and blocked, shared by the lights whose shadow edges cross the
-    pixel, at least one each (:meth:`Renderer._shade`);
-    ``caustic_splats``: with a caustic first shot, its samples per pixel and image pass that
-    light-trace the caustic on the surfaces the eye sees into the pixels
-    (:meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`), 0 = read it from the patches as the rest of the
-    diffuse indirect light;
-    ``world_samples``: shadow rays per visible point and image pass towards a world that
-    changes with direction, drawn by its brightness and by where the bundles found the sky
-    open from the point's side (:class:`~raybundle.lights.world_light.WorldLight`), for the diffuse lobe's direct light
-    from the world; 0 = the patches carry it, as the rest of the diffuse light; -1 (the
-    default) = 4 where the world is the only light, else 0
-    (:meth:`Renderer.automatic_world_samples`: beside a sun most such rays meet blinds and
-    walls, and the few through a window make single pixels bright);
-    ``transmission_depth``: the interfaces of glass, refraction and transparent surfaces an eye
-    path is refracted by before it ends at the next (black), Cycles' default
-    transmission bounces (:mod:`raybundle.scene.transmission`, :meth:`Renderer.trace_gbuffer`);
-    ``glossy_depth``: the reflections on them (total internal ones included) after which a path
-    ends at the next, black, Cycles' default glossy bounces.
-    """
-
+    #: rays per side of each bundle grid (0: about one cell per patch,
+    #: :func:`~raybundle.methods.stochastic_iteration.auto_bundle_resolution`)
     bundle_resolution: int = 0
+    #: the random sequence's name (:mod:`raybundle.tracing.sampling`)
     sequence: str = DEFAULT_SEQUENCE
+    #: the random seed: runs of given iterations are reproducible with it
     seed: int = 0
+    #: 'auto': small lights and emitters are shot first (thesis 3.4); 'none': only the bundles
     first_shot: str = "auto"
+    #: the first-shot lamps and emitting triangles chosen per point by a light tree
+    #: (:mod:`raybundle.lights.light_tree`), ``light_samples`` of them per point and pass, in place
+    #: of a shadow ray per lamp: 'on', 'off', or 'auto' (many lamps, or a curved mesh light of many
+    #: triangles: :meth:`~raybundle.lights.direct.DirectLighting.wants_tree`)
     light_tree: str = "auto"
+    #: shadow rays per light per pixel per image pass
     light_samples: int = 1
+    #: the share of traced rays spent on image passes (the rest on bundles); 0: automatic, 0.2 for
+    #: diffuse scenes, 0.55 where the passes' eye paths also carry glossy lobes (:meth:`Renderer.step`)
     image_ray_share: float = 0.0
+    #: sub-pixel positions at which the diffuse indirect part is resolved
     resolve_samples: int = 16
+    #: interpolate the patch values across smooth surfaces
     smooth: bool = True
+    #: the glossy lobe the eye sees by one importance-sampled eye ray per pixel and pass
+    #: (:meth:`~raybundle.imaging.glossy_paths.GlossyEyePaths.gather`), not the per-iteration
+    #: ``E f(t, w_eye)``
     glossy_gather: bool = True
+    #: the glossy bounces those eye rays follow
     glossy_gather_depth: int = 3
+    #: extra samples per pass (a jittered s x s grid, rounded to a square) for the pixels on the edge
+    #: of a visible emitter and those whose passes disagree most (:meth:`Renderer._noisy_pixels`)
     emission_edge_samples: int = 16
+    #: bundle directions per iteration, traced together
+    #: (:meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.step`)
     directions_per_step: int = 16
+    #: the first shot's glossy reflection by lobe-sampled rays (:mod:`raybundle.lights.caustics`),
+    #: not through the bundles
     caustics: bool = True
+    #: with ``glossy_gather``, the mesh lights a glossy lobe reflects are estimated by light samples
+    #: and by the lobe's ray together (multiple importance sampling, power heuristic)
     glossy_mis: bool = True
+    #: lobe-sampled rays per glossy side and bundle direction that gather what the side's glossy lobe
+    #: sends (:meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.glossy_sent_radiance`)
     glossy_send_rays: int = 2
+    #: final-gather rays per pixel where the patch values are not to be trusted (next to concave
+    #: edges and contacts, :mod:`raybundle.imaging.gather`): 0 none; -1 as many as ``gather_share``
+    #: of the run's seconds buys, in runs limited by time (none in runs of given iterations, which
+    #: stay reproducible, nor in images formed without a budget of seconds):
+    #: :meth:`Renderer.diffuse_indirect`
     gather_rays: int = -1
+    #: the share of a timed run's seconds the automatic final gather may take
     gather_share: float = 0.25
+    #: shadow rays per pass at the pixels where a light's earlier samples were both seen and blocked,
+    #: shared by the lights whose shadow edges cross the pixel, at least one each (:meth:`Renderer._shade`)
     penumbra_samples: int = 8
+    #: with a caustic first shot, its samples per pixel and image pass that light-trace the caustic on
+    #: the surfaces the eye sees into the pixels (:meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`);
+    #: 0: read it from the patches as the rest of the diffuse indirect light
     caustic_splats: float = 1.0
+    #: shadow rays per visible point and image pass towards a world that changes with direction,
+    #: drawn by its brightness and by where the bundles found the sky open from the point's side
+    #: (:class:`~raybundle.lights.world_light.WorldLight`), for the diffuse lobe's direct light from
+    #: the world; 0: the patches carry it; -1: 4 where the world is the only light, else 0
+    #: (:meth:`Renderer.automatic_world_samples`)
     world_samples: int = -1
+    #: the interfaces of glass, refraction and transparent surfaces an eye path is refracted by before
+    #: it ends, black, at the next: Cycles' default transmission bounces
+    #: (:mod:`raybundle.scene.transmission`, :meth:`Renderer.trace_gbuffer`)
     transmission_depth: int = 12
+    #: the reflections on them (total internal ones included) after which a path ends, black, at the
+    #: next: Cycles' default glossy bounces
     glossy_depth: int = 4
+    #: the ray tracer's threads (None: all cores)
     threads: int | None = None
 
 

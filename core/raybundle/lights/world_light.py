@@ -13,8 +13,8 @@ shadow ray per sample.  Every pixel that sends light can be drawn, so the estima
 unbiased.  Bright skies and suns seen through windows are found at once, where cosine
 sampling or the patch solution meet them by chance or smear them over a patch.
 
-Through a room's windows most of the sky is hidden: drawn by brightness alone, 1.7% of the
-living room's samples reached the sky (the interior bench, docs/benchmarks.md).  Each side then draws
+Through a room's windows most of the sky is hidden: drawn by brightness alone, few samples
+reach the sky (docs/benchmarks.md).  Each side then draws
 ``GUIDE_SHARE`` of its samples by a *guide*, a distribution over cells of the sky: what the
 solver's bundles brought the side from each cell, and what the image passes' own samples on
 that side found open (:meth:`WorldLight.learn`: ``L cos / pdf`` of each unblocked sample by its

@@ -243,8 +243,7 @@ def refine_crowded(scene: PatchScene, which, h, tracer):
 
     A patch is one value over its area: a floor patch h wide reaching under a stair step
     h / 8 above it averages the lit floor in front with the dark floor beneath, and the step's
-    underside, which sees only that floor, is lit by the average.  (The interior bench's hall,
-    h = 1.2 m at 4,000 patches: the floor in front of its lowest step 15% too bright.)
+    underside, which sees only that floor, is lit by the average.
     ``tracer``: a :class:`~raybundle.tracing.visibility.RayTracer` over ``scene``'s surfaces.  Returns ``(scene, row, crowded)``: ``row`` (T',) the triangle of ``scene`` each new
     one came from, ``crowded`` the count of triangles cut."""
     which = np.asarray(which, np.int64)
