@@ -40,6 +40,21 @@ def floor_and_block():
     return lamp
 
 
+def two_tiles():
+    """:func:`floor_and_block`'s floor cut in two objects, tile A (x < 0) and tile B (x > 0)."""
+    bpy.data.objects.remove(bpy.data.objects["floor"])
+    for name, x0, x1 in (("tile A", -4, 0), ("tile B", 0, 4)):
+        add_object(name, [(x0, -4, 0), (x1, -4, 0), (x1, 4, 0), (x0, 4, 0)], [(0, 1, 2, 3)],
+                   [node_material(name, color=(0.5, 0.5, 0.5))])
+
+
+def light_nodes(lamp):
+    """The node tree of ``lamp``'s light (Blender 4.x makes it with Use Nodes)."""
+    if lamp.data.node_tree is None:
+        lamp.data.use_nodes = True
+    return lamp.data.node_tree
+
+
 def against_cycles(tmp_path, iterations=24):
     """(ours (A, B), Cycles' (A, B)), two seeds each."""
     ours = [render_raybundle(tmp_path / f"rb{s}.exr", iterations=iterations, seed=s) for s in (1, 2)]
@@ -52,10 +67,7 @@ def test_a_lights_node_tree_scales_its_emission_as_in_cycles(fresh, tmp_path):
     (an RGB node) on the lamp's own nodes: 3 x (1, 0.35, 0.2) its light, as Cycles renders it
     (the tree was not read: x0.6 of Cycles' mean)."""
     lamp = floor_and_block()
-    nt = lamp.data.node_tree
-    if nt is None:                          # Blender 4.x: a light's nodes start with Use Nodes
-        lamp.data.use_nodes = True
-        nt = lamp.data.node_tree
+    nt = light_nodes(lamp)
     em = next(n for n in nt.nodes if n.type == "EMISSION")
     rgb, fall = nt.nodes.new("ShaderNodeRGB"), nt.nodes.new("ShaderNodeLightFalloff")
     rgb.outputs[0].default_value = (1.0, 0.35, 0.2, 1.0)
@@ -106,11 +118,7 @@ def test_light_and_shadow_linking_on_lamps_as_in_cycles(fresh, tmp_path):
     from raybundle_addon.properties import LAST_RUN
 
     floor_and_block()
-    floor = bpy.data.objects["floor"]
-    for name, x0, x1 in (("tile A", -4, 0), ("tile B", 0, 4)):
-        add_object(name, [(x0, -4, 0), (x1, -4, 0), (x1, 4, 0), (x0, 4, 0)], [(0, 1, 2, 3)],
-                   [node_material(name, color=(0.5, 0.5, 0.5))])
-    bpy.data.objects.remove(floor)
+    two_tiles()
     spot = add_light("SPOT", location=(0.3, -0.4, 2.6), rotation=(0.1, 0.0, 0), energy=900.0, spot_size=1.8,
                      shadow_soft_size=0.0, use_soft_falloff=False)
     receivers, excluded, blockers = (bpy.data.collections.new(n) for n in ("lit", "not lit", "blocking"))
@@ -153,10 +161,7 @@ def test_an_ies_profile_shapes_a_lamps_light_as_in_cycles(fresh, tmp_path):
     lamp.data.energy = 40.0
     text = bpy.data.texts.new("profile.ies")
     text.from_string(IES_TEXT)
-    nt = lamp.data.node_tree
-    if nt is None:
-        lamp.data.use_nodes = True
-        nt = lamp.data.node_tree
+    nt = light_nodes(lamp)
     ies = nt.nodes.new("ShaderNodeTexIES")
     ies.mode, ies.ies = "INTERNAL", text
     ies.inputs["Strength"].default_value = 1.5
@@ -170,10 +175,7 @@ def test_an_ies_texture_blender_cannot_read_is_warned(fresh):
     from raybundle_addon.export import export_scene
 
     lamp = floor_and_block()
-    nt = lamp.data.node_tree
-    if nt is None:
-        lamp.data.use_nodes = True
-        nt = lamp.data.node_tree
+    nt = light_nodes(lamp)
     ies = nt.nodes.new("ShaderNodeTexIES")
     nt.links.new(ies.outputs[0], next(n for n in nt.nodes if n.type == "EMISSION").inputs["Strength"])
     text = "\n".join(export_scene(bpy.context.evaluated_depsgraph_get()).warnings)
@@ -188,10 +190,7 @@ def test_light_linking_on_an_emitting_mesh_as_in_cycles(fresh, tmp_path):
     from raybundle_addon.properties import LAST_RUN
 
     floor_and_block()
-    bpy.data.objects.remove(bpy.data.objects["floor"])
-    for name, x0, x1 in (("tile A", -4, 0), ("tile B", 0, 4)):
-        add_object(name, [(x0, -4, 0), (x1, -4, 0), (x1, 4, 0), (x0, 4, 0)], [(0, 1, 2, 3)],
-                   [node_material(name, color=(0.5, 0.5, 0.5))])
+    two_tiles()
     glow = add_object("glow", [(-0.3, -0.3, 2.2), (0.3, -0.3, 2.2), (0.3, 0.3, 2.2), (-0.3, 0.3, 2.2)],
                       [(0, 1, 2, 3)], [node_material("glow", kind="emission", color=(1.0, 0.9, 0.8), strength=60.0)])
     receivers, blockers = bpy.data.collections.new("lit"), bpy.data.collections.new("blocking")
