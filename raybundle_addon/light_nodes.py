@@ -2,14 +2,13 @@
 
 Cycles multiplies a light's color and power by what its node tree's Light Output receives: an
 Emission shader's ``Color x Strength`` (the default tree, Color white and Strength 1, is a
-factor of 1).  The factor is read where it is the same in every direction and at every point:
+factor of 1).  The factor is read where it is the same at every point of the light:
 
 - the Emission's Color and Strength as their sockets hold them, or from an RGB or Value node;
 - a Light Falloff node on the Strength: its Quadratic output with Smooth 0 is its Strength
   (Cycles' sampling already gives the inverse-square fall-off); its Linear and Constant outputs,
   and a Smooth above 0, depend on the distance;
-- Add and Mix Shaders of emissions: the sum, and the mix by a constant factor.
-
+- Add and Mix Shaders of emissions: the sum, and the mix by a constant factor;
 - an IES Texture's output (times its Strength) on the Strength of a point or spot lamp's
   Emission: its photometric profile (:mod:`raybundle.lights.ies`), looked up in the lamp's own
   frame as Cycles does with the Vector left unlinked; the file from the node's text block or
