@@ -84,7 +84,7 @@ endif
 # Every method on the built-in scenes, 60 s each (12 minutes on 2 cores, plus 10 minutes per missing
 # reference half of the Cornell boxes: `make cycles-reference` makes Cycles ones instead)
 bench: $(STAMP)
-	$(PY) -m raybundle bench --out out/bench
+	$(PY) -m raybundle bench --out out/bench --page docs/benchmarks.md
 
 # The RAYBUNDLE engine against Cycles on the Cornell .blend (about 15 minutes on 2 cores)
 bench-blender: $(STAMP)

@@ -35,10 +35,46 @@ def short_bench(tmp_path_factory):
     (analytic reference) and the Cornell box (reference halves path-traced once, then reused)."""
     tmp = tmp_path_factory.mktemp("bench")
     ref, out = tmp / "ref", tmp / "bench"
+    (tmp / "docs").mkdir()
+    (tmp / "docs" / "benchmarks.md").write_text(PAGE)
     cmd = [sys.executable, "-m", "raybundle", "bench", "--scenes", "furnace", "cornell", "--methods",
            "stochastic-iteration", "--time", "3", "--resolution", "24", "24", "--reference-time", "2",
-           "--reference-dir", str(ref), "--out", str(out), "--cycles", str(ROOT / "tools" / "cycles_reference.py")]
+           "--reference-dir", str(ref), "--out", str(out), "--cycles", str(ROOT / "tools" / "cycles_reference.py"),
+           "--page", str(tmp / "docs" / "benchmarks.md")]
     return cmd, ref, out, subprocess.run(cmd, capture_output=True, text=True)
+
+
+#: a benchmark page with another bench's section and an old one of this bench's
+PAGE = """# Benchmarks
+
+<!-- bench:lights -->
+## Many lights
+kept as it is
+<!-- /bench:lights -->
+
+<!-- bench:methods -->
+## Methods, an old run
+| furnace | 9.99% |
+<!-- /bench:methods -->
+"""
+
+
+def test_the_bench_writes_its_own_section_of_the_benchmark_page(short_bench):
+    """``--page``: the bench's section is replaced by its summary table and charts (copied beside
+    the page), stamped with the date, the commit and the machine; the other sections stay."""
+    import datetime
+
+    cmd, ref, out, p = short_bench
+    assert p.returncode == 0, p.stderr
+    page = pathlib.Path(cmd[-1])
+    text = page.read_text()
+    assert "## Many lights\nkept as it is" in text and "9.99%" not in text
+    section = text.split("<!-- bench:methods -->", 1)[1].split("<!-- /bench:methods -->", 1)[0]
+    assert f"on {datetime.date.today().isoformat()}, commit " in section and " cores, " in section
+    assert "| furnace | stochastic-iteration |" in section and "| cornell | cycles |" in section
+    for k in range(2):
+        assert f"(images/bench-methods-{k}.png)" in section
+        assert (page.parent / "images" / f"bench-methods-{k}.png").stat().st_size > 0
 
 
 def test_bench_writes_curves_charts_and_a_summary(short_bench, tmp_path):

@@ -14,7 +14,8 @@ halves (``tools/bench_blender.py``'s ``reference-{1,2}.exr``) may be copied ther
 Writes into ``--out`` (default ``out/bench``): ``<scene>.csv`` (seconds, iterations, error per
 method), ``<scene>.png`` (log-log error against seconds, one curve per method, the reference's
 noise marked), ``summary.md`` (time to 5%, 2%, 1.5% and 1% per method and scene, and each
-curve's slope) and ``summary.json``.  ``--throughput`` adds the older figures: bundle
+curve's slope) and ``summary.json``; with ``--page``, the bench's section of the benchmark page
+(:mod:`raybundle.app.bench_page`).  ``--throughput`` adds the older figures: bundle
 visibility against raw Embree queries (``visibility.csv``) and milliseconds per iteration
 (``iterations.csv``).
 """
@@ -325,6 +326,15 @@ def run_throughput(out):
 
 def run_bench(args):
     out = args.out
+    page = getattr(args, "page", None)
+    if page:
+        from ..util.io import OutputError, check_output
+
+        try:
+            check_output(page, "--page", suffix=".md")
+        except OutputError as e:
+            print(f"raybundle bench: {e}", file=sys.stderr)
+            return 2
     os.makedirs(out, exist_ok=True)
     methods = list(METHODS) if "all" in args.methods else list(dict.fromkeys(args.methods))
     bad = [m for m in methods if m not in METHODS]
@@ -405,6 +415,15 @@ def run_bench(args):
     extra = run_throughput(out) if args.throughput and not partial else {}
     write_json(os.path.join(out, "summary.json"), {"seconds": args.time, "methods": methods, "scenes": summary,
                                                    "not_applicable": skipped, "partial": partial, **extra})
+    if page and not partial:
+        from .bench_page import write_section
+
+        charts = [os.path.join(out, f"{label(n)}.png") for n in results if results[n]]
+        write_section(page, "methods", "Methods: error against time on the built-in scenes",
+                      f"Every method for {args.time:g} s on each scene, one after the other "
+                      f"(`python -m raybundle bench --scenes {' '.join(args.scenes)} --time {args.time:g}`). "
+                      f"Error: relative RMSE, the reference's noise subtracted.\n\n{table}",
+                      [c for c in charts if os.path.exists(c)], command="make bench")
     print(table)
     print(f"wrote {out}/summary.md, summary.json and a CSV, a PNG and the final EXRs per scene"
           + (" (partial: stopped by Ctrl-C)" if partial else ""))

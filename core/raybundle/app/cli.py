@@ -245,6 +245,8 @@ def build_parser():
                    "1, 2, 4, ... samples per pixel, each render timed from loading the scene, by SCRIPT (the "
                    "repository's tools/cycles_reference.py; it needs the bpy module)")
     b.add_argument("--out", default="out/bench")
+    b.add_argument("--page", metavar="FILE.md", help="also write this bench's section of the benchmark page, its "
+                   "summary and charts (make bench: docs/benchmarks.md)")
     return p
 
 
