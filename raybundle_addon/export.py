@@ -404,19 +404,24 @@ def light_color(ld):
     return c
 
 
-def convert_light(ld, M, warn):
+def convert_light(ld, M, warn, nodes=None):
     """(kind, dict) for a bpy Light ``ld`` with world matrix ``M`` (4, 4):
     kind "point" (position, intensity, spot_*, radius), "sun" (direction,
     irradiance, angle) or "area" (center, axis_u, axis_v, normal, shape, radiance), each with
-    ``shadow`` (1, or 0 with Cast Shadow off).  Formulas: module docstring."""
-    got = _convert_light(ld, M, warn)
+    ``shadow`` (1, or 0 with Cast Shadow off).  Formulas: module docstring.  ``nodes``: a dict
+    that keeps each light data-block's :func:`.light_nodes.light_node_factor` (its instances share
+    one reading and one profile)."""
+    if nodes is None:
+        nodes = {}
+    if ld.name_full not in nodes:
+        nodes[ld.name_full] = light_node_factor(ld, warn)
+    got = _convert_light(ld, M, warn, *nodes[ld.name_full])
     if got is not None:
         got[1]["shadow"] = float(bool(getattr(ld, "use_shadow", True)))
     return got
 
 
-def _convert_light(ld, M, warn):
-    factor, profile = light_node_factor(ld, warn)
+def _convert_light(ld, M, warn, factor, profile):
     color = light_color(ld) * factor
     power = float(ld.energy)
     normalize = bool(getattr(ld, "normalize", True))
@@ -682,6 +687,7 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
     objects = []
     lights = {"point": [], "sun": [], "area": []}
     link_sets = LinkSets()
+    light_nodes = {}                        # light data-block -> its node tree's reading
     portals = []
     n_vert = n_tri = 0
     for inst in depsgraph.object_instances:
@@ -705,7 +711,7 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
             if getattr(getattr(ob.data, "cycles", None), "is_portal", False):
                 portals.append(ob.original.name)
                 continue
-            got = convert_light(ob.data, M, warn)
+            got = convert_light(ob.data, M, warn, light_nodes)
             bounces = getattr(getattr(ob.data, "cycles", None), "max_bounces", 1024)
             if bounces < 1024:
                 warn(f"light {ob.original.name!r}: its max bounces ({bounces}) is not applied: raybundle renders every "
@@ -791,11 +797,11 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
         if not rows:
             return cls()
         profiles = [r.pop("profile") for r in rows if "profile" in r]
-        if profiles:          # photometric profiles: an index into their list, -1 for none
-            kept = [p for p in profiles if p is not None]
-            index = iter(range(len(kept)))
+        if profiles:          # photometric profiles: an index into their list (one per profile), -1 for none
+            index = {}
             for r, p in zip(rows, profiles):
-                r["profile"] = -1 if p is None else next(index)
+                r["profile"] = -1 if p is None else index.setdefault(id(p), (len(index), p))[0]
+            kept = [p for _, p in sorted(index.values(), key=lambda x: x[0])]
             return cls(**{k: np.array([r[k] for r in rows]) for k in rows[0]}, profiles=kept)
         return cls(**{k: np.array([r[k] for r in rows]) for k in rows[0]})
 

@@ -108,7 +108,8 @@ LIGHT = _id({
     **_many("spot_size spot_blend", ("M", "test_blender_semantics.py::test_spot_light_cone_and_blend_match_cycles_formula")),
     **_many("show_cone use_square", ("I", EEVEE)),
     "angle": ("M", T_EXPORT + "test_light_units"),
-    **_many("specular_factor diffuse_factor transmission_factor volume_factor use_custom_distance cutoff_distance shadow_buffer_clip_start shadow_filter_radius "
+    **_many("specular_factor diffuse_factor transmission_factor volume_factor use_custom_distance cutoff_distance "
+            "shadow_buffer_clip_start shadow_filter_radius "
             "shadow_maximum_resolution use_shadow_jitter shadow_jitter_overblur use_absolute_resolution "
             "shadow_buffer_bias contact_shadow_distance contact_shadow_thickness contact_shadow_bias "
             "use_contact_shadow shadow_cascade_count shadow_cascade_max_distance shadow_cascade_exponent "

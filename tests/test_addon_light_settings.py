@@ -48,6 +48,16 @@ def two_tiles():
                    [node_material(name, color=(0.5, 0.5, 0.5))])
 
 
+def link_lighting_tile_a(emitter, receivers):
+    """Give ``emitter`` the receiver collection ``receivers`` and a blocker collection that
+    excludes the block (so everything else, and not the block, shadows it)."""
+    blockers = bpy.data.collections.new("blocking")
+    blockers.objects.link(bpy.data.objects["block"])
+    blockers.collection_objects[0].light_linking.link_state = "EXCLUDE"
+    emitter.light_linking.receiver_collection = receivers
+    emitter.light_linking.blocker_collection = blockers
+
+
 def light_nodes(lamp):
     """The node tree of ``lamp``'s light (Blender 4.x makes it with Use Nodes)."""
     if lamp.data.node_tree is None:
@@ -121,15 +131,12 @@ def test_light_and_shadow_linking_on_lamps_as_in_cycles(fresh, tmp_path):
     two_tiles()
     spot = add_light("SPOT", location=(0.3, -0.4, 2.6), rotation=(0.1, 0.0, 0), energy=900.0, spot_size=1.8,
                      shadow_soft_size=0.0, use_soft_falloff=False)
-    receivers, excluded, blockers = (bpy.data.collections.new(n) for n in ("lit", "not lit", "blocking"))
+    receivers, excluded = bpy.data.collections.new("lit"), bpy.data.collections.new("not lit")
     receivers.objects.link(bpy.data.objects["tile A"])
     receivers.children.link(excluded)
     excluded.objects.link(bpy.data.objects["tile B"])
     receivers.collection_children[0].light_linking.link_state = "EXCLUDE"
-    blockers.objects.link(bpy.data.objects["block"])
-    blockers.collection_objects[0].light_linking.link_state = "EXCLUDE"
-    spot.light_linking.receiver_collection = receivers
-    spot.light_linking.blocker_collection = blockers
+    link_lighting_tile_a(spot, receivers)
     assert_like_cycles(*against_cycles(tmp_path))
     assert not [w for w in LAST_RUN[bpy.context.scene.name]["warnings"] if "linking" in w]
 
@@ -167,6 +174,13 @@ def test_an_ies_profile_shapes_a_lamps_light_as_in_cycles(fresh, tmp_path):
     ies.inputs["Strength"].default_value = 1.5
     nt.links.new(ies.outputs[0], next(n for n in nt.nodes if n.type == "EMISSION").inputs["Strength"])
     assert_like_cycles(*against_cycles(tmp_path))
+    from raybundle_addon.export import export_scene
+
+    twin = bpy.data.objects.new("twin", lamp.data)          # a second lamp of the same light data
+    twin.location = (0.5, -0.5, 1.6)
+    bpy.context.scene.collection.objects.link(twin)
+    lights = export_scene(bpy.context.evaluated_depsgraph_get()).scene.point_lights
+    assert len(lights) == 2 and len(lights.profiles) == 1 and list(lights.profile) == [0, 0]
 
 
 def test_an_ies_texture_blender_cannot_read_is_warned(fresh):
@@ -193,12 +207,9 @@ def test_light_linking_on_an_emitting_mesh_as_in_cycles(fresh, tmp_path):
     two_tiles()
     glow = add_object("glow", [(-0.3, -0.3, 2.2), (0.3, -0.3, 2.2), (0.3, 0.3, 2.2), (-0.3, 0.3, 2.2)],
                       [(0, 1, 2, 3)], [node_material("glow", kind="emission", color=(1.0, 0.9, 0.8), strength=60.0)])
-    receivers, blockers = bpy.data.collections.new("lit"), bpy.data.collections.new("blocking")
+    receivers = bpy.data.collections.new("lit")
     receivers.objects.link(bpy.data.objects["tile A"])
-    blockers.objects.link(bpy.data.objects["block"])
-    blockers.collection_objects[0].light_linking.link_state = "EXCLUDE"
-    glow.light_linking.receiver_collection = receivers
-    glow.light_linking.blocker_collection = blockers
+    link_lighting_tile_a(glow, receivers)
     assert_like_cycles(*against_cycles(tmp_path))
     assert not [w for w in LAST_RUN[bpy.context.scene.name]["warnings"] if "linking" in w]
 
