@@ -20,7 +20,7 @@ NO_OLDEST := the oldest Blender's environment (no working Python 3.11: the zip w
 SKIPPED := $(if $(PY_NEWEST),,$(NO_NEWEST))$(if $(PY_OLDEST),,$(NO_OLDEST))
 
 .PHONY: demo test test-newest test-suite test-chains test-oldest bench bench-blender bench-boxes bench-lights bench-interiors bench-bake bench-scale \
-        bench-invariance extension cycles-reference demo-scenes test-blender-versions golden golden-check clean FORCE
+        bench-invariance docs-images extension cycles-reference demo-scenes test-blender-versions golden golden-check clean FORCE
 
 ifeq ($(PYTHON),)
 ifneq ($(MAKECMDGOALS),clean)
@@ -81,51 +81,66 @@ ifneq ($(PY_OLDEST),)
 	$(OLDEST)/bin/python -m pytest -q tests/test_extension.py tests/test_blender_walk.py
 endif
 
+# Each bench rewrites its own section of this page (raybundle.app.bench_page)
+PAGE = docs/benchmarks.md
+
 # Every method on the built-in scenes, 60 s each (12 minutes on 2 cores, plus 10 minutes per missing
 # reference half of the Cornell boxes: `make cycles-reference` makes Cycles ones instead)
 bench: $(STAMP)
-	$(PY) -m raybundle bench --out out/bench --page docs/benchmarks.md
+	$(PY) -m raybundle bench --out out/bench --page $(PAGE)
 
 # The RAYBUNDLE engine against Cycles on the Cornell .blend (about 15 minutes on 2 cores)
 bench-blender: $(STAMP)
-	$(PY) tools/bench_blender.py demo_scenes/cornell_box.blend --out out/bench-blender
+	$(PY) tools/bench_blender.py demo_scenes/cornell_box.blend --out out/bench-blender --page $(PAGE)
 
 # The built-in boxes against Cycles on the same triangles, side by side (about 45 minutes on 2 cores)
 bench-boxes: $(STAMP)
-	$(PY) tools/bench_blender.py cornell --times 5 10 30 60 120 --out out/bench-cornell --max-cycles-seconds 260
-	$(PY) tools/bench_blender.py cornell-glossy --times 5 10 30 60 120 --out out/bench-cornell-glossy --reference-samples 4096 --max-cycles-seconds 200
+	$(PY) tools/bench_blender.py cornell --times 5 10 30 60 120 --out out/bench-cornell --max-cycles-seconds 260 \
+	    --page $(PAGE)
+	$(PY) tools/bench_blender.py cornell-glossy --times 5 10 30 60 120 --out out/bench-cornell-glossy --reference-samples 4096 \
+	    --max-cycles-seconds 200 --page $(PAGE)
 
 # Many lights: Veach's multiple-importance test scene (demo_scenes/lights) against Cycles from the same
 # file at 30 and 90 s, references committed (about 10 minutes on 2 cores)
 bench-lights: $(STAMP)
 	$(PY) tools/bench_blender.py demo_scenes/lights/veach-mis.blend --references demo_scenes/lights/references \
-	    --times 30 90 --max-cycles-seconds 200 --out out/bench-lights
+	    --times 30 90 --max-cycles-seconds 200 --out out/bench-lights --page $(PAGE)
 
-# Real rooms (demo_scenes/interiors) in clay (the view layer's Material Override), RAYBUNDLE against
-# Cycles from the same file at 320 x 180, references committed (about 25 minutes a room on 2 cores)
+# Real rooms (demo_scenes/interiors), RAYBUNDLE against Cycles from the same file at 320 x 180, references
+# committed: each room in its own materials at 60 s, then in clay (the view layer's Material Override) at
+# 60 and 300 s (about 35 minutes a room on 2 cores)
 INTERIORS = living-room dining-room modern-hall
 bench-interiors: $(STAMP)
 	for room in $(INTERIORS); do \
+	  $(PY) tools/bench_blender.py demo_scenes/interiors/$$room.blend --resolution 320 180 \
+	    --references demo_scenes/interiors/references --times 60 \
+	    --max-cycles-seconds 200 --out out/bench-interiors/$$room --page $(PAGE) || exit 1; \
 	  $(PY) tools/bench_blender.py demo_scenes/interiors/$$room.blend --clay --resolution 320 180 \
 	    --references demo_scenes/interiors/references --reference-samples 4096 --times 60 300 \
-	    --max-cycles-seconds 400 --out out/bench-interiors/$$room || exit 1; \
+	    --max-cycles-seconds 400 --out out/bench-interiors/$$room-clay --page $(PAGE) || exit 1; \
 	done
 
 # The point-domain bake against Cycles' bake of the same 4,624 vertices, and a 1024^2 lightmap
 # (about 25 minutes on 2 cores the first time: the Cycles reference is cached in out/bench-bake)
 bench-bake: $(STAMP)
-	$(PY) tools/bench_bake.py --out out/bench-bake
+	$(PY) tools/bench_bake.py --out out/bench-bake --page $(PAGE)
 
 # The Cornell box meshed with 4k to 4M triangles: error, set-up time and memory against triangle count
 # (about 15 minutes on 2 cores and 5 GB of memory; needs out/bench-cornell's Cycles reference from bench-boxes)
 bench-scale: $(STAMP)
-	$(PY) tools/bench_scale.py --out out/bench-scale --one-patch-per-triangle 4000 16000 64000
+	$(PY) tools/bench_scale.py --out out/bench-scale --one-patch-per-triangle 4000 16000 64000 --page $(PAGE)
 
 # The Cornell .blend described in a dozen ways a Blender user would (subdivided, triangulated, flipped,
 # split, joined, instanced, transformed, scaled, reordered) against the file as it is, and the patch
 # count as a convergence (about 10 minutes on 2 cores)
 bench-invariance: $(STAMP)
-	$(PY) tools/bench_invariance.py --out out/bench-invariance
+	$(PY) tools/bench_invariance.py --out out/bench-invariance --page $(PAGE)
+
+# The pictures of the README and the manual (docs/images), made from the code as it is: a real room by
+# raybundle and by Cycles at the same time, in clay and in its own materials, with both errors; a render
+# and a bake of the demo box (about 10 minutes on 2 cores)
+docs-images: $(STAMP)
+	$(PY) tools/docs_images.py --out docs/images
 
 # The installable Blender extension: dist/raybundle-<version>-<platform>.zip for every platform in
 # blender_manifest.toml, built without a Blender binary (Blender's blender_ext.py from the bpy module).

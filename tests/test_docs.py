@@ -73,3 +73,33 @@ def test_no_docstring_or_comment_quotes_a_before_and_after_figure_or_a_date():
                                                            *ROOT.glob("raybundle_addon/*.py")]
              for k, line in enumerate(path.read_text().split("\n"), 1) if figure.search(line)]
     assert not found, found
+
+
+def table_rows(text):
+    """The first cells of every Markdown table row in ``text``."""
+    return {m.group(1).strip() for m in re.finditer(r"^\| ([^|]+) \|", text, re.M)}
+
+
+def test_the_manual_describes_every_panel_setting_and_every_headless_option():
+    """Each setting of the Ray Bundle GI panels (the property group's properties, the last
+    render's read-only fields aside) has a row under its panel name in the manual's settings
+    tables, and each option of ``raybundle-blender`` appears in the manual."""
+    import bpy
+
+    import raybundle_addon
+    from raybundle_addon.__main__ import build_parser
+
+    if not hasattr(bpy.types.Scene, "raybundle"):
+        raybundle_addon.register()
+
+    manual = (ROOT / "docs" / "manual.md").read_text()
+    render = manual.split("### Settings (Render Properties › Ray Bundle GI)", 1)[1].split("\n## ", 1)[0]
+    bake = manual.split("### Settings (Render Properties › Ray Bundle GI › Bake)", 1)[1].split("\n### ", 1)[0]
+    rows = table_rows(render) | table_rows(bake)
+    settings = bpy.types.Scene.bl_rna.properties["raybundle"].fixed_type.properties
+    missing = [p.identifier for p in settings
+               if p.identifier not in ("rna_type", "name") and not p.identifier.startswith("last_")
+               and p.name not in rows]
+    assert not missing, f"panel settings without a row in the manual: {missing}"
+    options = [o for action in build_parser()._actions for o in action.option_strings if o.startswith("--")]
+    assert [o for o in options if f"`{o}" not in manual and o != "--help"] == []

@@ -42,7 +42,8 @@ _TOOLS = os.path.dirname(os.path.abspath(__file__))
 _ROOT = os.path.dirname(_TOOLS)
 sys.path[:0] = [_TOOLS, _ROOT, os.path.join(_ROOT, "demo_scenes")]
 
-from bench_blender import _open, chart, side_by_side, time_to_errors  # noqa: E402
+from bench_blender import _open, chart, comparison_tables, side_by_side, time_to_errors  # noqa: E402
+from raybundle.app.bench_page import add_page_argument, checked_page, command_line, write_section  # noqa: E402
 
 BLEND = os.path.join(_ROOT, "demo_scenes", "cornell_bake.blend")
 CYCLES_ATTRIBUTE = "CyclesBake"
@@ -125,7 +126,9 @@ def main(argv=None):
     p.add_argument("--lightmap-size", type=int, default=1024)
     p.add_argument("--lightmap-seconds", type=float, default=5.0)
     p.add_argument("--reference-only", action="store_true", help="make the cached reference and stop")
+    add_page_argument(p, "bake")
     a = p.parse_args(argv)
+    checked_page(a.page, "bench_bake")
     from raybundle.app.metrics import image_error
 
     os.makedirs(a.out, exist_ok=True)
@@ -186,6 +189,18 @@ def main(argv=None):
           ylabel="relative RMSE over the vertices against a long Cycles bake",
           xlabel="seconds from loading the .blend to the attribute written (2 cores)", all_pixels=False)
     print(f"wrote {a.out}/bake.csv, summary.json, bake.png")
+    if a.page:
+        write_section(a.page, a.section or "bake", "Bakes: color attributes and a lightmap against Cycles' bake",
+                      f"`{os.path.relpath(blend)}`, {len(reference):,} vertices baked to a point-domain color "
+                      "attribute, each bake timed from opening the file to the attribute written. Reference: "
+                      f"Cycles' bake of the same vertices, 2 × {a.reference_samples} samples, its own noise "
+                      "subtracted; the lamp's vertices left out. Error: relative RMSE over the vertices.\n\n"
+                      + comparison_tables(rows, summary, targets)
+                      + f"\nA {a.lightmap_size}² lightmap of the floor after a {a.lightmap_seconds:g} s solve: "
+                      f"{wall:.1f} s from opening the file, of which {out.stats['bake_seconds']:.1f} s for the "
+                      "lightmap itself.",
+                      [os.path.join(a.out, "bake.png")], command=command_line("tools/bench_bake.py", argv))
+        print(f"wrote its section of {a.page}")
     return 0
 
 

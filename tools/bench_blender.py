@@ -48,6 +48,8 @@ import numpy as np
 _TOOLS = os.path.dirname(os.path.abspath(__file__))
 sys.path[:0] = [_TOOLS, os.path.dirname(_TOOLS)]          # cycles_reference; raybundle_addon
 
+from raybundle.app.bench_page import add_page_argument, checked_page, command_line, table, write_section  # noqa: E402
+
 
 #: what every render of a run does right after opening the file: ``clay`` (the Material
 #: Override) and ``resolution`` (W, H or None), set by ``main``
@@ -236,7 +238,9 @@ def main(argv=None):
     p.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="override the file's resolution")
     p.add_argument("--references", help="folder of committed reference halves <file>-<clay|full>-<seed>.exr "
                    "(rendered there when missing)")
+    add_page_argument(p, "blender-<file>[-clay]")
     a = p.parse_args(argv)
+    checked_page(a.page, "bench_blender")
     OPEN_SETTINGS.update(clay=a.clay, resolution=a.resolution)
     from raybundle.app.metrics import image_error
     from raybundle.util.io import read_exr, read_exr_header
@@ -246,6 +250,7 @@ def main(argv=None):
         os.makedirs(a.references, exist_ok=True)
     halves, paths = [], []
     stem = os.path.splitext(os.path.basename(a.blend))[0]
+    section = a.section or f"blender-{stem}{'-clay' if a.clay else ''}"
     for seed in (1, 2):
         path = (os.path.join(a.references, f"{stem}-{'clay' if a.clay else 'full'}-{seed}.exr") if a.references
                 else os.path.join(a.out, f"reference-{seed}.exr"))
@@ -313,7 +318,55 @@ def main(argv=None):
     chart(os.path.join(a.out, "bench.png"), rows, os.path.basename(a.blend) + (" (clay)" if a.clay else ""))
     print(f"peak memory of the run {peak_memory_gb():.2f} GB")
     print(f"wrote {a.out}/bench.csv, summary.json, bench.png")
+    if a.page:
+        title = os.path.basename(a.blend) + (" in clay" if a.clay else "") + ": raybundle against Cycles"
+        write_section(a.page, section, title, page_body(a, reference, reference_samples, noise, rows, summary,
+                                                          targets, warnings),
+                      [os.path.join(a.out, "bench.png")], command=command_line("tools/bench_blender.py", argv))
+        print(f"wrote its section {section!r} of {a.page}")
     return 0
+
+
+def page_body(a, reference, reference_samples, noise, rows, summary, targets, warnings):
+    """The bench's section of the benchmark page: the set-up, then :func:`comparison_tables`
+    and the run's warnings."""
+    h, w = reference.shape[:2]
+    text = [f"`{a.blend}`{' in clay (a white diffuse Material Override)' if a.clay else ', its own materials'}, "
+            f"{w} × {h} px. Every render is timed from opening the scene to the EXR written. Reference: Cycles "
+            f"2 × {reference_samples} spp, its own noise ({percent(noise['reference_noise'])} per pixel) "
+            "subtracted. Error: relative RMSE over pixels at least 2 px from a directly seen light "
+            "(`raybundle.app.metrics.image_error`).", "", comparison_tables(rows, summary, targets)]
+    if warnings:
+        text.append("raybundle's warnings: " + "; ".join(warnings))
+    return "\n".join(text)
+
+
+def percent(e):
+    return "–" if e is None else f"{100 * e:.2f}%"
+
+
+def comparison_tables(rows, summary, targets):
+    """Markdown: one row per raybundle run (its set-up and mean when the rows have them) beside
+    Cycles at the same time (``summary``, from :func:`side_by_side`), Cycles' ladder, and the
+    time each engine needs for each error level (``targets``, from :func:`time_to_errors`)."""
+    ours = [r for r in rows if r["engine"] == "raybundle"]
+    names = {"setup_seconds": "set-up", "mean_ratio": "its mean"}
+    shown = {"setup_seconds": lambda v: "–" if v is None else f"{v:.1f} s", "mean_ratio": lambda v: f"×{v:.3f}"}
+    extra = [k for k in names if any(r.get(k) is not None for r in ours)]
+    cycles = [r for r in rows if r["engine"] == "cycles"]
+    return "\n".join([
+        table(["raybundle Time Limit", "seconds"] + [names[k] for k in extra]
+              + ["raybundle", "Cycles, same time", "ratio", "Cycles' time for raybundle's error"],
+              [[f"{r['setting']:g} s", f"{r['seconds']:.1f}"] + [shown[k](r.get(k)) for k in extra]
+               + [percent(r["error"]), percent(s["cycles_error_same_time"]),
+                  "–" if not s["cycles_error_same_time"] else f"{r['error'] / s['cycles_error_same_time']:.2f}",
+                  "–" if s["cycles_seconds_same_error"] is None else f"{s['cycles_seconds_same_error']:.0f} s"]
+               for r, s in zip(ours, summary)]),
+        table(["Cycles spp"] + [f"{r['setting']:g}" for r in cycles],
+              [["seconds"] + [f"{r['seconds']:.1f}" for r in cycles],
+               ["error"] + [percent(r["error"]) for r in cycles]]),
+        table(["time to an error of"] + list(next(iter(targets.values()))),
+              [[engine] + list(t.values()) for engine, t in targets.items()])])
 
 
 def chart(path, rows, title, ylabel="relative RMSE against a long Cycles render",

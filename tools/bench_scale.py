@@ -34,10 +34,13 @@ import subprocess
 import sys
 
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+from raybundle.app.bench_page import add_page_argument, checked_page, command_line, table, write_section  # noqa: E402
+
 REFERENCE = os.path.join(_ROOT, "out", "bench-cornell")
 
 
-def one(triangles, seconds, patches, mode):
+def one(triangles, seconds, patches, mode, reference=REFERENCE, resolution=None):
     """Run one row in this process; returns a dict (see the module docstring)."""
     import resource
     import time
@@ -50,7 +53,10 @@ def one(triangles, seconds, patches, mode):
     from raybundle.patches.clusters import tessellate
     from raybundle.scene.builtin import load_scene
 
-    scene = tessellate(load_scene("cornell"), triangles)
+    box = load_scene("cornell")
+    if resolution:
+        box.camera = box.camera.with_resolution(*resolution)
+    scene = tessellate(box, triangles)
     if mode == "memory":
         tracemalloc.start()
         base = tracemalloc.get_traced_memory()[0]
@@ -73,10 +79,10 @@ def one(triangles, seconds, patches, mode):
     from raybundle.app.metrics import image_error, light_source_mask
     from raybundle.util.io import read_exr
 
-    halves = [read_exr(os.path.join(REFERENCE, f"reference-{k}.exr")) for k in (1, 2)]
+    halves = [read_exr(os.path.join(reference, f"reference-{k}.exr")) for k in (1, 2)]
     reference = 0.5 * (halves[0] + halves[1])
     error = image_error(result.image, reference, reference_halves=halves,
-                        exclude=light_source_mask(load_scene("cornell")))["error"]
+                        exclude=light_source_mask(box))["error"]
     st = renderer.solver.stats
     # --time means the whole run: wall <= T + 10% + 1 s whenever set-up takes less than T / 2
     within = None if t2 - t0 >= seconds / 2 else bool(t3 - t0 <= 1.1 * seconds + 1.0)
@@ -86,11 +92,13 @@ def one(triangles, seconds, patches, mode):
                 peak_rss_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
 
 
-def run_row(triangles, seconds, patches):
+def run_row(triangles, seconds, patches, reference, resolution):
     row = {}
     for mode in ("memory", "render"):
-        out = subprocess.run([sys.executable, __file__, "--one", str(triangles), str(seconds), str(patches), mode],
-                             check=True, capture_output=True, text=True).stdout
+        job = json.dumps(dict(triangles=triangles, seconds=seconds, patches=patches, mode=mode, reference=reference,
+                              resolution=resolution))
+        out = subprocess.run([sys.executable, __file__, "--one", job], check=True, capture_output=True,
+                             text=True).stdout
         row.update(json.loads(out.strip().splitlines()[-1]))
     return dict(row, layout="clusters" if patches else "one patch per triangle")
 
@@ -127,20 +135,25 @@ def main(argv=None):
     p.add_argument("--time", type=float, default=20.0)
     p.add_argument("--patches", type=int, default=4000, help="target patch count (the default of render)")
     p.add_argument("--one-patch-per-triangle", type=int, nargs="*", default=[])
-    p.add_argument("--one", nargs=4, help=argparse.SUPPRESS)
+    p.add_argument("--reference", default=REFERENCE, help="folder of the box's reference halves reference-{1,2}.exr")
+    p.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="the box's camera (default: "
+                   "the built-in's, as the reference)")
+    p.add_argument("--one", help=argparse.SUPPRESS)
+    add_page_argument(p, "scale")
     a = p.parse_args(argv)
     if a.one:
-        print(json.dumps(one(int(a.one[0]), float(a.one[1]), int(a.one[2]), a.one[3])))
+        print(json.dumps(one(**json.loads(a.one))))
         return 0
-    if not all(os.path.exists(os.path.join(REFERENCE, f"reference-{k}.exr")) for k in (1, 2)):
-        print(f"no Cycles reference in {REFERENCE}: run tools/bench_blender.py cornell --out {REFERENCE} first",
+    if not all(os.path.exists(os.path.join(a.reference, f"reference-{k}.exr")) for k in (1, 2)):
+        print(f"no Cycles reference in {a.reference}: run tools/bench_blender.py cornell --out {a.reference} first",
               file=sys.stderr)
         return 2
+    checked_page(a.page, "bench_scale")
     os.makedirs(a.out, exist_ok=True)
     rows = []
     plan = [(n, a.patches) for n in a.triangles] + [(n, 0) for n in a.one_patch_per_triangle]
     for n, patches in plan:
-        row = run_row(n, a.time, patches)
+        row = run_row(n, a.time, patches, a.reference, a.resolution)
         rows.append(row)
         print(f"{row['triangles']:>8} triangles, {row['layout']}: {row['patches']} patches, set-up "
               f"{row['prepare_s']:.1f} + {row['solver_setup_s']:.1f} s, {row['ms_per_iteration']:.1f} ms/iteration, "
@@ -156,7 +169,27 @@ def main(argv=None):
         json.dump(dict(seconds=a.time, rows=rows), f, indent=1)
     chart(os.path.join(a.out, "scale.png"), rows)
     print(f"wrote {a.out}/scale.csv, summary.json, scale.png")
+    if a.page:
+        write_section(a.page, a.section or "scale", "Scale: the Cornell box meshed with more and more triangles",
+                      page_body(a, rows), [os.path.join(a.out, "scale.png")],
+                      command=command_line("tools/bench_scale.py", argv))
+        print(f"wrote its section of {a.page}")
     return 0
+
+
+def page_body(a, rows):
+    """The bench's section of the benchmark page: one row per triangle count and layout."""
+    within = {None: "set-up over half the time", True: "yes", False: "**no**"}
+    return ("The built-in `cornell` tessellated into more and more triangles, each its own input face, laid out "
+            f"and rendered for {a.time:g} s (set-up included), each row in a fresh process. Error: relative RMSE "
+            "against the box's Cycles reference, its noise subtracted. Memory: the peak of NumPy's traced "
+            "allocations (Embree's BVH not included) and the process's peak resident size.\n\n"
+            + table(["triangles", "layout", "patches", "set-up", "ms / iteration", "iterations", "error",
+                     "within the time + 10% + 1 s", "traced bytes / triangle", "peak RSS"],
+                    [(f"{r['triangles']:,}", r["layout"], f"{r['patches']:,}",
+                      f"{r['prepare_s'] + r['solver_setup_s']:.1f} s", f"{r['ms_per_iteration']:.1f}",
+                      r["iterations"], f"{100 * r['error']:.2f}%", within[r["within_budget"]],
+                      f"{r['traced_bytes_per_triangle']:.0f}", f"{r['peak_rss_gb']:.2f} GB") for r in rows]))
 
 
 if __name__ == "__main__":

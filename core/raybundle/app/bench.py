@@ -38,6 +38,7 @@ from ..scene.builtin import load_scene
 from ..tracing.sampling import DEFAULT_SEQUENCE, uniform_sphere
 from ..tracing.visibility import RayTracer, bundle_from_hits
 from ..util.io import read_exr, write_exr, write_json
+from .bench_page import checked_page, write_section
 from .metrics import image_error, light_source_mask
 from .pipeline import build, make_renderer, prepare
 from .plan import RunOptions, plan
@@ -326,15 +327,7 @@ def run_throughput(out):
 
 def run_bench(args):
     out = args.out
-    page = getattr(args, "page", None)
-    if page:
-        from ..util.io import OutputError, check_output
-
-        try:
-            check_output(page, "--page", suffix=".md")
-        except OutputError as e:
-            print(f"raybundle bench: {e}", file=sys.stderr)
-            return 2
+    page = checked_page(getattr(args, "page", None), "raybundle bench")
     os.makedirs(out, exist_ok=True)
     methods = list(METHODS) if "all" in args.methods else list(dict.fromkeys(args.methods))
     bad = [m for m in methods if m not in METHODS]
@@ -416,8 +409,6 @@ def run_bench(args):
     write_json(os.path.join(out, "summary.json"), {"seconds": args.time, "methods": methods, "scenes": summary,
                                                    "not_applicable": skipped, "partial": partial, **extra})
     if page and not partial:
-        from .bench_page import write_section
-
         charts = [os.path.join(out, f"{label(n)}.png") for n in results if results[n]]
         write_section(page, "methods", "Methods: error against time on the built-in scenes",
                       f"Every method for {args.time:g} s on each scene, one after the other "

@@ -12,8 +12,10 @@ import datetime
 import os
 import platform
 import re
+import shlex
 import shutil
 import subprocess
+import sys
 
 from ..util.io import atomic_path
 
@@ -31,6 +33,41 @@ def _commit(folder):
         return head.stdout.strip() + ("+dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return "unknown"
+
+
+def table(header, rows):
+    """A Markdown table: ``header`` (column names) over ``rows`` (sequences of cells, already text)."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def add_page_argument(parser, section):
+    """``--page FILE.md`` (the benchmark page whose section this bench writes) and ``--section
+    NAME`` (the section's name; None when not given, ``section`` says the bench's default) on a
+    bench's argument ``parser``."""
+    parser.add_argument("--page", help="write this bench's section of a benchmark page (Markdown), "
+                        "e.g. docs/benchmarks.md")
+    parser.add_argument("--section", help=f"the section's name on the page (default: {section})")
+
+
+def command_line(tool, argv=None):
+    """The shell command that ran ``tool`` with ``argv`` (default: this process's arguments)."""
+    return shlex.join([tool, *(sys.argv[1:] if argv is None else argv)])
+
+
+def checked_page(page, tool):
+    """``page`` checked writable before any work (None passes); exits with one line and status 2
+    if not."""
+    if page:
+        from ..util.io import OutputError, check_output
+
+        try:
+            check_output(page, "--page", suffix=".md")
+        except OutputError as e:
+            print(f"{tool}: {e}", file=sys.stderr)
+            raise SystemExit(2) from None
+    return page
 
 
 def machine():
