@@ -1,6 +1,6 @@
 """Renders keep their golden hashes (tools/golden.py): a refactoring changes no pixel.
 
-Skipped where tests/golden_hashes.json has no hashes for this environment (Python, NumPy,
+Skipped where tests/golden_hashes.json has no hashes for this environment (Python, NumPy, bpy,
 embreex, CPU model and vector instruction sets, core count): floating-point results can differ
 between machines. `make golden` records them; an intended change of results re-records them
 and says which cases changed.

@@ -5,14 +5,20 @@
     python tools/golden.py --record     # (re)write this environment's hashes (`make golden`)
     python tools/golden.py --only cornell:stochastic-iteration ...
 
-Each case is a command line, run in-process through ``raybundle.app.cli.main`` (the front door a
-user has): the built-in scenes with ``--iterations 4 --seed 3`` at 24 x 24 pixels and 300 patches;
-every method on the Cornell box; ``--gather-rays 64`` (the final gather at a fixed count); and
-chains by iterations (``--workers 2``). A case's hash is the SHA-256 of the EXR's float32
-pixels read back, with the iteration count and the rays traced from ``--stats``.
+Each case is a command line, run in-process through a front door a user has:
+
+- ``raybundle render`` (``raybundle.app.cli.main``): the built-in scenes with ``--iterations 4
+  --seed 3`` at 24 x 24 pixels and 300 patches; every method on the Cornell box;
+  ``--gather-rays 64`` (the final gather at a fixed count); and chains by iterations
+  (``--workers 2``). Its hash is the SHA-256 of the EXR's float32 pixels read back, with the
+  iteration count and the rays traced from ``--stats``;
+- ``raybundle-blender`` (``raybundle_addon.__main__.main``, the real ``bpy``) on
+  ``demo_scenes/cornell_box.blend`` with the same iterations, seed and patches at 10%: the
+  render's pixels (``blend:render``), and the exported scene it saves (``blend:npz``: every array
+  of the ``.npz``, by name, dtype, shape and bytes).
 
 Floating-point results can depend on the machine (SIMD paths, core count) and the libraries,
-so the file keeps one set of hashes per environment: Python, NumPy and embreex versions, the CPU
+so the file keeps one set of hashes per environment: Python, NumPy, embreex and bpy versions, the CPU
 model, its vector instruction sets and the core count. An environment the file does not know is reported, not failed:
 record it with ``make golden`` on the commit before a refactoring.
 """
@@ -38,9 +44,15 @@ SCENES = ["cornell", "cornell-glossy", "furnace", "furnace-glossy", "small-light
 METHODS = ["ray-bundle-walk", "radiosity", "point-collocation", "path-tracing", "single-ray-iteration", "auto"]
 
 
+BLEND = ROOT / "demo_scenes" / "cornell_box.blend"
+BLEND_ARGS = ["--iterations", "4", "--seed", "3", "--patches", "300", "--resolution-percentage", "10"]
+
+
 def cases() -> dict[str, list[str]]:
-    """name -> the ``render`` arguments after the scene's name and before --out/--stats."""
-    out = {f"{s}:stochastic-iteration": [s] for s in SCENES}
+    """name -> the ``render`` arguments after the scene's name and before --out/--stats; the
+    ``blend:`` cases -> [] (their command is fixed: :func:`blend_hashes`)."""
+    out = {"blend:render": [], "blend:npz": []}
+    out.update({f"{s}:stochastic-iteration": [s] for s in SCENES})
     out.update({f"cornell:{m}": ["cornell", "--method", m] for m in METHODS})
     out.update({f"{s}:gather-64": [s, "--gather-rays", "64"] for s in ("cornell", "cornell-glossy")})
     out.update({f"{s}:chains-2": [s, "--workers", "2"] for s in ("cornell", "furnace-glossy")})
@@ -60,7 +72,7 @@ def environment() -> str:
     except OSError:
         pass
     return (f"python {sys.version_info[0]}.{sys.version_info[1]}, numpy {version('numpy')}, "
-            f"embreex {version('embreex')}, {cpu}{simd}, {os.cpu_count()} cores")
+            f"embreex {version('embreex')}, bpy {version('bpy')}, {cpu}{simd}, {os.cpu_count()} cores")
 
 
 def render_hash(args: list[str], workdir: pathlib.Path) -> str:
@@ -80,10 +92,37 @@ def render_hash(args: list[str], workdir: pathlib.Path) -> str:
     return h.hexdigest()[:16]
 
 
+def blend_hashes(workdir: pathlib.Path) -> dict[str, str]:
+    """Run ``raybundle-blender`` on :data:`BLEND` in-process; the hashes of its image's pixels
+    (``blend:render``) and of the exported scene it saved (``blend:npz``)."""
+    import numpy as np
+
+    from raybundle.util.io import read_exr
+    from raybundle_addon.__main__ import main
+
+    out, npz = workdir / "blend.exr", workdir / "blend.npz"
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        status = main([str(BLEND), *BLEND_ARGS, "--out", str(out), "--save-npz", str(npz)])
+    if status != 0:
+        raise RuntimeError(f"raybundle-blender exited {status}: {err.getvalue().strip()[-500:]}")
+    image = hashlib.sha256(read_exr(out).astype("<f4").tobytes())
+    scene = hashlib.sha256()
+    with np.load(npz, allow_pickle=False) as arrays:
+        for name in sorted(arrays.files):
+            a = arrays[name]
+            scene.update(f"{name} {a.dtype.str} {a.shape}".encode())
+            scene.update(np.ascontiguousarray(a).tobytes())
+    return {"blend:render": image.hexdigest()[:16], "blend:npz": scene.hexdigest()[:16]}
+
+
 def run(names: list[str] | None = None) -> dict[str, str]:
     todo = cases()
+    names = list(names or todo)
     with tempfile.TemporaryDirectory() as tmp:
-        return {name: render_hash(todo[name], pathlib.Path(tmp)) for name in (names or todo)}
+        got = blend_hashes(pathlib.Path(tmp)) if any(n.startswith("blend:") for n in names) else {}
+        got.update({name: render_hash(todo[name], pathlib.Path(tmp)) for name in names if name not in got})
+        return {name: got[name] for name in names}
 
 
 def main(argv=None) -> int:
