@@ -623,7 +623,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
     camera = export_camera(cam_ob, render, size, border, warn) if cam_ob is not None or require_camera else None
     world = getattr(depsgraph.view_layer, "world_override", None) or scene.world
     _unmodeled_settings(scene, depsgraph.view_layer, world, warn)
-    pending = start_world_export(world, warn, camera_view(cam_ob, render, camera, border))
+    pending = start_world_export(world, warn, camera_view(cam_ob, render, size, camera, border))
     try:
         result = _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
                                   pending.now if defer_world else pending.finish(), t0)

@@ -10,7 +10,7 @@ factor of 1).  The factor is read where it is the same at every point of the lig
   and a Smooth above 0, depend on the distance;
 - Add and Mix Shaders of emissions: the sum, and the mix by a constant factor;
 - an IES Texture's output (times its Strength) on the Strength of a point or spot lamp's
-  Emission: its photometric profile (:mod:`raybundle.lights.ies`), looked up in the lamp's own
+  Emission: its photometric profile (:mod:`raybundle.scene.ies`), looked up in the lamp's own
   frame as Cycles does with the Vector left unlinked; the file from the node's text block or
   from its file path.
 
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .shaders import _follow_reroutes
+from .node_links import follow_reroutes
 
 
 class _Unread(Exception):
@@ -32,7 +32,7 @@ class _Unread(Exception):
 
 def light_node_factor(ld, warn):
     """``(factor (3,), profile)`` of light ``ld``'s emission given by its node tree: the color
-    factor (ones without a tree) and the :class:`~raybundle.lights.ies.Profile` of an IES Texture
+    factor (ones without a tree) and the :class:`~raybundle.scene.ies.Profile` of an IES Texture
     on it (None); ``warn(message)`` is told once for each light whose tree is not read in full."""
     import bpy
 
@@ -62,7 +62,7 @@ def _linked(sock):
     link = sock.links[0]
     if getattr(link, "is_muted", False) or not getattr(link, "is_valid", True):
         return None
-    return _follow_reroutes(link.from_node)
+    return follow_reroutes(link.from_node)
 
 
 def _shader(sock, depth, ies):
@@ -122,11 +122,11 @@ def _strength(sock, ies):
 
 
 def _profile(node):
-    """The :class:`~raybundle.lights.ies.Profile` of IES Texture ``node`` (its text block, or its
+    """The :class:`~raybundle.scene.ies.Profile` of IES Texture ``node`` (its text block, or its
     file); :class:`_Unread` naming the node when it has none or it cannot be read."""
     import bpy
 
-    from raybundle.lights.ies import IESError, parse_ies
+    from raybundle.scene.ies import IESError, parse_ies
 
     try:
         if node.mode == "INTERNAL":

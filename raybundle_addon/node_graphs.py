@@ -104,13 +104,13 @@ def socket_key(mat, sock):
 def graph_input(mat, sock):
     """The :class:`GraphInput` of the graph that drives input ``sock`` of material ``mat``, or a
     one-line reason why Blender cannot evaluate it over a UV map."""
-    from .shaders import _follow_reroutes, _uv_source
+    from .node_links import follow_reroutes, uv_source
 
     images, uvs, seen, positional = {}, set(), set(), False
     stack = [sock.links[0]]
     while stack:
         link = stack.pop()
-        node = _follow_reroutes(link.from_node)
+        node = follow_reroutes(link.from_node)
         if node is None or node.name in seen:
             continue
         if node.type == "TEX_COORD" and link.from_socket.name in VIEW_COORDINATES:
@@ -120,7 +120,7 @@ def graph_input(mat, sock):
             if node.image is None:
                 return f"the Image Texture {node.name!r} has no image"
             images[node.name] = node.image
-            uv = _uv_source(node)
+            uv = uv_source(node)
             if uv is None or getattr(node, "projection", "FLAT") != "FLAT":
                 positional = True           # read through other coordinates: baked on the object
             else:
@@ -165,7 +165,8 @@ def bake_scale(size):
 def linked_inputs(mat):
     """The color and value inputs (sockets) of the shaders of ``mat`` that the converter reads,
     linked to nodes it does not read directly."""
-    from .shaders import _follow_reroutes, read_directly
+    from .node_links import follow_reroutes
+    from .shaders import read_directly
 
     nt = getattr(mat, "node_tree", None)
     out = None if nt is None else (nt.get_output_node("CYCLES") or nt.get_output_node("ALL"))
@@ -174,7 +175,7 @@ def linked_inputs(mat):
     found, seen, stack = [], set(), [out.inputs["Surface"]]
     while stack:
         sock = stack.pop()
-        node = _follow_reroutes(sock.links[0].from_node) if sock.is_linked else None
+        node = follow_reroutes(sock.links[0].from_node) if sock.is_linked else None
         if node is None or node.name in seen or node.type not in READ_SHADERS:
             continue
         seen.add(node.name)
@@ -184,7 +185,7 @@ def linked_inputs(mat):
             if s.type == "SHADER":
                 stack.append(s)
             elif s.type in ("RGBA", "VALUE"):
-                src = _follow_reroutes(s.links[0].from_node)
+                src = follow_reroutes(s.links[0].from_node)
                 if src is not None and not read_directly(s, src):
                     found.append(s)
             elif s.type == "VECTOR" and s.name == "Normal":       # a normal or bump map

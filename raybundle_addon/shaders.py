@@ -56,6 +56,8 @@ import numpy as np
 from raybundle.scene.materials import color_text
 from raybundle.scene.textures import modulation_map
 
+from .node_links import follow_reroutes, uv_source
+
 #: the diffuse color of faces without a material (Blender's default surface)
 DEFAULT_GREY = 0.8
 #: glass rougher than this with Multiscatter GGX is warned about: single scattering loses some of its light
@@ -253,7 +255,7 @@ class MaterialConverter:
         link = socket.links[0]
         if getattr(link, "is_muted", False) or not getattr(link, "is_valid", True):
             return
-        node = _follow_reroutes(link.from_node)
+        node = follow_reroutes(link.from_node)
         if node is None or getattr(node, "mute", False):
             return
         t = node.type
@@ -287,7 +289,7 @@ class MaterialConverter:
             # Mix(Fac, Transparent, X): X where covered, a fraction Fac (1 - Fac with the
             # Transparent second) of the light; the rest passes on: a cut-out of X
             clear = _transparent_input(node)
-            color = self.color(_follow_reroutes(node.inputs[clear].links[0].from_node).inputs["Color"], notes)
+            color = self.color(follow_reroutes(node.inputs[clear].links[0].from_node).inputs["Color"], notes)
             if np.any(np.abs(color - 1.0) > 1e-6):
                 notes.append(f"a Transparent BSDF's color {color_text(color)} is not modeled: it passes all light")
             self._coverage(node.inputs[0], weight, notes, invert=clear == 2)
@@ -355,7 +357,7 @@ class MaterialConverter:
         Shader's ``Fac`` with a Transparent BSDF; ``invert``: the coverage is 1 - its value): a
         constant, or the map Blender baked of its node graph (:mod:`.node_graphs`); nothing
         where the coverage is 1."""
-        node = _follow_reroutes(sock.links[0].from_node) if sock.is_linked else None
+        node = follow_reroutes(sock.links[0].from_node) if sock.is_linked else None
         uv, px = None, None
         if node is None:
             value = float(sock.default_value)
@@ -396,7 +398,7 @@ class MaterialConverter:
         n = 2.0 * np.asarray(got, np.float32)[..., :3] - 1.0
         if np.allclose(n, (0.0, 0.0, 1.0), atol=1e-4):
             return
-        src = _follow_reroutes(sock.links[0].from_node)
+        src = follow_reroutes(sock.links[0].from_node)
         self._normal.append(NormalMap(self._evaluated(sock, n), self.graphs.uv(self._material, sock),
                                       src is not None and src.type == "BUMP"))
 
@@ -406,13 +408,13 @@ class MaterialConverter:
         if sock.type == "VALUE":
             return np.full(3, self.value(sock, notes))
         if sock.is_linked:
-            node = _follow_reroutes(sock.links[0].from_node)
+            node = follow_reroutes(sock.links[0].from_node)
             if node is not None and node.type == "RGB":
                 return np.array(node.outputs[0].default_value[:3], float)
             if node is not None and node.type in ("TEX_IMAGE", "TEX_ENVIRONMENT"):
                 mean = self.image_mean(node.image)
                 if mean is not None:
-                    uv = _uv_source(node) if node.type == "TEX_IMAGE" else None
+                    uv = uv_source(node) if node.type == "TEX_IMAGE" else None
                     albedo = _is_albedo(sock)
                     if albedo and uv is not None:
                         self._albedo.append(AlbedoTexture(node.image, uv, closest=node.interpolation == "Closest"))
@@ -443,7 +445,7 @@ class MaterialConverter:
         if sock.type == "RGBA":
             return float(_lum(self.color(sock, notes)))
         if sock.is_linked:
-            node = _follow_reroutes(sock.links[0].from_node)
+            node = follow_reroutes(sock.links[0].from_node)
             if node is not None and node.type == "VALUE":
                 return float(node.outputs[0].default_value)
             if node is not None:
@@ -689,19 +691,8 @@ def principled_to_material(inputs, distribution="MULTI_GGX", warn=print, layered
 def _transparent_input(mix):
     """1 or 2: the input of Mix Shader ``mix`` that a Transparent BSDF drives (the other not), or None."""
     found = [k for k in (1, 2) if mix.inputs[k].is_linked
-             and getattr(_follow_reroutes(mix.inputs[k].links[0].from_node), "type", None) == "BSDF_TRANSPARENT"]
+             and getattr(follow_reroutes(mix.inputs[k].links[0].from_node), "type", None) == "BSDF_TRANSPARENT"]
     return found[0] if len(found) == 1 else None
-
-
-def _follow_reroutes(node):
-    for _ in range(256):
-        if node is None or node.type != "REROUTE":
-            return node
-        sock = node.inputs[0]
-        if not sock.is_linked:
-            return None
-        node = sock.links[0].from_node
-    return None
 
 
 def read_directly(sock, node):
@@ -717,21 +708,6 @@ def read_directly(sock, node):
 def _is_albedo(sock):
     """A Diffuse BSDF's Color or a Principled BSDF's Base Color input."""
     return sock.name in ("Color", "Base Color") and sock.node.type in ("BSDF_DIFFUSE", "BSDF_PRINCIPLED")
-
-
-def _uv_source(tex_node):
-    """The UV map an Image Texture node reads: a UV Map node's map, "" for the active
-    render UV map (Vector unlinked, or Texture Coordinate's UV), None for other coordinates."""
-    vec = tex_node.inputs.get("Vector")
-    if vec is None or not vec.is_linked:
-        return ""
-    link = vec.links[0]
-    node = _follow_reroutes(link.from_node)
-    if node is not None and node.type == "UVMAP":
-        return node.uv_map
-    if node is not None and node.type == "TEX_COORD" and link.from_socket.name == "UV":
-        return ""
-    return None
 
 
 def _srgb_bytes(image):

@@ -128,7 +128,7 @@ def _constant_radiance(world, warn):
     """``(radiance, fallback)``: (3,) radiance when the world is the same from every
     direction and is read without Blender's help (radiance None otherwise); ``fallback``
     the Background's own color x strength."""
-    from .shaders import _follow_reroutes
+    from .node_links import follow_reroutes
 
     black = np.zeros(3)
     if world is None:
@@ -146,7 +146,7 @@ def _constant_radiance(world, warn):
     if any(n.type == "LIGHT_PATH" for n in nt.nodes):
         warn(f"world {world.name!r}: a Light Path node may make what the camera sees differ from what "
              "lights the scene; the scene is lit by the world as the camera sees it")
-    node = _follow_reroutes(out.inputs["Surface"].links[0].from_node)
+    node = follow_reroutes(out.inputs["Surface"].links[0].from_node)
     if node is None:
         return black, black
     if node.type != "BACKGROUND":
@@ -158,25 +158,24 @@ def _constant_radiance(world, warn):
     if strength_sock.is_linked:
         return None, fallback
     if color_sock.is_linked:
-        src = _follow_reroutes(color_sock.links[0].from_node)
+        src = follow_reroutes(color_sock.links[0].from_node)
         if src is None or src.type != "RGB":
             return None, fallback
         color = np.array(src.outputs[0].default_value[:3], float)
     return color * strength, color * strength
 
 
-def camera_view(cam_ob, render, camera, border):
+def camera_view(cam_ob, render, size, camera, border):
     """What :mod:`.world_render` needs to render the world through the perspective camera
-    object ``cam_ob`` (evaluated) as ``render`` renders it, with the exported ``camera``
-    (:class:`~raybundle.scene.camera.Camera`) and render ``border`` (x0, y0, w, h) or None, at
+    object ``cam_ob`` (evaluated) as ``render`` renders it at ``size`` (W, H) pixels, with the
+    exported ``camera`` (:class:`~raybundle.scene.camera.Camera`) and render ``border``
+    (x0, y0, w, h) or None, at
     ``s`` times the render's resolution (:data:`VIEW_SUPERSAMPLE`): ``(params, camera, border,
     s)``; None for other cameras (an orthographic one sees one direction of the world)."""
-    from .export import render_size
-
     if cam_ob is None or camera is None or cam_ob.data.type != "PERSP":
         return None
     cd = cam_ob.data
-    w, h = render_size(render)
+    w, h = size
     s = next((s for s in range(VIEW_SUPERSAMPLE, 1, -1) if s * s * w * h <= VIEW_MAX_PIXELS), 1)
     per_pixel = max(4, min(VIEW_SAMPLES, VIEW_SAMPLE_BUDGET // (w * h)))
     params = dict(matrix=[x for row in cam_ob.matrix_world for x in row], type=cd.type, lens=cd.lens,

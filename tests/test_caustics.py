@@ -162,7 +162,7 @@ def test_caustic_splat_filter_keeps_to_one_surface():
     wall neighbours, and once the splats are many the image is the raw average."""
     sc = floor_and_wall()
     r = pipeline.make_renderer(sc, RenderSettings(seed=3))
-    g = r.trace_gbuffer(np.full((len(r._pixel), 2), 0.5))
+    g = r.trace_gbuffer(np.full((len(r.eye.pixel), 2), 0.5))
     wall = g.hit & (g.material == 1)
     assert 0 < wall.sum() < len(wall) - 16
     r.caustic_splats.sum[:] = wall[:, None] * 1.0
@@ -174,6 +174,6 @@ def test_caustic_splat_filter_keeps_to_one_surface():
     r.caustic_splats.sum[p] = 16.0
     img = r.caustic_splats.image()[:, 0]
     assert 0 < img[p] < 16 and np.count_nonzero(img) > 1 and np.all(wall[img > 0])
-    r.caustic_splats.samples = r.caustic_splats.FILTER_SAMPLES * len(r._pixel)
+    r.caustic_splats.samples = r.caustic_splats.FILTER_SAMPLES * len(r.eye.pixel)
     assert np.array_equal(r.caustic_splats.image(), r.caustic_splats.sum / r.caustic_splats.samples)
     r.tracer.close()

@@ -44,8 +44,8 @@ def test_merged_chains_pool_their_sums_and_counts():
     assert np.allclose(fresh.diffuse_indirect(), 0.5 * (diffuse[0] + diffuse[1]), rtol=1e-4, atol=1e-9)
     assert np.allclose(fresh.pass_sum, sum(r.pass_sum for r in rs), rtol=1e-12)
     assert np.array_equal(fresh.pass_samples, sum(r.pass_samples for r in rs))
-    counts = sum(r.emission_count for r in rs)
-    assert np.allclose(fresh.emission_sum, sum(r.emission_sum for r in rs)) and np.array_equal(fresh.emission_count,
+    counts = sum(r.emission.count for r in rs)
+    assert np.allclose(fresh.emission.sum, sum(r.emission.sum for r in rs)) and np.array_equal(fresh.emission.count,
                                                                                              counts)
     fs = [r.solver.first_shot for r in rs]
     assert np.allclose(fresh.solver.first_shot.E, 0.5 * (fs[0].E + fs[1].E), rtol=1e-12)   # same counts per tside

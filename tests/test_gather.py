@@ -206,7 +206,7 @@ def test_a_gather_behind_its_pace_stops_rather_than_thinning():
     8.3% at 60 s, 4.7% with this rule).  With 8 of 16 samples left at 1 s each and 1 s of
     budget, the old rule gave each of them ``per_sample * left / (rest at this pace)``, 4 of
     its 32 rays; now the next one gets its 32 and the rest none."""
-    from raybundle.imaging.renderer import sample_gather_rays
+    from raybundle.imaging.resolve import sample_gather_rays
 
     assert sample_gather_rays(32, seconds_left=1.0, seconds_per_sample=0.5) == 32
     assert sample_gather_rays(32, seconds_left=1.0, seconds_per_sample=1.0) == 32
@@ -233,7 +233,7 @@ def test_the_automatic_gather_stays_off_where_the_patches_are_unbiased():
         r.run(iterations=150)
         for seed in range(3):
             r.edge_gather.seed = 10 + seed
-            r._planned = None
+            r.indirect.forget_plan()
             r.automatic_gather_pays(5.0)
             assert r.edge_gather.last_needed / r.edge_gather.NOISE_MARGIN > 300, (seed, r.edge_gather.last_needed)
     finally:

@@ -200,7 +200,7 @@ def test_penumbra_pixels_get_more_shadow_rays():
         for _ in range(24):
             r.image_pass()
         images[n_pen] = (r.pass_sum / r.pass_samples[:, None])[:, 0].reshape(16, 16)
-        pen_flags = (r.shadow_flags[:, 0] & r.shadow_flags[:, 1] != 0).reshape(16, 16)
+        pen_flags = (r.light.shadow_flags[:, 0] & r.light.shadow_flags[:, 1] != 0).reshape(16, 16)
     ref = penumbra_reference(r).reshape(16, 16)
     pen = pen_flags & (ref > 0)
     assert pen.sum() >= 64
@@ -263,7 +263,7 @@ def test_penumbra_rays_go_to_the_lamp_whose_shadow_edge_crosses_the_pixel():
     rays = []
     for _ in range(23):
         before = r.direct.rays
-        pen = (r._penumbrae() != 0).sum()
+        pen = (r.light.penumbrae() != 0).sum()
         r.image_pass()
         rays.append((r.direct.rays - before, pen))
     n_pix = 16 * 16
@@ -294,7 +294,7 @@ def test_faint_lamps_are_chosen_by_their_contribution():
     for _ in range(23):
         before = r.direct.rays
         # the penumbra samples beyond one: a pixel's 8 shared by the lamps whose shadow edges cross it
-        crossing = np.array([bin(int(x)).count("1") for x in r._penumbrae()])
+        crossing = np.array([bin(int(x)).count("1") for x in r.light.penumbrae()])
         pen = (crossing * (-(-8 // np.maximum(crossing, 1)) - 1)).sum()
         r.image_pass()
         rays.append((r.direct.rays - before, pen))

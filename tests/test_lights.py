@@ -557,12 +557,12 @@ def test_a_linked_lamp_lights_only_its_receivers_and_only_its_blockers_shadow_it
 
 
 def test_an_ies_file_is_read_as_cycles_reads_it():
-    """:func:`raybundle.lights.ies.parse_ies`: the candela values times the multiplier, ballast and
+    """:func:`raybundle.scene.ies.parse_ies`: the candela values times the multiplier, ballast and
     photometric factors and 4 pi / 177.83; a type C quadrant mirrored to the full circle; the
     profile's values at its grid's directions (v from straight down, h = atan2(x, y) + pi), 0
     above its last vertical angle, and never above :attr:`Profile.peak`; type A refused with a
     one-line error; the ``.npz`` arrays keep the profiles."""
-    from raybundle.lights.ies import CANDELA_TO_STRENGTH, IESError, parse_ies
+    from raybundle.scene.ies import CANDELA_TO_STRENGTH, IESError, parse_ies
 
     head = "IESNA:LM-63-2002\n[TEST] x\nTILT=NONE\n1 1000 2.0 4 3 {kind} 2 0.1 0.1 0.0\n0.5 1.0 100\n"
     text = head.format(kind=1) + "0 30 60 90\n0 45 90\n100 200 300 0\n100 400 500 0\n100 600 700 0\n"

@@ -32,7 +32,7 @@ def batch_means(renderer, batches, per_batch):
     for b in range(batches + 1):
         acc = np.zeros(3)
         snap = (r.pass_sum.copy(), r.passes, r.glossy_sum.copy(), r.glossy_iterations,
-                s.mean_incoming * s.averaged, r.emission_sum.copy(), r.emission_count.copy(),
+                s.mean_incoming * s.averaged, r.emission.sum.copy(), r.emission.count.copy(),
                 r.gather_sum.copy(), r.gather_passes, r.pass_samples.copy())
         for _ in range(per_batch):
             s.step()
@@ -46,7 +46,7 @@ def batch_means(renderer, batches, per_batch):
         d_direct = (r.pass_sum - snap[0]) / np.maximum(r.pass_samples - snap[9], 1)[:, None]
         d_glossy = (r.glossy_sum - snap[2]) / max(r.glossy_iterations - snap[3], 1)
         e_batch = (s.mean_incoming * s.averaged - snap[4]) / per_batch
-        d_emission = (r.emission_sum - snap[5]) / np.maximum(r.emission_count - snap[6], 1)[:, None]
+        d_emission = (r.emission.sum - snap[5]) / np.maximum(r.emission.count - snap[6], 1)[:, None]
         d_gather = (r.gather_sum - snap[7]) / max(r.gather_passes - snap[8], 1)
         img = d_direct + d_emission + d_glossy + d_gather + r.diffuse_indirect(e_batch)
         hit = r.gbuffer.hit

@@ -294,7 +294,7 @@ def test_area_lamps_are_seen_through_and_in_a_pane():
     seen = []
     for _ in range(64):
         g = r.trace_gbuffer(np.full((256, 2), 0.5))
-        seen.append(r.seen_radiance(g)[0][:, 0])
+        seen.append(r.emission.radiance(g)[0][:, 0])
     r.tracer.close()
     seen = np.array(seen)
     _, d = cam.rays(*(np.mgrid[0:16, 0:16][::-1].reshape(2, -1) + 0.5))
@@ -329,7 +329,7 @@ def test_a_slab_guides_the_eye_by_total_internal_reflection_as_far_as_the_bounce
         sc = build_scene(v, t, np.zeros(len(t), int), _glass(), camera=cam, area_lights=area, two_sided=True)
     r = pipeline.make_renderer(pipeline.prepare(sc, patches=50), RenderSettings(seed=4, transmission_depth=depth,
                                                                               glossy_depth=glossy))
-    seen = np.array([r.seen_radiance(r.trace_gbuffer(np.full((64, 2), 0.5)))[0][:, 0] for _ in range(32)])
+    seen = np.array([r.emission.radiance(r.trace_gbuffer(np.full((64, 2), 0.5)))[0][:, 0] for _ in range(32)])
     r.tracer.close()
     _, d = cam.rays(*(np.mgrid[0:8, 0:8][::-1].reshape(2, -1) + 0.5))
     exact = (5 * (1 - fresnel_dielectric_cos(d[:, 0], 1.5)) ** 2).mean() if glossy == 64 else 0.0

@@ -3,7 +3,7 @@
 Each variant (a JSON object of :class:`raybundle.imaging.settings.RenderSettings` fields, plus
 ``"patches"``, ``"solver"``: attributes to set on the solver, e.g.
 ``{"solver": {"caustic_refine": 4096}}``, and ``"renderer"``: attributes to set on the
-renderer, e.g. ``{"renderer": {"NOISY_SHARE": 0.05}}``, and ``"method"``: another method, e.g.
+renderer, e.g. ``{"renderer": {"FIRST_EDGE_SAMPLES": 8}}``, and ``"method"``: another method, e.g.
 ``{"method": "path-tracing"}``, whose mean tells an error of the export from one of the
 bundles) renders the scene once per seed, for a fixed
 time or iteration count, and prints its error (``raybundle.app.metrics.image_error``: pixels >= 2 px from the lamp, the

@@ -46,6 +46,7 @@ def light_source_mask(scene, camera=None, samples=4, seed=0, radius=2, tracer=No
     one when any of ``samples`` jittered primary rays hits its front.
     """
     from ..lights.direct import DirectLighting
+    from ..tracing.sampling import Stream, stream
     from ..tracing.visibility import RayTracer
 
     cam = camera if camera is not None else scene.camera
@@ -53,7 +54,7 @@ def light_source_mask(scene, camera=None, samples=4, seed=0, radius=2, tracer=No
     tracer = tracer or RayTracer(scene)
     try:
         lights = DirectLighting(scene, tracer).first_shot_material
-        rng = np.random.default_rng([seed, 5])
+        rng = stream(seed, Stream.LIGHT_SOURCE_MASK)
         py, px = np.divmod(np.arange(cam.width * cam.height), cam.width)
         seen = np.zeros(len(px), bool)
         for _ in range(samples):

@@ -30,7 +30,7 @@ class Cancelled(Exception):
 
 def _step(stage, stop, text):
     """Start a set-up step: raise :class:`Cancelled` if ``stop`` (a callable or an
-    object with ``is_set()``, as for :meth:`~raybundle.imaging.renderer.Renderer.run`) says so,
+    object with ``is_set()``, as for :meth:`~raybundle.imaging.progressive.ProgressiveImage.run`) says so,
     else tell ``stage(text)``."""
     if stop is not None and (stop.is_set() if hasattr(stop, "is_set") else stop()):
         raise Cancelled(f"stopped during set-up, before {text}")
@@ -194,10 +194,10 @@ def build(scene, plan, camera=None, image=True, stage=None, stop=None, attach=No
 
 def run_plan(scene, plan, progress=None, stop=None, camera=None, stage=None, started=None):
     """Build (:func:`build`) and run ``plan`` (:func:`~raybundle.app.plan.plan`) on ``scene``
-    (loaded, not laid out): ``(laid-out scene, :class:`~raybundle.imaging.renderer.RenderResult`)``.
+    (loaded, not laid out): ``(laid-out scene, :class:`~raybundle.imaging.progressive.RenderResult`)``.
     ``stop`` set during set-up raises :class:`Cancelled`; during the iteration it ends the run
     with the image so far.  The plan's ``seconds`` are the budget from ``started`` (default:
-    now), set-up included (:meth:`~raybundle.imaging.renderer.ProgressiveImage.run`)."""
+    now), set-up included (:meth:`~raybundle.imaging.progressive.ProgressiveImage.run`)."""
     started = time.perf_counter() if started is None else started
     scene, renderer = build(scene, plan, camera, stage=stage, stop=stop)
     try:
@@ -211,7 +211,7 @@ def render(scene, settings=None, iterations=None, seconds=None, progress=None, s
            solver=StochasticIterationSolver.name, started=None):
     """Render a scene already laid out (:func:`prepare`) with the method ``solver`` and
     ``settings`` as given (no plan: tests and studies of one setting); returns
-    :class:`~raybundle.imaging.renderer.RenderResult`.  ``stop``, ``seconds`` and ``started`` as in
+    :class:`~raybundle.imaging.progressive.RenderResult`.  ``stop``, ``seconds`` and ``started`` as in
     :func:`run_plan`."""
     started = time.perf_counter() if started is None else started
     renderer = make_renderer(scene, settings, camera, solver=solver, stage=stage, stop=stop)

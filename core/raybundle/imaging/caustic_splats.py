@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..tracing.sampling import Stream, stream
 from .splat import splat_to_camera
 
 
@@ -24,7 +25,7 @@ class CausticSplats:
     def __init__(self, scene, camera, tracer, direct, caustic, seed, pixel, trace_centres):
         self.scene, self.camera, self.tracer, self.direct, self.caustic = scene, camera, tracer, direct, caustic
         self.pixel, self.trace_centres = pixel, trace_centres
-        self.rng = np.random.default_rng([seed, 6])
+        self.rng = stream(seed, Stream.CAUSTIC_SPLATS)
         self.sum = np.zeros((len(pixel), 3))
         self.samples = 0
         self.rays = 0

@@ -34,7 +34,7 @@ import time
 
 import numpy as np
 
-from ..tracing.sampling import cosine_directions, frames_from_normals, kronecker_alpha
+from ..tracing.sampling import Stream, cosine_directions, frames_from_normals, kronecker_alpha, stream
 from ..tracing.visibility import near_surface
 
 
@@ -213,7 +213,7 @@ class EdgeGather:
         self.scene, self.tracer, self.seed = scene, tracer, seed
         self._flags = np.full(scene.n_sides, -1, np.int8)      # per side; -1: not probed yet
         self._by_area = None
-        self.rng = np.random.default_rng([seed, 3])
+        self.rng = stream(seed, Stream.EDGE_GATHER)
         self.points = 0
         self.last_needed = None                   # rays per pixel the last automatic gather needed
 
@@ -271,7 +271,7 @@ class EdgeGather:
         rep = np.repeat(probe, probe_rays)
         ts, bary = g.tside[rep], g.bary[rep]
         t0 = time.perf_counter()
-        one = final.irradiance(g.point[rep], self.scene.tside_normal[ts], 1, np.random.default_rng([self.seed, 4]),
+        one = final.irradiance(g.point[rep], self.scene.tside_normal[ts], 1, stream(self.seed, Stream.EDGE_GATHER_PROBE),
                                at=(ts, bary)).sum(axis=1).reshape(len(probe), probe_rays)
         cost = (time.perf_counter() - t0) / (len(probe) * probe_rays)          # seconds per ray and point
         left = gather_seconds - (time.perf_counter() - t0)

@@ -1,6 +1,6 @@
 """The one run loop: iterate a renderer or a solver until the budget is spent or the user stops.
 
-Renders (:meth:`~raybundle.imaging.renderer.ProgressiveImage.run`), bakes (the add-on's ``BakeJob``)
+Renders (:meth:`~raybundle.imaging.progressive.ProgressiveImage.run`), bakes (the add-on's ``BakeJob``)
 and the chains on Dask (:mod:`raybundle.app.distributed`) all iterate through :class:`RunLoop`,
 which owns the budget of the whole run:
 

@@ -29,7 +29,7 @@ class RenderSettings:
     #: shadow rays per light per pixel per image pass
     light_samples: int = 1
     #: the share of traced rays spent on image passes (the rest on bundles); 0: automatic, 0.2 for
-    #: diffuse scenes, 0.55 where the passes' eye paths also carry glossy lobes (:meth:`Renderer.step`)
+    #: diffuse scenes, 0.55 where the passes' eye paths also carry glossy lobes (:class:`~raybundle.imaging.passes.PassSchedule`)
     image_ray_share: float = 0.0
     #: sub-pixel positions at which the diffuse indirect part is resolved
     resolve_samples: int = 16
@@ -42,7 +42,7 @@ class RenderSettings:
     #: the glossy bounces those eye rays follow
     glossy_gather_depth: int = 3
     #: extra samples per pass (a jittered s x s grid, rounded to a square) for the pixels on the edge
-    #: of a visible emitter and those whose passes disagree most (:meth:`Renderer._noisy_pixels`)
+    #: of a visible emitter and those whose passes disagree most (:meth:`~raybundle.imaging.passes.PassSchedule.noisy_pixels`)
     emission_edge_samples: int = 16
     #: bundle directions per iteration, traced together
     #: (:meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.step`)
@@ -60,12 +60,12 @@ class RenderSettings:
     #: edges and contacts, :mod:`raybundle.imaging.gather`): 0 none; -1 as many as ``gather_share``
     #: of the run's seconds buys, in runs limited by time (none in runs of given iterations, which
     #: stay reproducible, nor in images formed without a budget of seconds):
-    #: :meth:`Renderer.diffuse_indirect`
+    #: :meth:`~raybundle.imaging.resolve.DiffuseIndirect.image`
     gather_rays: int = -1
     #: the share of a timed run's seconds the automatic final gather may take
     gather_share: float = 0.25
     #: shadow rays per pass at the pixels where a light's earlier samples were both seen and blocked,
-    #: shared by the lights whose shadow edges cross the pixel, at least one each (:meth:`Renderer._shade`)
+    #: shared by the lights whose shadow edges cross the pixel, at least one each (:mod:`~raybundle.imaging.pixel_light`)
     penumbra_samples: int = 8
     #: with a caustic first shot, its samples per pixel and image pass that light-trace the caustic on
     #: the surfaces the eye sees into the pixels (:meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`);
@@ -79,7 +79,7 @@ class RenderSettings:
     world_samples: int = -1
     #: the interfaces of glass, refraction and transparent surfaces an eye path is refracted by before
     #: it ends, black, at the next: Cycles' default transmission bounces
-    #: (:mod:`raybundle.scene.transmission`, :meth:`Renderer.trace_gbuffer`)
+    #: (:mod:`raybundle.scene.transmission`, :meth:`~raybundle.imaging.eye_rays.EyeRays.trace`)
     transmission_depth: int = 12
     #: the reflections on them (total internal ones included) after which a path ends, black, at the
     #: next: Cycles' default glossy bounces

@@ -21,7 +21,7 @@ class Method:
 
     Patch methods derive from :class:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver`
     (a solution per patch side: images and bakes); image-only methods from
-    :class:`~raybundle.imaging.renderer.ProgressiveImage` too (camera images, no patches)."""
+    :class:`~raybundle.imaging.progressive.ProgressiveImage` too (camera images, no patches)."""
 
     #: the name users give (``--method``, the add-on's method list)
     name = ""

@@ -36,8 +36,8 @@ import time
 
 import numpy as np
 
-from ..imaging.renderer import ImagePasses, ProgressiveImage
-from ..tracing.sampling import frames_from_normals, halton_permutations, halton_points
+from ..imaging.progressive import ImagePasses, ProgressiveImage
+from ..tracing.sampling import Stream, frames_from_normals, halton_permutations, halton_points, stream
 from .base import Method, SolverStats
 
 #: bounces before Russian roulette starts
@@ -89,7 +89,7 @@ class PathTracer(ProgressiveImage, Method):
                              f"{settings.sequence!r} (that one drives the iteration methods' directions)")
         self.scene, self.camera, self.tracer, self.direct, self.settings = scene, camera, tracer, direct, settings
         self.solver = ImagePasses(tracer, SolverStats(), name=self.name)
-        self.rng = np.random.default_rng([settings.seed, 11])
+        self.rng = stream(settings.seed, Stream.PATH_TRACING)
         n = camera.width * camera.height
         self.qmc = settings.sequence == "halton"
         self._shift = self.rng.random((n, QMC_DIMENSIONS)) if self.qmc else None

@@ -37,6 +37,7 @@ import warnings
 import numpy as np
 
 from ..scene.materials import NEAR_MIRROR_ROUGHNESS
+from ..tracing.sampling import Stream, stream
 from .stochastic_iteration import StochasticIterationSolver
 
 
@@ -61,7 +62,7 @@ class RayBundleWalk(StochasticIterationSolver):
         self.walk_direction = np.zeros((n, 3))
         self.walk_step = 0                         # steps taken by the current walk
         self.walks = 0                             # walks started
-        self.roulette = np.random.default_rng([seed, 13])
+        self.roulette = stream(seed, Stream.ROULETTE)
         if len(self.glossy_patches):
             rough = np.asarray(self.scene.materials.roughness)[self.patch_material[self.glossy_patches]].min()
             if rough < NEAR_MIRROR_ROUGHNESS:

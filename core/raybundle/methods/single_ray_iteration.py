@@ -48,9 +48,9 @@ import warnings
 
 import numpy as np
 
-from ..imaging.renderer import ImagePasses, ProgressiveImage
+from ..imaging.progressive import ImagePasses, ProgressiveImage
 from ..imaging.splat import splat_to_camera
-from ..tracing.sampling import frames_from_normals, points_on_triangles, uniform_sphere
+from ..tracing.sampling import Stream, frames_from_normals, points_on_triangles, stream, uniform_sphere
 from .base import Method, SolverStats
 
 
@@ -218,7 +218,7 @@ class SingleRayIteration(ProgressiveImage, Method):
                           "off are not honoured (the other methods honour them)", stacklevel=2)
         self.emission = LightEmission(scene, tracer)
         self.solver = ImagePasses(tracer, SolverStats(), name=self.name)
-        self.rng = np.random.default_rng([settings.seed, 13])
+        self.rng = stream(settings.seed, Stream.LIGHT_TRACING)
         n_pix = camera.width * camera.height
         self.chains = max(self.MIN_CHAINS, n_pix)
         k = self.chains

@@ -63,8 +63,8 @@ from ..lights.first_shot import PatchFirstShot
 from ..lights.world_light import GUIDE_CELLS, guide_cell
 from ..patches.reconstruction import LinearReconstruction
 from ..scene.transmission import solver_share
-from ..tracing.sampling import (cosine_directions, frames_from_normals, points_on_triangles, uniform_sphere,
-                                uniform_sphere_pdf)
+from ..tracing.sampling import (Stream, cosine_directions, frames_from_normals, points_on_triangles, stream,
+                                uniform_sphere, uniform_sphere_pdf)
 from .base import Method, SolverStats
 
 
@@ -163,14 +163,14 @@ class StochasticIterationSolver(Method):
             raise ValueError("glossy_send_rays must be at least 1")
         self.glossy_send_rays = int(glossy_send_rays)
         # incoming first shot, refined by a few shadow rays every iteration
-        self.first_shot = PatchFirstShot(direct, np.random.default_rng([seed, 7]), receiving_area=open_area)
-        self.grid_rng = np.random.default_rng([seed, 3])   # bundle grid offset and rotation
+        self.first_shot = PatchFirstShot(direct, stream(seed, Stream.FIRST_SHOT), receiving_area=open_area)
+        self.grid_rng = stream(seed, Stream.BUNDLE_GRID)
         # a sixteenth of the lit sides' worth of shadow rays per iteration (per side, not per
         # triangle: a cluster's many small triangles share one estimate)
         lit_sides = len(np.unique(scene.tside_side[self.first_shot.receiving_tsides]))
         self.first_shot_refine = max(64, lit_sides // 16) if direct.n_lights else 0
         # the first shot's glossy reflection goes by lobe-sampled rays, not by bundles
-        self.caustic = CausticShot(scene, tracer, self.first_shot, self.area, np.random.default_rng([seed, 11]),
+        self.caustic = CausticShot(scene, tracer, self.first_shot, self.area, stream(seed, Stream.CAUSTIC_SHOT),
                                    self.glossy_patches) if caustics else None
         if self.caustic is not None and not self.caustic.active:
             self.caustic = None

@@ -52,7 +52,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..scene.model import PatchScene
-from ..tracing.sampling import frames_from_normals
+from ..tracing.sampling import Stream, frames_from_normals, stream
 from ..tracing.visibility import RayTracer
 from ..util.arrays import group_ids, ranges
 from .contacts import CONTACT_SHARE, PROBE_CHUNK, gap_sides, pierced_parts
@@ -362,7 +362,7 @@ def world_view_classes(tracer, points, normals, rays=WORLD_VIEW_RAYS, seed=0):
     ``seed``: the same layout every run; the points go to the tracer
     :data:`~raybundle.patches.contacts.PROBE_CHUNK` rays at a time."""
     points, normals = np.asarray(points, float), np.asarray(normals, float)
-    rng = np.random.default_rng([seed, 17])
+    rng = stream(seed, Stream.OPEN_FRACTION_FRAMES)
     k = np.arange(rays) + 0.5
     sin_t, phi = np.sqrt(k / rays), np.pi * (3.0 - np.sqrt(5.0)) * k
     local = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), np.sqrt(1.0 - sin_t * sin_t)], axis=1)

@@ -25,6 +25,7 @@ import re
 
 import numpy as np
 
+from ..tracing.sampling import Stream, stream
 from .build import build_scene
 from .camera import Camera
 from .materials import MaterialTable, color_text
@@ -193,7 +194,7 @@ def random_room(seed, glossy=False, resolution=(96, 96)):
     ``glossy``: the boxes and the floor Glossy GGX (roughness 0.2-0.5), the walls a Mix with
     a glossy weight of 0.5-0.9, plus a second, smaller lamp; otherwise everything is
     Lambertian.  The camera stands in a corner, looking at the far one."""
-    rng = np.random.default_rng([int(seed), 29])
+    rng = stream(seed, Stream.RANDOM_ROOM)
     size = np.array([rng.uniform(3, 6), rng.uniform(3, 6), rng.uniform(2.4, 3.2)])
     colour = (lambda lo=0.2, hi=0.8: tuple(rng.uniform(lo, hi, 3)))
     if glossy:

@@ -33,6 +33,7 @@ import numpy as np
 from ..util.arrays import connected_components, group_ids, shared_edges, unique_rows
 from .camera import Camera
 from .materials import MaterialTable
+from .transmission import pass_probability
 from .world import World
 
 NPZ_FORMAT_VERSION = 3
@@ -72,7 +73,7 @@ class PointLights:
     (Blender's Cast Shadow off, ``Light.use_shadow``); ``link`` (L,) the light's link set
     (:mod:`raybundle.scene.linking`; 0: it lights everything and everything blocks it);
     ``profile`` (L,) the light's photometric profile in ``profiles`` (a list of
-    :class:`~raybundle.lights.ies.Profile`; -1: none) and ``axes`` (L, 3, 3) its own frame (rows:
+    :class:`~raybundle.scene.ies.Profile`; -1: none) and ``axes`` (L, 3, 3) its own frame (rows:
     its local X, Y and Z axes in the world, unit), in which the profile is looked up.
 
     Blender's point or spot light of power P [W] has I = P / (4 pi) W/sr; the
@@ -147,7 +148,7 @@ class PointLights:
     def from_arrays(cls, d, prefix="point_light_"):
         profiles = []
         if prefix + "profile_shapes" in d:
-            from ..lights.ies import Profile
+            from .ies import Profile
 
             at = np.zeros(3, np.int64)
             for nh, nv in np.asarray(d[prefix + "profile_shapes"], np.int64):
@@ -368,6 +369,17 @@ class PatchScene:
         m = np.zeros(self.n_patches, dtype=np.int64)
         m[self.triangle_patch[::-1]] = self.triangle_material[::-1]
         return m
+
+    def albedo_at(self, triangles, points):
+        """(N, 3) the texture's modulation of the diffuse reflectance at ``points`` (N, 3) on
+        patch ``triangles`` (N,) (:mod:`raybundle.scene.textures`), None for an untextured scene."""
+        tex = self.texture
+        return None if tex is None else tex.at(self.triangle_source[triangles], points)
+
+    def pass_probability(self, triangles, cos):
+        """(N,) probability that a ray meeting ``triangles`` (N,) at ``|cos|`` (N,) of its angle
+        to their normals passes straight through (:func:`.transmission.pass_probability`)."""
+        return pass_probability(self.materials, self.triangle_material[triangles], cos)
 
     @cached_property
     def bounding_sphere(self):

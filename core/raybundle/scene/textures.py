@@ -310,7 +310,7 @@ class SurfaceTexture:
         coarser level of the map's pyramid (each texel the mean of 2 x 2 of the level below),
         where it covers at most :data:`MAX_SAMPLES`.  The points' UVs are the triangle's corner
         UVs interpolated (UV is affine over a face)."""
-        from ..tracing.sampling import stratified_2d_sets, uniform_triangle
+        from ..tracing.sampling import Stream, stratified_2d_sets, stream, uniform_triangle
 
         tri_face = scene.triangle_source
         img = face_map[tri_face]
@@ -327,7 +327,7 @@ class SurfaceTexture:
         # points per triangle: the texels it covers on its level, rounded up to a power of 2
         k = np.clip(np.ceil(covered / 4.0 ** level), fewest, MAX_SAMPLES)
         k = np.minimum(2 ** np.ceil(np.log2(k)), MAX_SAMPLES).astype(np.int64)
-        rng = np.random.default_rng([seed, 31])
+        rng = stream(seed, Stream.TEXTURE_MEANS)
         groups, which = np.unique(np.stack([k, level, img[textured]], axis=1), axis=0, return_inverse=True)
         order = np.argsort(which.ravel(), kind="stable")
         for (n, lev, m), sel in zip(groups, np.split(order, np.cumsum(np.bincount(which.ravel()))[:-1])):

@@ -18,9 +18,44 @@ iteration as ``dim`` numbers in [0, 1).  Chosen by name via :data:`SEQUENCES`.
 """
 from __future__ import annotations
 
+import enum
 import math
 
 import numpy as np
+
+
+class Stream(enum.IntEnum):
+    """Every random stream of a run, by name: :func:`stream` ``(seed, Stream.X)`` is the
+    Generator ``np.random.default_rng([seed, X])``.  A stream's number is part of what a seed
+    means: changing it changes the images of that seed."""
+
+    IMAGE_PASSES = 1            # the renderer's passes: lobe uniforms, interfaces, extra samples
+    RESOLVE = 2                 # the diffuse resolve's sub-pixel offsets and gather shifts
+    EDGE_GATHER = 3             # :class:`~raybundle.imaging.gather.EdgeGather`'s probe points
+    BUNDLE_GRID = 3             # each bundle's grid offset and rotation (shares 3)
+    EDGE_GATHER_PROBE = 4       # ... and the one-ray gathers that measure its noise
+    LIGHT_SOURCE_MASK = 5       # :func:`~raybundle.app.metrics.light_source_mask`'s sub-pixel rays
+    CAUSTIC_SPLATS = 6          # the caustic shot light-traced into the pixels
+    FIRST_SHOT = 7              # the per-patch first shot's points and light samples
+    SUBPIXEL_SHIFT = 8          # each pixel's shift of its R_2 sequence of sub-pixel positions
+    LIGHT_SHIFT = 9             # each pixel's shift of its R_3 sequences of light samples
+    CHOICE_SHIFT = 9            # each pixel's shift of its first interface's choice (shares 9)
+    OPEN_AREA = 11              # the tracer's estimate of the patches' open (not buried) area
+    CAUSTIC_SHOT = 11           # the caustic first shot's lobe rays (shares 11)
+    PATH_TRACING = 11           # the path tracer's walks (shares 11)
+    LIGHT_TRACING = 13          # single-ray iteration's photons
+    ROULETTE = 13               # the bundle walk's Russian roulette (shares 13)
+    STRATIFIED = 17             # :class:`StratifiedSequence`'s streams, one more number each
+    OPEN_FRACTION_FRAMES = 17   # the patches' open-fraction probes' random turns (shares 17)
+    SOBOL_SHIFT = 23            # :class:`SobolSequence`'s digital shift
+    RANDOM_ROOM = 29            # the built-in random rooms
+    TEXTURE_MEANS = 31          # texture means over patches, by sampled points
+
+
+def stream(seed, which, *more):
+    """The Generator of stream ``which`` (:class:`Stream`) for ``seed`` (``more``: further
+    numbers that split it, e.g. one per sub-stream)."""
+    return np.random.default_rng([int(seed), int(which), *more])
 
 
 # ------------------------------------------------------------ direction maps
@@ -233,7 +268,7 @@ class StratifiedSequence:
 
     def __init__(self, seed=0, strata=256, streams=16):
         self.k = max(1, int(round(math.sqrt(strata))))
-        self.rngs = [np.random.default_rng([int(seed), 17, s]) for s in range(int(streams))]
+        self.rngs = [stream(seed, Stream.STRATIFIED, s) for s in range(int(streams))]
         self.blocks = [np.empty((0, 2)) for _ in range(int(streams))]
         self.n = 0
 
@@ -425,7 +460,7 @@ class SobolSequence:
 
     def __init__(self, seed=0, start=0):
         self.v = sobol_direction_numbers(self.BITS)
-        self.shift = np.random.default_rng([int(seed), 23]).integers(0, 1 << self.BITS, size=2, dtype=np.uint64)
+        self.shift = stream(seed, Stream.SOBOL_SHIFT).integers(0, 1 << self.BITS, size=2, dtype=np.uint64)
         self.index = int(start)
 
     def point(self, index):

@@ -23,7 +23,7 @@ the ray, the layer and the query (the same for any split over threads); a ray th
 goes on from just past the hit, in every query (first hits, shadow rays, bundle lines).
 So does a hit on a transmissive surface (glass, refraction, transparency), kept with the
 probability that the ray does not pass straight through
-(:func:`~raybundle.scene.transmission.pass_probability`), except in the eye's paths, which
+(the scene's ``pass_probability``), except in the eye's paths, which
 refract there instead (``first_hit(..., glass=False)``).
 
 ``embreex`` traces one ray after another in C and releases the GIL, so every
@@ -38,8 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..scene.transmission import pass_probability
-from .sampling import cosine_directions, frames_from_normals, points_on_triangles, stratified_2d_sets
+from .sampling import (Stream, cosine_directions, frames_from_normals, points_on_triangles, stratified_2d_sets,
+                       stream)
 
 _MAX_LAYERS = 10000
 #: most surfaces a first-hit query passes through before it gives up (the ray then misses)
@@ -131,7 +131,7 @@ class RayTracer:
         #: the scene's coverage maps (None: no cut-outs) and (T,) bool cut-out triangles
         self.cutouts = tex if tex is not None and tex.has_cutouts else None
         self._cut = None if self.cutouts is None else self.cutouts.cutout_faces[scene.triangle_source]
-        #: (T,) bool triangles light passes straight through (:mod:`raybundle.scene.transmission`), or None
+        #: (T,) bool triangles light may pass straight through (transmissive materials), or None
         glass = scene.materials.transmits[scene.triangle_material] if len(scene.triangles) else None
         self.glass = glass if glass is not None and glass.any() else None
         masks = [m for m in (self._cut, self.glass) if m is not None]
@@ -163,7 +163,7 @@ class RayTracer:
         Embree's barycentrics (hit = (1-u-v) v0 + u v1 + v v2).  A cut-out's hit is
         kept with the probability of its coverage there (module docstring), and with
         ``glass`` a transmissive surface's with the probability that the ray does not pass
-        straight through it (:func:`~raybundle.scene.transmission.pass_probability`; the eye's
+        straight through it (the scene's ``pass_probability``; the eye's
         paths refract there instead: ``glass`` False).
         """
         origins = np.asarray(origins, float)
@@ -200,16 +200,15 @@ class RayTracer:
         """(N,) bool: the hits on triangles ``tri`` at ``points`` are kept: a uniform number hashed
         from ``rays``, ``layer`` and ``query`` against the coverage of a cut-out times, for rays
         along ``directions`` (None: cut-outs only), the probability of not passing a
-        transmissive surface (:func:`~raybundle.scene.transmission.pass_probability`)."""
+        transmissive surface (the scene's ``pass_probability``)."""
         keep = np.ones(len(tri))
         if self._cut is not None:
             c = np.nonzero(self._cut[tri])[0]
             keep[c] = self.cutouts.alpha_at(self.scene.triangle_source[tri[c]], points[c])
         if directions is not None and self.glass is not None:
             g = np.nonzero(self.glass[tri])[0]
-            sc = self.scene
-            cos = np.einsum("ij,ij->i", sc.triangle_normal[tri[g]], directions[g])
-            keep[g] *= 1.0 - pass_probability(sc.materials, sc.triangle_material[tri[g]], cos)
+            cos = np.einsum("ij,ij->i", self.scene.triangle_normal[tri[g]], directions[g])
+            keep[g] *= 1.0 - self.scene.pass_probability(tri[g], cos)
         return hashed_uniform(rays, layer, query) < keep
 
     def _next_query(self):
@@ -302,7 +301,7 @@ class RayTracer:
         buried keeps half a sample's area (its E is then never divided by zero).  A scene
         without solids needs no rays: everything is open.
         """
-        rng = np.random.default_rng([seed, 11])
+        rng = stream(seed, Stream.OPEN_AREA)
         sc = self.scene
         n_t = len(sc.tside_triangle)
         if not sc.triangle_solid.any():

@@ -1,0 +1,182 @@
+"""The diffuse indirect light of the image, resolved from the solution, and the final gather.
+
+``W_d kd / pi * E_bar`` is linear in the running average ``E_bar`` of the patches' incoming
+radiance, so it is resolved once from the final average at ``resolve_samples`` stratified
+sub-pixel positions, with ``E_bar`` interpolated linearly over each smooth surface from vertex
+values that are the L2 projection of the patch values onto hat functions
+(:meth:`~raybundle.patches.reconstruction.LinearReconstruction.projected`), or flat per patch.
+Next to concave edges and contacts, where patch values cannot follow the light, a final gather
+reads the solution where its rays land instead (:mod:`raybundle.imaging.gather`).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..tracing.sampling import Stream, stratified_2d, stream
+from .gather import FinalGather
+
+
+def surface_values(scene, solver, side_values, vert, tside, bary):
+    """Side values (S, C) at hit points on triangle sides ``tside`` (N,) of ``scene``:
+    interpolated from welded-vertex values ``vert`` (V, C) with barycentrics (N, 3) by the
+    ``solver``'s reconstruction, or flat per side when ``vert`` is None."""
+    if vert is None:
+        return side_values[scene.tside_side[tside]]
+    return solver.reconstruction.at(vert, tside, bary)
+
+
+def sample_gather_rays(per_sample, seconds_left, seconds_per_sample):
+    """The automatic gather's rays for the next sub-pixel sample: all ``per_sample`` while the
+    budget left holds a sample at the pace so far, else none (:meth:`DiffuseIndirect.image`).
+    Never a few: a gather thinned below what the probe found it needs adds more noise than
+    the bias it removes."""
+    return int(per_sample) if seconds_left >= seconds_per_sample else 0
+
+
+class DiffuseIndirect:
+    """The image's diffuse indirect light from ``solver``'s solution, through the eye's rays
+    ``trace`` (:meth:`~raybundle.imaging.eye_rays.EyeRays.trace`, counted) at ``pixels``
+    pixels.  ``edge_gather`` (:class:`~raybundle.imaging.gather.EdgeGather`) flags the sides
+    that gather; ``probe()`` gives the G-buffer the automatic gather measures its cost on.
+    ``world_sampled``: the world's direct light is sampled per pixel (not read from the
+    patches); ``caustic_splatted``: the caustic shot is light-traced into the pixels."""
+
+    def __init__(self, scene, solver, settings, trace, pixels, edge_gather, probe, world_sampled, caustic_splatted):
+        self.scene, self.solver, self.settings, self.trace, self.pixels = scene, solver, settings, trace, pixels
+        self.edge_gather, self.probe = edge_gather, probe
+        self.world_sampled, self.caustic_splatted = world_sampled, caustic_splatted
+        self._resolve_rng = stream(settings.seed, Stream.RESOLVE)
+        self._planned = None                # automatic_gather_pays' plan for the next image
+        self.gather_rays_used = 0           # rays per pixel of the last resolve's gather
+
+    def forget_plan(self):
+        """Drop the plan :meth:`automatic_gather_pays` kept: the solution has moved on."""
+        self._planned = None
+
+    def image(self, e_bar=None, samples=None, gather=True, gather_seconds=None):
+        """(N, 3) W_d kd/pi * E_bar at the pixels (W_d: the diffuse weight under a
+        Principled layer, 1 without), box-filtered with ``samples`` (default
+        ``resolve_samples``) stratified sub-pixel samples.
+
+        ``e_bar`` (S, 3) defaults to the solver's
+        :meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.indirect_incoming`.
+        With ``smooth``, the bundles' running average and the caustic first shot are
+        interpolated by :meth:`~raybundle.patches.reconstruction.LinearReconstruction.smooth_and_sharp`.
+        With ``gather`` (and ``e_bar`` the solver's own), points on the sides
+        :meth:`~raybundle.imaging.gather.EdgeGather.near_edge` flags gather their indirect light
+        instead (:class:`~raybundle.imaging.gather.FinalGather`): ``gather_rays`` rays per pixel,
+        spread over its sub-pixel samples as one stratified set.  With ``gather_rays`` = -1
+        the count is what ``gather_seconds`` buy (the run loop gives ``gather_share`` of a timed
+        run's iteration seconds, :meth:`~raybundle.imaging.renderer.Renderer.resolve`; none: no automatic
+        gather), from the gather's
+        cost per ray measured on a few of the last image pass's points and the number of its
+        points on flagged sides (:class:`~raybundle.imaging.gather.EdgeGather`), and none where
+        the gather's own noise would outweigh the bias it removes
+        (:meth:`~raybundle.imaging.gather.EdgeGather.automatic_rays`).  Once its budget is spent
+        (a machine slower than at the probe, sides first seen by a sub-pixel sample probed for
+        edges then), the automatic gather leaves the remaining sub-pixel samples to the patch
+        values (:func:`sample_gather_rays`; docs/benchmarks.md, 'Real interiors').
+        """
+        t_start = time.perf_counter()
+        sc = self.scene
+        n = self.pixels
+        out = np.zeros((n, 3))
+        k = max(1, int(samples or self.settings.resolve_samples))
+        final, per_sample, rays = None, 0, self.settings.gather_rays
+        if e_bar is None:
+            planned, self._planned = self._planned, None
+            if planned is not None and planned[0] == (gather_seconds, k):
+                e_bar, vert, final, per_sample = planned[1]
+                t_start -= planned[2]                 # the probe's time counts against the gather's budget
+            else:
+                e_bar, vert, final, per_sample = self._indirect_plan(gather, gather_seconds, k)
+            self.gather_rays_used = 0
+        else:
+            vert = self.solver.reconstruction.smooth_and_sharp(e_bar, None) \
+                if self.settings.smooth and np.any(e_bar) else None
+        if not np.any(e_bar) and final is None and not len(getattr(self.solver, "translucent_sides", ())):
+            return out
+        kd = sc.materials.diffuse_reflectance
+        # translucent sides: what their patch's other side receives, sent on (smoothed like E_bar)
+        through = through_vert = None
+        if len(getattr(self.solver, "translucent_sides", ())):      # the first shot's part: _shade's
+            through = self.solver.translucent_radiance(self.solver.indirect_incoming())
+            through_vert = self.solver.reconstruction.averaged(through) if self.settings.smooth else None
+        offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve
+        if final is not None:
+            shift = self._resolve_rng.random((n, 2))
+        t_loop = time.perf_counter()
+        for j in range(k):
+            g = self.trace(np.broadcast_to(offsets[j], (n, 2)))
+            h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
+            e = surface_values(sc, self.solver, e_bar, vert, g.tside[h], g.bary[h])
+            if final is not None:
+                rays_j = per_sample
+                if rays < 0 and j > 0:     # the automatic gather keeps to its budget: none once it is spent
+                    now = time.perf_counter()
+                    rays_j = sample_gather_rays(per_sample, gather_seconds - (now - t_start), (now - t_loop) / j)
+                f = np.nonzero(self.edge_gather.near_edge(g.tside[h]))[0] if rays_j else []
+                if len(f):
+                    e[f] = final.irradiance(g.point[h[f]], sc.tside_normal[g.tside[h[f]]], rays_j,
+                                            self._resolve_rng, shift=shift[h[f]], first=j * per_sample,
+                                            at=(g.tside[h[f]], g.bary[h[f]]))
+                    self.edge_gather.points += len(f)
+                self.gather_rays_used += rays_j
+            m = g.material[h]
+            w_d = sc.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]))
+            scale = sc.albedo_at(g.triangle[h], g.point[h])
+            value = w_d * kd[m] / np.pi * e * (1.0 if scale is None else scale)
+            if through is not None:
+                value += surface_values(sc, self.solver, through, through_vert, g.tside[h], g.bary[h])
+            out[h] += g.weighted(value, h)
+        return out / k
+
+    def _indirect_plan(self, gather, gather_seconds, k):
+        """What :meth:`image` reads from the solver: ``(e_bar, vert, final,
+        per_sample)``, the solver's E_bar (S, 3) for the image, its vertex values (with
+        ``smooth``, else None), the :class:`~raybundle.imaging.gather.FinalGather` or None
+        and its rays per sub-pixel sample for ``k`` sub-pixel samples (the automatic count
+        is probed: :meth:`~raybundle.imaging.gather.EdgeGather.automatic_rays`)."""
+        solver = self.solver
+        caustic = solver.caustic is not None and not self.caustic_splatted
+        # a caustic light-traced into the pixels (caustic_splats) is left out here
+        e_bar = solver.image_incoming(caustic=caustic, world=not self.world_sampled)
+        sharp = solver.caustic.E if caustic else None
+        rays, final, per_sample = self.settings.gather_rays, None, 0
+        if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and gather_seconds and
+                                                             self.edge_gather.affordable(self.probe(),
+                                                                                         gather_seconds))):
+            final = FinalGather(solver, near=self.GATHER_NEAR, caustic=caustic, world=not self.world_sampled,
+                                image_values=(e_bar, sharp) if self.settings.smooth else None)
+        vert = final.image_vert if final is not None else None
+        if vert is None and self.settings.smooth and np.any(e_bar):
+            vert = solver.reconstruction.smooth_and_sharp(e_bar, sharp)
+        if final is not None:
+            per_sample = (-(-int(rays) // k) if rays > 0 else
+                          self.edge_gather.automatic_rays(final, self.probe(), k, gather_seconds,
+                                                          lambda ts, bary: surface_values(self.scene, solver, e_bar, vert, ts, bary)))
+            if per_sample == 0:
+                final = None
+        return e_bar, vert, final, per_sample
+
+    #: the image's final gather reads the patch values at every hit, however near
+    #: (:class:`~raybundle.imaging.gather.FinalGather`'s ``near`` 0): the direct light estimated
+    #: at hits within a patch size of the gathering point (bakes do, where a vertex's value is
+    #: final) costs many times as much per ray where lamps are many and takes no noise away
+    GATHER_NEAR = 0.0
+
+    def automatic_gather_pays(self, gather_seconds):
+        """Whether the automatic final gather (``gather_rays`` -1) would spend ``gather_seconds``
+        on the image: a timed run whose gather would not pay gives the seconds it kept for it
+        to more iterations (:meth:`~raybundle.imaging.progressive.ProgressiveImage.run`).  When it pays, the probe's plan is kept for the
+        :meth:`image` that follows."""
+        t0 = time.perf_counter()                  # probing the sides for edges counts too
+        if self.settings.gather_rays != -1 or not gather_seconds or not self.scene.n_patches or \
+                not self.edge_gather.affordable(self.probe(), gather_seconds):
+            return False
+        k = max(1, int(self.settings.resolve_samples))
+        plan = self._indirect_plan(True, gather_seconds, k)
+        self._planned = ((gather_seconds, k), plan, time.perf_counter() - t0) if plan[2] is not None else None
+        return plan[2] is not None
