@@ -17,8 +17,9 @@ the linear radiance as a 32-bit float multilayer EXR as Blender names it: a
 ``<view layer>.Combined`` pass (RGBA) for each view layer the file renders (its enabled
 ones, or the active one alone with Render Single Layer), plus an sRGB PNG preview of each
 beside it (``OUT.png`` for one layer, ``OUT.<view layer>.png`` for several).
-Options not given come from the file's ``scene.raybundle`` settings; those given are
-handed to the render directly (:func:`.engine.render_options`), the file is not changed.
+Options not given come from the file's ``scene.raybundle`` settings; those given replace
+them in memory while it runs (:func:`options_applied`), as the panel would; the file is not
+changed.
 
 ``--bake`` runs the ``raybundle.bake`` job instead (:mod:`.bake`): a ``RayBundle``
 color attribute on every mesh and, with ``--lightmaps DIR``, a lightmap EXR per mesh
@@ -33,6 +34,7 @@ cannot be rendered give a one-line error and exit status 2.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
@@ -87,25 +89,9 @@ def main(argv=None):
 
 def _main(argv, interrupted):
     args = build_parser().parse_args(argv)
-    if not os.path.isfile(args.blend):
-        return _fail(f"{args.blend}: no such file")
-    if not args.blend.endswith(".blend"):
-        return _fail(f"{args.blend}: not a .blend file")
-    if args.bake is None and (args.lightmaps or args.lightmap_size or args.domain or args.subdivide):
-        return _fail("--lightmaps, --lightmap-size, --domain and --subdivide go with --bake")
-    from raybundle.util.io import OutputError, check_output
-
-    try:                              # outputs are checked before the work, not lost after it
-        if args.out is not None:
-            check_output(args.out, "--out", suffix=".exr")
-        if args.bake is not None:
-            check_output(args.bake, "--bake", suffix=".blend")
-        if args.lightmaps:
-            check_output(args.lightmaps, "--lightmaps", folder=True)
-        if args.save_npz:
-            check_output(args.save_npz, "--save-npz", suffix=".npz")
-    except OutputError as e:
-        return _fail(str(e))
+    problem = _bad_arguments(args)
+    if problem:
+        return _fail(problem)
 
     import bpy
 
@@ -125,11 +111,14 @@ def _main(argv, interrupted):
         return _fail(f"--scene {args.scene!r}: the file has scenes {[s.name for s in bpy.data.scenes]}")
     if bpy.context.window is not None and bpy.context.window.scene != scene:
         bpy.context.window.scene = scene
+    from raybundle.app.plan import check
+
     from .properties import run_options
 
+    with options_applied(scene.raybundle, args):
+        options = run_options(scene)
     try:
-        options = replace(run_options(scene, seconds=args.time, iterations=args.iterations),
-                          **{k: v for k, v in (("seed", args.seed), ("patches", args.patches)) if v is not None})
+        check(options, bake=args.bake is not None)
     except ValueError as e:
         return _fail(str(e))
     if args.resolution_percentage is not None:
@@ -164,7 +153,7 @@ def _main(argv, interrupted):
     old = signal.signal(signal.SIGINT, on_interrupt)
     engine.observers.append(observe)
     try:
-        with engine.render_options(scene.name, options):
+        with options_applied(scene.raybundle, args):
             bpy.ops.render.render(write_still=False, scene=scene.name)
     except RuntimeError as e:                   # the engine's ERROR report
         bar.close()
@@ -198,6 +187,57 @@ def _main(argv, interrupted):
     return 130 if cancelled else 0
 
 
+def _bad_arguments(args):
+    """One line on what in ``args`` cannot run, or None; the outputs are checked writable
+    before the work, not found unwritable after it."""
+    if not os.path.isfile(args.blend):
+        return f"{args.blend}: no such file"
+    if not args.blend.endswith(".blend"):
+        return f"{args.blend}: not a .blend file"
+    if args.bake is None and (args.lightmaps or args.lightmap_size or args.domain or args.subdivide):
+        return "--lightmaps, --lightmap-size, --domain and --subdivide go with --bake"
+    from raybundle.util.io import OutputError, check_output
+
+    try:
+        if args.out is not None:
+            check_output(args.out, "--out", suffix=".exr")
+        if args.bake is not None:
+            check_output(args.bake, "--bake", suffix=".blend")
+        if args.lightmaps:
+            check_output(args.lightmaps, "--lightmaps", folder=True)
+        if args.save_npz:
+            check_output(args.save_npz, "--save-npz", suffix=".npz")
+    except OutputError as e:
+        return str(e)
+    return None
+
+
+@contextlib.contextmanager
+def options_applied(rb, args):
+    """Within the block, the command line's ``--time``, ``--iterations``, ``--seed`` and
+    ``--patches`` where given replace the scene's settings ``rb``, as the panel sets them; the
+    settings are restored after it (a baked copy of the file keeps the file's own)."""
+    names = ("time_limit", "iterations", "seed", "patches")
+    saved, choice = {k: getattr(rb, k) for k in names}, rb.get("budget_choice")
+    if args.time is not None:
+        rb.budget, rb.time_limit = "TIME", args.time
+    if args.iterations is not None:
+        rb.budget, rb.iterations = "ITERATIONS", args.iterations
+    if args.seed is not None:
+        rb.seed = args.seed
+    if args.patches is not None:
+        rb.patches = args.patches
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            setattr(rb, k, v)
+        if choice is None:
+            rb.pop("budget_choice", None)
+        else:
+            rb["budget_choice"] = choice
+
+
 def _bake(args, scene, options, interrupted):
     """The ``--bake`` path: :class:`.bake.BakeJob` with a progress bar, then save the copy."""
     import bpy
@@ -206,7 +246,8 @@ def _bake(args, scene, options, interrupted):
     from raybundle.app.pipeline import Cancelled
     from raybundle.scene.model import SceneError
 
-    from .bake import BakeJob, BakeSettings
+    from .bake import BakeJob
+    from .properties import BakeSettings
 
     bake = replace(BakeSettings.from_scene(scene), color_attribute=True, lightmaps=bool(args.lightmaps))
     if args.domain:

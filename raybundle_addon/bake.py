@@ -53,48 +53,10 @@ import numpy as np
 from raybundle.imaging.run import RunLoop
 
 from .export import corner_vertices, export_scene
-from .properties import LAST_BAKE, from_properties, run_options
+from .properties import LAST_BAKE, BakeSettings, run_options
 
 ATTRIBUTE = "RayBundle"
 COPY_SUFFIX = ".RayBundle"
-
-
-@dataclass
-class BakeSettings:
-    """Plain copy of the bake settings of ``scene.raybundle`` (see :mod:`.properties`)."""
-
-    color_attribute: bool = True
-    domain: str = "POINT"
-    lightmaps: bool = False
-    lightmap_size: int = 1024
-    lightmap_margin: int = 16
-    camera: bool = False
-    directory: str = "//raybundle_bake/"
-    light_samples: int = 32
-    single_user: bool = False
-    gather_rays: int = 1024
-    subdivide: bool = False
-    subdivide_levels: int = 3
-
-    @classmethod
-    def from_scene(cls, scene):
-        """The bake settings of ``scene.raybundle``, by field name (``bake_<field>`` or ``<field>``)."""
-        rb = getattr(scene, "raybundle", None)
-        return cls() if rb is None else from_properties(cls, rb, prefix="bake_")
-
-    def validate(self):
-        if not (self.color_attribute or self.lightmaps or self.camera):
-            raise ValueError("nothing to bake: turn on Color Attribute, Lightmaps or Camera View")
-        if self.domain not in ("POINT", "CORNER"):
-            raise ValueError(f"unknown color attribute domain {self.domain!r}: POINT or CORNER")
-        if self.lightmaps and not 1 <= self.lightmap_size <= 16384:
-            raise ValueError("the lightmap size must lie in [1, 16384]")
-        if self.light_samples < 1:
-            raise ValueError("light samples must be at least 1")
-        if self.gather_rays < 0:
-            raise ValueError("gather rays must be 0 (off) or more")
-        if self.subdivide and not 1 <= self.subdivide_levels <= 6:
-            raise ValueError("subdivision levels must lie in [1, 6]")
 
 
 def _unique_points(input_scene, face, bary):
@@ -201,7 +163,7 @@ class BakeJob:
         self.renderer = runner if b.camera else None
         self.solver = runner.solver if b.camera else runner
         self.timings["prepare_seconds"] = time.perf_counter() - self.t_start - self.timings["export_seconds"]
-        self.loop = RunLoop(runner, self.plan.iterations, self.plan.seconds, started=self.t_start, stop=self.stop)
+        self.loop = RunLoop(runner, self.plan.iterations, self.plan.time_limit, started=self.t_start, stop=self.stop)
         return self
 
     def _attach_world(self, scene):

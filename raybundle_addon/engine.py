@@ -23,7 +23,6 @@ reports; export warnings become ``WARNING`` reports.
 """
 from __future__ import annotations
 
-import contextlib
 import threading
 import time
 import traceback
@@ -42,24 +41,6 @@ from .properties import LAST_RUN, run_options
 observers: list = []
 #: jobs running now (``cancel_all`` sets their stop flags)
 active_jobs: set = set()
-#: scene name -> :class:`raybundle.app.plan.RunOptions` for that scene's renders started while it
-#: is set, instead of its settings: how the headless command line hands its options to a render
-#: that ``bpy.ops.render.render`` starts (:func:`render_options`)
-_options_override: dict = {}
-
-
-@contextlib.contextmanager
-def render_options(scene_name, options):
-    """Renders of the scene ``scene_name`` started inside the ``with`` block run ``options`` (a
-    :class:`raybundle.app.plan.RunOptions`), not its settings (other scenes, e.g. a compositor's
-    Render Layers of another scene, keep theirs); the ``.blend`` is not changed."""
-    _options_override[scene_name] = options
-    try:
-        yield
-    finally:
-        _options_override.pop(scene_name, None)
-
-
 def cancel_all():
     """Ask every running job to stop after its current iteration (keeps the image so far)."""
     for job in list(active_jobs):
@@ -88,9 +69,8 @@ class RenderJob:
     def __init__(self, depsgraph, options=None, stop=None, display=None, progress=None, stats=None,
                  user_break=None, camera_object=None, preview_interval=0.3):
         self.depsgraph = depsgraph
-        #: :class:`raybundle.app.plan.RunOptions`: given, handed over (:func:`render_options`), or (None)
-        #: the scene's, read when the job runs
-        self.options = options or _options_override.get(depsgraph.scene.name)
+        #: :class:`raybundle.app.plan.RunOptions`: given, or (None) the scene's, read when the job runs
+        self.options = options
         self.stop = stop if stop is not None else threading.Event()
         self.display, self.progress, self.stats_cb = display, progress, stats
         self.choice = None           # auto's Choice, when the method is auto
@@ -178,22 +158,23 @@ class RenderJob:
             if self.stats_cb is not None:
                 self.stats_cb(f"Ray Bundle GI | Preparing {self.export.counts['triangles']} triangles")
             stage = None if self.stats_cb is None else (lambda text: self.stats_cb(f"Ray Bundle GI | {text}"))
-            try:
-                p = plan(self.export.scene, self.options)
-                self.choice = p.choice
-                scene = pipeline.lay_out(self.export.scene, p, stage=stage, stop=self._stopped)
+            def attach(scene):
+                """Between the layout and the renderer: the world Blender rendered meanwhile."""
                 if self.export.world_render is not None and stage is not None:
                     stage("Waiting for Blender's render of the world")
                 self.world_wait = self.export.attach_world(scene)
+                if scene is not self.export.scene:
+                    self.export.scene.release_caches()          # the prepared copy renders
+
+            try:
+                p = plan(self.export.scene, self.options)
+                self.choice = p.choice
+                _, self.renderer = pipeline.build(self.export.scene, p, stage=stage, stop=self._stopped, attach=attach)
             finally:
                 self.export.cancel_world()
-            if scene is not self.export.scene:
-                self.export.scene.release_caches()          # the prepared copy renders
-            self.renderer = pipeline.make_renderer(scene, p.settings, solver=p.method, stage=stage,
-                                                   stop=self._stopped)
             t_prepared = time.perf_counter() - self.t_start
             try:
-                result = self.renderer.run(iterations=p.iterations, seconds=p.seconds, progress=self._on_progress,
+                result = self.renderer.run(iterations=p.iterations, time_limit=p.time_limit, progress=self._on_progress,
                                            stop=self._stopped, between=self._preview, started=self.t_start,
                                            stage=stage)
             finally:

@@ -8,10 +8,13 @@ need not be saved.
 """
 from __future__ import annotations
 
-from dataclasses import fields
+from dataclasses import dataclass
 
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+
+from raybundle.app.plan import DEFAULT_TIME_LIMIT
+from raybundle.patches.clusters import DEFAULT_PATCHES
 
 #: scene name -> statistics of that scene's last render (filled by :mod:`.engine`)
 LAST_RUN: dict[str, dict] = {}
@@ -29,27 +32,29 @@ def _solver_items():
          "lobes carry most of the reflection, then path tracing; bakes take the bundle iteration")]
 
 
-def run_options(scene, seconds=None, iterations=None):
-    """``scene.raybundle`` as the core's :class:`raybundle.app.plan.RunOptions`, field by field
-    name; Iterations 0 means the Time Limit rules (both 0 is an error).  ``seconds`` or
-    ``iterations`` given (the headless command line's) replace the file's budget."""
+#: the panel's settings a render takes, property -> :class:`raybundle.app.plan.RunOptions` field
+#: (the budget, Budget with Time Limit or Iterations, is :func:`run_options`' own)
+RUN_PROPERTIES = {"method": "method", "seed": "seed", "patches": "patches",
+                  "bundle_resolution": "bundle_resolution", "first_shot": "first_shot"}
+
+
+def run_options(scene):
+    """``scene.raybundle`` as the core's :class:`raybundle.app.plan.RunOptions`
+    (:data:`RUN_PROPERTIES`, and the Budget: the Time Limit or the Iterations), with the
+    scene's Cycles Light Paths limits."""
     from raybundle.app.plan import RunOptions
 
     rb = getattr(scene, "raybundle", None)
     depth = dict(transmission_depth=light_path_limit(scene, "transmission_bounces"),
                  glossy_depth=light_path_limit(scene, "glossy_bounces"))
     if rb is None:
-        return RunOptions(seconds=seconds, iterations=iterations, **depth)
-    names = {f.name for f in fields(RunOptions)} & set(rb.bl_rna.properties.keys())
-    values = {name: getattr(rb, name) for name in names}
-    values.update(depth)
-    if seconds is not None or iterations is not None:
-        values.update(seconds=seconds, iterations=iterations)
-    elif not values["iterations"]:
-        if rb.time_limit == 0:
-            raise ValueError("set a time limit (seconds) or an iteration count: both are 0")
-        values.update(iterations=None, seconds=float(rb.time_limit))
-    return RunOptions(**values)
+        return RunOptions(**depth)
+    values = {field: getattr(rb, prop) for prop, field in RUN_PROPERTIES.items()}
+    if rb.budget == "ITERATIONS":
+        values["iterations"] = int(rb.iterations)
+    else:
+        values["time_limit"] = float(rb.time_limit)
+    return RunOptions(**values, **depth)
 
 
 def light_path_limit(scene, bounces):
@@ -64,19 +69,6 @@ def light_path_limit(scene, bounces):
     return int(min(getattr(cycles, bounces), cycles.max_bounces))
 
 
-def from_properties(cls, rb, prefix=""):
-    """A dataclass ``cls`` filled from the property group ``rb`` by field name: field ``x``
-    from ``prefix + x`` or ``x``; fields without a property keep their defaults."""
-    props = set(rb.bl_rna.properties.keys())
-    values = {}
-    for f in fields(cls):
-        for name in (prefix + f.name, f.name):
-            if name in props:
-                values[f.name] = getattr(rb, name)
-                break
-    return cls(**values)
-
-
 def _stat(key, default):
     def get(self):
         value = LAST_RUN.get(self.id_data.name, {}).get(key, default)
@@ -84,19 +76,82 @@ def _stat(key, default):
     return get
 
 
+@dataclass
+class BakeSettings:
+    """Plain copy of the bake settings of ``scene.raybundle`` (see :mod:`.properties`)."""
+
+    color_attribute: bool = True
+    domain: str = "POINT"
+    lightmaps: bool = False
+    lightmap_size: int = 1024
+    lightmap_margin: int = 16
+    camera: bool = False
+    directory: str = "//raybundle_bake/"
+    light_samples: int = 32
+    single_user: bool = False
+    gather_rays: int = 1024
+    subdivide: bool = False
+    subdivide_levels: int = 3
+
+    @classmethod
+    def from_scene(cls, scene):
+        """The bake settings of ``scene.raybundle`` (:data:`BAKE_PROPERTIES`)."""
+        rb = getattr(scene, "raybundle", None)
+        return cls() if rb is None else cls(**{field: getattr(rb, prop) for prop, field in BAKE_PROPERTIES.items()})
+
+    def validate(self):
+        if not (self.color_attribute or self.lightmaps or self.camera):
+            raise ValueError("nothing to bake: turn on Color Attribute, Lightmaps or Camera View")
+        if self.domain not in ("POINT", "CORNER"):
+            raise ValueError(f"unknown color attribute domain {self.domain!r}: POINT or CORNER")
+        if self.lightmaps and not 1 <= self.lightmap_size <= 16384:
+            raise ValueError("the lightmap size must lie in [1, 16384]")
+        if self.light_samples < 1:
+            raise ValueError("light samples must be at least 1")
+        if self.gather_rays < 0:
+            raise ValueError("gather rays must be 0 (off) or more")
+        if self.subdivide and not 1 <= self.subdivide_levels <= 6:
+            raise ValueError("subdivision levels must lie in [1, 6]")
+
+
+#: the panel's bake settings, property -> :class:`BakeSettings` field
+BAKE_PROPERTIES = {"bake_color_attribute": "color_attribute", "bake_domain": "domain", "bake_lightmaps": "lightmaps",
+                   "lightmap_size": "lightmap_size", "lightmap_margin": "lightmap_margin", "bake_camera": "camera",
+                   "bake_directory": "directory", "bake_light_samples": "light_samples",
+                   "bake_single_user": "single_user", "bake_gather_rays": "gather_rays",
+                   "bake_subdivide": "subdivide", "bake_subdivide_levels": "subdivide_levels"}
+
+
+def _get_budget(self):
+    """Budget's value: as set; in a file saved before Budget existed, Iterations where its
+    count was above 0 (then 0 meant "none: the Time Limit"), else Time Limit."""
+    if "budget_choice" in self:
+        return self["budget_choice"]
+    return 1 if self.iterations > 0 else 0
+
+
+def _set_budget(self, value):
+    self["budget_choice"] = value
+
+
 class RAYBUNDLE_PG_settings(bpy.types.PropertyGroup):
+    budget: EnumProperty(
+        name="Budget", description="What ends the run", get=_get_budget, set=_set_budget,
+        items=[("TIME", "Time Limit", "The whole run's seconds, set-up included", 0),
+               ("ITERATIONS", "Iterations", "A fixed number of iterations: with a fixed seed, reproducible bit for bit",
+                1)])
     time_limit: FloatProperty(
-        name="Time Limit", description="Seconds to iterate (used when Iterations is 0)",
-        default=30.0, min=0.0, soft_max=3600.0, subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE")
+        name="Time Limit", description="Seconds of the whole run, from its start to the image (Budget: Time Limit)",
+        default=DEFAULT_TIME_LIMIT, min=0.0, soft_max=3600.0, subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE")
     iterations: IntProperty(
-        name="Iterations", description="Number of iterations; 0 = iterate until the time limit. "
+        name="Iterations", description="Number of iterations (Budget: Iterations). "
         "A fixed count with a fixed seed is reproducible bit for bit",
         default=0, min=0)
     seed: IntProperty(name="Seed", description="Random seed of the directions and samples", default=0, min=0)
     patches: IntProperty(
-        name="Patches", description="Target number of patches (finite elements); 0 = one patch per triangle. "
-        "Meshes with more triangles keep one patch per triangle",
-        default=4000, min=0, soft_max=200000)
+        name="Patches", description="Target number of patches (finite elements): faces larger than a patch are "
+        "cut, triangles much smaller grouped; 0 = one patch per triangle",
+        default=DEFAULT_PATCHES, min=0, soft_max=200000)
     bundle_resolution: IntProperty(
         name="Bundle Resolution", description="Rays per side of each bundle grid; 0 = automatic",
         default=0, min=0, max=4096)
@@ -107,51 +162,51 @@ class RAYBUNDLE_PG_settings(bpy.types.PropertyGroup):
 
     # bake (raybundle.bake); glossy lobes are view-dependent: a bake holds the diffuse part and emission
     bake_color_attribute: BoolProperty(
-        name="Color Attribute", default=True,
+        name="Color Attribute", default=BakeSettings.color_attribute,
         description="Write the view-independent radiance (diffuse light and emission; glossy reflections "
         "depend on the viewer and are left out) into a FLOAT_COLOR attribute 'RayBundle' of every mesh, "
         "set active for viewport shading. The geometry itself is not changed")
     bake_domain: EnumProperty(
-        name="Domain", default="POINT",
+        name="Domain", default=BakeSettings.domain,
         items=[("POINT", "Vertex", "One value per vertex (smooth; a vertex on a crease averages its faces)"),
                ("CORNER", "Face Corner", "One value per face corner (each face keeps its own light: hard edges "
                 "between faces)")],
         description="Domain of the color attribute")
     bake_subdivide: BoolProperty(
-        name="Into a Subdivided Copy", default=False,
+        name="Into a Subdivided Copy", default=BakeSettings.subdivide,
         description="Bake the color attribute into a new object '<name>.RayBundle' (hidden from renders) whose "
         "triangles are cut into 4, again and again, where the light's linear interpolation along an edge misses "
         "its midpoint by more than 5%: finer where shadows and corners need it. The original is not changed")
     bake_subdivide_levels: IntProperty(
-        name="Max Subdivisions", default=3, min=1, max=6,
+        name="Max Subdivisions", default=BakeSettings.subdivide_levels, min=1, max=6,
         description="How many times a triangle may be cut into 4 (each level at most 4 times the triangles)")
     bake_lightmaps: BoolProperty(
-        name="Lightmaps", default=False,
+        name="Lightmaps", default=BakeSettings.lightmaps,
         description="For each selected mesh with a UV map: an image filled texel by texel with the "
         "view-independent radiance (glossy reflections are left out), saved as EXR and kept as an Image")
     lightmap_size: IntProperty(name="Lightmap Size", description="Width and height of each lightmap in texels",
-                               default=1024, min=16, max=16384)
+                               default=BakeSettings.lightmap_size, min=16, max=16384)
     lightmap_margin: IntProperty(
         name="Margin", description="Texels filled around each UV island (seams, bilinear and mip-map lookups)",
-        default=16, min=0, max=256)
+        default=BakeSettings.lightmap_margin, min=0, max=256)
     bake_camera: BoolProperty(
-        name="Camera View", default=False,
+        name="Camera View", default=BakeSettings.camera,
         description="Also write the active camera's view (with glossy reflections) as an EXR and an Image")
     bake_directory: StringProperty(
-        name="Output", subtype="DIR_PATH", default="//raybundle_bake/",
+        name="Output", subtype="DIR_PATH", default=BakeSettings.directory,
         description="Folder of the lightmap and camera EXRs ('//' = next to the .blend file)")
     bake_light_samples: IntProperty(
-        name="Light Samples", default=32, min=1, max=4096,
+        name="Light Samples", default=BakeSettings.light_samples, min=1, max=4096,
         description="Shadow rays per light per vertex or corner for the direct light, 16 times as many where "
         "they find a penumbra (lightmap texels: a quarter, and 4 times as many in a penumbra); polygonal "
         "lights are integrated exactly and the rays only find their shadows")
     bake_gather_rays: IntProperty(
-        name="Gather Rays", default=1024, min=0, max=65536,
+        name="Gather Rays", default=BakeSettings.gather_rays, min=0, max=65536,
         description="Color attributes: rays per vertex or corner that gather the indirect light from the "
         "solution (right next to corners and contacts, where patch values cannot follow the light); "
         "0 = interpolate the patches (faster). Lightmaps always interpolate")
     bake_single_user: BoolProperty(
-        name="Make Single User", default=False,
+        name="Make Single User", default=BakeSettings.single_user,
         description="Objects sharing one mesh get their own copy of it, each baked with its own light; "
         "off = they keep sharing it and it holds the first object's light")
 

@@ -33,10 +33,8 @@ class RAYBUNDLE_PT_settings(RaybundlePanel, bpy.types.Panel):
         layout.use_property_decorate = False
         rb = context.scene.raybundle
         col = layout.column()
-        sub = col.column()
-        sub.active = rb.iterations == 0
-        sub.prop(rb, "time_limit")
-        col.prop(rb, "iterations")
+        col.prop(rb, "budget")
+        col.prop(rb, "time_limit" if rb.budget == "TIME" else "iterations")
         col.prop(rb, "seed")
         col = layout.column()
         col.prop(rb, "method")

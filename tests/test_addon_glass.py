@@ -229,7 +229,7 @@ def test_eye_paths_go_through_as_many_interfaces_as_the_files_light_paths(fresh)
     cycles.transmission_bounces, cycles.glossy_bounces, cycles.max_bounces = 64, 6, 64
     assert run_options(fresh).transmission_depth == 64 and run_options(fresh).glossy_depth == 6
     cycles.max_bounces = 5
-    options = run_options(fresh, seconds=5)
+    options = run_options(fresh)
     assert options.transmission_depth == 5 and options.glossy_depth == 5
     settings = plan(builtin.load_scene("cornell"), options).settings
     assert settings.transmission_depth == 5 and settings.glossy_depth == 5

@@ -27,7 +27,7 @@ from addon_helpers import (  # noqa: F401
     render_raybundle,
     set_world,
 )
-from cycles_reference import new_with_nodes
+from cycles_reference import exr_output, new_with_nodes
 
 
 def last_run():
@@ -467,7 +467,7 @@ def test_cancel_through_the_stop_flag_keeps_a_valid_partial_image(fresh):
         if len(shown) == 2:
             stop.set()                                  # what Esc does, through the same flag
 
-    job = RenderJob(bpy.context.evaluated_depsgraph_get(), RunOptions(seconds=60.0, patches=500), stop=stop,
+    job = RenderJob(bpy.context.evaluated_depsgraph_get(), RunOptions(time_limit=60.0, patches=500), stop=stop,
                     display=display, preview_interval=0.05)
     out = job.run()
     assert out.cancelled and out.stats["iterations"] < 10_000 and out.stats["seconds"] < 30
@@ -508,7 +508,7 @@ def test_esc_during_set_up_stops_before_the_iteration_without_an_image(fresh):
     def stats(text):
         steps.append(text)
 
-    job = RenderJob(bpy.context.evaluated_depsgraph_get(), RunOptions(seconds=60.0, patches=500), stats=stats,
+    job = RenderJob(bpy.context.evaluated_depsgraph_get(), RunOptions(time_limit=60.0, patches=500), stats=stats,
                     display=lambda image, final: shown.append(final),
                     user_break=lambda: any("building the ray tracer" in t for t in steps))
     with pytest.raises(Cancelled, match="before first shot"):
@@ -584,7 +584,7 @@ def test_auto_method_renders_with_its_choice_and_bakes_with_the_iteration(fresh)
 
 # ---------------------------------------------------------- errors, settings
 @pytest.mark.parametrize("case,message", [("no lights", "no lights"), ("no meshes", "no visible mesh"),
-                                          ("no camera", "no camera"), ("zero time", "time limit")])
+                                          ("no camera", "no camera")])
 def test_errors_are_one_line_reports(fresh, tmp_path, case, message):
     v, f = box((-1, -1, 0), (1, 1, 2))
     if case != "no meshes":
@@ -595,13 +595,58 @@ def test_errors_are_one_line_reports(fresh, tmp_path, case, message):
         add_camera((0, 0, 1.0), resolution=(8, 8))
     sc = bpy.context.scene
     sc.render.engine = "RAYBUNDLE"
-    sc.raybundle.time_limit = 0.0 if case == "zero time" else 1.0
+    sc.raybundle.time_limit = 1.0
     sc.render.filepath = str(tmp_path / "x.exr")
     with pytest.raises(RuntimeError) as e:
         bpy.ops.render.render(write_still=True)
     text = str(e.value)
     assert message in text and "Traceback" not in text and text.count("\n") <= 1, text
     assert last_run()["status"].startswith("error")
+
+
+def test_the_budget_has_one_meaning_and_files_saved_before_it_keep_theirs(fresh, tmp_path):
+    """Budget chooses what ends a run: the Time Limit (0 s: the fewest iterations, with a
+    warning) or the Iterations (0: none, the first image pass alone), each value meaning what
+    it says.  A file saved before Budget existed keeps its meaning: an Iterations count above 0
+    ruled, and 0 meant "the Time Limit"."""
+    from raybundle_addon.properties import run_options
+
+    small_lit_scene()
+    sc = bpy.context.scene
+    rb = sc.raybundle
+    assert rb.budget == "TIME" and (run_options(sc).time_limit, run_options(sc).iterations) == (30.0, None)
+    rb.iterations = 50                         # as a file saved before Budget held it
+    assert rb.budget == "ITERATIONS" and (run_options(sc).time_limit, run_options(sc).iterations) == (None, 50)
+    path = tmp_path / "earlier.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    sc = bpy.context.scene
+    rb = sc.raybundle
+    assert rb.budget == "ITERATIONS" and run_options(sc).iterations == 50
+    rb.budget = "TIME"                         # chosen: the count no longer rules
+    assert (run_options(sc).time_limit, run_options(sc).iterations) == (rb.time_limit, None)
+    rb.budget, rb.iterations = "ITERATIONS", 0
+    assert (run_options(sc).time_limit, run_options(sc).iterations) == (None, 0)
+    rb.budget, rb.time_limit = "TIME", 0.0
+    sc.render.engine = "RAYBUNDLE"
+    exr_output(tmp_path / "zero.exr")
+    bpy.ops.render.render(write_still=True)
+    assert last_run()["stats"]["iterations"] == 8
+    assert any("too short" in w for w in last_run()["warnings"])
+
+
+def test_the_panels_defaults_are_the_cores(fresh):
+    """The panel's settings, unchanged, ask for what the core's defaults are: the Time Limit,
+    the patch count, and every bake setting."""
+    from raybundle.app.plan import DEFAULT_TIME_LIMIT, RunOptions
+    from raybundle.patches.clusters import DEFAULT_PATCHES
+    from raybundle_addon.properties import BakeSettings, run_options
+
+    sc = bpy.context.scene
+    got = run_options(sc)
+    assert got == RunOptions(time_limit=DEFAULT_TIME_LIMIT, patches=DEFAULT_PATCHES,
+                             transmission_depth=got.transmission_depth, glossy_depth=got.glossy_depth)
+    assert BakeSettings.from_scene(sc) == BakeSettings()
 
 
 def test_unsupported_node_renders_with_a_warning_naming_the_material(fresh, tmp_path):

@@ -25,7 +25,7 @@ def run_chain(scene, seed, iterations, method="stochastic-iteration"):
 
 def same_resolve(renderer):
     """Fix the sub-pixel positions of the diffuse resolve (seeded per renderer otherwise)."""
-    renderer._resolve_rng = np.random.default_rng([0, 2])
+    renderer.indirect.rng = np.random.default_rng([0, 2])
     return renderer
 
 

@@ -128,7 +128,7 @@ def test_the_automatic_gather_runs_in_time_limited_runs_within_its_share():
             r.tracer.close()
         return res
 
-    timed, plain = run(seconds=3.0), run(share=0.0, seconds=3.0)
+    timed, plain = run(time_limit=3.0), run(share=0.0, time_limit=3.0)
     assert timed.stats["gather_rays_per_pixel"] >= EdgeGather.MIN_GATHER_RAYS
     assert plain.stats["gather_rays_per_pixel"] == 0
     extra = timed.stats["resolve_seconds"] - plain.stats["resolve_seconds"]
@@ -186,10 +186,10 @@ def test_the_automatic_gather_runs_where_the_bias_it_removes_outweighs_its_noise
         r.run(iterations=40)
         got = []
         for _ in range(3):      # the budget is scaled from a timing: a machine under load (CI's two
-            r.image(gather_seconds=2.0)          # test processes) can slow between the two calls
+            r.image(final_time=2.0)          # test processes) can slow between the two calls
             big = r.gather_rays_used
             assert big > 256
-            r.image(gather_seconds=2.0 * 128 / big)                # about 128 rays per pixel
+            r.image(final_time=2.0 * 128 / big)                # about 128 rays per pixel
             got.append(r.gather_rays_used)
             if 0 < got[-1] < 256:
                 break

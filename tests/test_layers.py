@@ -87,7 +87,7 @@ STILL_LONG = {
     "core/raybundle/patches/contacts.py:split_at_contacts": 130,
     "core/raybundle/scene/build.py:build_scene": 95,
     "core/raybundle/scene/materials.py": 842,
-    "raybundle_addon/__main__.py:_main": 111,
+    "raybundle_addon/__main__.py:_main": 98,
     "raybundle_addon/export.py": 853,
     "raybundle_addon/export.py:_export_objects": 189,
     "raybundle_addon/material_bake.py:main": 93,

@@ -30,9 +30,9 @@ def test_the_readme_library_example_runs(tmp_path, monkeypatch):
     """The README's library example, as printed (one second instead of ten, in a temporary folder)."""
     readme = (ROOT / "README.md").read_text()
     code = readme.split("## Library", 1)[1].split("```python", 1)[1].split("```", 1)[0]
-    assert "seconds=10" in code and "write_exr(" in code
+    assert "time_limit=10" in code and "write_exr(" in code
     monkeypatch.chdir(tmp_path)
-    exec(compile(code.replace("seconds=10", "seconds=1"), "README.md", "exec"), {})
+    exec(compile(code.replace("time_limit=10", "time_limit=1"), "README.md", "exec"), {})
     from raybundle.util.io import read_exr
 
     assert np.isfinite(read_exr(tmp_path / "out" / "glossy.exr")).all()

@@ -2,7 +2,7 @@
 and what cannot run, for every front-end alike."""
 import pytest
 
-from raybundle.app.plan import DEFAULT_SECONDS, RunOptions, check, plan
+from raybundle.app.plan import DEFAULT_TIME_LIMIT, RunOptions, check, plan
 from raybundle.patches.clusters import DEFAULT_PATCHES
 from raybundle.scene import builtin as scenes
 from raybundle.tracing.sampling import DEFAULT_SEQUENCE
@@ -10,11 +10,11 @@ from raybundle.tracing.sampling import DEFAULT_SEQUENCE
 
 def test_defaults_and_the_budget():
     p = plan(scenes.cornell(), RunOptions())
-    assert (p.method, p.patches, p.iterations, p.seconds) == ("stochastic-iteration", DEFAULT_PATCHES, None,
-                                                              DEFAULT_SECONDS)
+    assert (p.method, p.patches, p.iterations, p.time_limit) == ("stochastic-iteration", DEFAULT_PATCHES, None,
+                                                              DEFAULT_TIME_LIMIT)
     assert p.settings.sequence == DEFAULT_SEQUENCE and p.settings.first_shot == "auto" and p.describe() is None
     p = plan(scenes.cornell(), RunOptions(iterations=5, first_shot=False, gather_rays=64, seed=7))
-    assert (p.iterations, p.seconds, p.settings.first_shot, p.settings.gather_rays, p.settings.seed) == (
+    assert (p.iterations, p.time_limit, p.settings.first_shot, p.settings.gather_rays, p.settings.seed) == (
         5, None, "none", 64, 7)
 
 
@@ -36,8 +36,8 @@ def test_bakes_and_chains_take_a_patch_method_where_auto_picks_an_image_method(w
 
 @pytest.mark.parametrize("options,kw,message", [
     (RunOptions(method="nope"), {}, "unknown method"),
-    (RunOptions(iterations=3, seconds=2.0), {}, "not both"),
-    (RunOptions(seconds=float("nan")), {}, "seconds"),
+    (RunOptions(iterations=3, time_limit=2.0), {}, "not both"),
+    (RunOptions(time_limit=float("nan")), {}, "time limit"),
     (RunOptions(patches=-1), {}, "patch count"),
     (RunOptions(bundle_resolution=5000), {}, "bundle_resolution"),
     (RunOptions(method="path-tracing"), {"bake": True}, "renders images only"),

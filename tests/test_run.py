@@ -21,7 +21,7 @@ def solver(scene, seed=0):
 
 
 @pytest.mark.parametrize("iterations,seconds,message", [
-    (None, None, "give iterations or seconds"), (3, 1.0, "not both"), (-1, None, "non-negative"),
+    (None, None, "give iterations or a time limit"), (3, 1.0, "not both"), (-1, None, "non-negative"),
     (None, float("inf"), "finite"), (None, -2.0, "non-negative")])
 def test_a_budget_that_cannot_run_is_one_line(iterations, seconds, message):
     with pytest.raises(ValueError, match=message):
@@ -40,7 +40,7 @@ def test_iterations_in_slices_are_the_iterations_in_one_go(scene):
         assert loop.finished and not loop.cancelled and loop.fraction == 1.0 and calls == 12
         assert one.stats.iterations == sliced.stats.iterations == 12
         assert (one.mean_incoming == sliced.mean_incoming).all()
-        assert loop.final_seconds() is None          # a run of given iterations gathers nothing automatic
+        assert loop.final_time() is None          # a run of given iterations gathers nothing automatic
     finally:
         one.tracer.close()
         sliced.tracer.close()
@@ -49,8 +49,8 @@ def test_iterations_in_slices_are_the_iterations_in_one_go(scene):
 def test_a_budget_spent_in_set_up_still_runs_the_minimum_and_says_so(scene):
     s = solver(scene)
     try:
-        loop = RunLoop(s, seconds=0.5, started=time.perf_counter() - 2.0)     # set-up took 2 s of 0.5
-        assert loop.loop_seconds == 0.0 and loop.setup_seconds >= 2.0
+        loop = RunLoop(s, time_limit=0.5, started=time.perf_counter() - 2.0)     # set-up took 2 s of 0.5
+        assert loop.iteration_time == 0.0 and loop.setup_seconds >= 2.0
         assert loop.advance() is False and s.stats.iterations == RunLoop.MIN_ITERATIONS
         assert loop.short and "too short" in loop.budget_note(2.5)
     finally:
@@ -62,18 +62,18 @@ def test_the_time_left_after_set_up_is_shared_with_the_final_image(scene):
     image that share of its iteration time."""
     s = solver(scene)
     try:
-        loop = RunLoop(s, seconds=2.0, started=time.perf_counter() - 0.5, final_share=0.25)
-        assert abs(loop.loop_seconds - 1.5 / 1.25) < 0.05
+        loop = RunLoop(s, time_limit=2.0, started=time.perf_counter() - 0.5, final_share=0.25)
+        assert abs(loop.iteration_time - 1.5 / 1.25) < 0.05
         loop.advance()
         # it stops once less than half of its next step is left (a run ends within half a step of its budget)
-        assert loop.elapsed() + 0.5 * loop._next_step_seconds() >= loop.loop_seconds and not loop.short
-        assert abs(loop.final_seconds() - 0.25 * loop.elapsed()) < 0.01
+        assert loop.elapsed() + 0.5 * loop._next_step_seconds() >= loop.iteration_time and not loop.short
+        assert abs(loop.final_time() - 0.25 * loop.elapsed()) < 0.01
         # a final image that will not take its share (a gather that would not pay) gives it back
-        reserve, before = loop.final_seconds(), s.stats.iterations
+        reserve, before = loop.final_time(), s.stats.iterations
         loop.extend(reserve)
         assert loop.advance() is False and s.stats.iterations > before
         assert loop.elapsed() + 0.5 * loop._next_step_seconds() >= 1.5 / 1.25 + reserve
-        assert loop.final_seconds() == 0.0
+        assert loop.final_time() == 0.0
     finally:
         s.tracer.close()
 
@@ -95,7 +95,7 @@ def test_a_gather_that_would_not_pay_leaves_its_time_to_the_iterations():
     try:
         r.run(iterations=4)
         assert not r.automatic_gather_pays(10.0)
-        res = r.run(seconds=1.0)
+        res = r.run(time_limit=1.0)
         assert res.stats["gather_rays_per_pixel"] == 0
     finally:
         r.tracer.close()
@@ -108,11 +108,11 @@ def test_stop_and_ctrl_c_end_the_loop_with_what_was_done(scene):
         loop = RunLoop(s, iterations=1000, progress=lambda f, info: stop.set() if info["iterations"] >= 3 else None,
                        stop=stop)
         assert loop.advance() is False and loop.cancelled and s.stats.iterations == 3
-        assert loop.final_seconds() is None
+        assert loop.final_time() is None
 
         def interrupt(f, info):
             raise KeyboardInterrupt
-        loop = RunLoop(s, seconds=60.0, progress=interrupt)
+        loop = RunLoop(s, time_limit=60.0, progress=interrupt)
         assert loop.advance() is False and loop.cancelled and s.stats.iterations == 4
     finally:
         s.tracer.close()
@@ -171,7 +171,7 @@ def test_a_timed_run_ends_within_half_a_step_of_its_budget(monkeypatch):
         clock = _Clock()
         monkeypatch.setattr(run, "time", clock)
         runner = _Stepper(clock, long_from)
-        loop = run.RunLoop(runner, seconds=10.0, started=clock.now)
+        loop = run.RunLoop(runner, time_limit=10.0, started=clock.now)
         loop.advance()
         took = clock.now - 100.0
         assert 9.0 <= took <= latest, (long_from, took)

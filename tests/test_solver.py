@@ -211,8 +211,8 @@ def test_bad_settings_are_rejected_before_work(kwargs, msg):
 def test_bad_run_limits_are_rejected():
     r = furnace_renderer(False, "prng", patches=100, res=(8, 8))
     with pytest.raises(ValueError, match="seconds"):
-        r.run(seconds=float("nan"))
-    with pytest.raises(ValueError, match="iterations or seconds"):
+        r.run(time_limit=float("nan"))
+    with pytest.raises(ValueError, match="iterations or a time limit"):
         r.run()
     r.tracer.close()
 

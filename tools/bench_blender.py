@@ -118,7 +118,7 @@ def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None
             from raybundle.patches.clusters import DEFAULT_PATCHES
 
             r = make_renderer(prepare(load_scene(blend), patches or DEFAULT_PATCHES), RenderSettings(seed=seed))
-            img = r.run(seconds=seconds).image
+            img = r.run(time_limit=seconds).image
             r.tracer.close()
             write_exr(path, img)
         return img, time.perf_counter() - t0

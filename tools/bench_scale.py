@@ -74,7 +74,7 @@ def one(triangles, seconds, patches, mode, reference=REFERENCE, resolution=None)
         peak = tracemalloc.get_traced_memory()[1] - base
         tracemalloc.stop()
         return dict(row, traced_peak_mb=peak / 1e6, traced_bytes_per_triangle=peak / len(scene.triangles))
-    result = renderer.run(seconds=seconds, started=t0)          # the budget covers the set-up too
+    result = renderer.run(time_limit=seconds, started=t0)          # the budget covers the set-up too
     t3 = time.perf_counter()
     from raybundle.app.metrics import image_error, light_source_mask
     from raybundle.util.io import read_exr

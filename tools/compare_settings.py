@@ -64,7 +64,7 @@ def main(argv=None):
     scene.camera = scene.camera.with_resolution(w, h)
     mask = light_source_mask(scene)
     keep = ~mask
-    run = {"seconds": a.seconds} if a.seconds is not None else {"iterations": a.iterations}
+    run = {"time_limit": a.seconds} if a.seconds is not None else {"iterations": a.iterations}
     for text in a.variants:
         v = json.loads(text)
         method = v.pop("method", "stochastic-iteration")

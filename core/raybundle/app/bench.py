@@ -168,7 +168,7 @@ def reference(name, resolution, folder, seconds, log=print, stop=None):
                 raise ValueError(f"reference half {path} is missing and --reference-time is {seconds:g} s: "
                                  "give it seconds (or copy Cycles halves there)")
             _, r, _ = setup(name, "path-tracing", resolution, seed)
-            res = r.run(seconds=seconds, stop=stop)
+            res = r.run(time_limit=seconds, stop=stop)
             r.tracer.close()
             if res.cancelled:
                 raise Interrupted(f"reference half {path} cut short: not cached")
@@ -194,7 +194,7 @@ def run_method(name, method, seconds, ref, halves, resolution=None, log=print, s
                      "error": e["error"], "raw_error": e["raw"], "reference_noise": e["reference_noise"]})
         log(f"  {name} / {method}: {t_setup + t:6.1f} s, {it} iterations, error {100 * e['error']:.2f}%")
 
-    res = r.run(seconds=max(seconds - t_setup, 0.0), snapshots=snapshot_times(seconds - t_setup),
+    res = r.run(time_limit=max(seconds - t_setup, 0.0), snapshots=snapshot_times(seconds - t_setup),
                 on_snapshot=snap, stop=stop)
     r.tracer.close()
     snap(res.stats["seconds"], res.stats["iterations"], res.image)

@@ -22,7 +22,7 @@ from ..methods.stochastic_iteration import StochasticIterationSolver
 from ..patches.clusters import DEFAULT_PATCHES
 from ..tracing.sampling import DEFAULT_SEQUENCE, SEQUENCES
 from .bench import METHODS
-from .plan import DEFAULT_SECONDS
+from .plan import DEFAULT_TIME_LIMIT
 
 
 class ProgressBar:
@@ -108,7 +108,7 @@ def cmd_render(args):
     stop = threading.Event()
     old = signal.signal(signal.SIGINT, lambda *_: stop.set())   # Ctrl-C: set-up stops, the iteration writes
     chains = bool(args.workers or args.scheduler)
-    options = RunOptions(method=args.method, iterations=args.iterations, seconds=args.time, seed=args.seed,
+    options = RunOptions(method=args.method, iterations=args.iterations, time_limit=args.time, seed=args.seed,
                          patches=args.patches, sequence=args.sequence, bundle_resolution=args.bundle_resolution,
                          gather_rays=args.gather_rays, threads=args.threads)
     try:
@@ -198,7 +198,7 @@ def build_parser():
                    "near-mirror, room-<seed>, glossy-room-<seed>) or FILE.npz")
     g = r.add_mutually_exclusive_group()
     g.add_argument("--time", type=SECONDS, help=f"seconds of the whole run, from loading the scene to the image "
-                   f"written (default {DEFAULT_SECONDS:g})")
+                   f"written (default {DEFAULT_TIME_LIMIT:g})")
     g.add_argument("--iterations", type=COUNT, help="number of iterations (path-tracing: samples per pixel; "
                    "single-ray-iteration: steps of every chain; reproducible with --seed)")
     r.add_argument("--seed", type=COUNT, default=0)

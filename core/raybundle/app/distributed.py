@@ -63,7 +63,7 @@ def _run_chain(scene, method, settings_dict, seed, deadline, iterations, report_
 def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, report_seconds=2.0,
                   grace_seconds=30.0, progress=None, client=None, stop=None, started=None):
     """Render ``scene`` (laid out) as independent chains of ``plan``'s method on Dask (the plan
-    made with ``chains=True``: :func:`~raybundle.app.plan.plan`), for its iterations or seconds;
+    made with ``chains=True``: :func:`~raybundle.app.plan.plan`), for its iterations or time limit;
     returns ``(image, merged ChainState, per-chain iteration counts)``.
 
     ``client``: a ``distributed.Client`` to use; else one for ``scheduler`` (an address)
@@ -72,14 +72,14 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
     poll: each chain's iterations (``-`` before its first report, ``lost`` once its worker
     is gone).  ``stop`` (an object with ``is_set()``, Ctrl-C) ends the wait: every chain's
     last report is merged (:class:`~raybundle.app.pipeline.Cancelled` if none has reported yet).
-    The plan's ``seconds`` are the budget from ``started`` (a ``time.perf_counter()`` reading,
+    The plan's ``time_limit`` is the budget from ``started`` (a ``time.perf_counter()`` reading,
     default now): the cluster's start and the scene's scattering count."""
     if distributed is None:             # pragma: no cover - depends on the extra being installed
         raise RuntimeError("chains on Dask need the distributed extra: pip install raybundle[distributed]")
-    settings, seconds, iterations = plan.settings, plan.seconds, plan.iterations
+    settings, time_limit, iterations = plan.settings, plan.time_limit, plan.iterations
     from dataclasses import asdict
 
-    from ..imaging.run import iteration_seconds
+    from ..imaging.run import iteration_time
     from .pipeline import make_renderer
 
     own = client is None
@@ -104,9 +104,9 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
         # the chains iterate until the deadline; the client's resolve then has the final image's
         # share, as a single run has (run.RunLoop)
         share = renderer.final_share()
-        loop_seconds = None if seconds is None else iteration_seconds(
-            seconds, time.perf_counter() if started is None else started, share)
-        deadline = None if seconds is None else time.time() + loop_seconds
+        chain_time = None if time_limit is None else iteration_time(
+            time_limit, time.perf_counter() if started is None else started, share)
+        deadline = None if time_limit is None else time.time() + chain_time
         names = [f"raybundle-chain-{uuid.uuid4().hex}-{k}" for k in range(n)]
         futures = [client.submit(_run_chain, scene_future, plan.method, base, settings.seed + k, deadline, iterations,
                                  report_seconds, names[k], workers=[addresses[k % len(addresses)]],
@@ -124,8 +124,8 @@ def render_chains(scene, plan, chains_count=None, scheduler=None, workers=None, 
             raise RuntimeError("no chain reported any state (every worker was lost)")
         merged = chains.merge(states)
         chains.apply(merged, renderer)
-        image = renderer.resolve(None if seconds is None or (stop is not None and stop.is_set())
-                                 else share * loop_seconds)
+        image = renderer.resolve(None if time_limit is None or (stop is not None and stop.is_set())
+                                 else share * chain_time)
         merged.stats["gather_rays_per_pixel"] = renderer.gather_rays_used
         return image, merged, [None if s is None else s.stats["iterations"] for s in latest]
     finally:

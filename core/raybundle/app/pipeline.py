@@ -196,26 +196,26 @@ def run_plan(scene, plan, progress=None, stop=None, camera=None, stage=None, sta
     """Build (:func:`build`) and run ``plan`` (:func:`~raybundle.app.plan.plan`) on ``scene``
     (loaded, not laid out): ``(laid-out scene, :class:`~raybundle.imaging.progressive.RenderResult`)``.
     ``stop`` set during set-up raises :class:`Cancelled`; during the iteration it ends the run
-    with the image so far.  The plan's ``seconds`` are the budget from ``started`` (default:
+    with the image so far.  The plan's ``time_limit`` is the budget from ``started`` (default:
     now), set-up included (:meth:`~raybundle.imaging.progressive.ProgressiveImage.run`)."""
     started = time.perf_counter() if started is None else started
     scene, renderer = build(scene, plan, camera, stage=stage, stop=stop)
     try:
-        return scene, renderer.run(iterations=plan.iterations, seconds=plan.seconds, progress=progress, stop=stop,
+        return scene, renderer.run(iterations=plan.iterations, time_limit=plan.time_limit, progress=progress, stop=stop,
                                    started=started, stage=stage)
     finally:
         renderer.tracer.close()
 
 
-def render(scene, settings=None, iterations=None, seconds=None, progress=None, stop=None, camera=None, stage=None,
+def render(scene, settings=None, iterations=None, time_limit=None, progress=None, stop=None, camera=None, stage=None,
            solver=StochasticIterationSolver.name, started=None):
     """Render a scene already laid out (:func:`prepare`) with the method ``solver`` and
     ``settings`` as given (no plan: tests and studies of one setting); returns
-    :class:`~raybundle.imaging.progressive.RenderResult`.  ``stop``, ``seconds`` and ``started`` as in
+    :class:`~raybundle.imaging.progressive.RenderResult`.  ``stop``, ``time_limit`` and ``started`` as in
     :func:`run_plan`."""
     started = time.perf_counter() if started is None else started
     renderer = make_renderer(scene, settings, camera, solver=solver, stage=stage, stop=stop)
     try:
-        return renderer.run(iterations=iterations, seconds=seconds, progress=progress, stop=stop, started=started)
+        return renderer.run(iterations=iterations, time_limit=time_limit, progress=progress, stop=stop, started=started)
     finally:
         renderer.tracer.close()

@@ -10,8 +10,8 @@ every decision they share and returns a :class:`Plan`:
   iteration, and naming an image-only method for a bake or for chains is an error;
 * what ``auto`` decides is what the user left open (``None``): the patch count and the
   random sequence; a value the user gave is kept;
-* the budget: ``iterations`` or ``seconds`` (the whole run's, from its start), 30 s when
-  neither is given;
+* the budget: ``iterations`` or ``time_limit`` (the whole run's seconds, from its start),
+  :data:`DEFAULT_TIME_LIMIT` when neither is given;
 * the :class:`~raybundle.imaging.settings.RenderSettings` the run is built with, validated.
 
 :func:`raybundle.app.pipeline.build` then lays out the patches and builds the renderer or the
@@ -29,8 +29,8 @@ from ..patches.clusters import DEFAULT_PATCHES
 from ..tracing.sampling import DEFAULT_SEQUENCE
 from .auto import Choice, choose
 
-#: the budget of a run given neither iterations nor seconds [s]
-DEFAULT_SECONDS = 30.0
+#: the time limit of a run given neither iterations nor a time limit [s]
+DEFAULT_TIME_LIMIT = 30.0
 
 
 @dataclass
@@ -38,7 +38,8 @@ class RunOptions:
     """What the user asks for, as plain values (CLI options, the add-on's properties).
 
     ``method``: a :data:`~raybundle.methods.registry.SOLVERS` name or ``"auto"``; ``iterations`` or
-    ``seconds`` (the whole run from its start, set-up included; neither: 30 s);
+    ``time_limit`` (the whole run's seconds from its start, set-up included; neither:
+    :data:`DEFAULT_TIME_LIMIT`);
     ``patches`` (0: one patch per triangle) and ``sequence``: None leaves them to ``auto``
     or the defaults; ``first_shot``: shoot the lights and small emitters first;
     ``gather_rays``: final-gather rays per pixel next to concave edges (-1: as many as
@@ -50,7 +51,7 @@ class RunOptions:
 
     method: str = StochasticIterationSolver.name
     iterations: int | None = None
-    seconds: float | None = None
+    time_limit: float | None = None
     seed: int = 0
     patches: int | None = None
     sequence: str | None = None
@@ -70,7 +71,7 @@ class Plan:
     method: str
     patches: int
     iterations: int | None
-    seconds: float | None
+    time_limit: float | None
     settings: RenderSettings
     choice: Choice | None = None
     notes: list = field(default_factory=list)
@@ -96,7 +97,7 @@ def check(options: RunOptions, bake=False, chains=False):
     o = options
     if o.method != "auto" and o.method not in SOLVERS:
         raise ValueError(f"unknown method {o.method!r}; choose one of {sorted(SOLVERS)} or auto")
-    check_budget(o.iterations, _seconds(o))
+    check_budget(o.iterations, _time_limit(o))
     if o.patches is not None and int(o.patches) < 0:
         raise ValueError("the patch count must be non-negative (0: one patch per triangle)")
     if o.method != "auto":
@@ -104,10 +105,10 @@ def check(options: RunOptions, bake=False, chains=False):
     _settings(o, o.sequence).validate()
 
 
-def _seconds(o):
-    """The budget's seconds: the options', or :data:`DEFAULT_SECONDS` when neither seconds nor
-    iterations are given."""
-    return DEFAULT_SECONDS if o.iterations is None and o.seconds is None else o.seconds
+def _time_limit(o):
+    """The budget's time limit: the options', or :data:`DEFAULT_TIME_LIMIT` when neither a time
+    limit nor iterations are given."""
+    return DEFAULT_TIME_LIMIT if o.iterations is None and o.time_limit is None else o.time_limit
 
 
 def _check_method(method, bake, chains):
@@ -134,7 +135,7 @@ def plan(scene, options: RunOptions, bake=False, chains=False) -> Plan:
     a one-line reason for options that cannot run (:func:`check`)."""
     o = options
     check(o, bake, chains)
-    seconds = _seconds(o)
+    time_limit = _time_limit(o)
     method, choice, notes, sequence, patches = o.method, None, [], o.sequence, o.patches
     if method == "auto":
         choice = choose(scene)
@@ -148,5 +149,5 @@ def plan(scene, options: RunOptions, bake=False, chains=False) -> Plan:
             notes.append(f"{'a bake needs' if bake else 'chains need'} a patch solution: {method}")
         _check_method(method, bake, chains)
     settings = _settings(o, sequence)
-    return Plan(method, DEFAULT_PATCHES if patches is None else int(patches), o.iterations, seconds, settings,
+    return Plan(method, DEFAULT_PATCHES if patches is None else int(patches), o.iterations, time_limit, settings,
                 choice, notes)

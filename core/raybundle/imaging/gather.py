@@ -244,14 +244,14 @@ class EdgeGather:
         h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
         return h[self.near_edge(g.tside[h])]
 
-    def affordable(self, g, gather_seconds):
-        """Whether the automatic gather has a budget (``gather_seconds``) and points to spend
+    def affordable(self, g, final_time):
+        """Whether the automatic gather has a budget (``final_time``) and points to spend
         it on: checked before the gather's vertex values are made, which on millions of
         triangles take seconds."""
-        return bool(gather_seconds) and len(self.flagged(g)) > 0
+        return bool(final_time) and len(self.flagged(g)) > 0
 
-    def automatic_rays(self, final, g, k, gather_seconds, patch_values=None):
-        """Gather rays per sub-pixel sample that ``gather_seconds`` buy for ``k`` sub-pixel
+    def automatic_rays(self, final, g, k, final_time, patch_values=None):
+        """Gather rays per sub-pixel sample that ``final_time`` buy for ``k`` sub-pixel
         samples, or 0 where the gather would not pay.  Measured on up to :data:`PROBE_POINTS`
         (512) of ``g``'s points on flagged sides, one gather ray at a time, :data:`PROBE_RAYS`
         (64) each: the cost per ray (and the count
@@ -274,7 +274,7 @@ class EdgeGather:
         one = final.irradiance(g.point[rep], self.scene.tside_normal[ts], 1, stream(self.seed, Stream.EDGE_GATHER_PROBE),
                                at=(ts, bary)).sum(axis=1).reshape(len(probe), probe_rays)
         cost = (time.perf_counter() - t0) / (len(probe) * probe_rays)          # seconds per ray and point
-        left = gather_seconds - (time.perf_counter() - t0)
+        left = final_time - (time.perf_counter() - t0)
         per_pixel = left / (cost * len(f))
         needed = self.MIN_GATHER_RAYS
         if patch_values is not None:

@@ -42,17 +42,17 @@ class ProgressiveImage:
     (:class:`~raybundle.imaging.run.RunLoop`): they provide ``solver.stats.iterations``, ``passes``,
     ``image_pass()``, ``step()``, ``image()`` and ``stats(...)``."""
 
-    def run(self, iterations=None, seconds=None, progress=None, stop=None, snapshots=(), on_snapshot=None,
+    def run(self, iterations=None, time_limit=None, progress=None, stop=None, snapshots=(), on_snapshot=None,
             started=None, stage=None, between=None):
-        """Iterate (:class:`~raybundle.imaging.run.RunLoop`: ``iterations``, or ``seconds`` of the whole
-        run from ``started``, set-up included; ``progress``; ``stop``; ``between``) and form the final
+        """Iterate (:class:`~raybundle.imaging.run.RunLoop`: ``iterations``, or the whole run's
+        ``time_limit`` [s] from ``started``, set-up included; ``progress``; ``stop``; ``between``) and form the final
         image; returns :class:`RenderResult`, whose stats add the set-up's seconds
         (``setup_seconds``), the run's (``total_seconds``) and, when the budget was too short
         for the minimum of iterations, ``budget_note``.  ``stage(text)`` is told when the
         final image is formed.  ``on_snapshot(seconds, iterations, image)`` is called when the
         run's clock passes each of ``snapshots`` (seconds): ``seconds`` includes forming that
         image (what stopping there would have cost); the run's clock then leaves it out."""
-        loop = RunLoop(self, iterations, seconds, started, final_share=self.final_share(), progress=progress,
+        loop = RunLoop(self, iterations, time_limit, started, final_share=self.final_share(), progress=progress,
                        stop=stop, between=between)
         pending = sorted(snapshots) if on_snapshot is not None else []
         try:
@@ -64,22 +64,22 @@ class ProgressiveImage:
             pending.pop(0)
             t_snap = time.perf_counter()
             try:
-                img = self.resolve(loop.final_seconds())
+                img = self.resolve(loop.final_time())
                 on_snapshot(loop.elapsed() + time.perf_counter() - t_snap, loop.iterations, img)
             except KeyboardInterrupt:         # Ctrl-C while a snapshot forms: a stop, as in the loop
                 loop.cancelled = loop.finished = True
                 break
             loop.pause(time.perf_counter() - t_snap)
-        reserve = loop.final_seconds()
-        if reserve and not self.automatic_gather_pays(reserve):
-            loop.extend(reserve)                  # the time kept for a gather that would not pay: iterate on
+        final_time = loop.final_time()
+        if final_time and not self.automatic_gather_pays(final_time):
+            loop.extend(final_time)               # the time kept for a gather that would not pay: iterate on
             while loop.advance():
                 pass
-            reserve = None
+            final_time = None
         if stage is not None:
             stage("forming the final image")
         t_res = time.perf_counter()
-        img = self.resolve(reserve)
+        img = self.resolve(final_time)
         if not np.isfinite(img).all():
             raise FloatingPointError("the image has non-finite values; this is a bug, please report it")
         t_end = time.perf_counter()
@@ -94,8 +94,8 @@ class ProgressiveImage:
         """The final image's share of a time-limited run's iteration seconds (none here)."""
         return 0.0
 
-    def resolve(self, final_seconds=None):
-        """The image at the end of a run or at a snapshot; ``final_seconds``: what forming it
-        may take in a run limited by time (:meth:`~raybundle.imaging.run.RunLoop.final_seconds`), None
-        in a run of given iterations."""
+    def resolve(self, final_time=None):
+        """The image at the end of a run or at a snapshot; ``final_time``: what forming it may
+        take in a run limited by time (:meth:`~raybundle.imaging.run.RunLoop.final_time`), None in
+        a run of given iterations."""
         return self.image()

@@ -276,14 +276,14 @@ class Renderer(ProgressiveImage):
             self.glossy_sum[gl] += g.weighted(solver.caustic.E[patch] * f, gl)
 
     # -------------------------------------------------------------- resolve
-    def diffuse_indirect(self, e_bar=None, samples=None, gather=True, gather_seconds=None):
+    def diffuse_indirect(self, e_bar=None, samples=None, gather=True, final_time=None):
         """(pixels, 3) the diffuse indirect light (:meth:`~raybundle.imaging.resolve.DiffuseIndirect.image`)."""
-        return self.indirect.image(e_bar, samples, gather, gather_seconds)
+        return self.indirect.image(e_bar, samples, gather, final_time)
 
-    def automatic_gather_pays(self, gather_seconds):
-        """Whether the automatic final gather would spend ``gather_seconds``
+    def automatic_gather_pays(self, final_time):
+        """Whether the automatic final gather would spend ``final_time``
         (:meth:`~raybundle.imaging.resolve.DiffuseIndirect.automatic_gather_pays`)."""
-        return self.indirect.automatic_gather_pays(gather_seconds)
+        return self.indirect.automatic_gather_pays(final_time)
 
     @property
     def gather_rays_used(self):
@@ -301,15 +301,15 @@ class Renderer(ProgressiveImage):
         """The automatic final gather's share of a time-limited run (``gather_share``)."""
         return self.settings.gather_share if self.settings.gather_rays < 0 else 0.0
 
-    def resolve(self, final_seconds=None):
+    def resolve(self, final_time=None):
         """The image at the end of a run or at a snapshot; in a run limited by time the
-        automatic final gather may take ``final_seconds``."""
-        return self.image(gather_seconds=final_seconds)
+        automatic final gather may take ``final_time``."""
+        return self.image(final_time=final_time)
 
-    def image(self, diffuse=None, preview=False, gather_seconds=None):
+    def image(self, diffuse=None, preview=False, final_time=None):
         """The current estimate (H, W, 3) float32; ``diffuse`` = precomputed diffuse
         indirect; ``preview``: resolve it with one sub-pixel sample (fast, aliased);
-        ``gather_seconds``: the automatic final gather's budget (:meth:`diffuse_indirect`)."""
+        ``final_time``: the automatic final gather's budget (:meth:`diffuse_indirect`)."""
         img = self.pass_sum / np.maximum(self.pass_samples, 1)[:, None] + self.emission.mean()
         if self.gather_passes:
             img = img + self.gather_sum / self.gather_passes
@@ -319,7 +319,7 @@ class Renderer(ProgressiveImage):
             img = img + self.glossy_sum / self.glossy_iterations
         if diffuse is None:
             diffuse = self.diffuse_indirect(samples=1 if preview else None, gather=not preview,
-                                            gather_seconds=gather_seconds)
+                                            final_time=final_time)
         img = img + diffuse
         return img.reshape(self.camera.height, self.camera.width, 3).astype(np.float32)
 

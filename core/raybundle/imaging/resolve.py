@@ -47,7 +47,7 @@ class DiffuseIndirect:
         self.scene, self.solver, self.settings, self.trace, self.pixels = scene, solver, settings, trace, pixels
         self.edge_gather, self.probe = edge_gather, probe
         self.world_sampled, self.caustic_splatted = world_sampled, caustic_splatted
-        self._resolve_rng = stream(settings.seed, Stream.RESOLVE)
+        self.rng = stream(settings.seed, Stream.RESOLVE)
         self._planned = None                # automatic_gather_pays' plan for the next image
         self.gather_rays_used = 0           # rays per pixel of the last resolve's gather
 
@@ -55,7 +55,7 @@ class DiffuseIndirect:
         """Drop the plan :meth:`automatic_gather_pays` kept: the solution has moved on."""
         self._planned = None
 
-    def image(self, e_bar=None, samples=None, gather=True, gather_seconds=None):
+    def image(self, e_bar=None, samples=None, gather=True, final_time=None):
         """(N, 3) W_d kd/pi * E_bar at the pixels (W_d: the diffuse weight under a
         Principled layer, 1 without), box-filtered with ``samples`` (default
         ``resolve_samples``) stratified sub-pixel samples.
@@ -68,7 +68,7 @@ class DiffuseIndirect:
         :meth:`~raybundle.imaging.gather.EdgeGather.near_edge` flags gather their indirect light
         instead (:class:`~raybundle.imaging.gather.FinalGather`): ``gather_rays`` rays per pixel,
         spread over its sub-pixel samples as one stratified set.  With ``gather_rays`` = -1
-        the count is what ``gather_seconds`` buy (the run loop gives ``gather_share`` of a timed
+        the count is what ``final_time`` buy (the run loop gives ``gather_share`` of a timed
         run's iteration seconds, :meth:`~raybundle.imaging.renderer.Renderer.resolve`; none: no automatic
         gather), from the gather's
         cost per ray measured on a few of the last image pass's points and the number of its
@@ -87,11 +87,11 @@ class DiffuseIndirect:
         final, per_sample, rays = None, 0, self.settings.gather_rays
         if e_bar is None:
             planned, self._planned = self._planned, None
-            if planned is not None and planned[0] == (gather_seconds, k):
+            if planned is not None and planned[0] == (final_time, k):
                 e_bar, vert, final, per_sample = planned[1]
                 t_start -= planned[2]                 # the probe's time counts against the gather's budget
             else:
-                e_bar, vert, final, per_sample = self._indirect_plan(gather, gather_seconds, k)
+                e_bar, vert, final, per_sample = self._indirect_plan(gather, final_time, k)
             self.gather_rays_used = 0
         else:
             vert = self.solver.reconstruction.smooth_and_sharp(e_bar, None) \
@@ -104,9 +104,9 @@ class DiffuseIndirect:
         if len(getattr(self.solver, "translucent_sides", ())):      # the first shot's part: _shade's
             through = self.solver.translucent_radiance(self.solver.indirect_incoming())
             through_vert = self.solver.reconstruction.averaged(through) if self.settings.smooth else None
-        offsets = stratified_2d(k, self._resolve_rng)     # new positions at every resolve
+        offsets = stratified_2d(k, self.rng)     # new positions at every resolve
         if final is not None:
-            shift = self._resolve_rng.random((n, 2))
+            shift = self.rng.random((n, 2))
         t_loop = time.perf_counter()
         for j in range(k):
             g = self.trace(np.broadcast_to(offsets[j], (n, 2)))
@@ -116,11 +116,11 @@ class DiffuseIndirect:
                 rays_j = per_sample
                 if rays < 0 and j > 0:     # the automatic gather keeps to its budget: none once it is spent
                     now = time.perf_counter()
-                    rays_j = sample_gather_rays(per_sample, gather_seconds - (now - t_start), (now - t_loop) / j)
+                    rays_j = sample_gather_rays(per_sample, final_time - (now - t_start), (now - t_loop) / j)
                 f = np.nonzero(self.edge_gather.near_edge(g.tside[h]))[0] if rays_j else []
                 if len(f):
                     e[f] = final.irradiance(g.point[h[f]], sc.tside_normal[g.tside[h[f]]], rays_j,
-                                            self._resolve_rng, shift=shift[h[f]], first=j * per_sample,
+                                            self.rng, shift=shift[h[f]], first=j * per_sample,
                                             at=(g.tside[h[f]], g.bary[h[f]]))
                     self.edge_gather.points += len(f)
                 self.gather_rays_used += rays_j
@@ -133,7 +133,7 @@ class DiffuseIndirect:
             out[h] += g.weighted(value, h)
         return out / k
 
-    def _indirect_plan(self, gather, gather_seconds, k):
+    def _indirect_plan(self, gather, final_time, k):
         """What :meth:`image` reads from the solver: ``(e_bar, vert, final,
         per_sample)``, the solver's E_bar (S, 3) for the image, its vertex values (with
         ``smooth``, else None), the :class:`~raybundle.imaging.gather.FinalGather` or None
@@ -145,9 +145,9 @@ class DiffuseIndirect:
         e_bar = solver.image_incoming(caustic=caustic, world=not self.world_sampled)
         sharp = solver.caustic.E if caustic else None
         rays, final, per_sample = self.settings.gather_rays, None, 0
-        if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and gather_seconds and
+        if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and final_time and
                                                              self.edge_gather.affordable(self.probe(),
-                                                                                         gather_seconds))):
+                                                                                         final_time))):
             final = FinalGather(solver, near=self.GATHER_NEAR, caustic=caustic, world=not self.world_sampled,
                                 image_values=(e_bar, sharp) if self.settings.smooth else None)
         vert = final.image_vert if final is not None else None
@@ -155,7 +155,7 @@ class DiffuseIndirect:
             vert = solver.reconstruction.smooth_and_sharp(e_bar, sharp)
         if final is not None:
             per_sample = (-(-int(rays) // k) if rays > 0 else
-                          self.edge_gather.automatic_rays(final, self.probe(), k, gather_seconds,
+                          self.edge_gather.automatic_rays(final, self.probe(), k, final_time,
                                                           lambda ts, bary: surface_values(self.scene, solver, e_bar, vert, ts, bary)))
             if per_sample == 0:
                 final = None
@@ -167,16 +167,16 @@ class DiffuseIndirect:
     #: final) costs many times as much per ray where lamps are many and takes no noise away
     GATHER_NEAR = 0.0
 
-    def automatic_gather_pays(self, gather_seconds):
-        """Whether the automatic final gather (``gather_rays`` -1) would spend ``gather_seconds``
+    def automatic_gather_pays(self, final_time):
+        """Whether the automatic final gather (``gather_rays`` -1) would spend ``final_time``
         on the image: a timed run whose gather would not pay gives the seconds it kept for it
         to more iterations (:meth:`~raybundle.imaging.progressive.ProgressiveImage.run`).  When it pays, the probe's plan is kept for the
         :meth:`image` that follows."""
         t0 = time.perf_counter()                  # probing the sides for edges counts too
-        if self.settings.gather_rays != -1 or not gather_seconds or not self.scene.n_patches or \
-                not self.edge_gather.affordable(self.probe(), gather_seconds):
+        if self.settings.gather_rays != -1 or not final_time or not self.scene.n_patches or \
+                not self.edge_gather.affordable(self.probe(), final_time):
             return False
         k = max(1, int(self.settings.resolve_samples))
-        plan = self._indirect_plan(True, gather_seconds, k)
-        self._planned = ((gather_seconds, k), plan, time.perf_counter() - t0) if plan[2] is not None else None
+        plan = self._indirect_plan(True, final_time, k)
+        self._planned = ((final_time, k), plan, time.perf_counter() - t0) if plan[2] is not None else None
         return plan[2] is not None

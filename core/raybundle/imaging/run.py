@@ -5,10 +5,12 @@ and the chains on Dask (:mod:`raybundle.app.distributed`) all iterate through :c
 which owns the budget of the whole run:
 
 * ``iterations``: that many steps of the runner, reproducible with a fixed seed; or
-* ``seconds``, counted from ``started`` (the start of the command or the job, so loading,
-  export and set-up count): the iterations stop when what is left is the final image's
-  share, ``final_share`` of the iteration time (the automatic final gather,
-  :meth:`~raybundle.imaging.renderer.Renderer.diffuse_indirect`), or less than half the next
+* ``time_limit`` [s], counted from ``started`` (the start of the command or the job, so
+  loading, export and set-up count).  It falls into three parts: the set-up, the
+  *iteration time* and the *final time*, ``final_share`` of the iteration time, what forming
+  the final image may take (the automatic final gather,
+  :meth:`~raybundle.imaging.resolve.DiffuseIndirect.image`).  The iterations stop when what is
+  left is the final time, or less than half the next
   step more (:meth:`RunLoop._next_step_seconds`), so that the image is written when
   the budget ends, but not before :data:`RunLoop.MIN_ITERATIONS` steps; the run then says
   its budget was too short (:meth:`RunLoop.budget_note`).
@@ -25,22 +27,22 @@ import math
 import time
 
 
-def check_budget(iterations=None, seconds=None):
+def check_budget(iterations=None, time_limit=None):
     """Raise ValueError (one line) for a budget that cannot run: both or neither given,
-    negative iterations, seconds that are negative or not finite."""
-    if (iterations is None) == (seconds is None):
-        raise ValueError("give iterations or seconds" + (", not both" if iterations is not None else ""))
+    negative iterations, a time limit that is negative or not finite."""
+    if (iterations is None) == (time_limit is None):
+        raise ValueError("give iterations or a time limit" + (", not both" if iterations is not None else ""))
     if iterations is not None and int(iterations) < 0:
         raise ValueError("iterations must be non-negative")
-    if seconds is not None and not (math.isfinite(seconds) and seconds >= 0):
-        raise ValueError("seconds must be a finite, non-negative number")
+    if time_limit is not None and not (math.isfinite(time_limit) and time_limit >= 0):
+        raise ValueError("the time limit must be a finite, non-negative number of seconds")
 
 
-def iteration_seconds(seconds, started, final_share=0.0):
-    """Of a budget of ``seconds`` from ``started`` (a ``time.perf_counter()`` reading), the
-    seconds left for iterating now: what set-up left, less the final image's share
-    (``final_share`` of the iteration time)."""
-    return max(seconds - (time.perf_counter() - started), 0.0) / (1.0 + final_share)
+def iteration_time(time_limit, started, final_share=0.0):
+    """Of a ``time_limit`` [s] from ``started`` (a ``time.perf_counter()`` reading), the
+    iteration time left now: what set-up left, less the final time (``final_share`` of the
+    iteration time)."""
+    return max(time_limit - (time.perf_counter() - started), 0.0) / (1.0 + final_share)
 
 
 def iterations_of(runner):
@@ -58,10 +60,10 @@ class RunLoop:
     #: the fewest iterations of a run limited by time, however short its budget
     MIN_ITERATIONS = 8
 
-    def __init__(self, runner, iterations=None, seconds=None, started=None, final_share=0.0, progress=None,
+    def __init__(self, runner, iterations=None, time_limit=None, started=None, final_share=0.0, progress=None,
                  stop=None, between=None):
-        check_budget(iterations, seconds)
-        self.runner, self.target, self.seconds = runner, iterations, seconds
+        check_budget(iterations, time_limit)
+        self.runner, self.target, self.time_limit = runner, iterations, time_limit
         self.final_share = float(final_share)
         self.progress, self.between = progress, between
         self._stop = (stop.is_set if hasattr(stop, "is_set") else stop) or (lambda: False)
@@ -69,8 +71,9 @@ class RunLoop:
         self.started = self.t0 if started is None else started
         #: seconds from ``started`` to the first step (loading, export, set-up)
         self.setup_seconds = self.t0 - self.started
-        #: the iteration time a timed run has: what set-up left, less the final image's share
-        self.loop_seconds = None if seconds is None else iteration_seconds(seconds, self.started, self.final_share)
+        #: the iteration time a timed run has: what set-up left, less the final time
+        self.iteration_time = None if time_limit is None else iteration_time(time_limit, self.started,
+                                                                               self.final_share)
         self.cancelled = self.short = self.finished = False
         self._first_iteration = self.iterations
 
@@ -91,7 +94,7 @@ class RunLoop:
         """How much of the budget is spent, in [0, 1]."""
         if self.target is not None:
             return min(1.0, self.iterations / self.target) if self.target else 1.0
-        return min(1.0, self.elapsed() / max(self.loop_seconds, 1e-9))
+        return min(1.0, self.elapsed() / max(self.iteration_time, 1e-9))
 
     def advance(self, max_seconds=None, until=None):
         """Step until the budget is spent or ``stop`` is set (then False, and :attr:`finished`),
@@ -108,10 +111,10 @@ class RunLoop:
                 it = self.iterations
                 if self.target is not None and it >= self.target:
                     break
-                if self.loop_seconds is not None and elapsed + 0.5 * self._next_step_seconds() >= self.loop_seconds:
+                if self.iteration_time is not None and elapsed + 0.5 * self._next_step_seconds() >= self.iteration_time:
                     if it >= self.MIN_ITERATIONS:
                         break
-                    self.short = self.short or elapsed >= self.loop_seconds
+                    self.short = self.short or elapsed >= self.iteration_time
                 if self.between is not None:
                     self.between()
                 if self._stop():
@@ -130,9 +133,8 @@ class RunLoop:
     def _next_step_seconds(self):
         """What the runner's next step will take [s]: its own ``next_step_seconds()`` (a renderer
         knows when an image pass is due), else this loop's mean step.  The loop stops when less
-        than half of it is left, so a run ends within half a step of its budget: in the interior
-        bench's hall an image pass is 2-2.7 s, and runs checked only before a step ended up to
-        2.6 s late."""
+        than half of it is left, so a run ends within half a step of its budget, however long
+        its steps (an image pass can take seconds)."""
         own = getattr(self.runner, "next_step_seconds", None)
         if own is not None:
             return own()
@@ -140,17 +142,17 @@ class RunLoop:
         return self.elapsed() / steps if steps > 0 else 0.0
 
     def extend(self, seconds):
-        """Give the run ``seconds`` more of iteration, taken from the final image's share
-        (which is then none): :meth:`advance` goes on."""
-        self.loop_seconds = (self.loop_seconds or 0.0) + seconds
+        """Give the run ``seconds`` more of iteration time, taken from the final time (which is
+        then none): :meth:`advance` goes on."""
+        self.iteration_time = (self.iteration_time or 0.0) + seconds
         self.final_share = 0.0
         self.finished = False
 
-    def final_seconds(self):
-        """What the final image may take [s]: ``final_share`` of the iteration time in a run
-        limited by time that ran to its end; None in a run of given iterations (which stays
-        reproducible) or one that was stopped (a stop ends it now)."""
-        if self.seconds is None or self.cancelled:
+    def final_time(self):
+        """The final time [s], what forming the final image may take: ``final_share`` of the
+        iteration time in a run limited by time that ran to its end; None in a run of given
+        iterations (which stays reproducible) or one that was stopped (a stop ends it now)."""
+        if self.time_limit is None or self.cancelled:
             return None
         return self.final_share * self.elapsed()
 
@@ -159,5 +161,5 @@ class RunLoop:
         of iterations took longer."""
         if not self.short:
             return None
-        return (f"budget {self.seconds:g} s too short: set-up {self.setup_seconds:.1f} s, total "
+        return (f"budget {self.time_limit:g} s too short: set-up {self.setup_seconds:.1f} s, total "
                 f"{total_seconds:.1f} s ({self.iterations} iterations)")
