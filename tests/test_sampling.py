@@ -235,3 +235,12 @@ def test_toy_iteration_sobol_is_wrong():
 
     for seed in (0, 1):
         assert toy_iteration(FirstOfTwo(seed), 50_000) - 2.0 < -0.003
+
+
+def test_every_random_stream_has_a_number_of_its_own():
+    """Two streams that share a number draw the same numbers: the per-pixel shift of the light
+    samples and that of the first interface's choice once did, and so did the bundles' grid
+    and the edge gather's probe points."""
+    from raybundle.tracing.sampling import Stream
+
+    assert len(Stream.__members__) == len({int(s) for s in Stream.__members__.values()})

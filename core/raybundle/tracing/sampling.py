@@ -24,29 +24,31 @@ import math
 import numpy as np
 
 
+@enum.unique
 class Stream(enum.IntEnum):
     """Every random stream of a run, by name: :func:`stream` ``(seed, Stream.X)`` is the
-    Generator ``np.random.default_rng([seed, X])``.  A stream's number is part of what a seed
-    means: changing it changes the images of that seed."""
+    Generator ``np.random.default_rng([seed, X])``.  Each has a number of its own, so no two
+    draw the same numbers.  A stream's number is part of what a seed means: changing it changes
+    the images of that seed."""
 
     IMAGE_PASSES = 1            # the renderer's passes: lobe uniforms, interfaces, extra samples
     RESOLVE = 2                 # the diffuse resolve's sub-pixel offsets and gather shifts
     EDGE_GATHER = 3             # :class:`~raybundle.imaging.gather.EdgeGather`'s probe points
-    BUNDLE_GRID = 3             # each bundle's grid offset and rotation (shares 3)
     EDGE_GATHER_PROBE = 4       # ... and the one-ray gathers that measure its noise
     LIGHT_SOURCE_MASK = 5       # :func:`~raybundle.app.metrics.light_source_mask`'s sub-pixel rays
     CAUSTIC_SPLATS = 6          # the caustic shot light-traced into the pixels
     FIRST_SHOT = 7              # the per-patch first shot's points and light samples
     SUBPIXEL_SHIFT = 8          # each pixel's shift of its R_2 sequence of sub-pixel positions
     LIGHT_SHIFT = 9             # each pixel's shift of its R_3 sequences of light samples
-    CHOICE_SHIFT = 9            # each pixel's shift of its first interface's choice (shares 9)
+    CHOICE_SHIFT = 10           # each pixel's shift of its first interface's choice
     OPEN_AREA = 11              # the tracer's estimate of the patches' open (not buried) area
-    CAUSTIC_SHOT = 11           # the caustic first shot's lobe rays (shares 11)
-    PATH_TRACING = 11           # the path tracer's walks (shares 11)
+    CAUSTIC_SHOT = 12           # the caustic first shot's lobe rays
     LIGHT_TRACING = 13          # single-ray iteration's photons
-    ROULETTE = 13               # the bundle walk's Russian roulette (shares 13)
+    PATH_TRACING = 14           # the path tracer's walks
+    ROULETTE = 15               # the bundle walk's Russian roulette
+    BUNDLE_GRID = 16            # each bundle's grid offset and rotation
     STRATIFIED = 17             # :class:`StratifiedSequence`'s streams, one more number each
-    OPEN_FRACTION_FRAMES = 17   # the patches' open-fraction probes' random turns (shares 17)
+    OPEN_FRACTION_FRAMES = 18   # the patches' open-fraction probes' random turns
     SOBOL_SHIFT = 23            # :class:`SobolSequence`'s digital shift
     RANDOM_ROOM = 29            # the built-in random rooms
     TEXTURE_MEANS = 31          # texture means over patches, by sampled points
