@@ -80,8 +80,8 @@ STILL_LONG = {
     "core/raybundle/lights/direct.py:DirectLighting.reflected_radiance": 175,
     "core/raybundle/lights/sources.py": 685,
     "core/raybundle/methods/path_tracing.py:PathTracer.trace": 84,
-    "core/raybundle/methods/stochastic_iteration.py": 655,
-    "core/raybundle/methods/stochastic_iteration.py:StochasticIterationSolver.__init__": 109,
+    "core/raybundle/methods/patch_solution.py": 620,
+    "core/raybundle/methods/patch_solution.py:PatchSolution.__init__": 109,
     "core/raybundle/patches/contacts.py": 801,
     "core/raybundle/patches/contacts.py:contact_segments": 86,
     "core/raybundle/patches/contacts.py:split_at_contacts": 130,
@@ -128,3 +128,18 @@ def test_no_module_or_function_grows_over_its_length():
     over = {k: n for k, n in got.items() if n > (FUNCTION_LINES if ":" in k else MODULE_LINES)}
     assert {k: n for k, n in over.items() if n > STILL_LONG.get(k, 0)} == {}
     assert [k for k in STILL_LONG if k not in over] == []
+
+
+def test_patch_methods_share_an_abstract_base_and_none_inherits_another():
+    """Every patch method derives from the abstract ``PatchSolution`` directly, not from another
+    method (they once inherited the concrete bundle iteration)."""
+    from raybundle.methods.patch_solution import PatchSolution
+    from raybundle.methods.registry import SOLVERS
+
+    patch = [cls for cls in SOLVERS.values() if not cls.image_only]
+    assert len(patch) == 4 and all(PatchSolution in cls.__bases__ for cls in patch)
+    assert PatchSolution.__abstractmethods__ == frozenset({"step"})
+    # each declares what it is itself, nothing inherited from another method
+    assert {c.name: (c.__dict__["iterates"], c.__dict__["merges_chains"]) for c in patch} == {
+        "stochastic-iteration": (True, True), "ray-bundle-walk": (True, True), "radiosity": (False, True),
+        "point-collocation": (True, False)}

@@ -1,4 +1,4 @@
-"""The ``auto`` method: pick the method, patch count and first shot from what the scene holds.
+"""The ``auto`` method: pick the method (and its random numbers) from what the scene holds.
 
 :func:`inspect` measures the scene (no name is read): the share of the reflected light that
 glossy lobes carry, the glossy area that is nearly a mirror, the small emitters and lights
@@ -19,10 +19,11 @@ the first shot takes, and the area that emits.  :func:`choose` turns those figur
   ``cornell-glossy``, ``near-mirror`` and the unseen ``glossy-room-11`` (85% of its reflection
   glossy: a rule on the glossy share alone had picked path tracing there).
 
-The first shot is always on (``auto``: it takes the small emitters and lights and changes
-nothing without them); the patch count stays at the default (:data:`~raybundle.patches.clusters.DEFAULT_PATCHES`,
-4,000 sides), which measured best at a fixed time across scene sizes (finer layouts cost more per
-step than their smaller discretisation error gains).
+``auto`` leaves the rest as it is: the first shot is on for every method (it takes the small
+emitters and lights and changes nothing without them), and the patch count stays the user's or
+the default (:data:`~raybundle.patches.clusters.DEFAULT_PATCHES`), which measured best at a fixed
+time across scene sizes (finer layouts cost more per step than their smaller discretisation
+error gains).
 """
 from __future__ import annotations
 
@@ -31,7 +32,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..lights.sources import small_emitters
-from ..patches.clusters import DEFAULT_PATCHES
 from ..scene.materials import NEAR_MIRROR_ROUGHNESS
 
 #: path tracing wins above this share of the reflected light carried by glossy lobes ...
@@ -56,16 +56,14 @@ class SceneFigures:
 @dataclass
 class Choice:
     method: str
-    patches: int
-    first_shot: str
     reason: str
     figures: SceneFigures
     #: the random numbers the method draws (None: the run's own ``sequence``)
     sequence: str | None = None
 
     def as_dict(self):
-        return {"method": self.method, "patches": self.patches, "first_shot": self.first_shot,
-                "sequence": self.sequence, "reason": self.reason, "figures": asdict(self.figures)}
+        return {"method": self.method, "sequence": self.sequence, "reason": self.reason,
+                "figures": asdict(self.figures)}
 
 
 def inspect(scene) -> SceneFigures:
@@ -117,4 +115,4 @@ def choose(scene) -> Choice:
     # path tracing as the randomised quasi-Monte Carlo walk, which measured ahead of the PRNG's
     # on every bench scene (docs/benchmarks.md, 'Measured choices behind the defaults')
     sequence = "halton" if method == "path-tracing" else None
-    return Choice(method, DEFAULT_PATCHES, "auto", f"{why}; {light}", f, sequence)
+    return Choice(method, f"{why}; {light}", f, sequence)

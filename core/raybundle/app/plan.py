@@ -8,8 +8,8 @@ every decision they share and returns a :class:`Plan`:
   (:func:`~raybundle.app.auto.choose`, made on the loaded scene); a bake needs a patch
   solution, so where ``auto`` would pick an image-only method a bake takes the bundle
   iteration, and naming an image-only method for a bake or for chains is an error;
-* what ``auto`` decides is what the user left open (``None``): the patch count and the
-  random sequence; a value the user gave is kept;
+* what ``auto`` decides is what the user left open (``None``): the random sequence; a value
+  the user gave is kept;
 * the budget: ``iterations`` or ``time_limit`` (the whole run's seconds, from its start),
   :data:`DEFAULT_TIME_LIMIT` when neither is given;
 * the :class:`~raybundle.imaging.settings.RenderSettings` the run is built with, validated.
@@ -142,8 +142,6 @@ def plan(scene, options: RunOptions, bake=False, chains=False) -> Plan:
         method = choice.method
         if sequence is None:
             sequence = choice.sequence
-        if patches is None:
-            patches = choice.patches
         if (bake or chains) and image_only(method):
             method, sequence = StochasticIterationSolver.name, o.sequence
             notes.append(f"{'a bake needs' if bake else 'chains need'} a patch solution: {method}")

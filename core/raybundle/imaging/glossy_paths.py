@@ -117,8 +117,8 @@ class GlossyEyePaths:
         (:meth:`world_samples` takes the rest).  A transmissive surface's interface is followed
         as a mirror (:meth:`_interfaces`) while the path has rays left; at the last ray its patch
         stands in, reflecting what it receives less the first shot and the caustic shot, which it
-        would throw as a caustic (:meth:`~raybundle.methods.stochastic_iteration.
-        StochasticIterationSolver.radiance`'s ``sharp_interfaces``).  ``groups`` (N,) or None: the
+        would throw as a caustic (:meth:`~raybundle.methods.patch_solution.
+        PatchSolution.radiance`'s ``sharp_interfaces``).  ``groups`` (N,) or None: the
         link groups of ``pts`` (:mod:`raybundle.scene.linking`)."""
         sc, mats, solver = self.scene, self.scene.materials, self.solver
         out = np.zeros((len(pts), 3))

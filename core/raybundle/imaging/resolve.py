@@ -61,7 +61,7 @@ class DiffuseIndirect:
         ``resolve_samples``) stratified sub-pixel samples.
 
         ``e_bar`` (S, 3) defaults to the solver's
-        :meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.indirect_incoming`.
+        :meth:`~raybundle.methods.patch_solution.PatchSolution.indirect_incoming`.
         With ``smooth``, the bundles' running average and the caustic first shot are
         interpolated by :meth:`~raybundle.patches.reconstruction.LinearReconstruction.smooth_and_sharp`.
         With ``gather`` (and ``e_bar`` the solver's own), points on the sides

@@ -13,7 +13,7 @@ class RenderSettings:
     documented beside it.  :meth:`validate` checks them before any work."""
 
     #: rays per side of each bundle grid (0: about one cell per patch,
-    #: :func:`~raybundle.methods.stochastic_iteration.auto_bundle_resolution`)
+    #: :func:`~raybundle.methods.patch_solution.auto_bundle_resolution`)
     bundle_resolution: int = 0
     #: the random sequence's name (:mod:`raybundle.tracing.sampling`)
     sequence: str = DEFAULT_SEQUENCE
@@ -54,7 +54,7 @@ class RenderSettings:
     #: and by the lobe's ray together (multiple importance sampling, power heuristic)
     glossy_mis: bool = True
     #: lobe-sampled rays per glossy side and bundle direction that gather what the side's glossy lobe
-    #: sends (:meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.glossy_sent_radiance`)
+    #: sends (:meth:`~raybundle.methods.patch_solution.PatchSolution.glossy_sent_radiance`)
     glossy_send_rays: int = 2
     #: final-gather rays per pixel where the patch values are not to be trusted (next to concave
     #: edges and contacts, :mod:`raybundle.imaging.gather`): 0 none; -1 as many as ``gather_share``

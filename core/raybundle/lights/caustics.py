@@ -25,7 +25,7 @@ extent does (with one mean direction a sharp lobe under a lamp threw a
 too-concentrated spot on the ceiling).  ``E_c`` is the running mean over all
 samples, refined a little every iteration as the first shot is.  The iteration
 then leaves the first shot's glossy reflection out of what glossy sides send
-(:meth:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver.sent_radiance`) and adds
+(:meth:`~raybundle.methods.patch_solution.PatchSolution.sent_radiance`) and adds
 ``E_c`` to the receivers' incoming radiance instead, in both the iterate and
 the image's diffuse part; for a glossy receiver its own lobe uses the mean
 travel direction of its caustic light (the first shot's approximation).

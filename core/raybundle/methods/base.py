@@ -19,7 +19,7 @@ class SolverStats:
 class Method:
     """A solution method of the rendering equation, known by :attr:`name`.
 
-    Patch methods derive from :class:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver`
+    Patch methods derive from :class:`~raybundle.methods.patch_solution.PatchSolution`
     (a solution per patch side: images and bakes); image-only methods from
     :class:`~raybundle.imaging.progressive.ProgressiveImage` too (camera images, no patches)."""
 

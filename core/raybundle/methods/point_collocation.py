@@ -32,7 +32,7 @@ import numpy as np
 
 from ..patches.reconstruction import LinearReconstruction
 from ..tracing.sampling import uniform_sphere
-from .stochastic_iteration import StochasticIterationSolver
+from .patch_solution import PatchSolution
 
 #: collocation points sit this fraction of the way from a vertex towards its triangle's centroid
 #: (a ray from the exact corner may slip through the neighbouring face's edge)
@@ -63,13 +63,15 @@ class CollocationReconstruction(LinearReconstruction):
         return super().projected(side_values) + self.detail()
 
 
-class PointCollocationSolver(StochasticIterationSolver):
+class PointCollocationSolver(PatchSolution):
     """Stochastic iteration on vertex unknowns with linear basis functions (module docstring).
     The first shot, the image and the set-up are the bundle iteration's."""
 
     SEPARATES_WORLD_DIRECT = False        # its own step: the world's light stays in its solution
 
     name = "point-collocation"
+    #: each step applies a random operator to the previous iterate (thesis 1.2)
+    iterates = True
     #: its vertex averages are not in :class:`~raybundle.app.chains.ChainState`
     merges_chains = False
 

@@ -29,10 +29,10 @@ import time
 import numpy as np
 
 from ..tracing.sampling import uniform_sphere
-from .stochastic_iteration import StochasticIterationSolver
+from .patch_solution import PatchSolution
 
 
-class RadiositySolver(StochasticIterationSolver):
+class RadiositySolver(PatchSolution):
     """Global-line form factors and Jacobi sweeps (module docstring).  The first shot, the
     open area, the reconstruction and the image are the stochastic iteration's."""
 
@@ -41,6 +41,8 @@ class RadiositySolver(StochasticIterationSolver):
     name = "radiosity"
     #: the directions integrate form factors; no random operator is iterated
     iterates = False
+    #: independent chains' form factors and solutions merge exactly (:mod:`raybundle.app.chains`)
+    merges_chains = True
     #: the dense matrix's limit: 16,384 sides take 2 GB
     MAX_SIDES = 16384
     #: Jacobi sweeps per step

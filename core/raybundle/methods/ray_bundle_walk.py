@@ -11,7 +11,7 @@ one brought, reflected:
 
 with the bundle used in both directions (every line joins its consecutive hits both ways,
 so each side receives from the hemisphere it faces: the factor 2 pi, as in
-:mod:`raybundle.methods.stochastic_iteration`) and the walk's steps summed: ``L = Le + sum_k R^(k)`` estimates
+:mod:`raybundle.methods.patch_solution`) and the walk's steps summed: ``L = Le + sum_k R^(k)`` estimates
 ``Le + sum_k T^k Le``.  After each step the walk goes on with probability ``q`` (Russian
 roulette, survivors weighted 1/q) or a new walk starts at the next step, so every step of
 every walk enters the image: the running average over steps of ``R^(k) / (1 - q)`` (the
@@ -38,16 +38,20 @@ import numpy as np
 
 from ..scene.materials import NEAR_MIRROR_ROUGHNESS
 from ..tracing.sampling import Stream, stream
-from .stochastic_iteration import StochasticIterationSolver
+from .patch_solution import PatchSolution
 
 
-class RayBundleWalk(StochasticIterationSolver):
+class RayBundleWalk(PatchSolution):
     """Random walks of global ray bundles with Russian roulette (module docstring)."""
 
     SEPARATES_WORLD_DIRECT = False        # its own step: the world's light stays in its solution
     TINY_GATHER_RAYS = 0                  # its senders send the walk's last step, not what a gather reads
 
     name = "ray-bundle-walk"
+    #: each step applies a random operator to the walk's previous step (thesis 1.2)
+    iterates = True
+    #: independent chains of walks merge exactly (:mod:`raybundle.app.chains`)
+    merges_chains = True
     #: the range of the continuation probability q (the scene's mean albedo)
     Q_RANGE = (0.25, 0.95)
 

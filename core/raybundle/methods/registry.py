@@ -1,8 +1,8 @@
 """The methods by name: the registry the CLI, the bench and the add-on read.
 
 Every method is a :class:`~raybundle.methods.base.Method` (its name and what it can do), one
-per module: patch solvers (images and bakes) share
-:class:`~raybundle.methods.stochastic_iteration.StochasticIterationSolver`'s interface;
+per module: patch solvers (images and bakes) derive from
+:class:`~raybundle.methods.patch_solution.PatchSolution`;
 image-only methods (:class:`~raybundle.methods.path_tracing.PathTracer`,
 :class:`~raybundle.methods.single_ray_iteration.SingleRayIteration`) render camera images and have
 no patch solution.
