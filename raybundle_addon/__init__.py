@@ -1,10 +1,11 @@
 """RayBundle GI, the Blender extension: thin glue over the ``raybundle`` library.
 
-Modules: :mod:`.properties` (``scene.raybundle`` settings), :mod:`.export` and
-:mod:`.shaders` (evaluated depsgraph -> the core's arrays), :mod:`.engine` (the
-``RAYBUNDLE`` render engine), :mod:`.bake` and :mod:`.operators` (the ``raybundle.bake``
-operator: color attributes, lightmaps), :mod:`.ui` (panels); ``raybundle-blender``
-renders or bakes a ``.blend`` headless (:mod:`.__main__`).
+Two layers.  Its user interface: :mod:`.properties` (``scene.raybundle`` settings),
+:mod:`.engine` (the ``RAYBUNDLE`` render engine), :mod:`.bake` and :mod:`.operators` (the
+``raybundle.bake`` operator: color attributes, lightmaps), :mod:`.ui` (panels), and
+``raybundle-blender``, which renders or bakes a ``.blend`` headless (:mod:`.__main__`).  Under
+it, the translation of Blender's data into the core's scene (:mod:`.translation`), which
+imports nothing of the interface.
 """
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 :class:`BakeJob` is the whole bake, in three calls that the operator
 (:mod:`.operators`), the command line and the tests share:
 
-* :meth:`BakeJob.start` exports the evaluated depsgraph (:mod:`.export`), picks
+* :meth:`BakeJob.start` exports the evaluated depsgraph (:mod:`.translation.export`), picks
   the targets and reads what they need (corners, UVs), subdivides into patches
   and sets up the core's solver;
 * :meth:`BakeJob.step` iterates for about ``budget`` seconds and returns False
@@ -52,7 +52,7 @@ import numpy as np
 
 from raybundle.imaging.run import RunLoop
 
-from .export import corner_vertices, export_scene
+from .translation.export import corner_vertices, export_scene
 from .properties import LAST_BAKE, BakeSettings, run_options
 
 ATTRIBUTE = "RayBundle"

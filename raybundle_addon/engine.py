@@ -1,7 +1,7 @@
 """The ``RAYBUNDLE`` render engine ("Ray Bundle GI") and the progressive render job behind it.
 
 :class:`RenderJob` is independent of :class:`bpy.types.RenderEngine`: it exports
-the evaluated depsgraph (:mod:`.export`), subdivides it into patches, runs the
+the evaluated depsgraph (:mod:`.translation.export`), subdivides it into patches, runs the
 core's stochastic iteration and hands images to a ``display`` callback — a
 quick preview as soon as the first image pass is done (direct light only), then
 every few hundred milliseconds (at most ~1/5 of the time goes to previews), and
@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from .export import export_scene
+from .translation.export import export_scene
 from .properties import LAST_RUN, run_options
 
 #: callables ``fn(job, event)`` told about every job: events "export" (after export),

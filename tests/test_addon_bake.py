@@ -274,7 +274,7 @@ def test_textured_plane_keeps_its_detail_in_the_image_and_its_mean_in_the_patche
     a few percent; the exported material holds the texture's mean albedo."""
     from addon_helpers import render_cycles, render_raybundle
 
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     _, px = textured_plane()
     ex = export_scene(bpy.context.evaluated_depsgraph_get())

@@ -15,7 +15,7 @@ from raybundle.scene.model import SceneError
 
 
 def export(**kw):
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     return export_scene(bpy.context.evaluated_depsgraph_get(), **kw)
 

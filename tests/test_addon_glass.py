@@ -18,27 +18,34 @@ from addon_helpers import (  # noqa: F401
 
 
 def _export():
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     return export_scene(bpy.context.evaluated_depsgraph_get())
 
 
-def _regions_against_cycles(tmp_path, samples, iterations, floor=0.02):
-    """Cycles (two halves of ``samples``) and raybundle (``iterations``) on 48 x 36 pixels: the
-    relative errors of the 6 x 6 regions of 8 x 6 pixels brighter than ``floor`` x the brightest,
-    and the ratio of the image means."""
+def _regions_against_cycles(tmp_path, samples, iterations, floor=0.02, seeds=(3,)):
+    """Cycles (two halves of ``samples``) and raybundle (``iterations``, the mean of ``seeds``) on
+    48 x 36 pixels: the relative errors of the 6 x 6 regions of 8 x 6 pixels brighter than
+    ``floor`` x the brightest, and the ratio of the image means; with two ``seeds``, also each
+    region's relative standard error, raybundle's and Cycles' together (from each side's two
+    renders: ``sqrt(mean((A - B)^2) / (4 n))`` over the region's n pixels)."""
     from addon_helpers import render_cycles, render_raybundle
 
     a = render_cycles(tmp_path / "a.exr", samples=samples, seed=1)
     b = render_cycles(tmp_path / "b.exr", samples=samples, seed=2)
-    ours = render_raybundle(tmp_path / "rb.exr", iterations=iterations, seed=3)
+    runs = [render_raybundle(tmp_path / f"rb{k}.exr", iterations=iterations, seed=k) for k in seeds]
+    ours = np.mean(runs, axis=0)
 
     def regions(x):
         return x.reshape(6, 6, 6, 8, 3).mean(axis=(1, 3))
 
     ref = regions(0.5 * (a + b))
     lit = ref.mean(axis=-1) > floor * ref.mean(axis=-1).max()
-    return (regions(ours) / np.where(ref > 0, ref, 1) - 1)[lit], ours.mean() / ref.mean()
+    rel = (regions(ours) / np.where(ref > 0, ref, 1) - 1)[lit]
+    if len(seeds) != 2:
+        return rel, ours.mean() / ref.mean()
+    var = sum(regions((x - y) ** 2) / (4 * 48) for x, y in ((a, b), runs))
+    return rel, ours.mean() / ref.mean(), (np.sqrt(var) / np.where(ref > 0, ref, 1))[lit]
 
 
 def _floor(size=2.0):
@@ -86,10 +93,10 @@ def test_a_glass_sphere_refracts_the_room_as_in_cycles(fresh, tmp_path):
     add_camera((0, -2.6, 1.0), rotation=(1.35, 0, 0), resolution=(48, 36), lens=35)
     ex = _export()
     assert [w for w in ex.warnings if "not a pane of parallel faces ('Sphere')" in w], ex.warnings
-    rel, mean = _regions_against_cycles(tmp_path, 512, 100)
-    # measured 2026-11-28: rms 1.2%, largest 3.2%, mean x0.997; a diffuse sphere in its place: rms 1.2%,
-    # largest 3.4% (the world-lit floor's own error)
-    assert np.sqrt((rel ** 2).mean()) < 0.025 and np.abs(rel).max() < 0.06, rel
+    rel, mean, se = _regions_against_cycles(tmp_path, 512, 100, seeds=(3, 4))
+    # every region within 3% (the smooth sphere's faceted silhouette, the floor's own error under
+    # the sky: a diffuse sphere in its place is as far off) plus 4.5 standard errors of the noise
+    assert np.sqrt((rel ** 2).mean()) < 0.025 and np.all(np.abs(rel) <= 0.03 + 4.5 * se), (rel, se)
     assert mean == pytest.approx(1.0, abs=0.02)
 
 

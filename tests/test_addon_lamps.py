@@ -32,7 +32,7 @@ def test_a_thousand_small_lamps_light_a_room_as_in_cycles(fresh, tmp_path):
         add_light("POINT", location=(rng.uniform(-1.9, 1.9), rng.uniform(-1.9, 1.9), rng.uniform(0.15, 1.6)),
                   energy=float(10 ** rng.uniform(-1.5, 0.5)), shadow_soft_size=0.0)
     add_camera((0, -3.2, 2.6), rotation=(0.85, 0, 0), resolution=(48, 36), lens=24)
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     ex = export_scene(bpy.context.evaluated_depsgraph_get())
     assert len(ex.scene.point_lights) == 1000

@@ -174,7 +174,7 @@ def test_an_ies_profile_shapes_a_lamps_light_as_in_cycles(fresh, tmp_path):
     ies.inputs["Strength"].default_value = 1.5
     nt.links.new(ies.outputs[0], next(n for n in nt.nodes if n.type == "EMISSION").inputs["Strength"])
     assert_like_cycles(*against_cycles(tmp_path))
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     twin = bpy.data.objects.new("twin", lamp.data)          # a second lamp of the same light data
     twin.location = (0.5, -0.5, 1.6)
@@ -186,7 +186,7 @@ def test_an_ies_profile_shapes_a_lamps_light_as_in_cycles(fresh, tmp_path):
 def test_an_ies_texture_blender_cannot_read_is_warned(fresh):
     """An IES Texture without a text block: one warning naming the lamp and the node (the lamp
     then emits its own color and power)."""
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     lamp = floor_and_block()
     nt = light_nodes(lamp)
@@ -217,7 +217,7 @@ def test_light_linking_on_an_emitting_mesh_as_in_cycles(fresh, tmp_path):
 def test_linking_on_an_emitting_mesh_too_large_for_the_first_shot_is_warned(fresh):
     """An emitting mesh as large as the floor goes through the bundles, which carry its light to
     every surface: its linking is warned, once, naming it."""
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     floor_and_block()
     glow = add_object("ceiling", [(-4, -4, 3), (4, -4, 3), (4, 4, 3), (-4, 4, 3)], [(0, 1, 2, 3)],

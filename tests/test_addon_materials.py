@@ -20,7 +20,7 @@ from addon_helpers import (  # noqa: F401
 
 
 def _export():
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     return export_scene(bpy.context.evaluated_depsgraph_get())
 
@@ -311,7 +311,7 @@ def test_a_lightmap_of_a_node_graph_texture_is_cycles_bake(fresh, tmp_path):
 def test_a_bake_blender_cannot_finish_falls_back_to_the_sockets_value_with_a_warning(fresh, monkeypatch):
     """When Blender's bake of the graphs fails (here: it cannot finish in the time allowed), the
     export goes on: each graph input keeps its socket's own value, with one warning saying why."""
-    from raybundle_addon import node_graphs
+    from raybundle_addon.translation import node_graphs
 
     plane, _ = textured_plane()
     nt = plane.data.materials[0].node_tree

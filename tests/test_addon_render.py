@@ -150,7 +150,7 @@ def test_cornell_blend_matches_cycles_region_by_region(fresh, tmp_path):
     direction per iteration, 4000 iterations, the ceiling ranged from -6.1% to +2.9%)."""
     import make_demo_scenes as mds
 
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     mds.build_cornell()
     sc = bpy.context.scene
@@ -207,7 +207,7 @@ def test_hdri_with_a_sun_lights_a_plate_and_a_box_as_in_cycles(fresh, tmp_path):
     (a constant world) leaves the shadow out and fails here.  Measured over seeds 3-5 (60
     iterations against 2 x 64 samples): plate within 0.9%, box 2.6%, shadow 4.4% (its Cycles
     noise 2-5%)."""
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     sky_world(tmp_path, sun=((0.5, 0.3, 0.81), 3000.0))                  # the sun: one texel, 2.8 degrees
     add_object("plate", [(-1.5, -1.5, 0), (1.5, -1.5, 0), (1.5, 1.5, 0), (-1.5, 1.5, 0)], [(0, 1, 2, 3)],
@@ -248,8 +248,8 @@ def test_the_world_renders_while_the_patches_are_laid_out(fresh, tmp_path):
     vertices for the reconstruction, so that work too is done while the world renders."""
     from raybundle.app import pipeline
     from raybundle.app.plan import RunOptions, plan
-    from raybundle_addon.export import export_scene
-    from raybundle_addon.world import forget_rendered_worlds
+    from raybundle_addon.translation.export import export_scene
+    from raybundle_addon.translation.world import forget_rendered_worlds
 
     sky_world(tmp_path, sun=((0.5, 0.3, 0.81), 3000.0))
     add_object("plate", [(-1.5, -1.5, 0), (1.5, -1.5, 0), (1.5, 1.5, 0), (-1.5, 1.5, 0)], [(0, 1, 2, 3)],
@@ -288,7 +288,7 @@ def test_a_room_lit_through_a_window_is_cycles_room_with_or_without_a_portal(fre
     times the spread of its own mean at 200 iterations, 0.9% over seeds 3-8) plus 4.5 times
     Cycles' noise (seed 3: -0.6%).  With the portal taken as a lamp, as the export did before
     issue 29, 1000 W would light a room that the sky gives about 2 W through the window."""
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     sky_world(tmp_path)
     white = node_material("white", color=(0.8, 0.8, 0.8))
@@ -348,7 +348,7 @@ def test_the_sky_beside_a_bar_thinner_than_a_pixel_is_the_sky_cycles_sees(fresh,
     floor of the two renders' noise).  With the pixel's mean of the sky behind the bar too,
     as before: 12.3%."""
     from raybundle.tracing.visibility import RayTracer
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     checker_world(60.0)
     cam = add_camera((0, -0.5, 0.3), (math.radians(80), 0, math.radians(20)), resolution=(48, 48), lens=100)
@@ -414,7 +414,7 @@ def test_the_world_seen_by_the_camera_is_blenders_pixel_for_pixel(fresh, tmp_pat
     pixel that sees the world is Cycles' own (rendered through the camera with its filter),
     within Cycles' noise: relative RMSE under 3%.  Read from the lighting's 512-pixel
     panorama (1.4 pixels per degree) the checks blurred and aliased: 30% and more."""
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     checker_world(120.0)
     add_object("plate", [(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], [(0, 1, 2, 3)],

@@ -70,7 +70,7 @@ def test_no_docstring_or_comment_quotes_a_before_and_after_figure_or_a_date():
     CHANGELOG.md."""
     figure = re.compile(r"\d(\.\d+)?\s*%\s*(->|→)|(->|→)\s*\d+(\.\d+)?\s*(/\s*\d+(\.\d+)?\s*)?%|\b20\d\d-\d\d-\d\d\b")
     found = [f"{path.relative_to(ROOT)}:{k}" for path in [*ROOT.glob("core/raybundle/**/*.py"),
-                                                           *ROOT.glob("raybundle_addon/*.py")]
+                                                           *ROOT.glob("raybundle_addon/**/*.py")]
              for k, line in enumerate(path.read_text().split("\n"), 1) if figure.search(line)]
     assert not found, found
 

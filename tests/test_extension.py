@@ -212,7 +212,7 @@ DRIVER = textwrap.dedent(r'''
                                "add-on (raybundle_addon still a stub?)")
         bpy.ops.wm.open_mainfile(filepath=demo_blend)
         import importlib
-        export = importlib.import_module(mod + ".export")
+        export = importlib.import_module(mod + ".translation.export")
         ex = export.export_scene(bpy.context.evaluated_depsgraph_get())
         res["export"] = {"objects": sorted(o.name for o in ex.objects), "triangles": int(len(ex.scene.triangles)),
                          "emitting_triangles": int((ex.scene.materials.emission[ex.scene.triangle_material]

@@ -79,7 +79,7 @@ def test_the_blend_subdivided_in_blender_is_the_blend():
 
     from addon_helpers import ROOT, bpy, ensure_registered
 
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
     bmesh = importlib.import_module("bmesh")      # only once bpy is imported (by addon_helpers)
 
     ensure_registered()

@@ -88,12 +88,12 @@ STILL_LONG = {
     "core/raybundle/scene/build.py:build_scene": 95,
     "core/raybundle/scene/materials.py": 842,
     "raybundle_addon/__main__.py:_main": 98,
-    "raybundle_addon/export.py": 853,
-    "raybundle_addon/export.py:_export_objects": 189,
-    "raybundle_addon/material_bake.py:main": 93,
-    "raybundle_addon/node_graphs.py:start_graph_bake": 81,
-    "raybundle_addon/shaders.py": 754,
-    "raybundle_addon/shaders.py:MaterialConverter._closure": 81,
+    "raybundle_addon/translation/export.py": 853,
+    "raybundle_addon/translation/export.py:_export_objects": 189,
+    "raybundle_addon/translation/material_bake.py:main": 93,
+    "raybundle_addon/translation/node_graphs.py:start_graph_bake": 81,
+    "raybundle_addon/translation/shaders.py": 754,
+    "raybundle_addon/translation/shaders.py:MaterialConverter._closure": 81,
 }
 
 
@@ -143,3 +143,12 @@ def test_patch_methods_share_an_abstract_base_and_none_inherits_another():
     assert {c.name: (c.__dict__["iterates"], c.__dict__["merges_chains"]) for c in patch} == {
         "stochastic-iteration": (True, True), "ray-bundle-walk": (True, True), "radiosity": (False, True),
         "point-collocation": (True, False)}
+
+
+def test_the_add_ons_translation_imports_nothing_of_its_interface():
+    """``raybundle_addon.translation`` (Blender's data into the core's scene) sits under the
+    add-on's interface (settings, panels, operators, render engine, bake job, command line)."""
+    _, g = graph(ADDON)
+    up = sorted(f"{m} -> {d}" for m, deps in g.items() if m.startswith("raybundle_addon.translation")
+                for d in deps if not d.startswith("raybundle_addon.translation"))
+    assert up == []

@@ -126,7 +126,7 @@ def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None
     if engine == "CYCLES":
         cycles_settings(samples, seed, world_strength=None)
     else:
-        from raybundle_addon.world import forget_rendered_worlds
+        from raybundle_addon.translation.world import forget_rendered_worlds
 
         forget_rendered_worlds()          # timed as from a fresh session: the world's render included
         scene.render.engine = "RAYBUNDLE"
@@ -161,7 +161,7 @@ def light_mask(blend):
 
     from raybundle.app.metrics import light_source_mask
     from raybundle.scene.builtin import load_scene
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     if not is_blend(blend):
         return light_source_mask(load_scene(blend))

@@ -210,7 +210,7 @@ PAIRS = {"instance vs copy": (copy, instance)}
 
 
 def exported(case=None):
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     bpy = _open()
     if case is not None:
@@ -228,7 +228,7 @@ def images(seconds, cuts, out, seeds=(1, 2)):
     from addon_helpers import erode, object_id_image
 
     from raybundle.util.io import read_exr
-    from raybundle_addon.export import export_scene
+    from raybundle_addon.translation.export import export_scene
 
     bpy = _open()
     ex = export_scene(bpy.context.evaluated_depsgraph_get())

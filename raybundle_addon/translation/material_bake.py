@@ -1,6 +1,6 @@
 """Bake material inputs' node graphs with Cycles (run in a process of its own).
 
-Usage (by :mod:`raybundle_addon.node_graphs`, never imported by the add-on)::
+Usage (by :mod:`raybundle_addon.translation.node_graphs`, never imported by the add-on)::
 
     python material_bake.py LIBRARY.blend JOB.json THREADS
     blender -b --factory-startup --python material_bake.py -- LIBRARY.blend JOB.json THREADS

@@ -132,7 +132,7 @@ class ExportResult:
     border: tuple | None = None
     seconds: float = 0.0
     counts: dict = field(default_factory=dict)
-    #: with ``defer_world``: the world's render under way (:class:`~raybundle_addon.world.PendingWorld`)
+    #: with ``defer_world``: the world's render under way (:class:`~raybundle_addon.translation.world.PendingWorld`)
     world_render: object = None
 
     def attach_world(self, *scenes):

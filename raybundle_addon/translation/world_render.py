@@ -1,6 +1,6 @@
 """Render a World into an equirectangular image with Cycles (run in a process of its own).
 
-Usage (by :func:`raybundle_addon.world.render_world`, never imported by the add-on)::
+Usage (by :func:`raybundle_addon.translation.world.render_world`, never imported by the add-on)::
 
     python world_render.py LIBRARY.blend WORLD_NAME OUT.exr WIDTH SAMPLES THREADS [VIEW.json]
     blender -b --factory-startup --python world_render.py -- LIBRARY.blend WORLD_NAME OUT.exr WIDTH SAMPLES THREADS [VIEW.json]
