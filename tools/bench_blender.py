@@ -170,6 +170,26 @@ def light_mask(blend):
     return light_source_mask(ex.scene, ex.scene.camera)
 
 
+def reference_paths(blend, folder, clay):
+    """The two Cycles halves of ``blend`` (clay or its own materials) kept in ``folder``:
+    ``<file>-<clay|full>-<1|2>.exr``."""
+    stem = os.path.splitext(os.path.basename(blend))[0]
+    return [os.path.join(folder, f"{stem}-{'clay' if clay else 'full'}-{seed}.exr") for seed in (1, 2)]
+
+
+def reference_halves(blend, paths, samples):
+    """The Cycles halves at ``paths`` (seeds 1 and 2), each rendered with ``samples`` where
+    missing (with the current :data:`OPEN_SETTINGS`)."""
+    from raybundle.util.io import read_exr
+
+    for seed, path in enumerate(paths, 1):
+        if not os.path.exists(path):
+            print(f"Cycles reference half {seed} ({path}): {samples} samples ...", flush=True)
+            os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+            render(blend, path, "CYCLES", samples=samples, seed=seed)
+    return [read_exr(path) for path in paths]
+
+
 def loglog_at(xs, ys, x):
     """y at x by linear interpolation in log-log over the sorted points (None outside)."""
     xs, ys = np.log(np.asarray(xs, float)), np.log(np.maximum(np.asarray(ys, float), 1e-12))
@@ -243,22 +263,14 @@ def main(argv=None):
     checked_page(a.page, "bench_blender")
     OPEN_SETTINGS.update(clay=a.clay, resolution=a.resolution)
     from raybundle.app.metrics import image_error
-    from raybundle.util.io import read_exr, read_exr_header
+    from raybundle.util.io import read_exr_header
 
     os.makedirs(a.out, exist_ok=True)
-    if a.references:
-        os.makedirs(a.references, exist_ok=True)
-    halves, paths = [], []
     stem = os.path.splitext(os.path.basename(a.blend))[0]
     section = a.section or f"blender-{stem}{'-clay' if a.clay else ''}"
-    for seed in (1, 2):
-        path = (os.path.join(a.references, f"{stem}-{'clay' if a.clay else 'full'}-{seed}.exr") if a.references
-                else os.path.join(a.out, f"reference-{seed}.exr"))
-        paths.append(path)
-        if not os.path.exists(path):
-            print(f"Cycles reference half {seed}: {a.reference_samples} samples ...", flush=True)
-            render(a.blend, path, "CYCLES", samples=a.reference_samples, seed=seed)
-        halves.append(read_exr(path))
+    paths = (reference_paths(a.blend, a.references, a.clay) if a.references
+             else [os.path.join(a.out, f"reference-{seed}.exr") for seed in (1, 2)])
+    halves = reference_halves(a.blend, paths, a.reference_samples)
     # a committed half says its own samples (Cycles' header); the smaller of the two counts
     reference_samples = min(int(read_exr_header(path).get("cycles.ViewLayer.samples", a.reference_samples))
                   for path in paths)

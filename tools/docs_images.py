@@ -30,8 +30,7 @@ _TOOLS = os.path.dirname(os.path.abspath(__file__))
 _ROOT = os.path.dirname(_TOOLS)
 sys.path[:0] = [_TOOLS, _ROOT, os.path.join(_ROOT, "demo_scenes")]
 
-import bench_blender  # noqa: E402
-from bench_blender import OPEN_SETTINGS, _open, light_mask, render  # noqa: E402
+from bench_blender import OPEN_SETTINGS, _open, light_mask, reference_halves, reference_paths, render  # noqa: E402
 
 from raybundle.util.io import check_output, linear_to_srgb, read_exr  # noqa: E402
 
@@ -53,21 +52,6 @@ def cycles_for(blend, path, seconds, seed=7):
     return read_exr(path), time.perf_counter() - t0
 
 
-def references(blend, folder, clay, samples):
-    """The two Cycles halves of ``blend`` (clay or its own materials) in ``folder``, rendered
-    with ``samples`` each where missing."""
-    stem = os.path.splitext(os.path.basename(blend))[0]
-    halves = []
-    for seed in (1, 2):
-        path = os.path.join(folder, f"{stem}-{'clay' if clay else 'full'}-{seed}.exr")
-        if not os.path.exists(path):
-            print(f"Cycles reference {path}: {samples} samples ...", flush=True)
-            os.makedirs(folder, exist_ok=True)
-            render(blend, path, "CYCLES", samples=samples, seed=seed)
-        halves.append(read_exr(path))
-    return halves
-
-
 def room_panels(a, work):
     """[(title, image, exposure)] for the room: raybundle and Cycles, in clay and in its own
     materials, each row under one exposure that brings the reference's median to 0.3."""
@@ -77,7 +61,7 @@ def room_panels(a, work):
 
     panels = []
     for clay in (True, False):
-        halves = references(a.room, a.references, clay, a.reference_samples)
+        halves = reference_halves(a.room, reference_paths(a.room, a.references, clay), a.reference_samples)
         OPEN_SETTINGS.update(clay=clay, resolution=halves[0].shape[1::-1])
         reference, mask = 0.5 * (halves[0] + halves[1]), light_mask(a.room)
         kind = "clay" if clay else "own materials"
