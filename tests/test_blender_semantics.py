@@ -226,7 +226,7 @@ def test_principled_plane_under_a_white_world_renders_its_albedo(spec):
     Tolerance: 4.5 standard errors of the mean ratio, from two seeds, plus 0.5% for
     the albedo tables' interpolation."""
     from raybundle.scene.camera import Camera
-    from raybundle.scene.materials import principled_material
+    from raybundle.scene.principled import principled_material
 
     mats = MaterialTable.from_list([principled_material(**spec)])
     v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)

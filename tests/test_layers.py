@@ -86,7 +86,6 @@ STILL_LONG = {
     "core/raybundle/patches/contacts.py:contact_segments": 86,
     "core/raybundle/patches/contacts.py:split_at_contacts": 130,
     "core/raybundle/scene/build.py:build_scene": 95,
-    "core/raybundle/scene/materials.py": 842,
     "raybundle_addon/__main__.py:_main": 98,
     "raybundle_addon/translation/export.py": 853,
     "raybundle_addon/translation/export.py:_export_objects": 189,

@@ -1,7 +1,8 @@
 import numpy as np
 import pytest
 
-from raybundle.scene.materials import MaterialTable, ggx_albedo
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.microfacet import ggx_albedo
 from raybundle.tracing.sampling import uniform_sphere
 
 MATS = MaterialTable.from_list([
@@ -88,7 +89,7 @@ def test_emission_one_sided_and_albedo_complement():
 
 
 # ---------------------------------------------------------- Principled (layered) materials
-from raybundle.scene.materials import principled_material
+from raybundle.scene.principled import principled_material
 
 LAYERED = MaterialTable.from_list([
     principled_material((0.8, 0.5, 0.2), metallic=0.0, roughness=0.3),                    # dielectric over Lambert
@@ -178,7 +179,7 @@ def test_sample_glossy_weight_mean_is_glossy_albedo(mat, mu, rng):
 
 
 def test_sample_glossy_of_plain_materials_is_the_old_expression(rng):
-    from raybundle.scene.materials import sample_ggx_reflection
+    from raybundle.scene.microfacet import sample_ggx_reflection
     n = 1000
     mats = rng.integers(0, 4, n)
     normal = np.tile([0, 0, 1.0], (n, 1))
@@ -197,7 +198,7 @@ def test_ggx_samples_weigh_at_most_one_at_grazing_views(rng):
     ones included (half vectors drawn from D(h) (n.h) weigh up to ~2 / alpha there:
     16 for alpha 0.04 at cos_out 0.02), and the weights still average to the lobe's
     albedo (within 4.5 standard errors)."""
-    from raybundle.scene.materials import sample_ggx_reflection
+    from raybundle.scene.microfacet import sample_ggx_reflection
     n = 200_000
     normal = np.tile([0, 0, 1.0], (n, 1))
     for alpha in (0.04, 0.3):

@@ -15,7 +15,8 @@ from raybundle.lights.sources import MeshLight
 from raybundle.patches.layout import subdivide
 from raybundle.scene.build import build_scene
 from raybundle.scene.camera import Camera
-from raybundle.scene.materials import MaterialTable, principled_material
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.principled import principled_material
 
 MATS = MaterialTable.from_list([
     dict(name="ggx", glossy=(0.9, 0.8, 0.7), roughness=0.4, glossy_weight=1.0),

@@ -19,7 +19,9 @@ import pytest
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "tools"))
 import cycles_reference as cr  # noqa: E402
 
-from raybundle.scene.materials import MaterialTable, f0_from_ior, principled_material
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.microfacet import f0_from_ior
+from raybundle.scene.principled import principled_material
 
 BASE = (1.0, 0.5, 0.05)
 #: Cycles' own lookup tables (32 x 32 GGX albedo, 16^3 Fresnel factor) differ from the

@@ -12,7 +12,8 @@ from raybundle.imaging.settings import RenderSettings
 from raybundle.scene import builtin as scenes
 from raybundle.scene.build import build_scene
 from raybundle.scene.camera import Camera
-from raybundle.scene.materials import MaterialTable, fresnel_dielectric_cos, fresnel_dielectric_fss
+from raybundle.scene.materials import MaterialTable
+from raybundle.scene.microfacet import fresnel_dielectric_cos, fresnel_dielectric_fss
 from raybundle.scene.model import SunLights
 from raybundle.scene.transmission import pass_probability, scatter, solver_share
 from test_solver import assert_converged, batch_means
@@ -75,7 +76,7 @@ def test_a_rough_interface_scatters_about_visible_microfacets():
     is the lobe's Fresnel-weighted albedo F0 E + (1 - F0) E_d (:func:`ggx_fresnel_moments`, a
     quadrature) within 4.5 standard errors; reflected paths stay on the near side and refracted
     ones cross, weights in [0, 1]; at roughness 0.001 it is the smooth interface."""
-    from raybundle.scene.materials import f0_from_ior, ggx_fresnel_moments
+    from raybundle.scene.microfacet import f0_from_ior, ggx_fresnel_moments
 
     n = 200_000
     th = np.radians(40)

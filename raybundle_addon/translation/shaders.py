@@ -645,7 +645,7 @@ def principled_to_material(inputs, distribution="MULTI_GGX", warn=print, layered
     ignored feature.
 
     With ``layered`` and a core that has the Principled model
-    (:func:`raybundle.scene.materials.principled_material`: Fresnel-weighted dielectric
+    (:func:`raybundle.scene.principled.principled_material`: Fresnel-weighted dielectric
     GGX layer over Lambert, F82 conductor, multiscatter), that model is used.
     Otherwise the plain Lambert + GGX mix: diffuse = base color, glossy weight
     ``g = metallic + (1 - metallic) F0`` with ``F0 = ((ior-1)/(ior+1))^2 * 2 *
@@ -672,7 +672,7 @@ def principled_to_material(inputs, distribution="MULTI_GGX", warn=print, layered
             warn(f"Principled BSDF {label} is ignored")
     if layered:
         try:
-            from raybundle.scene.materials import principled_material
+            from raybundle.scene.principled import principled_material
         except ImportError:
             principled_material = None
         if principled_material is not None:

@@ -26,49 +26,8 @@ Emission is one-sided radiance [W m^-2 sr^-1] per RGB channel.  For the analytic
 glossy furnace a material may also emit ``c * (1 - albedo(w_out))``
 (``emission_albedo_complement = c``); see :mod:`raybundle.scene.builtin`.
 
-Principled (layered) materials
-------------------------------
-Blender's Principled BSDF (Cycles 5.0, ``svm/closure.h``) is not a Mix of
-Diffuse and Glossy: a Fresnel-weighted dielectric GGX layer sits over the
-Lambertian base, and the base only gets the light the layer did not reflect
-towards the viewer; the metallic part is a GGX lobe with Schlick/F82-tint
-conductor Fresnel (F0 = base color), and the default "Multiscatter GGX"
-distribution scales every GGX lobe to restore the energy lost by single
-scattering.  Four optional per-material parameters switch this on; with all
-of them off (their defaults) a material is exactly the Mix above, bit for bit:
-
-* ``specular_ior`` (eta; 0 = off): a dielectric GGX layer of the same roughness
-  over the diffuse lobe, with Cycles' remapped dielectric Fresnel
-  ``F_s(c) = mix(f0, 1, clamp((F_eta(c) - F0(eta)) / (1 - F0(eta)), 0, 1))``,
-  ``f0 = F0(eta) * specular_tint``, ``F0(eta) = ((eta - 1) / (eta + 1))^2``,
-  ``c = h.w_out``; the layer has the weight ``(1 - g)``;
-* ``specular_tint`` (RGB, default 1): the layer's f0 multiplier, and the F82 tint
-  of a conductor glossy lobe;
-* ``glossy_fresnel`` (0 = none, 1 = F82-tint conductor): the glossy lobe's color
-  ``ks`` is replaced by ``F_g(c) = clamp(mix(ks, 1, (1-c)^5) - B c (1-c)^6, 0, 1)``
-  with ``B`` from the tint (``B = 0`` for a white tint: plain Schlick);
-* ``multiscatter`` (0/1): Cycles' energy compensation
-  ``C(w_out) = 1 + Fms (1 - E(mu_o)) / E(mu_o)``,
-  ``Fms = Fss E_avg / (1 - Fss (1 - E_avg))`` on each GGX lobe, where ``E`` is the
-  single-scattering GGX albedo (:func:`ggx_albedo`), ``E_avg = 2 int E mu dmu``
-  and ``Fss`` the lobe's cosine-averaged Fresnel (the tint for a plain glossy
-  lobe).  Like Cycles it depends on the outgoing direction only, so the BRDF is
-  not reciprocal; the reflection operator still has norm max_w albedo(w) <= 1.
-
-The layered BRDF, with ``D G2 / (4 cos_i cos_o)`` the untinted GGX lobe::
-
-    f = (1 - g) kd / pi * W_d(w_out)
-      + (1 - g) F_s(h.w_out) C_s(w_out) D G2 / (4 cos_i cos_o)
-      + g       F_g(h.w_out) C_g(w_out) D G2 / (4 cos_i cos_o)          [1/sr]
-
-    W_d(w_out) = clamp(1 - max_rgb A_s(w_out), 0, 1)   (capped so that albedo <= 1)
-
-where ``A_s`` is Cycles' estimate of the layer's albedo (``closure_layering_weight``
-with ``bsdf_microfacet_estimate_albedo``): ``A_s = [E C_s if multiscatter else 1]
-mix(f0, 1, S(mu_o))``, ``S`` the mean of the Fresnel interpolation factor over
-visible normals (``ggx_gen_schlick_ior_s``), computed here by quadrature instead
-of Cycles' 16^3 table.  :func:`principled_material` maps a Principled BSDF's
-inputs onto these parameters.
+Blender's Principled BSDF is a layered form of this model (four optional parameters,
+:mod:`raybundle.scene.principled`); with those off a material is exactly the Mix above.
 """
 from __future__ import annotations
 
@@ -76,13 +35,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .microfacet import (dielectric_layer_fresnel, fresnel_f82, ggx_albedo, ggx_distribution, ggx_lobe,
+                         sample_ggx_reflection, smith_lambda)
+from .principled import MU_TABLE, interp_mu, layer_tables
+
 #: Smallest GGX alpha evaluated; below it the lobe is a near-mirror that stochastic
 #: iteration cannot resolve (documented failure mode: fireflies / black highlights).
 MIN_ALPHA = 1e-3
 #: glossy lobes below this GGX roughness count as near-mirrors (:mod:`raybundle.app.auto`,
 #: :mod:`raybundle.methods.ray_bundle_walk`)
 NEAR_MIRROR_ROUGHNESS = 0.1
-_MU_TABLE = 65               # samples of cos(theta_out) in the directional-albedo tables
 #: the transmission parameters and their defaults (an opaque surface)
 _TRANSMISSION_DEFAULTS = {"transmission": 0.0, "transmission_ior": 1.0, "transmission_color": (1.0, 1.0, 1.0),
                           "transmission_reflection": (1.0, 1.0, 1.0), "transmission_fresnel": 1,
@@ -362,8 +324,8 @@ class MaterialTable:
             for m in np.unique(mat[lay]):
                 sel = mat == m
                 tab, gm = self._layer_table(m), float(self.glossy_weight[m])
-                out[sel] += gm * _interp_mu(tab["glossy_albedo"], mu[sel]) \
-                    + (1.0 - gm) * _interp_mu(tab["layer_albedo"], mu[sel])
+                out[sel] += gm * interp_mu(tab["glossy_albedo"], mu[sel]) \
+                    + (1.0 - gm) * interp_mu(tab["layer_albedo"], mu[sel])
         out[mu <= 0] = 0.0
         return out
 
@@ -388,7 +350,7 @@ class MaterialTable:
         lay = self.has_layer[mat]
         for m in np.unique(mat[lay]):
             sel = mat == m
-            out[sel] = _interp_mu(self._layer_table(m)["diffuse_weight"], mu[sel])[:, None]
+            out[sel] = interp_mu(self._layer_table(m)["diffuse_weight"], mu[sel])[:, None]
         return out
 
     def sample_glossy(self, mat, normal, w_out, u):
@@ -447,10 +409,10 @@ class MaterialTable:
                     f = fresnel_f82(c[sel], tab["f82_f0"], tab["f82_b"])
                 else:
                     f = self.glossy[m][None, :]
-                out[sel] += gm * f * _interp_mu(tab["glossy_scale"], mu[sel])
+                out[sel] += gm * f * interp_mu(tab["glossy_scale"], mu[sel])
             if self.has_layer[m] and gm < 1:
-                f = _dielectric_layer_fresnel(c[sel], float(self.specular_ior[m]), tab["layer_f0"])
-                out[sel] += (1.0 - gm) * f * _interp_mu(tab["layer_scale"], mu[sel])
+                f = dielectric_layer_fresnel(c[sel], float(self.specular_ior[m]), tab["layer_f0"])
+                out[sel] += (1.0 - gm) * f * interp_mu(tab["layer_scale"], mu[sel])
         return out
 
     def emitted_radiance(self, mat, cos_out) -> np.ndarray:
@@ -466,17 +428,14 @@ class MaterialTable:
     def _ggx_albedo_table(self, m):
         alpha = float(self.alpha[m])
         if alpha not in self._albedo_tables:
-            mu = np.linspace(0.0, 1.0, _MU_TABLE)
+            mu = np.linspace(0.0, 1.0, MU_TABLE)
             a = ggx_albedo(alpha, np.maximum(mu, 1e-4))
             self._albedo_tables[alpha] = lambda x, mu=mu, a=a: np.interp(x, mu, a)
         return self._albedo_tables[alpha]
 
     def _layer_table(self, m):
-        """Tables in mu_o = cos_out (the :data:`_MU_TABLE` grid) for layered material m:
-        ``glossy_albedo`` (K, 3) = C_g int F_g lobe cos_i (without g), ``glossy_scale``
-        (K, 3) = C_g, ``layer_albedo`` (K, 3) = C_s int F_s lobe cos_i (without 1 - g),
-        ``layer_scale`` (K, 3) = C_s, ``diffuse_weight`` (K,) = W_d; one quadrature
-        (:func:`ggx_fresnel_moments`, a quadrature worth caching) per distinct parameter set."""
+        """:func:`~raybundle.scene.principled.layer_tables` of layered material m, one
+        quadrature (worth caching) per distinct parameter set."""
         alpha = float(self.alpha[m])
         eta = float(self.specular_ior[m]) if self.has_layer[m] else 0.0
         fres, ms = int(self.glossy_fresnel[m]), int(self.multiscatter[m])
@@ -484,54 +443,10 @@ class MaterialTable:
         tint = np.clip(np.asarray(self.specular_tint[m], float), 0.0, 1.0)
         g, kd = float(self.glossy_weight[m]), np.asarray(self.diffuse[m], float)
         key = ("layer", alpha, eta, tuple(ks), tuple(tint), fres, ms, g, tuple(kd))
-        if key in self._albedo_tables:
-            return self._albedo_tables[key]
-        mu = np.linspace(0.0, 1.0, _MU_TABLE)
-        f82_b = fresnel_f82_tint_b(ks, tint) if fres else np.zeros(3)
-        q = ggx_fresnel_moments(alpha, np.maximum(mu, 1e-4), eta=eta, f82=(ks, f82_b) if fres else None)
-        e = q["E"]
-        y = 2.0 * mu * e                                  # E_avg = int_0^1 2 mu E(mu) dmu, trapezoid rule
-        e_avg = float(np.sum(0.5 * (y[1:] + y[:-1]) * np.diff(mu)))
+        if key not in self._albedo_tables:
+            self._albedo_tables[key] = layer_tables(alpha, eta, fres, ms, ks, tint, g, kd)
+        return self._albedo_tables[key]
 
-        def scale(fss):                                   # Cycles' microfacet_ggx_preserve_energy
-            if not ms:
-                return np.ones((len(mu), 3))
-            fms = fss * e_avg / (1.0 - fss * (1.0 - e_avg))
-            return 1.0 + fms[None, :] * ((1.0 - e) / e)[:, None]
-
-        t = {"f82_f0": ks, "f82_b": f82_b}
-        if fres:
-            t["glossy_scale"] = scale(fresnel_f82_fss(ks, f82_b))
-            t["glossy_albedo"] = t["glossy_scale"] * q["F82"]
-        else:
-            t["glossy_scale"] = scale(ks)
-            t["glossy_albedo"] = t["glossy_scale"] * e[:, None] * ks[None, :]
-        if eta > 1.0:
-            f0_real = f0_from_ior(eta)
-            f0 = np.clip(f0_real * tint, 0.0, 1.0)
-            s_ss = np.clip((fresnel_dielectric_fss(eta) - f0_real) / (1.0 - f0_real), 0.0, 1.0)
-            t["layer_f0"] = f0
-            t["layer_scale"] = scale(f0 + (1.0 - f0) * s_ss)
-            t["layer_albedo"] = t["layer_scale"] * (f0[None, :] * e[:, None] + (1.0 - f0[None, :]) * q["Ed"][:, None])
-            estimate = f0[None, :] + (1.0 - f0[None, :]) * q["Sd"][:, None]      # bsdf_microfacet_estimate_albedo
-            if ms:
-                estimate = estimate * (e[:, None] * t["layer_scale"])          # sc->weight carries E C_s
-            w_d = np.clip(1.0 - estimate.max(axis=1), 0.0, 1.0)
-            # Cycles' estimate can let the total albedo exceed 1 by up to 0.5% at grazing
-            # angles for a white base; cap W_d so that albedo <= 1 (the iteration's contraction).
-            kdd = (1.0 - g) * kd
-            if np.any(kdd > 0):
-                rest = (1.0 - g) * t["layer_albedo"] + g * t["glossy_albedo"]
-                cap = ((1.0 - rest)[:, kdd > 0] / kdd[kdd > 0]).min(axis=1)
-                w_d = np.clip(np.minimum(w_d, cap), 0.0, 1.0)
-            t["diffuse_weight"] = w_d
-        else:
-            t["layer_f0"] = np.zeros(3)
-            t["layer_scale"] = np.zeros((len(mu), 3))
-            t["layer_albedo"] = np.zeros((len(mu), 3))
-            t["diffuse_weight"] = np.ones(len(mu))
-        self._albedo_tables[key] = t
-        return t
 
     # ------------------------------------------------------------------- io
     def to_arrays(self, prefix="material_") -> dict:
@@ -573,270 +488,3 @@ def color_text(c, digits=3) -> str:
     """``(r, g, b)`` rounded to ``digits`` decimals, as plain numbers (NumPy 2 prints its scalars as
     ``np.float64(0.5)``): the color in a message."""
     return "(" + ", ".join(repr(round(float(x), digits)) for x in np.ravel(c)) + ")"
-
-
-def smith_lambda(alpha, cos_theta):
-    """GGX Smith Lambda(w) = (sqrt(1 + alpha^2 tan^2 theta) - 1) / 2."""
-    c2 = np.clip(cos_theta, 1e-12, 1.0) ** 2
-    tan2 = (1.0 - c2) / c2
-    return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
-
-
-def ggx_distribution(alpha, n, w_i, w_o):
-    """Half vectors h (N, 3) of ``w_i`` and ``w_o``, ``cos_h = n.h`` and the GGX normal
-    distribution ``D(h) = alpha^2 / (pi (cos_h^2 (alpha^2 - 1) + 1)^2)`` [1/sr]."""
-    h = w_i + w_o
-    h = h / (np.linalg.norm(h, axis=1, keepdims=True) + 1e-300)
-    cos_h = np.einsum("ij,ij->i", n, h)
-    a2 = alpha * alpha
-    denom = cos_h * cos_h * (a2 - 1.0) + 1.0
-    return h, cos_h, a2 / (np.pi * denom * denom)
-
-
-def ggx_lobe(alpha, n, w_i, w_o, cos_i, cos_o):
-    """Untinted GGX lobe D(h) G2 / (4 cos_i cos_o) [1/sr] for front-facing pairs.
-
-    ``w_i`` points towards the light, ``w_o`` towards the viewer; all arrays (N, ...).
-    """
-    _, _, d = ggx_distribution(alpha, n, w_i, w_o)
-    g2 = 1.0 / (1.0 + smith_lambda(alpha, cos_i) + smith_lambda(alpha, cos_o))
-    return d * g2 / (4.0 * cos_i * cos_o)
-
-
-def sample_ggx_reflection(alpha, normal, w_out, u):
-    """Importance-sample the GGX lobe seen from ``w_out``: half vectors h drawn from
-    the distribution of normals visible from ``w_out``, ``G1(w_out) (h.w_out)^+ D(h) /
-    cos_out`` (Heitz 2018, "Sampling the GGX distribution of visible normals"),
-    mirrored to the light-side direction ``w_i``: pdf(w_i) = G1(w_out) D(h) / (4 cos_out).
-
-    Returns ``(w_i (N, 3), weight (N,))`` with ``weight = lobe * cos_i / pdf(w_i)
-    = G2 / G1(w_out)`` (at most 1; 0 where ``w_i`` is below the surface), so
-    ``E[weight * L(w_i)]`` is the lobe's reflected radiance (untinted).  Drawing h from
-    D(h) (n.h) instead gave ``G2 (h.w_out) / (cos_out cos_h)``, up to about 2 / alpha
-    where the lobe is seen at grazing angles: eye paths off the side of a glossy block
-    carried many times the lamp's light into single pixels (docs/benchmarks.md, 'Where the method is weak').
-    """
-    alpha = np.broadcast_to(np.asarray(alpha, float), (len(normal),))
-    h = sample_ggx_visible_normal(alpha, normal, w_out, u)
-    cos_o = np.einsum("ij,ij->i", normal, w_out)
-    h_o = np.einsum("ij,ij->i", h, w_out)
-    w_i = 2 * h_o[:, None] * h - w_out
-    cos_i = np.einsum("ij,ij->i", normal, w_i)
-    ok = (cos_i > 0) & (h_o > 0) & (cos_o > 0)
-    return w_i, np.where(ok, smith_g2_over_g1(alpha, cos_o, cos_i), 0.0)
-
-
-def smith_g2_over_g1(alpha, cos_out, cos_in):
-    """The visible-normal sampler's weight ``G2(w_out, w_in) / G1(w_out)`` (height-correlated
-    Smith), ``(1 + L(w_out)) / (1 + L(w_out) + L(w_in))`` with ``L`` :func:`smith_lambda` of
-    ``|cos|``; at most 1."""
-    lam_o = smith_lambda(alpha, np.abs(cos_out))
-    return (1.0 + lam_o) / (1.0 + lam_o + smith_lambda(alpha, np.abs(cos_in)))
-
-
-def sample_ggx_visible_normal(alpha, normal, w_out, u):
-    """Microfacet normals h (N, 3) of the GGX distribution ``alpha`` (N,) about unit ``normal``
-    (N, 3) drawn from the normals visible from ``w_out`` (N, 3), density
-    ``G1(w_out) (h.w_out)^+ D(h) / cos_out`` (Heitz 2018), for uniforms ``u`` (N, 2)."""
-    from ..tracing.sampling import frames_from_normals
-
-    t, b = frames_from_normals(normal)
-    vx, vy = np.einsum("ij,ij->i", w_out, t), np.einsum("ij,ij->i", w_out, b)
-    cos_o = np.einsum("ij,ij->i", normal, w_out)
-    # the view in the stretched (alpha = 1) configuration, where visible normals are a
-    # projected disc: a uniform point on the disc, foreshortened by the view's slant
-    v = np.stack([alpha * vx, alpha * vy, np.maximum(cos_o, 1e-12)], axis=1)
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
-    lens = np.hypot(v[:, 0], v[:, 1])
-    flat = lens < 1e-12
-    t1 = np.where(flat[:, None], [1.0, 0.0, 0.0],
-                  np.stack([-v[:, 1], v[:, 0], np.zeros(len(v))], axis=1) / np.where(flat, 1.0, lens)[:, None])
-    t2 = np.cross(v, t1)
-    r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
-    p1, p2 = r * np.cos(phi), r * np.sin(phi)
-    s = 0.5 * (1.0 + v[:, 2])
-    p2 = (1.0 - s) * np.sqrt(np.maximum(0.0, 1.0 - p1 * p1)) + s * p2
-    nh = p1[:, None] * t1 + p2[:, None] * t2 + np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))[:, None] * v
-    m = np.stack([alpha * nh[:, 0], alpha * nh[:, 1], np.maximum(nh[:, 2], 1e-12)], axis=1)
-    m /= np.linalg.norm(m, axis=1, keepdims=True)
-    return m[:, :1] * t + m[:, 1:2] * b + m[:, 2:] * normal
-
-
-def ggx_albedo(alpha, cos_out, n_theta=256, n_phi=32):
-    """Directional albedo of the untinted GGX lobe, integral of lobe * cos_i dw_i:
-    ``E`` of :func:`ggx_fresnel_moments`, a midpoint rule over the unit square of
-    :func:`sample_ggx_reflection` (visible normals), ``a = E_u[G2 / G1(w_o)]``, with the
-    weight 0 where the mirrored ``w_i`` is below the surface.  The integrand is bounded by
-    1: against a 16x finer rule the error is below 2e-5 for every cos_out and alpha (the
-    rule over h ~ D(h) (n.h) used before, whose weight grows as 1 / cos_out, was 6e-3 off
-    at cos_out 0.02, alpha 0.04).
-    """
-    return ggx_fresnel_moments(alpha, cos_out, n_theta=n_theta, n_phi=n_phi)["E"]
-
-
-# ------------------------------------------------------- Principled BSDF model
-def _interp_mu(table, mu):
-    """Linear interpolation of a table on the :data:`_MU_TABLE` grid of mu in [0, 1];
-    ``table`` (K,) or (K, C) gives (N,) or (N, C)."""
-    grid = np.linspace(0.0, 1.0, len(table))
-    if table.ndim == 1:
-        return np.interp(mu, grid, table)
-    return np.stack([np.interp(mu, grid, table[:, k]) for k in range(table.shape[1])], axis=1)
-
-
-def f0_from_ior(eta):
-    """Normal-incidence reflectance of a dielectric, ((eta - 1) / (eta + 1))^2."""
-    return ((eta - 1.0) / (eta + 1.0)) ** 2
-
-
-def ior_from_f0(f0):
-    """Inverse of :func:`f0_from_ior` (f0 clamped to [0, 0.99] as Cycles does)."""
-    r = np.sqrt(np.clip(f0, 0.0, 0.99))
-    return (1.0 + r) / (1.0 - r)
-
-
-def fresnel_dielectric_cos(c, eta):
-    """Unpolarized Fresnel reflectance of a dielectric of relative IOR ``eta`` at
-    cos(angle of incidence) ``c`` (Cycles' ``fresnel_dielectric_cos``); 1 under TIR."""
-    c = np.abs(c)
-    g2 = eta * eta - 1.0 + c * c
-    g = np.sqrt(np.maximum(g2, 0.0))
-    a = (g - c) / (g + c)
-    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-    return np.where(g2 > 0, 0.5 * a * a * (1.0 + b * b), 1.0)
-
-
-def fresnel_dielectric_fss(eta):
-    """Cosine-weighted hemispherical mean of the dielectric Fresnel, 2 int F mu dmu,
-    the Kulla-Conty fit Cycles uses (``fresnel_dielectric_Fss``), eta >= 1."""
-    return (eta - 1.0) / (4.08567 + 1.00071 * eta)
-
-
-def _dielectric_layer_fresnel(c, eta, f0):
-    """(N, 3) Cycles' Principled specular Fresnel: the real Fresnel remapped from
-    [F0(eta), 1] to [f0, 1] (generalized Schlick with negative exponent)."""
-    f0_real = f0_from_ior(eta)
-    s = np.clip((fresnel_dielectric_cos(c, eta) - f0_real) / (1.0 - f0_real), 0.0, 1.0)
-    return f0[None, :] + (1.0 - f0[None, :]) * s[:, None]
-
-
-def fresnel_f82_tint_b(f0, tint):
-    """F82-tint ``B`` (RGB): Schlick at cos = 1/7 times ``tint`` (Cycles' ``fresnel_f82tint_B``); 0 for white."""
-    f0, tint = np.asarray(f0, float), np.asarray(tint, float)
-    f = 6.0 / 7.0
-    f5 = f ** 5
-    return (f0 + (1.0 - f0) * f5) * (7.0 / (f5 * f)) * (1.0 - np.minimum(tint, 1.0))
-
-
-def fresnel_f82(c, f0, b):
-    """(N, 3) F82-tint conductor Fresnel clamp(mix(f0, 1, (1-c)^5) - b c (1-c)^6, 0, 1)."""
-    s = np.clip(1.0 - np.asarray(c, float), 0.0, 1.0)[:, None]
-    s5 = s ** 5
-    return np.clip(f0[None, :] + (1.0 - f0[None, :]) * s5 - b[None, :] * (1.0 - s) * s5 * s, 0.0, 1.0)
-
-
-def fresnel_f82_fss(f0, b):
-    """Cosine-weighted mean of the F82 model, mix(f0, 1, 1/21) - b/126 (Cycles' ``fresnel_f82_Fss``)."""
-    return f0 + (1.0 - f0) / 21.0 - b / 126.0
-
-
-def ggx_fresnel_moments(alpha, cos_out, eta=0.0, f82=None, n_theta=256, n_phi=32):
-    """Fresnel-weighted directional moments of the untinted GGX lobe, by a midpoint rule
-    over the visible-normal sampler's unit square, ``u_1 = 1 - (1 - t)^3`` (Jacobian
-    ``3 (1 - t)^2``) to resolve the lobe's tail, the rim of the visible-normal disc.  With
-    ``c = h.w_out``, ``w = G2 / G1(w_out)`` (the sampler's weight, 0 where the mirrored
-    ``w_i`` is below the surface) and ``valid`` (w_i above it):
-
-    * ``E``  = E[w]: the lobe's albedo (= :func:`ggx_albedo`);
-    * ``Ed`` = E[w s(c)], ``s = clamp((F_eta(c) - F0) / (1 - F0), 0, 1)`` (if eta > 1);
-    * ``Sd`` = E[valid s(c)]: the mean of ``s`` over visible normals, 0 for invalid
-      reflections, which is what Cycles tabulates as ``ggx_gen_schlick_ior_s`` for its
-      layering estimate;
-    * ``F82`` (K, 3) = E[w F82(c)] if ``f82 = (f0, b)`` is given.
-
-    The lobe is smooth in the azimuth: 256 x 32 points give the albedo of 256 x 128 to 1e-7
-    (within 2e-5 of a 16x finer rule, :func:`ggx_albedo`) in a quarter of the time, and each
-    distinct layered material's table takes one such quadrature per row of the mu table at
-    set-up.
-    """
-    cos_out = np.atleast_1d(np.asarray(cos_out, float))
-    t = (np.arange(n_theta) + 0.5) / n_theta
-    u = np.stack(np.meshgrid(1.0 - (1.0 - t) ** 3, (np.arange(n_phi) + 0.5) / n_phi, indexing="ij"),
-                 axis=-1).reshape(-1, 2)
-    jac = np.repeat(3.0 * (1.0 - t) ** 2, n_phi)         # du/dt: the quadrature weight
-    normal = np.tile([0.0, 0.0, 1.0], (len(u), 1))
-    a = np.full(len(u), float(alpha))
-    k = len(cos_out)
-    out = {"E": np.empty(k), "Ed": np.zeros(k), "Sd": np.zeros(k)}
-    if f82 is not None:
-        out["F82"] = np.empty((k, 3))
-        f82_f0, f82_b = (np.asarray(x, float) for x in f82)
-    f0_real = f0_from_ior(eta) if eta > 1 else 0.0
-    for j, mu in enumerate(cos_out):
-        mu = float(np.clip(mu, 1e-6, 1.0))
-        wo = np.broadcast_to([np.sqrt(1 - mu * mu), 0.0, mu], normal.shape)
-        w_i, w = sample_ggx_reflection(a, normal, wo, u)
-        h = w_i + wo
-        c = np.clip(np.einsum("ij,ij->i", h, wo) / np.linalg.norm(h, axis=1).clip(1e-300), 0.0, 1.0)
-        valid = jac * (w > 0)
-        w = w * jac
-        out["E"][j] = w.mean()
-        if eta > 1:
-            s = np.clip((fresnel_dielectric_cos(c, eta) - f0_real) / (1.0 - f0_real), 0.0, 1.0)
-            out["Ed"][j] = (w * s).mean()
-            out["Sd"][j] = (valid * s).mean()
-        if f82 is not None:
-            out["F82"][j] = (w[:, None] * fresnel_f82(c, f82_f0, f82_b)).mean(axis=0)
-    return out
-
-
-def principled_material(base_color, metallic=0.0, roughness=0.5, ior=1.5, specular_ior_level=0.5,
-                        emission=(0.0, 0.0, 0.0), specular_tint=(1.0, 1.0, 1.0),
-                        distribution="MULTI_GGX", name="principled") -> dict:
-    """A :meth:`MaterialTable.from_list` spec for Blender's Principled BSDF (Cycles 5.0).
-
-    Parameters are the node's inputs: ``base_color`` (RGB), ``metallic``,
-    ``roughness``, ``ior``, ``specular_ior_level``, ``specular_tint`` (RGB),
-    ``emission`` = Emission Color x Emission Strength [W m^-2 sr^-1] and the node's
-    ``distribution`` ("MULTI_GGX", Blender's default, or "GGX").  Mapping (as in
-    Cycles' ``svm_node_closure_bsdf``):
-
-    * diffuse = base color, glossy = base color (the conductor's F0),
-      glossy_weight = metallic, glossy_fresnel = 1 (F82 tint), roughness = roughness;
-    * specular_ior = eta with ``F0(eta) = F0(ior) * 2 * specular_ior_level``
-      (eta = ior at level 0.5; no layer when eta = 1, i.e. level 0); an ``ior < 1``
-      is mapped to 1/eta (the reflection of a dielectric seen from outside);
-    * specular_tint = tint (layer f0 multiplier and F82 tint), multiscatter =
-      distribution is "MULTI_GGX".
-
-    Ignored (the exporter warns): coat, sheen, transmission, subsurface, diffuse
-    roughness, anisotropy, thin film, alpha, normal maps.  Base color and tint are
-    clamped to [0, 1] (Cycles clamps the conductor's F0 there too).
-
-    Measured against Cycles (a plane under a white world, radiance = directional albedo),
-    the mapping matches it up to Cycles' own lookup-table interpolation, where a plain
-    Mix(Diffuse, Glossy GGX) with fac = metallic + (1 - metallic) F0, or even the best
-    constant Mix per material, is far off, most for dark bases (the figures: docs/benchmarks.md,
-    'Measured choices behind the defaults').  ``tests/test_principled.py``
-    re-measures a dozen of these points.
-    """
-    base = np.clip(np.asarray(base_color, float)[:3], 0.0, 1.0)
-    metallic = float(np.clip(metallic, 0.0, 1.0))
-    ior = max(float(ior), 1e-5)
-    f0 = f0_from_ior(ior)
-    eta = ior
-    if specular_ior_level != 0.5:
-        f0 *= 2.0 * max(float(specular_ior_level), 0.0)
-        eta = float(ior_from_f0(f0))
-        if ior < 1.0:
-            eta = 1.0 / eta
-    if eta < 1.0:
-        eta = 1.0 / eta
-    if abs(eta - 1.0) < 1e-7:
-        eta = 0.0                                         # Cycles skips the specular layer
-    glossy = metallic > 0 or eta > 0                      # else plain Lambert (level 0, not metallic)
-    return dict(name=name, diffuse=tuple(base), glossy=tuple(base), glossy_weight=metallic,
-                roughness=float(np.clip(roughness, 0.0, 1.0)), glossy_fresnel=int(glossy),
-                specular_ior=eta, specular_tint=tuple(np.clip(np.asarray(specular_tint, float)[:3], 0.0, 1.0)),
-                multiscatter=int(glossy and distribution == "MULTI_GGX"),
-                emission=tuple(np.maximum(np.asarray(emission, float)[:3], 0.0)))

@@ -4,7 +4,7 @@ A material's ``transmission`` share ``w_t`` (:class:`~raybundle.scene.materials.
 is a smooth dielectric interface of relative IOR ``eta`` (outside -> inside through the
 triangle's front, as Cycles' Glass BSDF reads ``backfacing``); the material's reflectances
 are the opaque rest's, already weighted.  The interface reflects the Fresnel share
-``F(cos, eta)`` (:func:`~raybundle.scene.materials.fresnel_dielectric_cos`, 1 under total
+``F(cos, eta)`` (:func:`~raybundle.scene.microfacet.fresnel_dielectric_cos`, 1 under total
 internal reflection) tinted ``transmission_reflection`` and refracts the rest tinted
 ``transmission_color``; a Refraction BSDF (``transmission_fresnel`` 0) refracts it all but
 what is totally reflected, which it absorbs; ``eta`` = 1 is a Transparent BSDF: no bend, no
@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .materials import fresnel_dielectric_cos, fresnel_dielectric_fss, sample_ggx_visible_normal, smith_g2_over_g1
+from .microfacet import fresnel_dielectric_cos, fresnel_dielectric_fss, sample_ggx_visible_normal, smith_g2_over_g1
 
 
 def _fresnel(materials, mat, cos):
@@ -126,7 +126,7 @@ def solver_share(materials):
 
     ``kept`` = the cosine-weighted mean over the hemisphere of the probability that a ray
     stops there, ``1 - w_t (1 - F_avg) mean(tint)`` (``F_avg`` = 2 int F mu dmu,
-    :func:`~raybundle.scene.materials.fresnel_dielectric_fss`; 0 for a Refraction BSDF): the
+    :func:`~raybundle.scene.microfacet.fresnel_dielectric_fss`; 0 for a Refraction BSDF): the
     patch's receiving area is scaled by it, as by a cut-out's coverage, so its irradiance is
     the light arriving on the surface.  The patch sends only along the lines that stop there
     (a share ``kept`` of them), so the diffuse reflectance that gives the power the surface
