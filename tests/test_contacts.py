@@ -169,7 +169,7 @@ def test_straddling_finds_the_triangles_the_lamps_outline_crosses():
     ``straddling`` flags are those whose area lies partly under the lamp and partly not
     (exact clipped areas, beyond a 2% margin either way), as brute force over all of them."""
     from raybundle.patches.clusters import tessellate
-    from raybundle.patches.contacts import straddling
+    from raybundle.patches.gaps import straddling
     from raybundle.tracing.visibility import RayTracer
 
     ceiling = np.array([[-1, -1, 1], [-1, 1, 1], [1, 1, 1], [1, -1, 1]], float)       # facing down

@@ -19,7 +19,7 @@ import numpy as np
 
 from raybundle.app import pipeline
 from raybundle.imaging.settings import RenderSettings
-from raybundle.patches.contacts import gap_sides
+from raybundle.patches.gaps import gap_sides
 
 REGIONS = ("floor", "ceiling", "back", "left", "right", "front")
 

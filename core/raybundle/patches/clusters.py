@@ -30,11 +30,11 @@ window), first halved along their length to pieces no longer than h
 They are grouped into the cells of a grid h wide, split by normal direction (the cube-map cell),
 by offset along the normal (half-h slabs: a shelf does not share a patch with the floor under it),
 by material, by sidedness, by whether they lie in a gap narrower than 5% of h (the
-ceiling over a lamp hanging just under it: :func:`~raybundle.patches.contacts.gap_sides`), after the
+ceiling over a lamp hanging just under it: :func:`~raybundle.patches.gaps.gap_sides`), after the
 triangles that straddle such a gap are cut along the contact, and, under a world that lights
 the scene, by how much of the world each side sees (:func:`world_view_classes`: the facets of a
 window's frame and reveal outside, in the sky, and inside, in the room's shade), and by whether
-a piece lies behind a surface its triangle pierces (:func:`~raybundle.patches.contacts.cut_where_pierced`);
+a piece lies behind a surface its triangle pierces (:func:`~raybundle.patches.piercing.cut_where_pierced`);
 the rest stay patches of their own.
 Clusters smaller than h^2 / :data:`DETAIL` (the facets of a plant or a chair's legs in a cell:
 in a furnished room they outnumbered the patches of walls and floor ten to one) are then
@@ -55,7 +55,8 @@ from ..scene.model import PatchScene
 from ..tracing.sampling import Stream, frames_from_normals, stream
 from ..tracing.visibility import RayTracer
 from ..util.arrays import group_ids, ranges
-from .contacts import CONTACT_SHARE, PROBE_CHUNK, gap_sides, pierced_parts
+from .gaps import CONTACT_SHARE, PROBE_CHUNK, gap_sides
+from .piercing import pierced_parts
 from .layout import (bisect_long, cut_at_contacts, edge_for_patches, longest_edges, refine_crowded, split_triangles,
                      subdivide)
 
@@ -136,11 +137,11 @@ class _Grouping:
     def clusters(self, h, small, gap=None, spread=False, world_view=None, part=None, small_rows=None):
         """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``;
         ``gap`` (S, 2) bool: the triangle lies in a gap on its front / back
-        (:func:`~raybundle.patches.contacts.gap_sides`), which a cluster does not straddle;
+        (:func:`~raybundle.patches.gaps.gap_sides`), which a cluster does not straddle;
         ``world_view`` (S, 2) int: the classes of how much of the world its front / back
         sees (:func:`world_view_classes`), which a cluster does not mix either; nor the two
         sides of a plane that a surface pierces, ``part`` = (part (S,), tagged corners (K, 3)) of
-        :func:`~raybundle.patches.contacts.pierced_parts` over the scene's triangles, of which
+        :func:`~raybundle.patches.piercing.pierced_parts` over the scene's triangles, of which
         ``small_rows`` (T,) bool are the grouping's (not with ``spread``).
         Triangles a patch wide or less are keyed by their centroid; ``spread`` keys a longer one
         at ceil(edge / h) points along its longest edge instead, as its pieces will be
@@ -231,7 +232,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     smaller than a patch gets exactly :func:`~raybundle.patches.layout.subdivide`'s layout.  With
     ``contacts``, patches follow contact lines (:func:`~raybundle.patches.layout.cut_at_contacts`)
     and no cluster holds triangles both in and out of a gap narrower than 5% of a patch
-    (:func:`~raybundle.patches.contacts.gap_sides`)."""
+    (:func:`~raybundle.patches.gaps.gap_sides`)."""
     if (patches is None) == (size is None):
         raise ValueError("give exactly one of patches and size")
     grouping = _Grouping(scene)
@@ -306,7 +307,7 @@ def _cut(scene, grouping, h, probe):
 
 def _sides_apart(ids, part, row, plane, behind):
     """Cluster ids (S,) with each cluster that holds pieces on both sides of a pierced plane
-    split by side (:func:`~raybundle.patches.contacts.pierced_parts`: the ``part`` (S,) of each
+    split by side (:func:`~raybundle.patches.piercing.pierced_parts`: the ``part`` (S,) of each
     triangle; per tagged corner its triangle ``row``, ``plane`` and side ``behind``), by the
     plane most of its tagged corners lie on (a cluster of a shelf through a wall, under a panel
     that stands across the wall on it, by the wall's).  A triangle's side of that plane is
@@ -360,7 +361,7 @@ def world_view_classes(tracer, points, normals, rays=WORLD_VIEW_RAYS, seed=0):
     rays)``, azimuth k times the golden angle) turned by a random angle about the normal: a
     stratified quadrature of the open fraction, at the cost of one frame per side.  Fixed
     ``seed``: the same layout every run; the points go to the tracer
-    :data:`~raybundle.patches.contacts.PROBE_CHUNK` rays at a time."""
+    :data:`~raybundle.patches.gaps.PROBE_CHUNK` rays at a time."""
     points, normals = np.asarray(points, float), np.asarray(normals, float)
     rng = stream(seed, Stream.OPEN_FRACTION_FRAMES)
     k = np.arange(rays) + 0.5

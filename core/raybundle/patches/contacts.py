@@ -29,11 +29,12 @@ patch and only get the tags.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..tracing.sampling import orthonormal_basis
-from ..util.arrays import connected_components, group_ids, ranges, shared_edges, unique_rows
+from ..util.arrays import ranges, unique_rows
 
 
 def _plane_groups(scene, faces):
@@ -110,7 +111,7 @@ def contact_segments(scene, faces, tol, min_plane_area=0.0):
     corners = scene.triangle_corners
     lo_all, hi_all = corners.min(axis=1), corners.max(axis=1)
     _, r = scene.bounding_sphere
-    vid = _welded(scene)
+    vid = welded_vertices(scene)
     # a plane's box is thin along its normal: sweep along the axis where it is thinnest
     overlapping = {}
     for group, n, off in _plane_groups(scene, faces):
@@ -125,61 +126,77 @@ def contact_segments(scene, faces, tol, min_plane_area=0.0):
         d = corners[cand] @ n - off                                   # (C, 3) signed distances
         cand_mask = (d.min(axis=1) <= tol) & (d.max(axis=1) >= -tol)
         cand, d = cand[cand_mask], d[cand_mask]
-        e1, e2 = orthonormal_basis(n)
-        origin = n * off
         if len(cand) == 0:
             continue
-        p = corners[cand]
-        near = np.abs(d) <= tol
-        all_near = near.all(axis=1)
-        segs = []
-        # edges lying in the plane (within tol); inner edges of a surface lying in the gap are dropped
-        tv = vid[scene.triangles[cand]]
-        for i, j in ((0, 1), (1, 2), (2, 0)):
-            sel = near[:, i] & near[:, j]
-            key = np.sort(np.stack([tv[:, i], tv[:, j]], axis=1), axis=1)
-            segs.append((sel, p[:, i], p[:, j], key, all_near))
-        keys = np.concatenate([s[3][s[0]] for s in segs])
-        flat = np.concatenate([s[4][s[0]] for s in segs])
-        kk, inv, cnt = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-        inner_count = np.bincount(inv.reshape(-1), flat, minlength=len(kk))
-        drop = (cnt >= 2) & (inner_count >= 2)
-        keep = ~drop[inv.reshape(-1)]
-        a3 = np.concatenate([s[1][s[0]] for s in segs])[keep]
-        b3 = np.concatenate([s[2][s[0]] for s in segs])[keep]
-        # crossings: triangles with corners on both sides beyond tol
-        cross = ~all_near & ~(near.sum(axis=1) >= 2) & (d.max(axis=1) > tol) & (d.min(axis=1) < -tol)
-        if cross.any():
-            pc, dc, nc = p[cross], d[cross], near[cross]
-            pts = np.zeros((len(pc), 2, 3))
-            cnt_pts = np.zeros(len(pc), np.int64)
-            for i in range(3):                                   # a corner on the plane
-                s = nc[:, i]
-                rows = np.nonzero(s)[0]
-                pts[rows, np.minimum(cnt_pts[rows], 1)] = pc[rows, i]
-                cnt_pts[rows] += 1
-            for i, j in ((0, 1), (1, 2), (2, 0)):                # an edge through the plane
-                s = ~nc[:, i] & ~nc[:, j] & (np.sign(dc[:, i]) != np.sign(dc[:, j]))
-                rows = np.nonzero(s)[0]
-                t = dc[rows, i] / (dc[rows, i] - dc[rows, j])
-                pts[rows, np.minimum(cnt_pts[rows], 1)] = pc[rows, i] + t[:, None] * (pc[rows, j] - pc[rows, i])
-                cnt_pts[rows] += 1
-            ok = cnt_pts == 2
-            a3 = np.concatenate([a3, pts[ok, 0]])
-            b3 = np.concatenate([b3, pts[ok, 1]])
+        a3, b3 = _edges_in_plane(corners[cand], d, vid[scene.triangles[cand]], tol)
         if len(a3) == 0:
             continue
-        to2d = np.stack([e1, e2], axis=1)
-        seg = np.stack([(a3 - origin) @ to2d, (b3 - origin) @ to2d], axis=1)
-        length = np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1)
-        seg = seg[length > 1e-9 * max(r, 1e-12)]
-        # the same segment from several triangles counts once
-        q = np.round(np.sort(seg.reshape(len(seg), 4).reshape(-1, 2, 2), axis=1).reshape(len(seg), 4)
-                     / max(r * 1e-7, 1e-12)).astype(np.int64)
-        seg = seg[np.unique(q, axis=0, return_index=True)[1]]
+        e1, e2 = orthonormal_basis(n)
+        seg = _in_plane_frame(a3, b3, n * off, e1, e2, r)
         if len(seg):
-            out.append((group, origin, e1, e2, seg))
+            out.append((group, n * off, e1, e2, seg))
     return out
+
+
+def _edges_in_plane(p, d, tv, tol):
+    """``(a, b)`` (K, 3): the segments where triangles with corners ``p`` (C, 3, 3) at signed
+    distances ``d`` (C, 3) from a plane meet it: their edges lying within ``tol`` of it (but the
+    inner edges, between two triangles both lying in the gap; ``tv`` (C, 3) welded corner ids),
+    and the lines where they cross it."""
+    near = np.abs(d) <= tol
+    all_near = near.all(axis=1)
+    segs = []
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        sel = near[:, i] & near[:, j]
+        key = np.sort(np.stack([tv[:, i], tv[:, j]], axis=1), axis=1)
+        segs.append((sel, p[:, i], p[:, j], key, all_near))
+    keys = np.concatenate([s[3][s[0]] for s in segs])
+    flat = np.concatenate([s[4][s[0]] for s in segs])
+    kk, inv, cnt = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    inner_count = np.bincount(inv.reshape(-1), flat, minlength=len(kk))
+    drop = (cnt >= 2) & (inner_count >= 2)
+    keep = ~drop[inv.reshape(-1)]
+    a3 = np.concatenate([s[1][s[0]] for s in segs])[keep]
+    b3 = np.concatenate([s[2][s[0]] for s in segs])[keep]
+    # crossings: triangles with corners on both sides beyond tol
+    cross = ~all_near & ~(near.sum(axis=1) >= 2) & (d.max(axis=1) > tol) & (d.min(axis=1) < -tol)
+    if cross.any():
+        ca, cb = _crossings(p[cross], d[cross], near[cross])
+        a3, b3 = np.concatenate([a3, ca]), np.concatenate([b3, cb])
+    return a3, b3
+
+
+def _crossings(pc, dc, nc):
+    """``(a, b)`` (K, 3): where triangles with corners ``pc`` (C, 3, 3), signed distances ``dc``
+    and corners on the plane ``nc`` (C, 3) bool cross the plane (two points each, a corner on the
+    plane or an edge through it)."""
+    pts = np.zeros((len(pc), 2, 3))
+    cnt_pts = np.zeros(len(pc), np.int64)
+    for i in range(3):                                   # a corner on the plane
+        s = nc[:, i]
+        rows = np.nonzero(s)[0]
+        pts[rows, np.minimum(cnt_pts[rows], 1)] = pc[rows, i]
+        cnt_pts[rows] += 1
+    for i, j in ((0, 1), (1, 2), (2, 0)):                # an edge through the plane
+        s = ~nc[:, i] & ~nc[:, j] & (np.sign(dc[:, i]) != np.sign(dc[:, j]))
+        rows = np.nonzero(s)[0]
+        t = dc[rows, i] / (dc[rows, i] - dc[rows, j])
+        pts[rows, np.minimum(cnt_pts[rows], 1)] = pc[rows, i] + t[:, None] * (pc[rows, j] - pc[rows, i])
+        cnt_pts[rows] += 1
+    ok = cnt_pts == 2
+    return pts[ok, 0], pts[ok, 1]
+
+
+def _in_plane_frame(a3, b3, origin, e1, e2, r):
+    """(K, 2, 2): the segments ``a3 -> b3`` in the plane's frame, without those shorter than
+    1e-9 of the scene radius ``r``, each once however many triangles gave it."""
+    to2d = np.stack([e1, e2], axis=1)
+    seg = np.stack([(a3 - origin) @ to2d, (b3 - origin) @ to2d], axis=1)
+    length = np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1)
+    seg = seg[length > 1e-9 * max(r, 1e-12)]
+    q = np.round(np.sort(seg.reshape(len(seg), 4).reshape(-1, 2, 2), axis=1).reshape(len(seg), 4)
+                 / max(r * 1e-7, 1e-12)).astype(np.int64)
+    return seg[np.unique(q, axis=0, return_index=True)[1]]
 
 
 def _split(poly, a, b, eps):
@@ -300,6 +317,33 @@ def _touching(tri2d, seg, eps):
     return (t1 - t0) * seg_len > 4 * eps
 
 
+@dataclass
+class _Pieces:
+    """The convex pieces cut so far, as fans of triangles: their corners (arrays in 3D), and per
+    fan triangle its corner indices, weld tags, source triangle and piece (patch) number."""
+    points: list = field(default_factory=list)
+    triangles: list = field(default_factory=list)
+    tags: list = field(default_factory=list)
+    source: list = field(default_factory=list)
+    patch: list = field(default_factory=list)
+    n_points: int = 0
+    n_patches: int = 0
+
+    def add(self, tri, poly, tags, origin, to2d):
+        """One piece ``poly`` (M, 2) of triangle ``tri`` in the plane frame (``origin``, ``to2d``)
+        with its corners' ``tags`` (M,); its fan keeps the triangle's winding."""
+        m, base = len(poly), self.n_points
+        self.points.append(origin + poly @ to2d.T)
+        self.n_points += m
+        for i in range(1, m - 1):
+            idx = (0, i, i + 1)
+            self.triangles.append([base + x for x in idx])
+            self.tags.append([tags[x] for x in idx])
+            self.source.append(tri)
+            self.patch.append(self.n_patches)
+        self.n_patches += 1
+
+
 def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0):
     """Cut the patches of triangles ``faces`` along contact lines (module docstring).
 
@@ -311,8 +355,6 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     patches cut.  The new scene carries ``triangle_corner_tag`` (T, 3) int64
     (0 = no contact at that corner).
     """
-    from ..scene.model import PatchScene
-
     groups = contact_segments(scene, np.asarray(faces, np.int64), tol, min_plane_area)
     if not groups:
         return scene, 0
@@ -322,11 +364,9 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     replaced = np.zeros(T, bool)
     corner_tag = (scene.triangle_corner_tag.copy() if scene.triangle_corner_tag is not None
                   else np.zeros((T, 3), np.int64))
-    new_pts, new_tris, new_from, new_patch_local, new_tags = [], [], [], [], []
+    out = _Pieces()
     tag_ids: dict = {}
     n_cut = 0
-    n_new_patches = 0
-    n_new_pts = 0
     seg_base = 0
     for group, origin, e1, e2, seg in groups:
         to2d = np.stack([e1, e2], axis=1)
@@ -340,33 +380,11 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
         tg = _corner_tags(c2[fast].reshape(-1, 2), np.repeat(np.arange(len(fast)), 3), c2[fast].mean(axis=1),
                           (own.reshape(-1), k[whole]), seg, lines, seg_base, eps, tag_ids)
         corner_tag[group[fast]] = _merged(corner_tag[group[fast]], tg.reshape(-1, 3), tag_ids)
-        # the others cut into convex pieces, as lists of [x, y] (numpy's cost per call on 3-6 corners)
+        # the others cut into convex pieces
         start = np.searchsorted(f, cut)
         count = np.searchsorted(f, cut, side="right") - start
-        pieces = []
-        for fi, lo, n in zip(cut.tolist(), start.tolist(), count.tolist()):
-            polys = [c2[fi].tolist()]
-            least = min_fraction * _area(polys[0])
-            # a line that leaves the triangle's corners on one side misses every piece of it
-            for a, b in seg[k[lo:lo + n][crosses[lo:lo + n]]].tolist():
-                nxt = []
-                for poly in polys:
-                    lft, rgt = _split(poly, a, b, eps)
-                    if lft is None or min(_area(lft), _area(rgt)) < least:
-                        nxt.append(poly)
-                    else:
-                        nxt += [lft, rgt]
-                polys = nxt
-            pieces.append([_without_collinear(poly, eps) for poly in polys])
-        # the pieces' corner tags, against the segments touching their triangle
-        polys = [poly for p in pieces for poly in p]
-        size = np.array([len(poly) for poly in polys], np.int64)
-        tri_of = np.repeat(np.arange(len(cut)), [len(p) for p in pieces])
-        tags = _corner_tags(np.concatenate(polys) if polys else np.zeros((0, 2)), np.repeat(np.arange(len(polys)), size),
-                            np.array([poly.mean(axis=0) for poly in polys]).reshape(-1, 2),
-                            (np.repeat(np.arange(len(polys)), count[tri_of]), k[ranges(start[tri_of], count[tri_of])]),
-                            seg, lines, seg_base, eps, tag_ids)
-        tags = np.split(tags, np.cumsum(size)[:-1]) if polys else []
+        pieces = _cut_triangles(c2, cut, start, count, seg[k], crosses, eps, min_fraction)
+        tags = _piece_tags(pieces, start, count, k, seg, lines, seg_base, eps, tag_ids)
         j = 0
         for fi, polys in zip(cut.tolist(), pieces):
             tri, f_tags = group[fi], tags[j:j + len(polys)]
@@ -375,28 +393,65 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
                 if f_tags[0].any():
                     corner_tag[tri] = _merged(corner_tag[tri], _tags_in_order(f_tags[0], polys[0], c2[fi], eps), tag_ids)
                 continue
-            # the tags the triangle had (a cut where it pierces a surface) stay on its pieces' corners
-            f_tags = [_merged(_inherited_tags(poly, c2[fi], corner_tag[tri], eps), tg, tag_ids)
-                      for poly, tg in zip(polys, f_tags)]
             replaced[tri] = True
-            n_cut += len(polys) > 1
+            n_cut += 1
             for poly, tg in zip(polys, f_tags):
-                m = len(poly)
-                base = n_new_pts
-                new_pts.append(origin + poly @ to2d.T)
-                n_new_pts += m
-                for i in range(1, m - 1):
-                    idx = (0, i, i + 1)               # pieces keep the triangle's winding
-                    new_tris.append([base + x for x in idx])
-                    new_tags.append([tg[x] for x in idx])
-                    new_from.append(tri)
-                    new_patch_local.append(n_new_patches)
-                n_new_patches += 1
+                # the tags the triangle had (a cut where it pierces a surface) stay on its pieces' corners
+                out.add(tri, poly, _merged(_inherited_tags(poly, c2[fi], corner_tag[tri], eps), tg, tag_ids),
+                        origin, to2d)
         seg_base += len(seg)
     if not replaced.any() and not corner_tag.any():
         return scene, 0
+    return _with_pieces(scene, replaced, corner_tag, out), n_cut
+
+
+def _cut_triangles(c2, cut, start, count, seg_k, crosses, eps, min_fraction):
+    """The convex pieces (lists of (M, 2) arrays) of each triangle ``cut`` (ids into ``c2``
+    (F, 3, 2)), cut along the lines of the segments that cross it (``seg_k``, ``crosses`` from
+    ``start`` for ``count`` pairs); a cut that would leave a piece under ``min_fraction`` of the
+    triangle is not made.  Corners are plain lists while cutting (NumPy's cost per call on 3-6
+    corners)."""
+    pieces = []
+    for fi, lo, n in zip(cut.tolist(), start.tolist(), count.tolist()):
+        polys = [c2[fi].tolist()]
+        least = min_fraction * _area(polys[0])
+        # a line that leaves the triangle's corners on one side misses every piece of it
+        for a, b in seg_k[lo:lo + n][crosses[lo:lo + n]].tolist():
+            nxt = []
+            for poly in polys:
+                lft, rgt = _split(poly, a, b, eps)
+                if lft is None or min(_area(lft), _area(rgt)) < least:
+                    nxt.append(poly)
+                else:
+                    nxt += [lft, rgt]
+            polys = nxt
+        pieces.append([_without_collinear(poly, eps) for poly in polys])
+    return pieces
+
+
+def _piece_tags(pieces, start, count, k, seg, lines, seg_base, eps, tag_ids):
+    """The corner tags (a list of (M,) arrays, piece by piece) of ``pieces`` against the segments
+    touching their triangle (:func:`_corner_tags`)."""
+    polys = [poly for p in pieces for poly in p]
+    if not polys:
+        return []
+    size = np.array([len(poly) for poly in polys], np.int64)
+    tri_of = np.repeat(np.arange(len(pieces)), [len(p) for p in pieces])
+    tags = _corner_tags(np.concatenate(polys), np.repeat(np.arange(len(polys)), size),
+                        np.array([poly.mean(axis=0) for poly in polys]).reshape(-1, 2),
+                        (np.repeat(np.arange(len(polys)), count[tri_of]), k[ranges(start[tri_of], count[tri_of])]),
+                        seg, lines, seg_base, eps, tag_ids)
+    return np.split(tags, np.cumsum(size)[:-1])
+
+
+def _with_pieces(scene, replaced, corner_tag, pieces):
+    """``scene`` with the triangles ``replaced`` (T,) bool replaced by the fans of ``pieces``
+    (:class:`_Pieces`) and the corner tags ``corner_tag`` (T, 3) of those it keeps."""
+    from ..scene.model import PatchScene
+
+    _, r = scene.bounding_sphere
     keep = np.nonzero(~replaced)[0]
-    pts = np.concatenate(new_pts) if new_pts else np.zeros((0, 3))
+    pts = np.concatenate(pieces.points) if pieces.points else np.zeros((0, 3))
     # weld the new corners that coincide, among themselves and with the corners of the
     # triangles they replace (which their neighbours keep); the other vertices stay as they are
     # (welding the whole scene again cost seconds at millions of triangles)
@@ -407,15 +462,15 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     own = old_ids[np.minimum(first, len(old_ids) - 1)] if len(old_ids) else np.zeros(len(first), np.int64)
     vertex_of = np.where(at_old, own, len(scene.vertices) + np.cumsum(~at_old) - 1)
     v = np.concatenate([scene.vertices, cand[first[~at_old]]])
-    new_t = vertex_of[inv[len(old_ids):]][np.asarray(new_tris, np.int64).reshape(-1, 3)]
+    new_t = vertex_of[inv[len(old_ids):]][np.asarray(pieces.triangles, np.int64).reshape(-1, 3)]
     t = np.concatenate([scene.triangles[keep], new_t])
-    src = np.concatenate([keep, np.asarray(new_from, np.int64)])
-    tags = np.concatenate([corner_tag[keep], np.asarray(new_tags, np.int64).reshape(-1, 3)])
+    src = np.concatenate([keep, np.asarray(pieces.source, np.int64)])
+    tags = np.concatenate([corner_tag[keep], np.asarray(pieces.tags, np.int64).reshape(-1, 3)])
     # patches: untouched triangles keep theirs (renumbered), pieces get new ids
     old_patch = scene.triangle_patch[keep]
     _, old_patch = np.unique(old_patch, return_inverse=True)
     n_old = int(old_patch.max()) + 1 if len(old_patch) else 0
-    patch = np.concatenate([old_patch.reshape(-1), n_old + np.asarray(new_patch_local, np.int64)]).astype(np.int64)
+    patch = np.concatenate([old_patch.reshape(-1), n_old + np.asarray(pieces.patch, np.int64)]).astype(np.int64)
     # pieces that welding or a sliver cut flattened to zero area carry nothing (their
     # normal would be NaN): drop them, and renumber the patches densely
     c = v[new_t]
@@ -424,12 +479,11 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     if not ok.all():
         t, src, tags = t[ok], src[ok], tags[ok]
         patch = np.unique(patch[ok], return_inverse=True)[1].reshape(-1).astype(np.int64)
-    out = PatchScene(v, t, scene.triangle_material[src], patch, scene.triangle_source[src], scene.materials,
-                     scene.point_lights, scene.camera, scene.analytic_radiance, scene.name,
-                     scene.dropped_triangles, scene.triangle_solid[src], scene.triangle_two_sided[src],
-                     scene.sun_lights, scene.area_lights, scene.world, tags, texture=scene.texture,
-                     shading=scene.shading, linking=scene.linking)
-    return out, n_cut
+    return PatchScene(v, t, scene.triangle_material[src], patch, scene.triangle_source[src], scene.materials,
+                      scene.point_lights, scene.camera, scene.analytic_radiance, scene.name,
+                      scene.dropped_triangles, scene.triangle_solid[src], scene.triangle_two_sided[src],
+                      scene.sun_lights, scene.area_lights, scene.world, tags, texture=scene.texture,
+                      shading=scene.shading, linking=scene.linking)
 
 
 def _lines(seg, eps):
@@ -458,19 +512,19 @@ def _on_segment(points, seg, eps):
 
 #: :func:`_merged`: a pierce tag merged with a contact tag moves by multiples of twice this
 #: (beyond any pierce tag's magnitude), keeping its sign
-_MERGED_STEP = 1 << 32
+MERGED_STEP = 1 << 32
 
 
 def _merged(old, new, tag_ids):
     """Weld tags (int64 arrays of one shape) of corners that had ``old`` and get ``new``: the
     one that is not 0, and where both are, one id per pair (from ``tag_ids``, as the contact
     tags), so corners weld only where both tags agree.  A pierce tag (negative,
-    :func:`pierce_tag`) stays negative, as :func:`pierced_parts` reads it."""
+    :func:`~raybundle.patches.piercing.pierce_tag`) stays negative, as :func:`~raybundle.patches.piercing.pierced_parts` reads it."""
     old, new = np.asarray(old, np.int64), np.asarray(new, np.int64)
     out = np.where(new == 0, old, new)
     for i in zip(*np.nonzero((old != 0) & (new != 0))):
         k = tag_ids.setdefault(("merged", int(old[i]), int(new[i])), len(tag_ids) + 1)
-        out[i] = old[i] - 2 * _MERGED_STEP * k if old[i] < 0 else k
+        out[i] = old[i] - 2 * MERGED_STEP * k if old[i] < 0 else k
     return out
 
 
@@ -532,270 +586,7 @@ def _corner_tags(points, polygon, centroid, pairs, seg, lines, seg_base, eps, ta
     return out
 
 
-#: gaps narrower than this share of the patch size count as contact
-#: (:func:`~raybundle.patches.layout.cut_at_contacts`, :func:`~raybundle.patches.clusters.make_patches`)
-CONTACT_SHARE = 0.05
-#: probe rays per chunk in :func:`gap_sides` (memory: about 100 bytes a ray)
-PROBE_CHUNK = 1 << 20
-
-
-def gap_sides(tracer, points, normals, tol):
-    """(N, 2) bool: another surface lies within ``tol`` [m] of ``points`` (N, 3) along
-    their unit ``normals`` (column 0) and against them (column 1).
-
-    A point in such a gap (the ceiling over a lamp hanging 0.5 mm under it, the floor
-    under a rug) sees only that surface on that side, a world apart from its neighbours
-    outside the gap: a patch must not hold both (module docstring)."""
-    points, normals = np.asarray(points, float), np.asarray(normals, float)
-    out = np.zeros((len(points), 2), bool)
-    eps = tracer.eps
-    for lo in range(0, len(points), PROBE_CHUNK // 2):
-        p, n = points[lo:lo + PROBE_CHUNK // 2], normals[lo:lo + PROBE_CHUNK // 2]
-        for col, sign in ((0, 1.0), (1, -1.0)):
-            d = sign * n
-            out[lo:lo + len(p), col] = tracer.occluded(p + eps * d, d, np.full(len(p), max(tol - eps, eps)))
-    return out
-
-
-#: hits along a triangle's edge that :func:`piercing` looks past (neighbours, surfaces in the edge's plane)
-PIERCE_HITS = 4
-
-
-def piercing(tracer, scene, faces):
-    """``(own, other)`` (P,) int: triangles of ``faces`` that pierce another surface and the
-    triangles they pierce, a pair for each (a picture frame sunk into the wall it hangs on: the
-    frame's facets behind the wall see the sky, and one patch or one welded corner for both
-    parts carries that light into the room).  A triangle may pierce several surfaces (a
-    shelf through a wall, under a panel that stands across the wall on it).
-
-    A triangle pierces another where one of its edges passes through it: each edge (once,
-    for the triangles that share it) is traced as a ray from corner to corner, ``eps`` short
-    of both ends and ``eps`` above one of the triangles; a hit counts unless the hit triangle shares a corner (welded) with the
-    edge or lies in the edge's plane (the ray then goes on past it, up to
-    :data:`PIERCE_HITS` hits).  Of a post through the middle of a floor triangle, the post's
-    triangles are found."""
-    faces = np.asarray(faces, np.int64)
-    vid = _welded(scene)
-    eps = tracer.eps
-    own, other = [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
-    step = max(1, PROBE_CHUNK // 3)
-    for lo in range(0, len(faces), step):
-        f = faces[lo:lo + step]
-        corner = vid[scene.triangles[f]]                                              # (F, 3) welded
-        ends = np.sort(np.stack([corner, np.roll(corner, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
-        # each edge once (edge 3 i + k of f[i] runs from corner k to k + 1), ``eps`` above its
-        # triangle (Embree reports a ray along a triangle's edge as hitting it again and again)
-        _, first, inv = np.unique(ends[:, 0] * (len(vid) + 1) + ends[:, 1], return_index=True, return_inverse=True)
-        tri_e, k = f[first // 3], first % 3
-        lift = eps * scene.triangle_normal[tri_e]
-        a = scene.vertices[scene.triangles[tri_e, k]] + lift
-        b = scene.vertices[scene.triangles[tri_e, (k + 1) % 3]] + lift
-        e = ends[first]
-        pierced = np.full(len(first), -1, np.int64)
-        length = np.linalg.norm(b - a, axis=1)
-        live = np.nonzero(length > 4 * eps)[0]
-        d = (b[live] - a[live]) / length[live, None]
-        start = np.full(len(live), eps)
-        for _ in range(PIERCE_HITS):                 # past hits that do not count (a neighbour, in plane)
-            tri, t, _, _ = tracer.first_hit(a[live] + start[:, None] * d, d, glass=False)
-            t = t + start
-            hit = np.nonzero((tri >= 0) & (t < length[live] - 2 * eps))[0]
-            theirs = tri[hit]
-            shares = (vid[scene.triangles[theirs]][:, :, None] == e[live[hit]][:, None, :]).any(axis=(1, 2))
-            flat = np.abs(np.einsum("ij,ij->i", scene.triangle_normal[theirs], d[hit])) < 1e-3
-            keep = ~shares & ~flat
-            pierced[live[hit[keep]]] = theirs[keep]
-            go = hit[~keep]
-            live, d, start = live[go], d[go], t[go] + eps
-            if len(live) == 0:
-                break
-        # every triangle holding a piercing edge pierces
-        edge = np.nonzero(pierced[inv.reshape(-1)] >= 0)[0]
-        own.append(f[edge // 3])
-        other.append(pierced[inv.reshape(-1)[edge]])
-    pairs = np.unique(np.stack([np.concatenate(own), np.concatenate(other)], axis=1), axis=0)
-    return pairs[:, 0], pairs[:, 1]
-
-
-def _welded(scene):
+def welded_vertices(scene):
     """(V,) int: vertex ids welded where positions agree to 1e-7 of the scene's radius."""
     _, r = scene.bounding_sphere
     return unique_rows(np.round(scene.vertices / max(r * 1e-7, 1e-12)).astype(np.int64))[1]
-
-
-def pierce_tag(plane, behind):
-    """The weld tag of a corner on the cut along pierced ``plane`` (int) on the piece in front
-    of it or ``behind`` it: negative, apart from :func:`split_at_contacts`'s positive ones."""
-    return -1 - 2 * np.asarray(plane, np.int64) - np.asarray(behind, np.int64)
-
-
-def pierced_parts(scene):
-    """``(part (T,), corners (K, 3))`` int, or None when nothing was cut where it pierces
-    (:func:`cut_where_pierced`): the part of a pierced surface each triangle lies in (-1 for
-    triangles of no such part) and, per corner tagged on such a cut, its triangle, plane and
-    side (:func:`pierce_tag`).  Parts are the
-    connected components of triangles that share an edge whose two ends carry the same pierce
-    tags in both: a cut along a pierced plane tags its two sides apart, so the shelf's part in
-    the room and its part outside are two parts, and a cluster that holds pieces on both sides
-    of a plane is split by part (:mod:`raybundle.patches.clusters`), however fine the shelf's
-    triangles beside the wall are.  Parts holding no tagged piece are -1."""
-    tag = scene.triangle_corner_tag
-    if tag is None or not (tag < 0).any():
-        return None
-    vid = _welded(scene).astype(np.int32)
-    corners = vid[scene.triangles]
-    lo, hi = shared_edges(corners)                            # edges of two triangles at one place
-    a = corners.reshape(-1)
-    # the two triangles' pierce tags at each end of the shared edge (their own corners at that
-    # position; a contact's tags, and a contact's share of a merged tag, left out: :func:`_merged`)
-    pierce = np.where(tag < 0, -(-tag % (2 * _MERGED_STEP)), 0)
-    check = np.nonzero(pierce.any(axis=1)[lo // 3] | pierce.any(axis=1)[hi // 3])[0]
-    el, eh = lo[check], hi[check]
-    t, tn = pierce.ravel(), pierce[:, [1, 2, 0]].ravel()
-    agree = np.ones(len(lo), bool)
-    agree[check] = np.where(a[el] == a[eh], (t[el] == t[eh]) & (tn[el] == tn[eh]),      # the same way round
-                            (t[el] == tn[eh]) & (tn[el] == t[eh]))
-    del a, corners
-    part = connected_components(len(scene.triangles), np.stack([lo[agree] // 3, hi[agree] // 3], axis=1))
-    cut = np.zeros(int(part.max(initial=-1)) + 1, bool)
-    cut[part[(tag < 0).any(axis=1)]] = True
-    row, k = np.nonzero(pierce < 0)
-    plane, behind = np.divmod(-1 - pierce[row, k], 2)
-    return np.where(cut[part], part, -1).astype(np.int32), np.stack([row, plane, behind], axis=1)
-
-
-def cut_where_pierced(scene, own, other):
-    """``(scene, rows)``: ``scene`` with each triangle ``own`` (P,) cut by the plane of the triangle
-    ``other`` (P,) it pierces (:func:`piercing`) into the piece in front of that plane and the
-    piece behind it, and ``rows`` (T',) the row in ``scene`` of each new triangle.  A triangle
-    that pierces several planes is cut along each in turn, its pieces again (one plane per
-    triangle and round, vectorised; :func:`_cut_once`).  Triangles with a corner within
-    ``1e-6`` of the scene radius of a plane are left whole by it."""
-    own, other = np.asarray(own, np.int64), np.asarray(other, np.int64)
-    if len(own) == 0:
-        return scene, np.arange(len(scene.triangles))
-    _, r = scene.bounding_sphere
-    eps = 1e-6 * max(r, 1e-12)
-    n = scene.triangle_normal[other]
-    p0 = scene.triangle_corners[other, 0]
-    off = np.einsum("ij,ij->i", n, p0)
-    q = np.round(n * 1e4).astype(np.int64)
-    plane = group_ids([q[:, 0], q[:, 1], q[:, 2], np.round(off / eps).astype(np.int64)])
-    _, once = np.unique(np.stack([own, plane], axis=1), axis=0, return_index=True)        # a pair per plane
-    own, plane, n, p0 = own[once], plane[once], n[once], p0[once]
-    rows = np.arange(len(scene.triangles))
-    next_id, meet = int(plane.max(initial=-1)) + 1, {}     # ids where two cuts meet (:func:`_cut_once`)
-    while len(own):
-        _, first = np.unique(own, return_index=True)
-        scene, cut_rows = _cut_once(scene, own[first], n[first], p0[first], plane[first], eps, next_id, meet)
-        rows = rows[cut_rows]
-        # the planes left for a triangle apply to each of its pieces
-        rest = np.ones(len(own), bool)
-        rest[first] = False
-        own, plane, n, p0 = own[rest], plane[rest], n[rest], p0[rest]
-        order = np.argsort(cut_rows, kind="stable")
-        lo = np.searchsorted(cut_rows[order], own, side="left")
-        hi = np.searchsorted(cut_rows[order], own, side="right")
-        count = hi - lo
-        pair = np.repeat(np.arange(len(own)), count)
-        own = order[ranges(lo, count)]
-        plane, n, p0 = plane[pair], n[pair], p0[pair]
-    return scene, rows
-
-
-def _cut_once(scene, own, n, p0, plane, eps, next_id, meet):
-    """``(scene, rows)``: :func:`cut_where_pierced` for distinct triangles ``own`` (P,),
-    each cut by one plane (unit normal ``n`` (P, 3) through ``p0`` (P, 3), id ``plane`` (P,))
-    into the piece in front of it and the piece behind it (one triangle and two).  The
-    behind pieces get a patch of their own (one per patch cut), and the new corners on the cut
-    a weld tag per plane and side (:func:`pierce_tag`), so the pieces share neither an unknown
-    nor an interpolated corner value; pieces in front of one plane weld along the cut.  A new
-    corner on an edge cut before (both ends tagged alike) lies where two cuts meet: it gets the
-    tag of a plane of its own, an id from ``next_id`` on per earlier tag, plane and side (kept
-    in ``meet``, a dict, through the rounds), so it welds only with pieces on its side of both."""
-    from ..scene.model import PatchScene
-    c = scene.triangle_corners[own]
-    d = np.einsum("fkc,fc->fk", c - p0[:, None], n)                                      # (P, 3) [m]
-    ok = (np.abs(d) > eps).all(axis=1) & (d.max(axis=1) > 0) & (d.min(axis=1) < 0)
-    own, plane, c, d = own[ok], plane[ok], c[ok], d[ok]
-    if len(own) == 0:
-        return scene, np.arange(len(scene.triangles))
-    pos = d > 0
-    lone = np.where(pos.sum(axis=1) == 1, np.argmax(pos, axis=1), np.argmin(pos, axis=1))
-    k = (lone[:, None] + np.arange(3)) % 3                                  # lone corner first, winding kept
-    idx = scene.triangles[own][np.arange(len(own))[:, None], k]                         # (P, 3) A, B, C
-    ca = np.take_along_axis(c, k[:, :, None], axis=1)
-    da = np.take_along_axis(d, k, axis=1)
-    pp = ca[:, 0] + (ca[:, 1] - ca[:, 0]) * (da[:, 0] / (da[:, 0] - da[:, 1]))[:, None]     # on AB
-    qq = ca[:, 0] + (ca[:, 2] - ca[:, 0]) * (da[:, 0] / (da[:, 0] - da[:, 2]))[:, None]     # on AC
-    m = len(own)
-    v0 = len(scene.vertices)
-    vp, vq = v0 + np.arange(m), v0 + m + np.arange(m)
-    a, b, cc = idx.T
-    tris = np.concatenate([np.stack([a, vp, vq], 1), np.stack([vp, b, cc], 1), np.stack([vp, cc, vq], 1)])
-    src = np.tile(own, 3)
-    old_tag = (scene.triangle_corner_tag if scene.triangle_corner_tag is not None
-               else np.zeros((len(scene.triangles), 3), np.int64))
-    ot = np.take_along_axis(old_tag[own], k, axis=1)
-    lone_front = da[:, 0] > 0
-    # the tags of the new corners P (on AB) and Q (on AC), on the lone corner's piece and on the others
-    tag = {}
-    for name, end in (("p", 1), ("q", 2)):
-        crossed = np.nonzero((ot[:, 0] == ot[:, end]) & (ot[:, 0] < 0))[0]      # an earlier cut runs along the edge
-        for side, behind in (("lone", ~lone_front), ("rest", lone_front)):
-            ids = plane.copy()
-            for i in crossed:
-                ids[i] = meet.setdefault((int(ot[i, 0]), int(plane[i]), bool(behind[i])), next_id + len(meet))
-            tag[name, side] = pierce_tag(ids, behind)
-    tags = np.concatenate([np.stack([ot[:, 0], tag["p", "lone"], tag["q", "lone"]], 1),
-                           np.stack([tag["p", "rest"], ot[:, 1], ot[:, 2]], 1),
-                           np.stack([tag["p", "rest"], ot[:, 2], tag["q", "rest"]], 1)])
-    # patches: the pieces behind the plane get one new patch per patch cut
-    behind = np.concatenate([~lone_front, lone_front, lone_front])
-    n_patch = int(scene.triangle_patch.max(initial=-1)) + 1
-    patch = np.where(behind, n_patch + scene.triangle_patch[src], scene.triangle_patch[src])
-    keep = np.ones(len(scene.triangles), bool)
-    keep[own] = False
-    keep = np.nonzero(keep)[0]
-    rows = np.concatenate([keep, src])
-    patch = np.unique(np.concatenate([scene.triangle_patch[keep], patch]), return_inverse=True)[1].reshape(-1)
-    return PatchScene(np.concatenate([scene.vertices, pp, qq]), np.concatenate([scene.triangles[keep], tris]),
-                      scene.triangle_material[rows], patch.astype(np.int64), scene.triangle_source[rows],
-                      scene.materials, scene.point_lights, scene.camera, scene.analytic_radiance, scene.name,
-                      scene.dropped_triangles, scene.triangle_solid[rows], scene.triangle_two_sided[rows],
-                      scene.sun_lights, scene.area_lights, scene.world,
-                      np.concatenate([old_tag[keep], tags]), texture=scene.texture,
-                      shading=scene.shading, linking=scene.linking), rows
-
-
-def straddling(tracer, scene, faces, tol):
-    """(F,) bool: triangles ``faces`` part of which lies in a gap narrower than ``tol`` [m]
-    and part not: the triangles :func:`split_at_contacts` must cut.  :func:`gap_sides` at
-    every centroid first; where a triangle's flags differ from those of a triangle it shares
-    a corner with (or it shares none), at its three corners pulled 1% towards the centroid
-    too, and the triangle straddles where its four points disagree."""
-    faces = np.asarray(faces, np.int64)
-    if len(faces) == 0:
-        return np.zeros(0, bool)
-    c = scene.triangle_corners[faces]
-    flags = gap_sides(tracer, c.mean(axis=1), scene.triangle_normal[faces], tol)
-    code = flags[:, 0] * 2 + flags[:, 1]
-    corner = scene.triangles[faces]
-    lo = np.full(len(scene.vertices), 4)
-    hi = np.full(len(scene.vertices), -1)
-    users = np.zeros(len(scene.vertices), np.int64)
-    np.minimum.at(lo, corner, code[:, None])
-    np.maximum.at(hi, corner, code[:, None])
-    np.add.at(users, corner, 1)
-    near = np.any(lo[corner] != hi[corner], axis=1) | np.all(users[corner] == 1, axis=1)
-    out = np.zeros(len(faces), bool)
-    sel = np.nonzero(near)[0]
-    step = max(1, PROBE_CHUNK // 8)
-    for start in range(0, len(sel), step):
-        f = sel[start:start + step]
-        mid = c[f].mean(axis=1, keepdims=True)
-        pts = mid + 0.99 * (c[f] - mid)                                           # (F, 3, 3)
-        n = np.repeat(scene.triangle_normal[faces[f]], 3, axis=0)
-        at = gap_sides(tracer, pts.reshape(-1, 3), n, tol).reshape(len(f), 3, 2)
-        out[f] = (at != flags[f, None, :]).any(axis=(1, 2))
-    return out

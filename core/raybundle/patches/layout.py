@@ -172,12 +172,14 @@ def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene
     """The patches of triangles ``cut`` (the pieces of subdivided faces) cut along contact
     lines (:mod:`raybundle.patches.contacts`, gaps under 5% of ``max_edge`` count as contact); so is
     every reflecting triangle when there are at most :data:`CONTACT_ALL_MAX` of them, and
-    beyond that every one that straddles such a gap (:func:`~raybundle.patches.contacts.straddling`,
+    beyond that every one that straddles such a gap (:func:`~raybundle.patches.gaps.straddling`,
     probed with ``tracer``, a :class:`~raybundle.tracing.visibility.RayTracer` over ``scene``, or
     one built here), and every one that pierces another surface is first cut along that
-    surface's plane (:func:`~raybundle.patches.contacts.piercing`,
-    :func:`~raybundle.patches.contacts.cut_where_pierced`)."""
-    from .contacts import CONTACT_SHARE, cut_where_pierced, piercing, split_at_contacts, straddling
+    surface's plane (:func:`~raybundle.patches.piercing.piercing`,
+    :func:`~raybundle.patches.piercing.cut_where_pierced`)."""
+    from .contacts import split_at_contacts
+    from .gaps import CONTACT_SHARE, straddling
+    from .piercing import cut_where_pierced, piercing
     # faces the user meshed finer than the patches are cut too: a ceiling cut into a grid over
     # a lamp hanging under it must still trap the lamp's upper light.  Up to CONTACT_ALL_MAX
     # triangles all of them (crossings too: a post through a floor); beyond, the cut is a
