@@ -8,6 +8,7 @@ render), as the rest of the suite does.
 import numpy as np
 import pytest
 
+from raybundle.lights.reflected_direct import reflected_radiance
 from raybundle.app import pipeline
 from raybundle.app.metrics import image_error, light_source_mask
 from raybundle.imaging.settings import RenderSettings
@@ -96,7 +97,7 @@ def test_two_sided_lamp_lights_the_ceiling_above_it(rng):
         p = np.repeat(np.column_stack([pts, np.full(len(pts), 0.5488)]), n, axis=0)
         down = np.tile([0, 0, -1.0], (len(p), 1))
         white = np.zeros(len(p), int)                              # material 0: the white ceiling
-        rad = dl.reflected_radiance(p, down, white, down, rng).reshape(len(pts), n, 3)
+        rad = reflected_radiance(dl, p, down, white, down, rng).reshape(len(pts), n, 3)
         tr.close()
         e = rad.mean(axis=1) * np.pi / np.array(scenes.WHITE)
         se = rad.std(axis=1) / np.sqrt(n) * np.pi / np.array(scenes.WHITE)
@@ -120,7 +121,7 @@ def direct_irradiance(sc, points, rng, n=20000):
     k = len(points)
     p = np.repeat(points, n, axis=0)
     up = np.tile([0, 0, 1.0], (len(p), 1))
-    rad = dl.reflected_radiance(p, up, np.zeros(len(p), int), up, rng).reshape(k, n, 3) / (0.5 / np.pi)
+    rad = reflected_radiance(dl, p, up, np.zeros(len(p), int), up, rng).reshape(k, n, 3) / (0.5 / np.pi)
     tr.close()
     return rad.mean(axis=1), rad.std(axis=1) / np.sqrt(n)
 

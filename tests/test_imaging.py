@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from geometry_helpers import clipped_area
 
+from raybundle.lights.reflected_direct import reflected_radiance
 from raybundle.app import pipeline
 from raybundle.imaging.settings import RenderSettings
 from raybundle.scene import builtin as scenes
@@ -239,7 +240,7 @@ def test_penumbra_samples_continue_one_sequence_per_point_and_lamp_over_the_pass
             total = np.zeros(256)
             for p in range(24):
                 seq = (shift, np.full(256, 8 * p)) if continued else (rng.random((256, 3)), None)
-                total += d.reflected_radiance(pts, up, mats, w_out, None if continued else rng, 1, analytic=True,
+                total += reflected_radiance(d, pts, up, mats, w_out, None if continued else rng, 1, analytic=True,
                                               penumbra=(mask, 8) + seq)[:, 0]
             err[continued].append(total[pen] / 24 - ref[pen])
     rms = {k: np.sqrt(np.mean(np.concatenate(e) ** 2)) for k, e in err.items()}

@@ -76,9 +76,6 @@ MODULE_LINES, FUNCTION_LINES = 600, 80
 STILL_LONG = {
     "core/raybundle/app/bench.py:run_bench": 94,
     "core/raybundle/imaging/glossy_paths.py:GlossyEyePaths.trace": 103,
-    "core/raybundle/lights/direct.py": 620,
-    "core/raybundle/lights/direct.py:DirectLighting.reflected_radiance": 175,
-    "core/raybundle/lights/sources.py": 685,
     "core/raybundle/methods/path_tracing.py:PathTracer.trace": 84,
     "core/raybundle/methods/patch_solution.py": 620,
     "core/raybundle/methods/patch_solution.py:PatchSolution.__init__": 109,

@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from raybundle.lights.reflected_direct import reflected_radiance
 from raybundle.app import pipeline
 from raybundle.lights.direct import DirectLighting
 from raybundle.lights.first_shot import PatchFirstShot
@@ -46,7 +47,7 @@ def test_direct_light_of_area_light_matches_form_factor(x, y, rng):
     n = 100_000
     p = np.tile([x, y, 0.0], (n, 1))
     up = np.tile([0, 0, 1.0], (n, 1))
-    out = dl.reflected_radiance(p, up, np.zeros(n, int), up, rng)
+    out = reflected_radiance(dl, p, up, np.zeros(n, int), up, rng)
     exact = 0.5 / np.pi * rect_irradiance(x, y, -0.2, 0.2, -0.2, 0.2, 0.5, [1, 2, 3])
     se = out.std(axis=0) / np.sqrt(n)
     assert np.all(np.abs(out.mean(axis=0) - exact) < 4.5 * se + 1e-12), (out.mean(axis=0), exact, se)
@@ -60,7 +61,7 @@ def test_point_light_direct_is_inverse_square(rng):
     dl.area_lights = []            # isolate the point light
     pts = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 0.0]])
     up = np.tile([0, 0, 1.0], (2, 1))
-    out = dl.reflected_radiance(pts, up, np.zeros(2, int), up, rng)
+    out = reflected_radiance(dl, pts, up, np.zeros(2, int), up, rng)
     lp, intensity = np.array([0.3, -0.2, 0.8]), np.array([2.0, 1.0, 0.5])
     v = lp - pts
     r2 = (v * v).sum(axis=1)
@@ -213,9 +214,9 @@ def test_control_variate_direct_light_is_exact_where_the_lamp_is_seen_and_unbias
     rep = lambda a: np.repeat(a, n, axis=0)
     mask = rep(~umbra)
     rng = np.random.default_rng(2)
-    cv = dl.reflected_radiance(rep(p), rep(up), np.zeros(len(p) * n, int), rep(up), rng,
+    cv = reflected_radiance(dl, rep(p), rep(up), np.zeros(len(p) * n, int), rep(up), rng,
                                analytic=mask).reshape(len(p), n, 3)
-    plain = dl.reflected_radiance(rep(p), rep(up), np.zeros(len(p) * n, int), rep(up), rng).reshape(len(p), n, 3)
+    plain = reflected_radiance(dl, rep(p), rep(up), np.zeros(len(p) * n, int), rep(up), rng).reshape(len(p), n, 3)
     assert np.allclose(cv[lit], exact[lit][:, None], rtol=1e-9, atol=0)
     assert plain[lit].std(axis=1).min() > 1e-4 * exact[lit].max()
     assert np.all(cv[umbra] == 0)
@@ -408,7 +409,7 @@ def test_a_lamp_giving_little_light_at_a_point_costs_few_shadow_rays_there():
 
     def estimate(**kw):
         rays = dl.rays
-        out = dl.reflected_radiance(P, U, m, U, np.random.default_rng(3), **kw)
+        out = reflected_radiance(dl, P, U, m, U, np.random.default_rng(3), **kw)
         return out.reshape(len(p), n, 3), dl.rays - rays
 
     always, _ = estimate()
@@ -499,7 +500,7 @@ def test_a_lamp_with_cast_shadow_off_lights_through_a_blocker(tree):
                     ("one casts", scene(True, np.eye(n)[0]))):
         tr = RayTracer(sc)
         dl = DirectLighting(sc, tr, light_tree=tree)
-        got[key] = (dl.reflected_radiance(pts, up, np.zeros(500, int), up, np.random.default_rng(5)),
+        got[key] = (reflected_radiance(dl, pts, up, np.zeros(500, int), up, np.random.default_rng(5)),
                     dl.irradiance(pts, up, np.random.default_rng(6), samples_per_light=2))
         tr.close()
     for a, b in zip(got["open"], got["shadowless"]):
@@ -540,7 +541,7 @@ def test_a_linked_lamp_lights_only_its_receivers_and_only_its_blockers_shadow_it
     def estimates(sc, points, groups):
         tr = RayTracer(sc)
         dl = DirectLighting(sc, tr, light_tree=tree)
-        got = (dl.reflected_radiance(points, up, np.zeros(400, int), up, np.random.default_rng(5), receivers=groups),
+        got = (reflected_radiance(dl, points, up, np.zeros(400, int), up, np.random.default_rng(5), receivers=groups),
                dl.irradiance(points, up, np.random.default_rng(6), samples_per_light=2, receivers=groups))
         tr.close()
         return got

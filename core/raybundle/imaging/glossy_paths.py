@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..lights.direct import DirectLighting
+from ..lights.reflected_direct import reflected_radiance
 from ..scene.transmission import mirror_probability, pass_probability, scatter, solver_share
 
 
@@ -48,7 +49,7 @@ class GlossyEyePaths:
         iterate ``E f(t, w)`` or, while fewer than ``glossy_gather_depth`` glossy
         bounces were traced, one more lobe-sampled ray (the per-iteration term is
         what makes glossy-to-glossy paths spiky).  Direct light of the first-shot
-        lights is left out of what the rays see: :meth:`DirectLighting.reflected_radiance`
+        lights is left out of what the rays see: :func:`~raybundle.lights.reflected_direct.reflected_radiance`
         and the first shot count it.  ``u`` (len(idx), 2): uniforms for the first
         lobe sample.  ``world_samples`` K > 0: the caller took K world samples for these lobes
         (:meth:`WorldLight.irradiance` with ``lobe``), weighted against the path's first ray with
@@ -174,7 +175,7 @@ class GlossyEyePaths:
                 # the lamps in the glossy lobe of a hit the path goes on from: light samples, MIS-weighted
                 # against the next ray (E1 f(w_mean, w) spiked where a sharp lobe lined up with w_mean)
                 hp = pts[live[gi]] + t[gi, None] * w_i[live[gi]]
-                lit = self.direct.reflected_radiance(hp, hit_n[gi], hit_m[gi], w_back[gi], self.rng,
+                lit = reflected_radiance(self.direct, hp, hit_n[gi], hit_m[gi], w_back[gi], self.rng,
                                                      self.settings.light_samples, mis=np.ones(len(gi), bool),
                                                      diffuse_scale=np.zeros((len(gi), 3)),
                                                      receivers=sc.link_groups(tri[gi]))

@@ -1,7 +1,7 @@
 """Direct light per pixel: the first-shot lights and the world at the points the eye sees.
 
 Every image pass estimates, at each visible point, the light of the first-shot lights with
-shadow rays (:meth:`~raybundle.lights.direct.DirectLighting.reflected_radiance`), what a
+shadow rays (:func:`~raybundle.lights.reflected_direct.reflected_radiance`), what a
 translucent surface lets through from its far side, and the world's light on the diffuse
 lobe where the world is sampled per pixel.
 
@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..lights.direct import ALL_LIGHTS
+from ..lights.reflected_direct import reflected_radiance
 from ..tracing.sampling import Stream, stream
 
 
@@ -89,7 +90,7 @@ class PixelLight:
             u, sequence = None, (self._light_shift[pixels[hf]], np.full(len(hf), passes * more * n_s))
         else:
             u, sequence = u_light, (self.rng.random((len(hf), 3)), None)
-        value = direct.reflected_radiance(
+        value = reflected_radiance(direct, 
             g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], u, n_s,
             mis=mis, diffuse_scale=self.scene.albedo_at(g.triangle[hf], g.point[hf]), shadow_flags=f,
             analytic=np.full(len(hf), ALL_LIGHTS) if start else flags[:, 0],

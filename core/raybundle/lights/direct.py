@@ -9,7 +9,7 @@ solves ``L~ = (Le_r + L1) + T L~`` with ``L1 = T Le_s`` as extra emission.
 :class:`DirectLighting` holds the first-shot lights of a scene
 (:mod:`raybundle.lights.sources`) and estimates, per pixel at the visible point, the
 reflected direct radiance with fresh shadow rays every image pass, so shadows and glossy
-highlights are sharp (:meth:`DirectLighting.reflected_radiance`); per patch, the first shot
+highlights are sharp (:func:`raybundle.lights.reflected_direct.reflected_radiance`); per patch, the first shot
 is :class:`raybundle.lights.first_shot.PatchFirstShot`.
 """
 from __future__ import annotations
@@ -17,23 +17,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..tracing.sampling import kronecker_alpha
-from ..util.arrays import ranges
 from .light_tree import build_light_tree
 from .polygon import light_polygon_irradiance
 from .sources import MeshLight, PointLight, ShapeLight, SunLight, sample_point_lights, small_emitters
 
 
-#: the golden ratio's fraction: lamp l's selection uniform is (u + l phi) mod 1
-_GOLDEN = 0.6180339887498949
-#: each light's offset of a point's Kronecker shift (reflected_radiance's ``penumbra``): light l
-#: adds l times this, mod 1 (the R_3 generators of the next dimensions)
-_LIGHT_OFFSET = kronecker_alpha(6)[3:]
 #: a light mask with every light's bit set (:func:`light_bits`)
 ALL_LIGHTS = np.uint64(0xFFFF_FFFF_FFFF_FFFF)
-#: :meth:`DirectLighting.reflected_radiance`'s stand-in light index for the light tree's samples
-TREE = -1
-
-
 def light_bits(n):
     """(n,) uint64: the bit of each of ``n`` lights in per-light masks (shadow flags), light
     ``l``'s bit ``min(l, 63)``: lights past the 64th share the last bit, which then stands
@@ -49,6 +39,13 @@ def may_light(light, points, normals):
     if isinstance(light, ShapeLight):
         ok &= (points - light.center) @ light.normal > 0
     return ok
+
+
+def seen_blocked(e, free):
+    """(N,) bool each: the sample reached its light (``e`` (N, 3), shadowed estimate);
+    it faced the light but was blocked (``free``, the unshadowed estimate)."""
+    seen = np.any(e > 0, axis=1)
+    return seen, np.any(free > 0, axis=1) & ~seen
 
 
 class TreeLights:
@@ -116,7 +113,7 @@ class DirectLighting:
                                        int(sl.link[k]))
                               for k in range(len(sl)) if np.any(sl.irradiance[k] > 0)]
         #: lamps and emitting triangles chosen by their contribution (:mod:`raybundle.lights.light_tree`)
-        #: in :meth:`reflected_radiance`, or None: each light sampled on its own
+        #: in :func:`~raybundle.lights.reflected_direct.reflected_radiance`, or None: each light sampled on its own
         self.tree = None
         lights = self.light_list()
         #: per light of :meth:`light_list`, whether anything blocks its direct light (Cast Shadow)
@@ -266,233 +263,16 @@ class DirectLighting:
         return [TreeLights(self)] + [lights[li] for li in self.suns]
 
     def sampled_apart(self):
-        """The light masks (:func:`light_bits`) sampled apart in :meth:`reflected_radiance`:
+        """The light masks (:func:`light_bits`) sampled apart in :func:`~raybundle.lights.reflected_direct.reflected_radiance`:
         one per light, or with a light tree, the tree's lights as one and each sun."""
         bits = light_bits(self.n_lights)
         return list(bits) if self.tree is None else [self.tree_mask] + [bits[li] for li in self.suns]
 
-    @staticmethod
-    def _seen_blocked(e, free):
-        """(N,) bool each: the sample reached its light (``e`` (N, 3), shadowed estimate);
-        it faced the light but was blocked (``free``, the unshadowed estimate)."""
-        seen = np.any(e > 0, axis=1)
-        return seen, np.any(free > 0, axis=1) & ~seen
-
-    #: :meth:`_selection`: a lamp giving at least this share of all lamps' unoccluded light at a
-    #: point is always taken there; one giving less, with probability share / SELECT_SHARE ...
-    SELECT_SHARE = 0.05
-    #: ... but at least this (a rough estimate of the share must not make rare, heavy samples)
-    SELECT_MIN = 1.0 / 16.0
-    #: lamps chosen only up to this many (the estimates cost N x lamps; a light tree is the way beyond)
-    SELECT_MAX_LIGHTS = 64
-
-    def _selection(self, points, normals, reach, exact):
-        """Per light, the probability (one value per point in ``reach[l]``) that it is taken at
-        the points: ``clip(c_l / (SELECT_SHARE C), SELECT_MIN, 1)``, ``c_l`` the lamp's
-        unoccluded irradiance at the point (luminance: the exact ``Le I(x)`` where ``exact``
-        holds it, else :meth:`~raybundle.lights.sources.ShapeLight.selection_estimate`, an upper
-        bound for area lamps, a guess for the others) and
-        ``C`` the sum over the lamps; None (every lamp always taken) for a single lamp or
-        more than :data:`SELECT_MAX_LIGHTS`.  Unbiased whatever the estimates: each lamp's
-        samples are weighted 1 / probability."""
-        lights = self.light_list()
-        if not 1 < len(lights) <= self.SELECT_MAX_LIGHTS:
-            return None
-        c = np.zeros((len(points), len(lights)))
-        for li, light in enumerate(lights):
-            base = reach[li]
-            if exact[li] is not None:
-                here, irr, ok = exact[li]
-                c[here[ok], li] = irr[ok] * float(np.mean(light.radiance))
-                base = np.setdiff1d(base, here[ok], assume_unique=True)
-            if len(base) == 0:
-                continue
-            c[base, li] = light.selection_estimate(points[base], normals[base])
-        total = c.sum(axis=1, keepdims=True)
-        chance = np.clip(c / np.maximum(self.SELECT_SHARE * total, 1e-300), self.SELECT_MIN, 1.0)
-        return [chance[reach[li], li] for li in range(len(lights))]
-
     def samples_per_pass(self, samples_per_light=1):
-        """How many light samples :meth:`reflected_radiance` draws per point."""
+        """How many light samples :func:`~raybundle.lights.reflected_direct.reflected_radiance` draws per point."""
         if self.tree is not None:
             return samples_per_light + len(self.suns)
         return samples_per_light * len(self.area_lights) + len(self.point_lights)
-
-    def reflected_radiance(self, points, normals, mats, w_out, u, samples_per_light=1, mis=None, diffuse_scale=None,
-                           shadow_flags=None, analytic=False, penumbra=None, select=None, receivers=None):
-        """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
-
-        Unbiased estimate with ``samples_per_light`` shadow rays per area light
-        (one per point light or sun): ``sum_l mean_s e_l cos_x f(w_travel, w_out) V``.
-        ``u``: uniforms (N, K, 3) with K = :meth:`samples_per_pass`, a Generator, or None
-        where ``penumbra`` gives every sample's sequence (its ``first``).
-        ``mis`` (N,) bool: points whose glossy lobe also gets one lobe-sampled ray that
-        counts the mesh lights it meets (:meth:`mis_weight`); the glossy part of their
-        mesh-light samples is weighted by ``w_l = (n p_l)^2 / ((n p_l)^2 + p_g^2)`` (power
-        heuristic; n = ``samples_per_light``, p_l and p_g the light's and the lobe's
-        densities of the sampled direction), so a sharp lobe reflecting a lamp is found by
-        the lobe's ray, not by rare light samples with a huge BRDF value.
-        ``diffuse_scale`` (N, 3): texture modulation of the diffuse reflectance.
-
-        Per-light masks are uint64 bit sets, light ``l``'s bit ``min(l, 63)``
-        (:func:`light_bits`).  ``shadow_flags`` (N, 2) uint64, updated in place: in column 0
-        the lights a sample reached, in column 1 those a sample facing them found blocked.
-
-        ``penumbra`` ``(mask (N,) uint64, count (int or (N,) ints), shift (N, 3), first (N,) int or
-        None)`` or None: the lights in a point's ``mask`` take ``count`` times as many samples there, on
-        the randomly shifted Kronecker (R_3) sequence ``(shift + l beta + j alpha) mod 1`` of
-        light ``l`` (``beta`` a fixed irrational offset, so each light has a shift of its own),
-        in place of those of ``u``: the penumbra samples cost rays only for the lights whose
-        shadow edge crosses the point.  Without ``first``, ``j = c n + s`` for the s-th of the
-        light's n = ``samples_per_light`` samples in its c-th set; with ``first`` every light
-        takes every sample from its sequence, from index ``first + c n + s``: a caller that
-        keeps ``shift`` per pixel and advances ``first`` by ``count n`` every pass continues
-        one sequence per pixel and light over the passes, so a penumbra's shadow rays stay
-        stratified over the light across passes, not only within one.
-
-        With a light tree (:attr:`tree`) its ``samples_per_light`` samples per point
-        (:meth:`tree_sample`, penumbra samples as for one light, each sample flagging its own
-        lamp's bit) stand for every lamp, the suns one each; the control variate and ``select``
-        are then not used.
-
-        ``select`` (N,) uniforms or None: lamps chosen by their contribution
-        (:meth:`_selection`): a lamp whose unoccluded contribution at a point is a small share of
-        all lamps' there is taken with probability ``P < 1`` (its samples weighted 1 / P), the
-        decision ``(select + l phi) mod 1 < P`` for lamp ``l`` (phi the golden ratio's fraction).
-        A lamp taken by chance at a point (``P < 1``: a small share of the light there) takes no
-        penumbra samples there.
-
-        ``receivers`` (N,) or None: the points' link groups; a linked light lights only those it
-        reaches (:mod:`raybundle.scene.linking`).
-
-        ``analytic`` (bool, (N,) bool, or (N,) uint64 mask of lights): the diffuse lobe of
-        polygonal lights (:func:`light_polygon_irradiance`) with the exact unoccluded irradiance as a control variate,
-        ``f_d (Le I(x) - mean_s (e_s - e_s V_s))``, ``e_s`` the sample's unshadowed
-        estimate: still unbiased, and exact wherever the light is wholly seen or wholly
-        hidden from the point's upper side (only which samples are blocked is random,
-        not where on the light they land: the Cornell back wall's per-pass noise).  In
-        an umbra the plain estimate is exact (0) and the control variate is not, so a
-        caller that knows where earlier samples were all blocked passes a mask.
-        """
-        n = len(points)
-        out = np.zeros((n, 3))
-        n_k = self.samples_per_pass(samples_per_light)
-        if isinstance(u, np.random.Generator):
-            u = u.random((n, n_k, 3))
-        mt = self.scene.materials
-        lights = self.light_list()
-        bits = light_bits(len(lights))
-        an = np.asarray(analytic)
-        an = np.where(np.broadcast_to(an, n), ALL_LIGHTS, np.uint64(0)) if an.dtype == bool else an.astype(np.uint64)
-        cv = np.nonzero(an)[0] if any(isinstance(light, (MeshLight, ShapeLight)) for light in lights) else []
-        if len(cv):
-            f_d_all = np.zeros((n, 3))     # f_d does not depend on the incoming direction
-            f_d_all[cv] = mt.brdf(mats[cv], normals[cv], -normals[cv], w_out[cv], glossy=False,
-                                  diffuse_scale=None if diffuse_scale is None else diffuse_scale[cv])
-        # per light: the points it can reach (the rest get nothing, and no shadow flag) and,
-        # where the control variate applies, its exact unoccluded irradiance there
-        # with a light tree, the tree's samples (TREE) and the suns on their own
-        own = range(len(lights)) if self.tree is None else self.suns
-        reach, exact = [None] * len(lights), [None] * len(lights)
-        for li in own:
-            light = lights[li]
-            base = np.nonzero(may_light(light, points, normals))[0]
-            if self.linking is not None and receivers is not None:
-                base = base[self.linking.receives[self.light_link[li], receivers[base]]]
-            here = base[(an[base] & bits[li]) != 0] if len(cv) and isinstance(light, (MeshLight, ShapeLight)) else []
-            ex = light_polygon_irradiance(light, points[here], normals[here]) if len(here) else None
-            reach[li] = base
-            exact[li] = None if ex is None else (here, ex[0], ex[1])
-        chance = self._selection(points, normals, reach, exact) if select is not None and self.tree is None else None
-        alpha = kronecker_alpha(3)
-        k = 0
-        for li in ([TREE] if self.tree is not None else []) + list(own):
-            light = lights[li] if li != TREE else None
-            bit = bits[li] if li != TREE else self.tree_mask
-            polygonal = li == TREE or isinstance(light, (MeshLight, ShapeLight))
-            n_s = samples_per_light if polygonal else 1
-            base, picked = (reach[li], 1.0) if li != TREE else (np.arange(n), 1.0)
-            if chance is not None:                 # the lamps chosen by their contribution
-                c_l = chance[li]
-                if mis is not None and isinstance(light, (MeshLight, ShapeLight)):
-                    c_l = np.where(mis[base], 1.0, c_l)    # the lobe's MIS weight assumes it is always taken
-                keep = (select[base] + li * _GOLDEN) % 1.0 < c_l
-                base, picked = base[keep], 1.0 / c_l[keep]
-            # the samples' points (repeated where the light takes penumbra samples) and weights
-            if penumbra is None:
-                pt, copy = base, None
-                weight = np.broadcast_to(picked / n_s, len(pt))[:, None]
-            else:
-                mask, more, shift, first = penumbra
-                on = (mask[base] & bit) != 0
-                if chance is not None:      # a lamp taken by chance gives little here: no penumbra samples
-                    on &= picked <= 1.0
-                reps = np.where(on, more[base] if np.ndim(more) else int(more), 1)
-                pt = np.repeat(base, reps)
-                copy = ranges(0, reps)
-                kron = np.nonzero(np.repeat(on, reps))[0] if first is None else np.arange(len(pt))
-                start = copy[kron] * n_s + (0 if first is None else first[pt[kron]])
-                light_shift = shift[pt[kron]] + (li if li != TREE else len(lights)) * _LIGHT_OFFSET
-                weight = np.repeat(picked / (n_s * reps), reps)[:, None]
-            p, nrm, m, wo = points[pt], normals[pt], mats[pt], w_out[pt]
-            scale = None if diffuse_scale is None else diffuse_scale[pt]
-            acc = np.zeros((len(pt), 3))
-            f_d = None
-            if li != TREE and exact[li] is not None:
-                here, irr, ok = exact[li]
-                out[here] += f_d_all[here] * (ok * irr)[:, None] * np.asarray(light.radiance, float)
-                taken = np.zeros(n, bool)
-                taken[here[ok]] = True
-                f_d = f_d_all[pt] * taken[pt, None]
-            for s in range(n_s):
-                uk = u[pt, k] if u is not None else np.empty((len(pt), 3))
-                if copy is not None and len(kron):
-                    uk[kron] = (light_shift + (start + s)[:, None] * alpha) % 1.0
-                if li == TREE:
-                    y, e, em = self.tree_sample(p, nrm, uk)
-                    ids = np.where(em >= 0, self.tree.light[np.maximum(em, 0)], -1)
-                else:
-                    y, e = light.sample(p, uk)
-                    ids = li
-                rec = None if receivers is None else receivers[pt]
-                if shadow_flags is None and f_d is None:
-                    e, travel, cos_x = self.shadowed(p, nrm, y, e, lights=ids, receivers=rec)
-                    live = np.any(e > 0, axis=1)
-                else:
-                    e, travel, cos_x, free = self.shadowed(p, nrm, y, e, unshadowed=True, lights=ids, receivers=rec)
-                    live, blocked = self._seen_blocked(e, free)
-                    if shadow_flags is not None and li == TREE:     # each sample its own light's bit
-                        lb = bits[self.tree.light[np.maximum(em, 0)]]
-                        np.bitwise_or.at(shadow_flags, (pt[live], 0), lb[live])
-                        np.bitwise_or.at(shadow_flags, (pt[blocked], 1), lb[blocked])
-                    elif shadow_flags is not None:
-                        shadow_flags[pt[live], 0] |= bit      # repeated points all write the same value
-                        shadow_flags[pt[blocked], 1] |= bit
-                    if f_d is not None:
-                        acc -= weight * f_d * (free - e)
-                k += 1
-                if live.any():
-                    f = mt.brdf(m[live], nrm[live], travel[live], wo[live],
-                                diffuse_scale=None if scale is None else scale[live])
-                    if f_d is not None:                # the control variate took the diffuse part
-                        f -= f_d[live]
-                    if mis is not None and polygonal:
-                        sel = np.nonzero(mis[pt[live]])[0]
-                        if li == TREE:                 # not the point lights, which no ray meets
-                            sel = sel[np.any(self.tree_radiance[em[live][sel]] > 0, axis=1)]
-                        if len(sel):
-                            i = np.nonzero(live)[0][sel]
-                            le = light.radiance if li != TREE else self.tree_radiance[em[i]]
-                            # e = Le cos_x / p_l for an unblocked sample (MeshLight.sample; the
-                            # tree's probability included)
-                            p_l = np.mean(le, axis=-1) * cos_x[i] / np.mean(e[i], axis=1)
-                            p_g = mt.glossy_pdf(m[i], nrm[i], -travel[i], wo[i])
-                            w_l = 1.0 - self.mis_weight(p_g, n_s * p_l)
-                            f[sel] -= (1.0 - w_l)[:, None] * mt.brdf(m[i], nrm[i], travel[i], wo[i], diffuse=False)
-                    acc[live] += weight[live] * e[live] * f
-            for c in range(3):
-                out[:, c] += np.bincount(pt, acc[:, c], minlength=n)
-        return out
 
     def irradiance(self, points, normals, rng, samples_per_light=16, penumbra_samples=None, receivers=None):
         """Direct irradiance (N, 3) [W/m^2] of the first-shot lights at surface points
@@ -535,7 +315,7 @@ class DirectLighting:
                                                           crossed=shade, receivers=rec)
                     seen += e
                     total += free
-                    reached, blocked = self._seen_blocked(e, free)
+                    reached, blocked = seen_blocked(e, free)
                     lit |= reached
                     shade |= blocked
                 return seen, total, lit & shade
@@ -578,7 +358,8 @@ class DirectLighting:
     def lobe_hits_light(self, origins, mats, normals, w_out, w_in, triangles, hits, samples_per_light=1,
                         distance=None, mirrored=None, receivers=None):
         """Emitted radiance (N, 3) of first-shot mesh lights met by lobe-sampled rays,
-        MIS-weighted against light sampling (:meth:`reflected_radiance` with ``mis``):
+        MIS-weighted against light sampling (:func:`~raybundle.lights.reflected_direct.reflected_radiance`,
+        ``mis``):
         ``Le w_g``, ``w_g = p_g^2 / (p_g^2 + (n p_l)^2)``.  ``origins``, ``normals``,
         ``w_out``, ``w_in`` (N, 3) at the surface the rays leave along ``w_in``;
         ``triangles`` (N,) the triangles met (-1 none) at points ``hits`` (N, 3).  With

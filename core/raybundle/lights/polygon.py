@@ -115,7 +115,7 @@ def _cut_outline_irradiance(x, n, edges, m):
 
 def light_polygon_irradiance(light, points, normals):
     """``I(x)`` (N,) of :func:`polygon_irradiance` for a polygonal light seen from its
-    emitting side (a :class:`MeshLight` of at most :data:`MAX_PLANES` planar parts, a
+    emitting side (a :class:`MeshLight` of at most :data:`~raybundle.lights.light_planes.MAX_PLANES` planar parts, a
     rectangular :class:`ShapeLight`), and (N,) bool: where it is exact.  ``None`` for other lights.
 
     A mesh light is integrated plane by plane: by its outline

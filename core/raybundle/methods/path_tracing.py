@@ -10,7 +10,7 @@ with three unbiased pieces:
 
 * **next-event estimation**: the first-shot lights (small mesh emitters, point, spot,
   area and sun lights; :class:`~raybundle.lights.direct.DirectLighting`) by one light sample per
-  light, :meth:`~raybundle.lights.direct.DirectLighting.reflected_radiance`;
+  light, :func:`~raybundle.lights.reflected_direct.reflected_radiance`;
 * **BRDF importance sampling** of the next direction: the diffuse lobe (cosine-distributed)
   with probability ``a_d / (a_d + a_g)``, else the glossy lobes
   (:meth:`~raybundle.scene.materials.MaterialTable.sample_glossy`), ``a_d`` and ``a_g`` the
@@ -37,6 +37,7 @@ import time
 import numpy as np
 
 from ..imaging.progressive import ImagePasses, ProgressiveImage
+from ..lights.reflected_direct import reflected_radiance
 from ..tracing.sampling import Stream, frames_from_normals, halton_permutations, halton_points, stream
 from .base import Method, SolverStats
 
@@ -168,7 +169,7 @@ class PathTracer(ProgressiveImage, Method):
             u_light = u.take(pix, 3 * self._k_light).reshape(len(pix), self._k_light, 3)
             if direct.n_lights:
                 before = direct.rays
-                out[row] += throughput * direct.reflected_radiance(x, nrm, mat, w_out, u_light, 1, mis=glossy,
+                out[row] += throughput * reflected_radiance(direct, x, nrm, mat, w_out, u_light, 1, mis=glossy,
                                                                    diffuse_scale=tex, receivers=sc.link_groups(tri))
                 self.image_rays += direct.rays - before
             # the next direction: one lobe, chosen by its albedo
