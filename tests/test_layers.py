@@ -77,8 +77,6 @@ STILL_LONG = {
     "core/raybundle/app/bench.py:run_bench": 94,
     "core/raybundle/imaging/glossy_paths.py:GlossyEyePaths.trace": 103,
     "core/raybundle/methods/path_tracing.py:PathTracer.trace": 84,
-    "core/raybundle/methods/patch_solution.py": 620,
-    "core/raybundle/methods/patch_solution.py:PatchSolution.__init__": 109,
     "core/raybundle/scene/build.py:build_scene": 95,
     "raybundle_addon/__main__.py:_main": 98,
     "raybundle_addon/translation/export.py": 853,

@@ -5,57 +5,14 @@ drive any of them by name (:data:`raybundle.methods.registry.SOLVERS`): ``step()
 ``incoming`` / ``receive_direction`` describe the current iterate,
 ``mean_incoming`` the running average, and ``stats`` counts the work.
 
-Stochastic iteration with ray bundles (thesis 3.3, bidirectional form)
---------------------------------------------------------------------
-One RGB variable per patch side (:mod:`raybundle.scene.model`: one per one-sided
-patch, two per two-sided patch), the *incoming* radiance ``E_i`` (an irradiance:
-the cosine-weighted integral of the incoming radiance estimated from one
-direction, [W/m^2]).  Iteration n draws a direction d uniformly on the sphere,
-finds with one bundle (:mod:`raybundle.tracing.visibility`) every pair of mutually
-visible patches along +-d, and transfers::
-
-    S_j   = Le_r,j(s_j) + L1_j(s_j) + E_j^{n-1} f_j(t_j^{n-1}, s_j)     (radiance sent)
-    E_i^n = (2 pi / A_i) sum_j S_j P(i, j, d)                             [W/m^2]
-
-where ``i`` and ``j`` are sides (normal ``n`` of the side), the world is one
-more sender ``j`` for the first and last hits of each bundle line, sending the
-radiance ``L_w(-d)`` along +d and ``L_w(d)`` along -d (:mod:`raybundle.scene.world`:
-one look-up per direction for the whole bundle), ``s_j = sign(n_j.d) d`` is the
-direction side j sends into,
-``t_i = -sign(n_i.d) d`` the travel direction patch i receives from (uniform
-on i's hemisphere, hence the 2 pi = 1/pdf), ``P(i,j,d) = A(i,j,d) cos_i`` the
-projected area of the rays linking them and ``L1`` the incoming first shot of
-the small lights (:mod:`raybundle.lights.sources`).  The iterate
-``L_n,i(w) = Le_i(w) + E_i^n f_i(t_i, w)`` is an unbiased random operator
-applied to ``L_{n-1}``; the *image is the running average* of the iterates.
-
-Diffuse-only scenes take the view-independent path: with ``f = kd/pi`` the
-sent radiance needs no direction, and the image needs only the running
-average of E.
-
-An iteration may use K directions (``directions_per_step``, default 16): the
-diffuse lobe receives the mean of their K transfers (still an unbiased random
-operator), a glossy side keeps one of them drawn at random; the K bundles go
-to Embree as one threaded query and everything else per iteration (first-shot
-refinement, sent radiance of diffuse sides) is shared, which on the Cornell box measured
-more directions per second and a lower image error at a fixed time than one direction per
-iteration (docs/benchmarks.md, 'Measured choices behind the defaults').
-The first shot's glossy reflection leaves glossy sides by lobe-sampled rays
-(:mod:`raybundle.lights.caustics`), not through the bundles.
-
-Parameters: bundle resolution (rays per side of the grid), the random sequence
-that draws the directions (``stratified`` (default), ``prng`` or ``pi-powers``;
-``halton`` converges to a wrong answer, thesis 1.2).  The grid's random offset
-and rotation come from a separate PRNG stream.
-Failure modes: glossy lobes with low roughness (fireflies, blocky reflections:
-radiance is constant per patch), albedo near 1 (slow convergence), patches
-much smaller than the bundle cell (a line meets them rarely, and then with cell / area times
-their share: they gather their light by rays of their own instead, :meth:`_gather_tiny`).
+The transfer along bundle lines (:meth:`PatchSolution.transfer`), its equations, parameters
+and failure modes are those of stochastic iteration (:mod:`raybundle.methods.stochastic_iteration`),
+which every iterating method applies; sides much smaller than a bundle cell gather their light by
+rays of their own instead (:meth:`PatchSolution._gather_tiny`).
 """
 from __future__ import annotations
 
 import abc
-import time
 
 import numpy as np
 
@@ -63,8 +20,9 @@ from ..lights.caustics import CausticShot
 from ..lights.first_shot import PatchFirstShot
 from ..lights.world_light import GUIDE_CELLS, guide_cell
 from ..patches.reconstruction import LinearReconstruction
+from ..patches.side_points import SidePoints
 from ..scene.transmission import solver_share
-from ..tracing.sampling import (Stream, cosine_directions, frames_from_normals, points_on_triangles, stream,
+from ..tracing.sampling import (Stream, cosine_directions, frames_from_normals, stream,
                                 uniform_sphere, uniform_sphere_pdf)
 from .base import Method, SolverStats
 
@@ -95,6 +53,18 @@ class PatchSolution(Method, abc.ABC):
         if int(directions_per_step) < 1:
             raise ValueError("directions_per_step must be at least 1")
         self.directions_per_step = int(directions_per_step)
+        if int(glossy_send_rays) < 1:
+            raise ValueError("glossy_send_rays must be at least 1")
+        self.glossy_send_rays = int(glossy_send_rays)
+        open_area = self._set_sides(scene, tracer, seed)
+        self._set_glossy_sides(scene.materials, self.patch_material)
+        self._set_shots(scene, tracer, direct, seed, open_area, caustics)
+        self._set_iterate()
+
+    def _set_sides(self, scene, tracer, seed):
+        """The sides' materials, normals, receiving areas (less what solids bury, cut-outs and
+        glass do not keep) and diffuse reflectance; returns the sides' open area, which the
+        first shot averages over."""
         mats = scene.materials
         # the unknowns are patch sides: normals, materials and areas are per side
         pm = scene.side_material
@@ -127,15 +97,20 @@ class PatchSolution(Method, abc.ABC):
         # translucent sides: kt / pi (S, 3) of the light their patch's other side receives
         self.translucent_sides = np.nonzero(np.any(mats.translucent[pm] > 0, axis=1) & (scene.side_opposite >= 0))[0]
         self.kt_over_pi = mats.translucent[pm[self.translucent_sides]] / np.pi
+        return open_area
+
+    def _set_glossy_sides(self, mats, pm):
+        """The glossy sides, which of them send their lobe's light by gather rays, the mean
+        albedo and the iterations left out of the running average."""
         self.glossy_mask = mats.is_glossy[pm]
         self.layered_sides = np.nonzero(mats.has_layer[pm])[0]      # diffuse lobe under a specular layer
         self.glossy_patches = np.nonzero(self.glossy_mask)[0]
         #: per glossy side: its lobe's light is sent by gather rays (a sharp or strong lobe)
         #: rather than from the iterate (:meth:`glossy_sent_radiance`)
         self.traced_lobe = self.sharp_lobes(mats, pm[self.glossy_patches])
-        traced_mask = np.zeros(scene.n_sides, bool)
+        traced_mask = np.zeros(self.scene.n_sides, bool)
         traced_mask[self.glossy_patches[self.traced_lobe]] = True
-        self._glossy_points = _SidePoints(scene, traced_mask)    # for glossy_sent_radiance
+        self._glossy_points = SidePoints(self.scene, traced_mask)    # for glossy_sent_radiance
         gpm = pm[self.glossy_patches]
         rho_g = mats.albedo(gpm, np.full(len(gpm), 0.7), diffuse=False).max(axis=1)
         rho_d = np.pi * self.kd_over_pi[self.glossy_patches].max(axis=1)
@@ -155,9 +130,10 @@ class PatchSolution(Method, abc.ABC):
         #: iterations left out of the running average: until the start-up transient,
         #: about mean_albedo^n, is below 1% (at least BURN_IN, at most 1,000)
         self.burn_in = int(np.clip(np.ceil(np.log(0.01) / np.log(max(self.mean_albedo, 1e-3))), self.BURN_IN, 1000))
-        if int(glossy_send_rays) < 1:
-            raise ValueError("glossy_send_rays must be at least 1")
-        self.glossy_send_rays = int(glossy_send_rays)
+
+    def _set_shots(self, scene, tracer, direct, seed, open_area, caustics):
+        """The first shot of the small lights and its caustic shot, and how many rays refine
+        each per iteration."""
         # incoming first shot, refined by a few shadow rays every iteration
         self.first_shot = PatchFirstShot(direct, stream(seed, Stream.FIRST_SHOT), receiving_area=open_area)
         self.grid_rng = stream(seed, Stream.BUNDLE_GRID)
@@ -172,14 +148,17 @@ class PatchSolution(Method, abc.ABC):
             self.caustic = None
         self.caustic_refine = (max(1024, len(np.unique(scene.tside_side[self.caustic.tsides])))
                                if self.caustic is not None else 0)
-        self.world = scene.world
+
+    def _set_iterate(self):
+        """The iterate, its running averages and the world's part of them, all zero."""
+        self.world = self.scene.world
         #: the method can keep the iterates' part that came straight from the world apart
         #: (a world that changes with direction and a step that keeps that average)
         self.world_direct = self.SEPARATES_WORLD_DIRECT and self.world.emits and not self.world.is_constant
         #: it does (:meth:`separate_world`): for an image that takes the world's direct light at
         #: its visible points (:class:`~raybundle.lights.world_light.WorldLight`, ``world_samples``)
         self.separates_world = False
-        n = scene.n_sides
+        n = self.scene.n_sides
         self._all_patches = np.arange(n)
         self.incoming = np.zeros((n, 3))
         self.glossy_incoming = self.incoming        # E_i(d_k) of glossy sides, received from t_i
@@ -361,7 +340,7 @@ class PatchSolution(Method, abc.ABC):
         n = len(self.area)
         if self._tiny is None and len(bundles):
             self._tiny = np.nonzero(self.area < bundles[0].cell_area / self.TINY_SIDE)[0]
-            self._tiny_points = _SidePoints(self.scene, np.isin(np.arange(n), self._tiny))
+            self._tiny_points = SidePoints(self.scene, np.isin(np.arange(n), self._tiny))
         # diffuse senders send the same radiance into every direction they face (a bundle
         # pairs only sides that face each other): one evaluation serves all K bundles, and
         # only glossy sides are evaluated per direction
@@ -597,24 +576,3 @@ def auto_bundle_resolution(scene, lo=32, hi=512):
     time per iteration; coarser ones leave more patches without a ray."""
     _, r = scene.bounding_sphere
     return int(np.clip(np.ceil(2 * r / np.sqrt(scene.patch_area.mean())), lo, hi))
-
-
-class _SidePoints:
-    """Uniform points of chosen sides: their tsides with an area CDF per side (side id + fraction)."""
-
-    def __init__(self, scene, chosen):
-        """``chosen`` (S,) bool: the sides to draw points of."""
-        self.scene = scene
-        ts = np.nonzero(chosen[scene.tside_side])[0]
-        self.tsides = ts = ts[np.argsort(scene.tside_side[ts], kind="stable")]
-        a = scene.triangle_area[scene.tside_triangle[ts]]
-        own = scene.tside_side[ts]
-        total = np.bincount(own, a, minlength=scene.n_sides)
-        self.cdf = own + (np.cumsum(a) - (np.cumsum(total) - total)[own]) / total[own]
-
-    def draw(self, sides, u):
-        """Points (N, 3) uniform on ``sides`` (N,) from uniforms ``u`` (N, 3), and the normals
-        (N, 3) of the triangles they lie on (a cluster may be curved)."""
-        sc = self.scene
-        ts = self.tsides[np.minimum(np.searchsorted(self.cdf, sides + u[:, 0], side="right"), len(self.tsides) - 1)]
-        return points_on_triangles(sc.triangle_corners[sc.tside_triangle[ts]], u[:, 1], u[:, 2]), sc.tside_normal[ts]

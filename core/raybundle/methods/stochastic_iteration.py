@@ -2,8 +2,55 @@
 
 Each step applies one random transport operator to the previous iterate
 (:meth:`~raybundle.methods.patch_solution.PatchSolution.transfer`: ``directions_per_step``
-bundles), and the image is the running average of the iterates.  The patch solution, the
-transfer's equations and its failure modes are :mod:`raybundle.methods.patch_solution`'s.
+bundles), and the image is the running average of the iterates.  The patch solution itself is
+:mod:`raybundle.methods.patch_solution`'s.
+
+Stochastic iteration with ray bundles (thesis 3.3, bidirectional form)
+--------------------------------------------------------------------
+One RGB variable per patch side (:mod:`raybundle.scene.model`: one per one-sided
+patch, two per two-sided patch), the *incoming* radiance ``E_i`` (an irradiance:
+the cosine-weighted integral of the incoming radiance estimated from one
+direction, [W/m^2]).  Iteration n draws a direction d uniformly on the sphere,
+finds with one bundle (:mod:`raybundle.tracing.visibility`) every pair of mutually
+visible patches along +-d, and transfers::
+
+    S_j   = Le_r,j(s_j) + L1_j(s_j) + E_j^{n-1} f_j(t_j^{n-1}, s_j)     (radiance sent)
+    E_i^n = (2 pi / A_i) sum_j S_j P(i, j, d)                             [W/m^2]
+
+where ``i`` and ``j`` are sides (normal ``n`` of the side), the world is one
+more sender ``j`` for the first and last hits of each bundle line, sending the
+radiance ``L_w(-d)`` along +d and ``L_w(d)`` along -d (:mod:`raybundle.scene.world`:
+one look-up per direction for the whole bundle), ``s_j = sign(n_j.d) d`` is the
+direction side j sends into,
+``t_i = -sign(n_i.d) d`` the travel direction patch i receives from (uniform
+on i's hemisphere, hence the 2 pi = 1/pdf), ``P(i,j,d) = A(i,j,d) cos_i`` the
+projected area of the rays linking them and ``L1`` the incoming first shot of
+the small lights (:mod:`raybundle.lights.sources`).  The iterate
+``L_n,i(w) = Le_i(w) + E_i^n f_i(t_i, w)`` is an unbiased random operator
+applied to ``L_{n-1}``; the *image is the running average* of the iterates.
+
+Diffuse-only scenes take the view-independent path: with ``f = kd/pi`` the
+sent radiance needs no direction, and the image needs only the running
+average of E.
+
+An iteration may use K directions (``directions_per_step``, default 16): the
+diffuse lobe receives the mean of their K transfers (still an unbiased random
+operator), a glossy side keeps one of them drawn at random; the K bundles go
+to Embree as one threaded query and everything else per iteration (first-shot
+refinement, sent radiance of diffuse sides) is shared, which on the Cornell box measured
+more directions per second and a lower image error at a fixed time than one direction per
+iteration (docs/benchmarks.md, 'Measured choices behind the defaults').
+The first shot's glossy reflection leaves glossy sides by lobe-sampled rays
+(:mod:`raybundle.lights.caustics`), not through the bundles.
+
+Parameters: bundle resolution (rays per side of the grid), the random sequence
+that draws the directions (``stratified`` (default), ``prng`` or ``pi-powers``;
+``halton`` converges to a wrong answer, thesis 1.2).  The grid's random offset
+and rotation come from a separate PRNG stream.
+Failure modes: glossy lobes with low roughness (fireflies, blocky reflections:
+radiance is constant per patch), albedo near 1 (slow convergence), patches
+much smaller than the bundle cell (a line meets them rarely, and then with cell / area times
+their share: they gather their light by rays of their own instead, :meth:`~raybundle.methods.patch_solution.PatchSolution._gather_tiny`).
 """
 from __future__ import annotations
 
