@@ -52,7 +52,8 @@ import numpy as np
 
 from raybundle.imaging.run import RunLoop
 
-from .translation.export import corner_vertices, export_scene
+from .translation.export import export_scene
+from .translation.mesh_data import corner_vertices
 from .properties import LAST_BAKE, BakeSettings, run_options
 
 ATTRIBUTE = "RayBundle"

@@ -79,8 +79,6 @@ STILL_LONG = {
     "core/raybundle/methods/path_tracing.py:PathTracer.trace": 84,
     "core/raybundle/scene/build.py:build_scene": 95,
     "raybundle_addon/__main__.py:_main": 98,
-    "raybundle_addon/translation/export.py": 853,
-    "raybundle_addon/translation/export.py:_export_objects": 189,
     "raybundle_addon/translation/material_bake.py:main": 93,
     "raybundle_addon/translation/node_graphs.py:start_graph_bake": 81,
     "raybundle_addon/translation/shaders.py": 754,

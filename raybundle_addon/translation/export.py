@@ -15,30 +15,11 @@ Geometry
 Materials
     :mod:`.shaders` (node trees -> Lambert + GGX / Principled parameters).
 
-Lights (Blender's units, as Cycles converts them; ``blender.md`` §4.4)
-    Every light's color is ``color x 2**exposure`` (x ``temperature_color`` when
-    ``use_temperature`` is on), times:
-
-    ============  =====================================================================
-    point, spot   intensity ``I = P / (4 pi)`` [W/sr]; the spot cone (``spot_size``,
-                  ``spot_blend``) masks it and does **not** renormalise it
-    sun           irradiance ``E = strength`` [W/m^2] on a plane facing the sun
-    area          radiance ``L = P / (pi A)`` [W m^-2 sr^-1], one-sided (local -Z),
-                  ``A`` the world-space area: ``size x size_y`` (square, rectangle)
-                  or ``pi/4 size x size_y`` (disk, ellipse), object scale included
-    ============  =====================================================================
-
-    With ``normalize`` off (Cycles' "unnormalized" lights) the area factor is
-    dropped: area ``L = P / pi``, point/spot ``I = P r^2 / 4`` for radius r > 0, sun
-    ``E = strength x pi tan^2(angle / 2)`` for angle > 0.
-
-    A light's own node tree scales its color (:mod:`.light_nodes`).  With Cast Shadow off
-    (``use_shadow``) nothing blocks its direct light, as in Cycles; its light and shadow linking
-    is :mod:`.light_linking`'s.
-
-    A light portal (an area light with Portal on) guides Cycles' sampling of the world and
-    emits nothing: it is left out (noted once), since bundles reach the world through the
-    openings without it.
+Lights
+    :mod:`.lights` (Blender's units, as Cycles converts them), each light's node tree
+    :mod:`.light_nodes`, light and shadow linking :mod:`.light_linking`.  A light portal (an area
+    light with Portal on) guides Cycles' sampling of the world and emits nothing: it is left out
+    (noted once), since bundles reach the world through the openings without it.
 
 Materials override
     The view layer's Material Override replaces every object's materials, emitters'
@@ -61,16 +42,16 @@ Camera
 """
 from __future__ import annotations
 
-import math
 import time
-import warnings as _warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .light_linking import LinkSets
-from .light_nodes import light_node_factor
+from .lights import convert_light
+from .mesh_data import mesh_arrays, texture_uvs
 from .node_graphs import start_graph_bake
+from .scene_builder import SceneBuilder
 from .shaders import MaterialConverter
 from .world import camera_view, start_world_export
 
@@ -163,52 +144,6 @@ class _Warnings(list):
 
 
 # ------------------------------------------------------------------ geometry
-def _mesh_arrays(me):
-    """Local arrays of an evaluated mesh: positions (V, 3) f32, triangle corners
-    (T, 3) i32 (vertex ids), loops (T, 3) i32, triangle -> polygon (T,) i32,
-    polygon material index (P,) i32, corner normals (L, 3) f32 (Blender's shading normals:
-    smooth, auto smooth and custom normals; None where the API lacks them)."""
-    nv = len(me.vertices)
-    pos = np.empty(nv * 3, np.float32)
-    pa = me.attributes.get("position")
-    if pa is not None:
-        pa.data.foreach_get("vector", pos)
-    else:
-        me.vertices.foreach_get("co", pos)
-    nt = len(me.loop_triangles)
-    loops = np.empty(nt * 3, np.int32)
-    me.loop_triangles.foreach_get("loops", loops)
-    cv_attr = me.attributes.get(".corner_vert")
-    if cv_attr is not None:
-        cv = np.empty(len(me.loops), np.int32)
-        cv_attr.data.foreach_get("value", cv)
-        tri = cv[loops]
-    else:
-        tri = np.empty(nt * 3, np.int32)
-        me.loop_triangles.foreach_get("vertices", tri)
-    tp = np.empty(nt, np.int32)
-    me.loop_triangle_polygons.foreach_get("value", tp)
-    mi_attr = me.attributes.get("material_index")
-    if mi_attr is not None and mi_attr.domain == "FACE" and mi_attr.data_type == "INT":
-        mi = np.empty(len(me.polygons), np.int32)
-        mi_attr.data.foreach_get("value", mi)
-    else:
-        mi = np.zeros(len(me.polygons), np.int32)
-    cn = None
-    if hasattr(me, "corner_normals"):
-        cn = np.empty(len(me.loops) * 3, np.float32)
-        me.corner_normals.foreach_get("vector", cn)
-        cn = cn.reshape(-1, 3)
-    return pos.reshape(-1, 3), tri.reshape(-1, 3), loops.reshape(-1, 3), tp, mi, cn
-
-
-def world_normals(n, M):
-    """Normals ``n`` (..., 3) of an object with matrix ``M`` (4, 4) in world space, unit
-    length: by the inverse transpose of its 3 x 3 part (a non-uniform scale tilts them)."""
-    out = n @ np.linalg.pinv(M[:3, :3]).astype(np.float32)
-    return out / np.maximum(np.linalg.norm(out, axis=-1, keepdims=True), 1e-30)
-
-
 #: Cycles' defaults of its bounce limits: below them a file cuts light paths short on purpose
 _BOUNCES = {"max_bounces": 12, "diffuse_bounces": 4, "glossy_bounces": 4, "transmission_bounces": 12,
             "transparent_max_bounces": 8}
@@ -293,183 +228,6 @@ def _ray_visible(ob, warn):
     if getattr(ob, "is_holdout", False) or getattr(ob, "is_shadow_catcher", False):
         warn(f"object {ob.name!r}: holdout / shadow catcher is not supported; rendered as a normal object")
     return True
-
-
-def _texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, warn):
-    """For an object whose materials have albedo textures (``converter.textures``), cut-outs
-    (``converter.cutouts``) or normal maps (``converter.normal_maps``): ((T, 3, 2) corner UVs,
-    (T,) image index into ``images`` (-1 untextured, -2 the corner colors), (T, 3, 3) corner
-    colors of a color attribute, (T,) coverage map index into ``images`` (-1 opaque), (T,)
-    normal map index into ``images`` (-1 none), (T,) bool: that map is a bump's), or None.
-    ``images`` (key -> (index, bpy Image or :class:`.shaders.EvaluatedImage`, its kind:
-    "albedo", "alpha" or "normal", read at the nearest texel)) grows as new images are met."""
-    for m in slots:
-        converter.convert(m)                  # (cached) fills converter.textures, .cutouts, .normal_maps
-    tex = [converter.texture_of(ob, m) for m in slots] or [None]
-    cut = [converter.cutouts.get(m.name_full) if m is not None else None for m in slots] or [None]
-    nrm = [converter.normal_maps.get(m.name_full) if m is not None else None for m in slots] or [None]
-    if not any(tex) and not any(cut) and not any(nrm):
-        return None
-    slot = np.clip(poly_mat[tri_poly], 0, len(tex) - 1)
-    uv = np.zeros((len(loops), 3, 2))
-    img = np.full(len(loops), -1, np.int64)
-    alpha = np.full(len(loops), -1, np.int64)
-    normal = np.full(len(loops), -1, np.int64)
-    bump = np.zeros(len(loops), bool)
-    colors = np.zeros((len(loops), 3, 3))
-    layers = {}
-
-    def read_uv(name, what, sel, k):
-        layer = (me.uv_layers.get(name) if name else
-                 next((l for l in me.uv_layers if l.active_render), me.uv_layers.active))
-        if layer is None:
-            warn(f"object {ob.name!r}: material {slots[k].name!r} has {what} but the mesh has no UV "
-                 f"map{' ' + repr(name) if name else ''}: {'its mean color is used' if 'image' in what else 'opaque'}")
-            return False
-        if layer.name not in layers:
-            a = np.empty(2 * len(me.loops), np.float32)
-            layer.uv.foreach_get("vector", a)
-            layers[layer.name] = a.reshape(-1, 2)
-        uv[sel] = layers[layer.name][loops[sel]]
-        return True
-
-    for k, (got, cover, nmap) in enumerate(zip(tex, cut, nrm)):
-        sel = np.nonzero(slot == k)[0]
-        if len(sel) == 0:
-            continue
-        read = None                               # the UV map this slot's faces hold
-        if got is not None and got.attribute is not None:
-            colors[sel] = _corner_colors(me, got.attribute, ob, slots[k], warn)[loops[sel]]
-            img[sel] = -2
-        elif got is not None and read_uv(got.uv, f"the image texture {got.image.name!r}", sel, k):
-            img[sel] = images.setdefault((got.image.name_full, got.closest),
-                                         (len(images), got.image, "albedo", got.closest))[0]
-            read = got.uv
-        for what, m, label in (("alpha", cover, "cut-out (Alpha)"), ("normal", nmap, "normal or bump map")):
-            if m is None:
-                continue
-            if m.uv is not None:                  # a map: through the UVs read already, or its own
-                if read is not None and read != m.uv:
-                    warn(f"object {ob.name!r}: material {slots[k].name!r} reads its {label} through another UV map "
-                         f"than its albedo or cut-out: the first one's ({read or 'the active one'}) is used for all")
-                elif read is None:
-                    if not read_uv(m.uv, f"a {label}", sel, k):
-                        continue
-                    read = m.uv
-            index = images.setdefault((what, m.image.name_full), (len(images), m.image, what, False))[0]
-            if what == "alpha":
-                alpha[sel] = index
-            else:
-                normal[sel], bump[sel] = index, m.bump
-    if np.all(img == -1) and np.all(alpha == -1) and np.all(normal == -1):
-        return None
-    return uv, img, colors, alpha, normal, bump
-
-
-def _corner_colors(me, name, ob, mat, warn):
-    """(corners, 3) linear RGB of color attribute ``name`` ("" = the active render one) of
-    mesh ``me`` per face corner; black, warned, when the mesh does not have it (as Cycles)."""
-    ca = me.color_attributes
-    attr = ca.get(name) if name else (ca[ca.render_color_index] if len(ca) and ca.render_color_index >= 0 else None)
-    if attr is None or attr.domain not in ("POINT", "CORNER"):
-        warn(f"object {ob.name!r}: material {mat.name!r} reads the color attribute {name or '(active)'!r}, which "
-             "the mesh does not have: black, as in Cycles")
-        return np.zeros((len(me.loops), 3))
-    vals = np.empty(4 * len(attr.data), np.float32)
-    attr.data.foreach_get("color", vals)             # linear for byte and float colors alike
-    vals = vals.reshape(-1, 4)[:, :3].astype(float)
-    if attr.domain == "CORNER":
-        return vals
-    return vals[corner_vertices(me)]
-
-
-def corner_vertices(me):
-    """(corners,) int32: the vertex of each face corner of mesh ``me`` (the fast hidden
-    ``.corner_vert`` attribute, else the loops)."""
-    cv = np.empty(len(me.loops), np.int32)
-    attr = me.attributes.get(".corner_vert")
-    if attr is not None:
-        attr.data.foreach_get("value", cv)
-    else:
-        me.loops.foreach_get("vertex_index", cv)
-    return cv
-
-
-# -------------------------------------------------------------------- lights
-def light_color(ld):
-    """(3,) color x 2**exposure (x temperature color when enabled) of a bpy Light."""
-    c = np.array(ld.color[:3], float) * 2.0 ** float(getattr(ld, "exposure", 0.0))
-    if getattr(ld, "use_temperature", False) and hasattr(ld, "temperature_color"):
-        c = c * np.array(ld.temperature_color[:3], float)
-    return c
-
-
-def convert_light(ld, M, warn, nodes=None):
-    """(kind, dict) for a bpy Light ``ld`` with world matrix ``M`` (4, 4):
-    kind "point" (position, intensity, spot_*, radius), "sun" (direction,
-    irradiance, angle) or "area" (center, axis_u, axis_v, normal, shape, radiance), each with
-    ``shadow`` (1, or 0 with Cast Shadow off).  Formulas: module docstring.  ``nodes``: a dict
-    that keeps each light data-block's :func:`.light_nodes.light_node_factor` (its instances share
-    one reading and one profile)."""
-    if nodes is None:
-        nodes = {}
-    if ld.name_full not in nodes:
-        nodes[ld.name_full] = light_node_factor(ld, warn)
-    got = _convert_light(ld, M, warn, *nodes[ld.name_full])
-    if got is not None:
-        got[1]["shadow"] = float(bool(getattr(ld, "use_shadow", True)))
-    return got
-
-
-def _convert_light(ld, M, warn, factor, profile):
-    color = light_color(ld) * factor
-    power = float(ld.energy)
-    normalize = bool(getattr(ld, "normalize", True))
-    pos = M[:3, 3].copy()
-    z = M[:3, 2]
-    zn = np.linalg.norm(z)
-    down = -z / zn if zn > 0 else np.array([0.0, 0.0, -1.0])
-    if power < 0:
-        warn(f"light {ld.name!r} has negative power: ignored")
-        return None
-    if ld.type in ("POINT", "SPOT"):
-        r = float(ld.shadow_soft_size)
-        intensity = color * power / (4 * math.pi)
-        if not normalize and r > 0:
-            intensity = intensity * math.pi * r * r
-        axes = M[:3, :3].T / np.maximum(np.linalg.norm(M[:3, :3], axis=0), 1e-30)[:, None]
-        d = dict(position=pos, intensity=intensity, radius=r, spot_direction=np.zeros(3),
-                 spot_cos_half_angle=-1.0, spot_blend=0.0, profile=profile, axes=axes)
-        if getattr(ld, "use_soft_falloff", False) and r > 0:
-            warn(f"light {ld.name!r}: soft falloff is not modelled (a sphere light is used)")
-        if ld.type == "SPOT":
-            d.update(spot_direction=down, spot_cos_half_angle=math.cos(float(ld.spot_size) / 2),
-                     spot_blend=float(ld.spot_blend))
-            sx, sy = np.linalg.norm(M[:3, 0]), np.linalg.norm(M[:3, 1])
-            if abs(sx - sy) > 1e-6 * max(sx, sy):
-                warn(f"spot light {ld.name!r}: a non-uniformly scaled (elliptic) cone is treated as round")
-        return "point", d
-    if ld.type == "SUN":
-        angle = float(ld.angle)
-        irradiance = color * power
-        if not normalize and angle > 0:
-            irradiance = irradiance * math.pi * math.tan(angle / 2) ** 2
-        return "sun", dict(direction=down, irradiance=irradiance, angle=angle)
-    if ld.type == "AREA":
-        sx = float(ld.size)
-        sy = float(ld.size_y) if ld.shape in ("RECTANGLE", "ELLIPSE") else sx
-        u, v = M[:3, 0] * sx / 2, M[:3, 1] * sy / 2
-        ellipse = ld.shape in ("DISK", "ELLIPSE")
-        area = (math.pi if ellipse else 4.0) * np.linalg.norm(u) * np.linalg.norm(v)
-        if area <= 0:
-            warn(f"area light {ld.name!r} has zero size: ignored")
-            return None
-        radiance = color * power / (math.pi * (area if normalize else 1.0))
-        if float(getattr(ld, "spread", math.pi)) < math.pi - 1e-6:
-            warn(f"area light {ld.name!r}: spread is not modelled (a Lambertian emitter is used)")
-        return "area", dict(center=pos, axis_u=u, axis_v=v, normal=down, shape=int(ellipse), radiance=radiance)
-    warn(f"light {ld.name!r} of type {ld.type} is not supported: ignored")
-    return None
 
 
 # -------------------------------------------------------------------- camera
@@ -664,32 +422,12 @@ def _used_materials(depsgraph, override):
 
 def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, world, t0, converter, override):
     """:func:`_export_geometry` with the material ``converter`` made."""
-    from raybundle.scene.build import build_scene
-    from raybundle.scene.materials import MaterialTable
-    from raybundle.scene.model import AreaLights, PointLights, SceneError, SunLights
-    from raybundle.scene.shading import ShadingNormals
+    from raybundle.scene.model import SceneError
 
-    render = scene.render
     viewport = depsgraph.mode == "VIEWPORT"
-    mat_index, mat_specs = {}, []
-
-    def material_id(mat):
-        key = None if mat is None else mat.name_full
-        if key not in mat_index:
-            mat_index[key] = len(mat_specs)
-            mat_specs.append(converter.convert(mat))
-        return mat_index[key]
-
-    cache = {}
-    verts, tris, tmats, tobj, tpoly, tloops, tnorm, temit = [], [], [], [], [], [], [], []
-    # albedo textures and cut-outs: corner UVs, image per triangle, corner colors, coverage map per triangle
-    tuv, timg, tcol, talpha, tnrm, tbump, images = [], [], [], [], [], [], {}
-    objects = []
-    lights = {"point": [], "sun": [], "area": []}
+    build = SceneBuilder(converter)
     link_sets = LinkSets()
-    light_nodes = {}                        # light data-block -> its node tree's reading
-    portals = []
-    n_vert = n_tri = 0
+    light_nodes, portals, meshes = {}, [], {}     # a light data-block's node tree reading; meshes read
     for inst in depsgraph.object_instances:
         ob = inst.object
         kind = ob.type
@@ -701,153 +439,96 @@ def _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, 
         if viewport and ob.original.hide_render:
             continue
         if kind == "LIGHT":
-            rays = [getattr(ob, f"visible_{k}", True) for k in ("diffuse", "glossy", "transmission")]
-            if not (rays[0] or rays[1]):
-                continue
-            if not all(rays):
-                off = ", ".join(k for k, on in zip(("diffuse", "glossy", "transmission"), rays) if not on)
-                warn(f"light {ob.original.name!r}: ray visibility ({off} off) is not supported; "
-                     "it lights every surface as if all were on")
-            if getattr(getattr(ob.data, "cycles", None), "is_portal", False):
-                portals.append(ob.original.name)
-                continue
-            got = convert_light(ob.data, M, warn, light_nodes)
-            bounces = getattr(getattr(ob.data, "cycles", None), "max_bounces", 1024)
-            if bounces < 1024:
-                warn(f"light {ob.original.name!r}: its max bounces ({bounces}) is not applied: raybundle renders every "
-                     "bounce of its light")
-            if got is not None:
-                got[1]["link"] = link_sets.set_of(ob.original)
-                lights[got[0]].append(got[1])
+            _export_light(ob, M, build, link_sets, light_nodes, portals, warn)
             continue
         if not inst.is_instance:
             _unmodeled_features(ob.original, warn)
             _object_settings(ob.original, warn)
-        if not inst.show_self or not _ray_visible(ob, warn):
-            continue
-        me, temp = (ob.data, False) if kind == "MESH" else (None, True)
-        if temp:
-            try:
-                me = ob.to_mesh()
-            except RuntimeError:
-                me = None
-            if me is None:
-                continue
-        try:
-            key = me.as_pointer()
-            arrays = cache.get(key) if not temp else None
-            if arrays is None:
-                arrays = _mesh_arrays(me)
-                if not temp:
-                    cache[key] = arrays
-            pos, tri, loops, tp, mi, cn = arrays
-            slots = [s.material for s in ob.material_slots] if len(ob.material_slots) else list(me.materials)
-            if override is not None:
-                slots = [override] * max(1, len(slots))
-            left_out = [converter.left_out(m) for m in slots]
-            if any(left_out):                     # faces of a volume without a surface
-                keep = ~np.array(left_out)[np.clip(mi[tp], 0, len(slots) - 1)]
-                tri, loops, tp = tri[keep], loops[keep], tp[keep]
-            textured = _texture_uvs(me, ob, slots, tp, mi, loops, converter, images, warn)
-            info = ObjectInfo(ob.name, ob.original.name, me.name, bool(inst.is_instance),
-                              inst.parent.name if inst.is_instance and inst.parent else None,
-                              n_tri, len(tri), len(me.polygons), len(me.loops), M)
-        finally:
-            if temp:
-                ob.to_mesh_clear()
-        if len(tri) == 0:
-            continue
-        ids = np.array([material_id(m) for m in slots] or [material_id(None)], np.int64)
-        tmats.append(ids[np.clip(mi[tp], 0, len(ids) - 1)])
-        verts.append(pos @ M[:3, :3].T.astype(np.float64) + M[:3, 3])
-        tris.append(tri.astype(np.int64) + n_vert)
-        tobj.append(np.full(len(tri), len(objects), np.int32))
-        temit.append(link_sets.set_of(ob.original))          # an emitting mesh's own link set
-        tpoly.append(tp)
-        tloops.append(loops)
-        tnorm.append(None if cn is None else world_normals(cn[loops], M))
-        # untextured objects hold None: their zeros are made only if some object is textured
-        tuv.append((len(tri), textured[0]) if textured else (len(tri), None))
-        timg.append(textured[1] if textured else None)
-        tcol.append(textured[2] if textured else None)
-        talpha.append(textured[3] if textured else None)
-        tnrm.append(textured[4] if textured else None)
-        tbump.append(textured[5] if textured else None)
-        objects.append(info)
-        n_vert += len(pos)
-        n_tri += len(tri)
-
+        if inst.show_self and _ray_visible(ob, warn):
+            _export_mesh(inst, ob, M, build, link_sets, meshes, override, warn)
     if portals:
         warn(f"light portal{'s' if len(portals) > 1 else ''} {', '.join(repr(p) for p in portals[:3])}"
              f"{' ...' if len(portals) > 3 else ''}: a portal guides Cycles' sampling of the world and emits "
              "nothing; left out (bundles reach the world through the openings without it)")
-    if n_tri == 0:
+    if build.n_triangles == 0:
         raise SceneError("nothing to render: the scene has no visible mesh objects")
-    if render.use_motion_blur:
+    if scene.render.use_motion_blur:
         warn("motion blur is not supported: the scene is rendered at the current frame")
-    if render.film_transparent:
+    if scene.render.film_transparent:
         warn("transparent film is not supported: the background is the world's color, alpha is 1")
-
-    v = np.concatenate(verts)
-    t = np.concatenate(tris)
-    m = np.concatenate(tmats)
-    mats = MaterialTable.from_list(mat_specs)
-
-    def group(cls, rows):
-        if not rows:
-            return cls()
-        profiles = [r.pop("profile") for r in rows if "profile" in r]
-        if profiles:          # photometric profiles: an index into their list (one per profile), -1 for none
-            index = {}
-            for r, p in zip(rows, profiles):
-                r["profile"] = -1 if p is None else index.setdefault(id(p), (len(index), p))[0]
-            kept = [p for _, p in sorted(index.values(), key=lambda x: x[0])]
-            return cls(**{k: np.array([r[k] for r in rows]) for k in rows[0]}, profiles=kept)
-        return cls(**{k: np.array([r[k] for r in rows]) for k in rows[0]})
-
-    texture = None
-    if any(x is not None and np.any(x != -1) for x in timg + talpha + tnrm):
-        def faces(per_object):
-            return np.concatenate([np.full(n, -1, np.int64) if x is None else x for (n, _), x in zip(tuv, per_object)])
-
-        face_image, face_alpha, face_normal = faces(timg), faces(talpha), faces(tnrm)
-        face_bump = np.concatenate([np.zeros(n, bool) if b is None else b for (n, _), b in zip(tuv, tbump)])
-        tcol = [np.zeros((n, 3, 3)) if c is None else c for (n, _), c in zip(tuv, tcol)]
-        tuv = [np.zeros((n, 3, 2)) if u is None else u for n, u in tuv]
-        from raybundle.scene.textures import SurfaceTexture
-
-        # albedo maps are the image over its mean (the material holds the mean; a byte sRGB image's
-        # texels encoded, as Cycles keeps them), coverage and normal maps as they are
-        ordered = sorted(images.values(), key=lambda x: x[0])
-        maps = [converter.albedo_map(im) if kind == "albedo" else (np.asarray(converter.image_pixels(im), np.float32),
-                                                                   None) for _, im, kind, _ in ordered]
-        texture = SurfaceTexture([m for m, _ in maps], face_image, v[t], np.concatenate(tuv), np.concatenate(tcol),
-                                 face_alpha, face_normal, face_bump, encoded=[e for _, e in maps],
-                                 closest=[closest for *_, closest in ordered])
-    with _warnings.catch_warnings(record=True) as caught:
-        _warnings.simplefilter("always")
-        shading = None
-        if all(x is not None for x in tnorm):
-            shading = ShadingNormals.of_faces(v[t], np.concatenate(tnorm))
-        sc = build_scene(v, t, m, mats, point_lights=group(PointLights, lights["point"]),
-                         sun_lights=group(SunLights, lights["sun"]), area_lights=group(AreaLights, lights["area"]),
-                         world=world, camera=camera, two_sided=True,
-                         triangle_solid=np.zeros(len(t), bool),    # two-sided surfaces are never solids
-                         name=name or scene.name, texture=texture, shading=shading,
-                         linking=link_sets.linking([(o.original, o.instancer) for o in objects], np.concatenate(tobj),
-                                                   np.array(temit, np.int64)))
-    for w in caught:
-        warn(str(w.message))
-    _warn_large_linked_emitters(sc, np.concatenate(tobj), objects, warn)
-    _warn_overlaps(v[t], np.concatenate(tobj), objects, warn)
-    _warn_curved_glass(sc, np.concatenate(tobj), objects, warn)
+    sc, v, t, mats = build.scene(world, camera, name or scene.name, link_sets, warn)
+    tobj, objects = build.triangle_object(), build.objects
+    _warn_large_linked_emitters(sc, tobj, objects, warn)
+    _warn_overlaps(v[t], tobj, objects, warn)
+    _warn_curved_glass(sc, tobj, objects, warn)
     far = float(np.sqrt(((v - camera.position) ** 2).sum(axis=1).max())) if camera is not None else 0.0
     if cam_ob is not None and far > cam_ob.data.clip_end:
         warn(f"camera {cam_ob.name!r}: geometry beyond the clip end ({cam_ob.data.clip_end:g} m) is rendered "
              "(clip end is not modelled)")
+    lights = build.lights
     counts = {"objects": len(objects), "triangles": int(len(sc.triangles)), "vertices": int(len(v)),
               "materials": len(mats), "point_lights": len(lights["point"]), "sun_lights": len(lights["sun"]),
               "area_lights": len(lights["area"])}
-    return ExportResult(sc, warn, objects, np.concatenate(tobj), np.concatenate(tpoly),
-                        np.concatenate(tloops), list(mats.names), size, border,
-                        time.perf_counter() - t0, counts)
+    return ExportResult(sc, warn, objects, tobj, build.joined("polygons"), build.joined("loops"), list(mats.names),
+                        size, border, time.perf_counter() - t0, counts)
+
+
+def _export_light(ob, M, build, link_sets, light_nodes, portals, warn):
+    """Light object ``ob`` (world matrix ``M``) into ``build.lights``, unless no diffuse or glossy
+    ray sees it, or it is a portal (its name added to ``portals``)."""
+    rays = [getattr(ob, f"visible_{k}", True) for k in ("diffuse", "glossy", "transmission")]
+    if not (rays[0] or rays[1]):
+        return
+    if not all(rays):
+        off = ", ".join(k for k, on in zip(("diffuse", "glossy", "transmission"), rays) if not on)
+        warn(f"light {ob.original.name!r}: ray visibility ({off} off) is not supported; "
+             "it lights every surface as if all were on")
+    if getattr(getattr(ob.data, "cycles", None), "is_portal", False):
+        portals.append(ob.original.name)
+        return
+    got = convert_light(ob.data, M, warn, light_nodes)
+    bounces = getattr(getattr(ob.data, "cycles", None), "max_bounces", 1024)
+    if bounces < 1024:
+        warn(f"light {ob.original.name!r}: its max bounces ({bounces}) is not applied: raybundle renders every "
+             "bounce of its light")
+    if got is not None:
+        got[1]["link"] = link_sets.set_of(ob.original)
+        build.lights[got[0]].append(got[1])
+
+
+def _export_mesh(inst, ob, M, build, link_sets, meshes, override, warn):
+    """Mesh-like object instance ``inst`` (object ``ob``, world matrix ``M``) into ``build``: its
+    evaluated mesh's arrays (read once per mesh data-block, kept in ``meshes``; other types
+    through a temporary mesh), without the faces of volume-only materials."""
+    me, temp = (ob.data, False) if ob.type == "MESH" else (None, True)
+    if temp:
+        try:
+            me = ob.to_mesh()
+        except RuntimeError:
+            me = None
+        if me is None:
+            return
+    try:
+        key = me.as_pointer()
+        arrays = meshes.get(key) if not temp else None
+        if arrays is None:
+            arrays = mesh_arrays(me)
+            if not temp:
+                meshes[key] = arrays
+        pos, tri, loops, tp, mi, cn = arrays
+        slots = [s.material for s in ob.material_slots] if len(ob.material_slots) else list(me.materials)
+        if override is not None:
+            slots = [override] * max(1, len(slots))
+        left_out = [build.converter.left_out(m) for m in slots]
+        if any(left_out):                     # faces of a volume without a surface
+            keep = ~np.array(left_out)[np.clip(mi[tp], 0, len(slots) - 1)]
+            tri, loops, tp = tri[keep], loops[keep], tp[keep]
+        textured = texture_uvs(me, ob, slots, tp, mi, loops, build.converter, build.images, warn)
+        info = ObjectInfo(ob.name, ob.original.name, me.name, bool(inst.is_instance),
+                          inst.parent.name if inst.is_instance and inst.parent else None,
+                          build.n_triangles, len(tri), len(me.polygons), len(me.loops), M)
+    finally:
+        if temp:
+            ob.to_mesh_clear()
+    if len(tri):
+        build.add_object(info, (pos, tri, loops, tp, mi, cn), M, slots, textured, link_sets.set_of(ob.original))
