@@ -81,8 +81,6 @@ STILL_LONG = {
     "raybundle_addon/__main__.py:_main": 98,
     "raybundle_addon/translation/material_bake.py:main": 93,
     "raybundle_addon/translation/node_graphs.py:start_graph_bake": 81,
-    "raybundle_addon/translation/shaders.py": 754,
-    "raybundle_addon/translation/shaders.py:MaterialConverter._closure": 81,
 }
 
 

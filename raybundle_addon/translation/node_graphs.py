@@ -283,7 +283,7 @@ def start_graph_bake(materials, users=None, threads=0):
     for graphs baked on each object.  Graphs baked before in this session are not baked again."""
     import bpy
 
-    from .shaders import image_rgba
+    from .images import image_rgba
 
     users = users or {}
     objects, uv_of, bake_objects = {}, {}, {}

@@ -16,7 +16,7 @@ model.  A material's node tree is read from its Cycles output node:
   tint-weighted mean of the lobes' roughness.  A sum above 1 (an Add Shader of
   two reflective closures) creates energy: it is clipped, with a warning.
 * **Emission**: radiance = Color x Strength [W m^-2 sr^-1], from both sides.
-* **Principled BSDF**: :func:`principled_to_material` (the one place that maps it).
+* **Principled BSDF**: :func:`.closures.principled_to_material` (the one place that maps it).
 * An **Image Texture** on a Diffuse BSDF's Color or a Principled BSDF's Base Color,
   looked up through a UV map (the Vector input unlinked, or from a UV Map node or
   Texture Coordinate's UV), is an albedo texture (:attr:`MaterialConverter.textures`,
@@ -49,13 +49,15 @@ model.  A material's node tree is read from its Cycles output node:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from raybundle.scene.materials import color_text
 from raybundle.scene.textures import modulation_map
 
+from .closures import Closures, clip_colors, flatten, luminance, principled_to_material
+from .images import image_bytes, linear_pixels, srgb_bytes
 from .node_links import follow_reroutes, uv_source
 
 #: the diffuse color of faces without a material (Blender's default surface)
@@ -64,39 +66,8 @@ DEFAULT_GREY = 0.8
 MULTISCATTER_GLASS = 0.1
 
 
-def _core_supports(fieldname):
-    from raybundle.scene.materials import MaterialTable
-
-    return fieldname in getattr(MaterialTable, "__dataclass_fields__", {})
-
-
-def srgb_to_linear(c):
-    c = np.asarray(c, float)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
 class Unsupported(Exception):
     """A node the core cannot model; the material falls back to its viewport color."""
-
-
-@dataclass
-class _Closure:
-    """A weighted sum of closures, as Mix/Add shaders build it."""
-
-    diffuse: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    glossy: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    rough_sum: float = 0.0          # sum of lum(glossy_k) * roughness_k
-    glossy_lum: float = 0.0
-    multi_ggx: list = field(default_factory=list)     # per glossy lobe: uses Multiscatter GGX
-    emission: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    principled: list = field(default_factory=list)    # [(weight, spec dict, simple spec dict)]
-    #: dielectric interfaces: [(weight, refraction tint (3,), reflection tint (3,), ior, fresnel 0/1)]
-    transmission: list = field(default_factory=list)
-    translucent: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-
-def _lum(c):
-    return float(np.dot(np.asarray(c, float)[:3], (0.2126, 0.7152, 0.0722)))
 
 
 @dataclass(frozen=True)
@@ -213,7 +184,7 @@ class MaterialConverter:
         self._albedo, self._cutout, self._normal = [], [], []
         self._material = mat
         try:
-            acc = _Closure()
+            acc = Closures()
             self._closure(out.inputs["Surface"], 1.0, acc, notes, 0)
         except Unsupported as e:
             self.warn(f"material {name!r}: {e}; using its viewport color")
@@ -234,7 +205,7 @@ class MaterialConverter:
                          "by their mean color, attributes by white")
         for n in dict.fromkeys(notes):        # once each, in order
             self.warn(f"material {name!r}: {n}")
-        return self._flatten(name, acc)
+        return flatten(name, acc, self.warn)
 
     def left_out(self, mat):
         """Whether the faces of material ``mat`` (a bpy Material or None) are left out: a volume
@@ -243,7 +214,7 @@ class MaterialConverter:
         return mat is not None and mat.name_full in self.volume_only
 
     def _viewport(self, mat):
-        return self._clip(dict(name=mat.name_full, diffuse=tuple(mat.diffuse_color[:3])), mat.name_full)
+        return clip_colors(dict(name=mat.name_full, diffuse=tuple(mat.diffuse_color[:3])), mat.name_full, self.warn)
 
     # ------------------------------------------------------------- closures
     def _closure(self, socket, weight, acc, notes, depth):
@@ -265,18 +236,7 @@ class MaterialConverter:
                 notes.append("Diffuse BSDF roughness (Oren-Nayar) is ignored (Lambert)")
             self._normal_map(node, notes)
         elif t in ("BSDF_GLOSSY", "BSDF_ANISOTROPIC"):
-            color = weight * self.color(node.inputs["Color"], notes)
-            r = float(np.clip(self.value(node.inputs["Roughness"], notes), 0.0, 1.0))
-            acc.glossy += color
-            acc.rough_sum += _lum(color) * r
-            acc.glossy_lum += _lum(color)
-            dist = getattr(node, "distribution", "GGX")
-            acc.multi_ggx.append(dist == "MULTI_GGX")
-            if dist not in ("GGX", "MULTI_GGX"):
-                notes.append(f"Glossy BSDF distribution {dist} is approximated by GGX")
-            if "Anisotropy" in node.inputs and abs(self.value(node.inputs["Anisotropy"], notes)) > 1e-6:
-                notes.append("anisotropy is ignored (isotropic GGX)")
-            self._normal_map(node, notes)
+            self._glossy(node, weight, acc, notes)
         elif t == "BSDF_TRANSLUCENT":
             acc.translucent += weight * np.clip(self.color(node.inputs["Color"], notes), 0.0, 1.0)
             self._normal_map(node, notes)
@@ -302,31 +262,51 @@ class MaterialConverter:
             self._closure(node.inputs[0], weight, acc, notes, depth + 1)
             self._closure(node.inputs[1], weight, acc, notes, depth + 1)
         elif t == "BSDF_PRINCIPLED":
-            alpha = node.inputs.get("Alpha")
-            if alpha is not None:
-                self._coverage(alpha, weight, notes)
-            inputs = {s.name: (self.color(s, notes) if s.type == "RGBA" else self.value(s, notes))
-                      for s in node.inputs if s.type in ("RGBA", "VALUE") and s.name != "Alpha"}
-            # Cycles: metallic, then Transmission Weight of the rest is glass tinted by the base color
-            glass = (1.0 - float(np.clip(inputs.get("Metallic", 0.0), 0.0, 1.0))) * float(
-                np.clip(inputs.pop("Transmission Weight", 0.0), 0.0, 1.0))
-            if glass > 0:
-                self._glass(weight * glass, np.clip(inputs.get("Base Color", (0.8,) * 3), 0.0, 1.0)[:3],
-                            np.clip(inputs.get("Specular Tint", (1.0,) * 3), 0.0, 1.0)[:3],
-                            float(inputs.get("IOR", 1.5)), 1, float(inputs.get("Roughness", 0.5)), acc, notes,
-                            getattr(node, "distribution", "MULTI_GGX"))
-            spec = principled_to_material(inputs, getattr(node, "distribution", "MULTI_GGX"),
-                                          notes.append)
-            simple = principled_to_material(inputs, getattr(node, "distribution", "MULTI_GGX"),
-                                            lambda m: None, layered=False)
-            if glass < 1.0 - 1e-6:
-                acc.principled.append((weight * (1.0 - glass), spec, simple))
-            else:                             # all glass: only its emission is left of the rest
-                acc.emission += weight * np.asarray(spec.get("emission", (0.0, 0.0, 0.0)), float)
-            self._normal_map(node, notes)
+            self._principled(node, weight, acc, notes)
         else:
             label = node.bl_label if hasattr(node, "bl_label") else t
             raise Unsupported(f"the {label} node ({node.name!r}) is not supported")
+
+    def _glossy(self, node, weight, acc, notes):
+        """A Glossy or Anisotropic BSDF ``node`` times ``weight`` into ``acc``: a GGX lobe."""
+        color = weight * self.color(node.inputs["Color"], notes)
+        r = float(np.clip(self.value(node.inputs["Roughness"], notes), 0.0, 1.0))
+        acc.glossy += color
+        acc.rough_sum += luminance(color) * r
+        acc.glossy_lum += luminance(color)
+        dist = getattr(node, "distribution", "GGX")
+        acc.multi_ggx.append(dist == "MULTI_GGX")
+        if dist not in ("GGX", "MULTI_GGX"):
+            notes.append(f"Glossy BSDF distribution {dist} is approximated by GGX")
+        if "Anisotropy" in node.inputs and abs(self.value(node.inputs["Anisotropy"], notes)) > 1e-6:
+            notes.append("anisotropy is ignored (isotropic GGX)")
+        self._normal_map(node, notes)
+
+    def _principled(self, node, weight, acc, notes):
+        """A Principled BSDF ``node`` times ``weight`` into ``acc``: its cut-out, its glass
+        (Transmission Weight of the non-metallic part) and the rest as the core's model."""
+        alpha = node.inputs.get("Alpha")
+        if alpha is not None:
+            self._coverage(alpha, weight, notes)
+        inputs = {s.name: (self.color(s, notes) if s.type == "RGBA" else self.value(s, notes))
+                  for s in node.inputs if s.type in ("RGBA", "VALUE") and s.name != "Alpha"}
+        # Cycles: metallic, then Transmission Weight of the rest is glass tinted by the base color
+        glass = (1.0 - float(np.clip(inputs.get("Metallic", 0.0), 0.0, 1.0))) * float(
+            np.clip(inputs.pop("Transmission Weight", 0.0), 0.0, 1.0))
+        if glass > 0:
+            self._glass(weight * glass, np.clip(inputs.get("Base Color", (0.8,) * 3), 0.0, 1.0)[:3],
+                        np.clip(inputs.get("Specular Tint", (1.0,) * 3), 0.0, 1.0)[:3],
+                        float(inputs.get("IOR", 1.5)), 1, float(inputs.get("Roughness", 0.5)), acc, notes,
+                        getattr(node, "distribution", "MULTI_GGX"))
+        spec = principled_to_material(inputs, getattr(node, "distribution", "MULTI_GGX"),
+                                      notes.append)
+        simple = principled_to_material(inputs, getattr(node, "distribution", "MULTI_GGX"),
+                                        lambda m: None, layered=False)
+        if glass < 1.0 - 1e-6:
+            acc.principled.append((weight * (1.0 - glass), spec, simple))
+        else:                             # all glass: only its emission is left of the rest
+            acc.emission += weight * np.asarray(spec.get("emission", (0.0, 0.0, 0.0)), float)
+        self._normal_map(node, notes)
 
     def _interface(self, node, weight, acc, notes):
         """A Glass, Refraction or Transparent BSDF ``node`` times ``weight`` into ``acc``: a
@@ -443,7 +423,7 @@ class MaterialConverter:
 
     def value(self, sock, notes):
         if sock.type == "RGBA":
-            return float(_lum(self.color(sock, notes)))
+            return float(luminance(self.color(sock, notes)))
         if sock.is_linked:
             node = follow_reroutes(sock.links[0].from_node)
             if node is not None and node.type == "VALUE":
@@ -536,8 +516,8 @@ class MaterialConverter:
         Cycles keeps it, its encoded texels with ``encoded`` the inverse of its linear mean
         (the lookup decodes after interpolating, as Cycles does); any other its
         :meth:`modulation` and None."""
-        if self._normalizer.get(image.name_full) is None and _srgb_bytes(image):
-            px = _image_bytes(image)
+        if self._normalizer.get(image.name_full) is None and srgb_bytes(image):
+            px = image_bytes(image)
             if px is not None:
                 mean = self.image_mean(image)
                 return px, np.where(mean > 0, 1.0 / np.where(mean > 0, mean, 1.0), 1.0)
@@ -549,7 +529,7 @@ class MaterialConverter:
             return None
         key = image.name_full
         if key not in self._image_pixels:
-            self._image_pixels[key] = _image_pixels(image)
+            self._image_pixels[key] = linear_pixels(image)
         return self._image_pixels[key]
 
     def image_mean(self, image):
@@ -557,137 +537,6 @@ class MaterialConverter:
         px = self.image_pixels(image)
         return None if px is None else px.reshape(-1, 3).mean(axis=0)
 
-    # -------------------------------------------------------------- flatten
-    def _flatten(self, name, acc):
-        spec = self._flatten_opaque(name, acc)
-        if np.any(acc.translucent > 0):
-            reflected = np.asarray(spec.get("diffuse", (0, 0, 0)), float) * (1 - spec.get("glossy_weight", 0.0))
-            kt = np.minimum(acc.translucent, np.maximum(1.0 - reflected, 0.0))
-            if np.any(kt < acc.translucent - 1e-6):
-                self.warn(f"material {name!r}: its diffuse and translucent colors add up to more than 1 "
-                          "(it would create energy): the translucent one is clipped")
-            spec["translucent"] = tuple(kt)
-        if acc.transmission:
-            w = np.array([x[0] for x in acc.transmission])
-            total = float(w.sum())
-            if total > 1.0 + 1e-6:
-                self.warn(f"material {name!r}: its glass and transparent shaders add up to {total:.3g} > 1: "
-                          "scaled to 1")
-                w, total = w / total, 1.0
-            mean = lambda k: sum(wi * np.asarray(x[k], float) for wi, x in zip(w, acc.transmission)) / total
-            kinds = {(x[3], x[4]) for x in acc.transmission}
-            if len(kinds) > 1:
-                self.warn(f"material {name!r}: interfaces of different IOR or kind are mixed: one of their mean "
-                          "IOR is used")
-            spec.update(transmission=total, transmission_color=tuple(mean(1)), transmission_reflection=tuple(mean(2)),
-                        transmission_ior=float(mean(3)), transmission_fresnel=int(round(float(mean(4)))),
-                        transmission_roughness=float(mean(5)))
-        return spec
-
-    def _flatten_opaque(self, name, acc):
-        emission = np.maximum(acc.emission, 0.0)
-        plain = not (np.any(acc.diffuse) or np.any(acc.glossy) or np.any(acc.translucent))
-        if len(acc.principled) == 1 and plain and abs(acc.principled[0][0] - 1.0) < 1e-9:
-            spec = dict(acc.principled[0][1], name=name)
-            spec["emission"] = tuple(np.asarray(spec.get("emission", (0, 0, 0)), float) + emission)
-            return self._clip(spec, name)
-        if acc.principled:
-            if len(acc.principled) > 1 or not plain or abs(acc.principled[0][0] - 1.0) > 1e-9:
-                self.warn(f"material {name!r}: a Principled BSDF mixed with other shaders is approximated "
-                          "by a plain Lambert + GGX mix (no Fresnel layer)")
-            for w, spec, simple in acc.principled:
-                d = np.asarray(simple["diffuse"], float) * (1 - simple["glossy_weight"])
-                gl = np.asarray(simple["glossy"], float) * simple["glossy_weight"]
-                acc.diffuse += w * d
-                acc.glossy += w * gl
-                acc.rough_sum += _lum(w * gl) * simple["roughness"]
-                acc.glossy_lum += _lum(w * gl)
-                acc.multi_ggx.append(False)
-                emission = emission + w * np.asarray(spec.get("emission", (0, 0, 0)), float)
-        d, gsum = np.maximum(acc.diffuse, 0.0), np.maximum(acc.glossy, 0.0)
-        md, mg = float(d.max()), float(gsum.max())
-        rough = acc.rough_sum / acc.glossy_lum if acc.glossy_lum > 0 else 0.5
-        spec = dict(name=name, emission=tuple(emission), roughness=float(np.clip(rough, 0.0, 1.0)))
-        if mg <= 0:
-            spec.update(diffuse=tuple(d), glossy_weight=0.0)
-        elif md <= 0:
-            spec.update(glossy=tuple(gsum), glossy_weight=1.0)
-        else:
-            g = mg / (mg + md)
-            spec.update(diffuse=tuple(d / (1 - g)), glossy=tuple(gsum / g), glossy_weight=g)
-        if mg > 0 and all(acc.multi_ggx) and _core_supports("multiscatter"):
-            spec["multiscatter"] = 1
-        elif mg > 0 and any(acc.multi_ggx) and not all(acc.multi_ggx) and _core_supports("multiscatter"):
-            self.warn(f"material {name!r}: GGX and Multiscatter GGX lobes are mixed; using single-scatter GGX")
-        elif mg > 0 and any(acc.multi_ggx):
-            self.warn(f"material {name!r}: Multiscatter GGX is approximated by GGX")
-        return self._clip(spec, name)
-
-    def _clip(self, spec, name):
-        """Colors above 1 create energy (the core rejects them): clip, with a warning."""
-        for k in ("diffuse", "glossy", "specular_tint", "transmission_color", "transmission_reflection"):
-            if k in spec:
-                c = np.asarray(spec[k], float)
-                if np.any(c > 1.0 + 1e-6):
-                    self.warn(f"material {name!r}: {k} color {color_text(c)} has albedo > 1, clipped to 1 "
-                              "(it would create energy)")
-                spec[k] = tuple(np.clip(c, 0.0, 1.0))
-        return spec
-
-
-def principled_to_material(inputs, distribution="MULTI_GGX", warn=print, layered=True):
-    """The core material spec of a Principled BSDF, from its input values.
-
-    ``inputs``: socket name -> value (colors (3,) linear, floats), as on the node
-    in Blender 4.x/5.x (``Base Color``, ``Metallic``, ``Roughness``, ``IOR``,
-    ``Specular IOR Level``, ``Specular Tint``, ``Emission Color``,
-    ``Emission Strength``, ``Coat Weight``...).  ``warn`` gets one message per
-    ignored feature.
-
-    With ``layered`` and a core that has the Principled model
-    (:func:`raybundle.scene.principled.principled_material`: Fresnel-weighted dielectric
-    GGX layer over Lambert, F82 conductor, multiscatter), that model is used.
-    Otherwise the plain Lambert + GGX mix: diffuse = base color, glossy weight
-    ``g = metallic + (1 - metallic) F0`` with ``F0 = ((ior-1)/(ior+1))^2 * 2 *
-    specular_level``, glossy tint ``(metallic * base + (1 - metallic) F0 tint) / g``.
-    """
-    get = inputs.get
-    base = np.clip(np.asarray(get("Base Color", (0.8, 0.8, 0.8)), float)[:3], 0.0, None)
-    if np.any(base > 1.0 + 1e-6):
-        warn(f"Principled BSDF base color {color_text(base)} is above 1 (albedo > 1 creates energy): "
-             "clipped to 1")
-        base = np.minimum(base, 1.0)
-    metallic = float(np.clip(get("Metallic", 0.0), 0.0, 1.0))
-    roughness = float(np.clip(get("Roughness", 0.5), 0.0, 1.0))
-    ior = float(get("IOR", 1.5))
-    level = float(get("Specular IOR Level", 0.5))
-    tint = np.asarray(get("Specular Tint", (1.0, 1.0, 1.0)), float)[:3]
-    emission = np.asarray(get("Emission Color", (0.0, 0.0, 0.0)), float)[:3] * max(
-        float(get("Emission Strength", 0.0)), 0.0)
-    for key, label in (("Coat Weight", "coat"), ("Sheen Weight", "sheen"),
-                       ("Subsurface Weight", "subsurface"),
-                       ("Anisotropic", "anisotropy"), ("Thin Film Thickness", "thin film"),
-                       ("Diffuse Roughness", "diffuse roughness")):
-        if float(get(key, 0.0)) > 1e-6:
-            warn(f"Principled BSDF {label} is ignored")
-    if layered:
-        try:
-            from raybundle.scene.principled import principled_material
-        except ImportError:
-            principled_material = None
-        if principled_material is not None:
-            return principled_material(base, metallic=metallic, roughness=roughness, ior=ior,
-                                       specular_ior_level=level, emission=emission, specular_tint=tint,
-                                       distribution=distribution)
-    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * max(level, 0.0)
-    f0 = float(np.clip(f0, 0.0, 1.0))
-    g = metallic + (1.0 - metallic) * f0
-    gl = metallic * np.clip(base, 0, 1) + (1.0 - metallic) * f0 * np.clip(tint, 0, 1)
-    return dict(diffuse=tuple(base), glossy=tuple(gl / g) if g > 0 else (0.0, 0.0, 0.0),
-                glossy_weight=g, roughness=roughness, emission=tuple(emission))
-
-
-# ------------------------------------------------------------------- helpers
 def _transparent_input(mix):
     """1 or 2: the input of Mix Shader ``mix`` that a Transparent BSDF drives (the other not), or None."""
     found = [k for k in (1, 2) if mix.inputs[k].is_linked
@@ -710,45 +559,3 @@ def _is_albedo(sock):
     return sock.name in ("Color", "Base Color") and sock.node.type in ("BSDF_DIFFUSE", "BSDF_PRINCIPLED")
 
 
-def _srgb_bytes(image):
-    """Whether ``image`` (a bpy Image) holds bytes in the sRGB color space, which Cycles keeps
-    encoded and decodes after interpolating."""
-    return (not getattr(image, "is_float", True) and
-            getattr(getattr(image, "colorspace_settings", None), "name", "") == "sRGB")
-
-
-def _image_bytes(image):
-    """(H, W, 3) the encoded values of a byte sRGB image (row 0 at the bottom), or None."""
-    px = image_rgba(image, decode=False)
-    return None if px is None else np.ascontiguousarray(px[..., :3])
-
-
-def _image_pixels(image):
-    """(H, W, 3) linear RGB of an image's pixels (None without data), row 0 at the bottom."""
-    px = image_rgba(image)
-    return None if px is None else np.ascontiguousarray(px[..., :3])
-
-
-def image_rgba(image, decode=True):
-    """(H, W, 4) float32 linear RGB and alpha of an image's pixels (None without data), row 0
-    at the bottom.  Byte images in an sRGB color space hold encoded values in
-    ``Image.pixels``: their colors are decoded first (with ``decode``; else as they are)."""
-    try:
-        w, h = image.size
-        ch = image.channels
-        if w * h == 0 or not image.has_data and (image.packed_file is None and not image.filepath):
-            return None
-        px = np.empty(w * h * ch, np.float32)
-        image.pixels.foreach_get(px)
-    except (RuntimeError, ValueError, AttributeError):
-        return None
-    if px.size == 0:
-        return None
-    px = px.reshape(h, w, ch)
-    rgb = px[..., :3] if ch >= 3 else np.repeat(px[..., :1], 3, axis=2)
-    if decode and _srgb_bytes(image):
-        rgb = srgb_to_linear(rgb)
-    alpha = px[..., 3:4] if ch in (2, 4) else np.ones((h, w, 1), np.float32)
-    if ch == 2:
-        alpha = px[..., 1:2]
-    return np.concatenate([rgb, alpha], axis=2).astype(np.float32)

@@ -1,0 +1,51 @@
+"""Blender images' pixels as arrays: linear RGB and alpha, row 0 at the bottom, and the encoded
+values of byte sRGB images, which Cycles keeps encoded and decodes after interpolating."""
+from __future__ import annotations
+
+import numpy as np
+
+from raybundle.scene.textures import srgb_to_linear
+
+
+def srgb_bytes(image):
+    """Whether ``image`` (a bpy Image) holds bytes in the sRGB color space, which Cycles keeps
+    encoded and decodes after interpolating."""
+    return (not getattr(image, "is_float", True) and
+            getattr(getattr(image, "colorspace_settings", None), "name", "") == "sRGB")
+
+
+def image_bytes(image):
+    """(H, W, 3) the encoded values of a byte sRGB image (row 0 at the bottom), or None."""
+    px = image_rgba(image, decode=False)
+    return None if px is None else np.ascontiguousarray(px[..., :3])
+
+
+def linear_pixels(image):
+    """(H, W, 3) linear RGB of an image's pixels (None without data), row 0 at the bottom."""
+    px = image_rgba(image)
+    return None if px is None else np.ascontiguousarray(px[..., :3])
+
+
+def image_rgba(image, decode=True):
+    """(H, W, 4) float32 linear RGB and alpha of an image's pixels (None without data), row 0
+    at the bottom.  Byte images in an sRGB color space hold encoded values in
+    ``Image.pixels``: their colors are decoded first (with ``decode``; else as they are)."""
+    try:
+        w, h = image.size
+        ch = image.channels
+        if w * h == 0 or not image.has_data and (image.packed_file is None and not image.filepath):
+            return None
+        px = np.empty(w * h * ch, np.float32)
+        image.pixels.foreach_get(px)
+    except (RuntimeError, ValueError, AttributeError):
+        return None
+    if px.size == 0:
+        return None
+    px = px.reshape(h, w, ch)
+    rgb = px[..., :3] if ch >= 3 else np.repeat(px[..., :1], 3, axis=2)
+    if decode and srgb_bytes(image):
+        rgb = srgb_to_linear(rgb)
+    alpha = px[..., 3:4] if ch in (2, 4) else np.ones((h, w, 1), np.float32)
+    if ch == 2:
+        alpha = px[..., 1:2]
+    return np.concatenate([rgb, alpha], axis=2).astype(np.float32)
