@@ -96,21 +96,14 @@ def _main(argv, interrupted):
     import bpy
 
     from raybundle.app.cli import ProgressBar
-    from raybundle.util.io import write_layers_exr, write_png
 
     from . import engine, register
 
     if not hasattr(bpy.types.Scene, "raybundle"):
         register()
-    try:
-        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
-    except RuntimeError as e:
-        return _fail(f"cannot open {args.blend}: {str(e).strip().splitlines()[-1]}")
-    scene = bpy.data.scenes.get(args.scene) if args.scene else bpy.context.scene
-    if scene is None:
-        return _fail(f"--scene {args.scene!r}: the file has scenes {[s.name for s in bpy.data.scenes]}")
-    if bpy.context.window is not None and bpy.context.window.scene != scene:
-        bpy.context.window.scene = scene
+    scene = _open_scene(args)
+    if isinstance(scene, int):
+        return scene
     from raybundle.app.plan import check
 
     from .properties import run_options
@@ -169,11 +162,37 @@ def _main(argv, interrupted):
         return 130
     if job is None or job.last_image is None:
         return _fail("the render produced no image", 1)
+    return _write_render(args, scene, job, state["layers"])
+
+
+def _open_scene(args):
+    """Open ``args.blend`` and make its scene ``args.scene`` (or the active one) the window's:
+    the scene, or the exit code of a one-line error."""
+    import bpy
+
+    try:
+        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
+    except RuntimeError as e:
+        return _fail(f"cannot open {args.blend}: {str(e).strip().splitlines()[-1]}")
+    scene = bpy.data.scenes.get(args.scene) if args.scene else bpy.context.scene
+    if scene is None:
+        return _fail(f"--scene {args.scene!r}: the file has scenes {[s.name for s in bpy.data.scenes]}")
+    if bpy.context.window is not None and bpy.context.window.scene != scene:
+        bpy.context.window.scene = scene
+    return scene
+
+
+def _write_render(args, scene, job, jobs):
+    """Write the rendered view layers of ``jobs`` ({view layer: render job}) to ``args.out`` (an
+    EXR of layers with the run's figures, a PNG a layer), print the warnings and a summary; the
+    exit code (130 when ``job``, the last, was stopped early)."""
+    from raybundle.util.io import write_layers_exr, write_png
+
     from .properties import LAST_RUN
 
     stats = LAST_RUN.get(scene.name, {}).get("stats", {})
     header = {"raybundle_" + k: v for k, v in stats.items() if isinstance(v, (int, float, str))}
-    layers = {name: j.last_image for name, j in state["layers"].items() if j.last_image is not None}
+    layers = {name: j.last_image for name, j in jobs.items() if j.last_image is not None}
     write_layers_exr(args.out, layers, header)
     stem = os.path.splitext(args.out)[0]
     for name, image in layers.items():

@@ -276,16 +276,12 @@ def object_uv(ob):
     return layer.name, None
 
 
-def start_graph_bake(materials, users=None, threads=0):
-    """Begin baking the graphs Blender can evaluate on the inputs of ``materials`` (bpy
-    Materials, None skipped) in one process on ``threads`` CPU threads (0: all): a
-    :class:`GraphBake`.  ``users``: material name -> the objects that use it (their originals),
-    for graphs baked on each object.  Graphs baked before in this session are not baked again."""
-    import bpy
-
-    from .images import image_rgba
-
-    users = users or {}
+def _graph_inputs(materials, users):
+    """What :func:`start_graph_bake` bakes: ``(inputs, reasons, originals, objects, uv_of,
+    bake_objects)``, the graph inputs Blender can evaluate by key, why the others cannot be
+    (key -> reason), the original of each material, the per-object keys of each graph baked on
+    each object (``users``: material name -> its objects), each such key's UV map, and those
+    objects by name."""
     objects, uv_of, bake_objects = {}, {}, {}
     inputs, reasons, originals = {}, {}, {}
     for mat in dict.fromkeys(m for m in materials if m is not None):
@@ -307,6 +303,19 @@ def start_graph_bake(materials, users=None, threads=0):
                         else:
                             uv_of[key] = where
                             bake_objects[ob.name_full] = ob
+    return inputs, reasons, originals, objects, uv_of, bake_objects
+
+
+def start_graph_bake(materials, users=None, threads=0):
+    """Begin baking the graphs Blender can evaluate on the inputs of ``materials`` (bpy
+    Materials, None skipped) in one process on ``threads`` CPU threads (0: all): a
+    :class:`GraphBake`.  ``users``: material name -> the objects that use it (their originals),
+    for graphs baked on each object.  Graphs baked before in this session are not baked again."""
+    import bpy
+
+    from .images import image_rgba
+
+    inputs, reasons, originals, objects, uv_of, bake_objects = _graph_inputs(materials, users or {})
     if not inputs:
         return GraphBake(inputs, reasons, results={})
     folder = temporary_folder("raybundle-graphs-")

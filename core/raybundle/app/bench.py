@@ -325,6 +325,38 @@ def run_throughput(out):
     return {"visibility": v, "iterations": its}
 
 
+def _bench_scene(name, methods, args, ref, halves, log, stop, skipped):
+    """{method: rows} of every method (and Cycles with ``args.cycles``) on scene ``name`` against
+    reference ``ref``, its final images, CSV and chart written to ``args.out``; methods that do not
+    apply go into ``skipped``."""
+    out = args.out
+    rows_scene, results = [], {}
+    for method in methods:
+        if stop.is_set():
+            break
+        try:
+            rows, res = run_method(name, method, args.time, ref, halves, args.resolution, log, stop)
+        except ValueError as e:          # a method that does not apply (radiosity on a glossy scene)
+            log(f"  {name} / {method}: not applicable: {e}")
+            skipped.setdefault(name, {})[method] = str(e)
+            continue
+        results[method] = rows
+        rows_scene += rows
+        write_exr(os.path.join(out, f"{label(name)}-{method}.exr"), res.image)
+    if args.cycles and not stop.is_set():
+        try:
+            rows = run_cycles(name, args.time, ref, halves, args.cycles, args.resolution, log)
+            results["cycles"] = rows
+            rows_scene += rows
+        except ValueError as e:
+            log(f"  {name} / cycles: not applicable: {e}")
+            skipped.setdefault(name, {})["cycles"] = str(e)
+    if rows_scene:
+        write_csv(os.path.join(out, f"{label(name)}.csv"), rows_scene)
+        chart(os.path.join(out, f"{label(name)}.png"), label(name), rows_scene)
+    return results
+
+
 def run_bench(args):
     out = args.out
     page = checked_page(getattr(args, "page", None), "raybundle bench")
@@ -366,30 +398,7 @@ def run_bench(args):
             except ValueError as e:
                 print(f"raybundle bench: {e}", file=sys.stderr)
                 return 2
-            rows_scene, results[name] = [], {}
-            for method in methods:
-                if stop.is_set():
-                    break
-                try:
-                    rows, res = run_method(name, method, args.time, ref, halves, args.resolution, log, stop)
-                except ValueError as e:          # a method that does not apply (radiosity on a glossy scene)
-                    log(f"  {name} / {method}: not applicable: {e}")
-                    skipped.setdefault(name, {})[method] = str(e)
-                    continue
-                results[name][method] = rows
-                rows_scene += rows
-                write_exr(os.path.join(out, f"{label(name)}-{method}.exr"), res.image)
-            if args.cycles and not stop.is_set():
-                try:
-                    rows = run_cycles(name, args.time, ref, halves, args.cycles, args.resolution, log)
-                    results[name]["cycles"] = rows
-                    rows_scene += rows
-                except ValueError as e:
-                    log(f"  {name} / cycles: not applicable: {e}")
-                    skipped.setdefault(name, {})["cycles"] = str(e)
-            if rows_scene:
-                write_csv(os.path.join(out, f"{label(name)}.csv"), rows_scene)
-                chart(os.path.join(out, f"{label(name)}.png"), label(name), rows_scene)
+            results[name] = _bench_scene(name, methods, args, ref, halves, log, stop, skipped)
             summary[name] = {m: {"final_error": r[-1]["error"], "seconds": r[-1]["seconds"], "slope": slope(r),
                                  **{f"seconds_to_{lv:g}": time_to(r, lv) for lv in LEVELS}}
                              for m, r in results[name].items()}

@@ -20,7 +20,7 @@ from ..methods.registry import SOLVERS, image_only
 from ..methods.stochastic_iteration import StochasticIterationSolver
 from ..patches.clusters import DEFAULT_PATCHES, make_patches, triangle_patches
 from ..patches.layout import subdivide
-from ..tracing.sampling import NOT_CUD, make_sequence
+from ..tracing.sampling import NOT_CUD
 from ..tracing.visibility import RayTracer
 
 
@@ -119,10 +119,7 @@ def make_solver(scene, settings: RenderSettings | None = None, solver=Stochastic
     try:
         _step(stage, stop, f"first shot and solver set-up for {scene.n_patches:,} patches")
         direct = DirectLighting(scene, tracer, first_shot=settings.first_shot, light_tree=settings.light_tree)
-        sequence = make_sequence(settings.sequence, settings.seed)
-        return SOLVERS[solver](scene, tracer, direct, sequence, bundle_resolution=settings.bundle_resolution,
-                               seed=settings.seed, directions_per_step=settings.directions_per_step,
-                               caustics=settings.caustics, glossy_send_rays=settings.glossy_send_rays)
+        return SOLVERS[solver](scene, tracer, direct, settings)
     except BaseException:           # Cancelled, bad input, Ctrl-C: the tracer's threads end now
         tracer.close()
         raise
@@ -152,7 +149,7 @@ def _make_image_method(scene, settings, camera, name, stage, stop):
     tracer = RayTracer(scene, threads=settings.threads)
     try:
         direct = DirectLighting(scene, tracer, first_shot=settings.first_shot, light_tree=settings.light_tree)
-        return SOLVERS[name](scene, camera if camera is not None else scene.camera, tracer, direct, settings)
+        return SOLVERS[name](scene, tracer, direct, settings, camera=camera)
     except BaseException:
         tracer.close()
         raise

@@ -103,24 +103,20 @@ class GlossyEyePaths:
         return out
 
     def trace(self, pts, n, w_i, throughput, e, vert, light_mis=None, world_mis=None, groups=None):
-        """Radiance (N, 3) arriving at ``pts`` (N, 3) with normals ``n`` along ``w_i``
-        (N, 3), times ``throughput`` (N, 3), as ``(light, solved)`` (N, 3) each: the lamps and
-        the world the paths meet, and what they read from the solver where each ray lands
-        (:meth:`gather`): the hit's outgoing radiance from the side values ``e``
-        (S, 3) (the diffuse lobe's incoming radiance, interpolated with the vertex
-        values ``vert`` or flat when None); at glossy hits the path goes on along
-        the hit's glossy lobe, up to ``glossy_gather_depth`` rays in all.  With
-        ``light_mis = (materials, w_out)`` of the glossy lobes the rays were drawn from,
-        rays that meet a first-shot mesh light or an area lamp add its emission, MIS-weighted
-        against the light samples (:meth:`~raybundle.lights.direct.DirectLighting.lobe_hits_light`);
-        with ``world_mis = (p_w, p_g)`` (N,) each, the world sampling's and the lobe's densities of
-        the first rays, those that leave the scene see the world weighted ``p_g^2 / (p_g^2 + p_w^2)``
-        (:meth:`world_samples` takes the rest).  A transmissive surface's interface is followed
-        as a mirror (:meth:`_interfaces`) while the path has rays left; at the last ray its patch
-        stands in, reflecting what it receives less the first shot and the caustic shot, which it
-        would throw as a caustic (:meth:`~raybundle.methods.patch_solution.
-        PatchSolution.radiance`'s ``sharp_interfaces``).  ``groups`` (N,) or None: the
-        link groups of ``pts`` (:mod:`raybundle.scene.linking`)."""
+        """Radiance (N, 3) arriving at ``pts`` (N, 3) with normals ``n`` along ``w_i`` (N, 3), times
+        ``throughput`` (N, 3), as ``(light, solved)`` (N, 3) each: the lamps and the world the paths
+        meet, and what they read from the solver where each ray lands (:meth:`gather`): the hit's
+        outgoing radiance from the side values ``e`` (S, 3) (the diffuse lobe's incoming radiance,
+        interpolated with the vertex values ``vert`` or flat when None); at glossy hits the path
+        goes on along the hit's glossy lobe, up to ``glossy_gather_depth`` rays in all.  With
+        ``light_mis = (materials, w_out)`` of the glossy lobes the rays were drawn from, rays that
+        meet a first-shot mesh light or an area lamp add its emission, MIS-weighted against the
+        light samples (:meth:`_lamps_met`); with ``world_mis = (p_w, p_g)`` (N,) each, those that
+        leave the scene see the world MIS-weighted (:meth:`_world_seen`; :meth:`world_samples`
+        takes the rest).  A transmissive surface's interface is followed as a mirror
+        (:meth:`_interfaces`) while the path has rays left; at the last ray its patch stands in,
+        less what it would throw as a caustic (:meth:`_opaque_rest`).  ``groups`` (N,) or None:
+        the link groups of ``pts`` (:mod:`raybundle.scene.linking`)."""
         sc, mats, solver = self.scene, self.scene.materials, self.solver
         out = np.zeros((len(pts), 3))
         light = np.zeros((len(pts), 3))
@@ -131,37 +127,24 @@ class GlossyEyePaths:
         for bounce in range(depth):
             if len(pix) == 0:
                 break
-            if bounce:
-                lobe = np.nonzero(~mirrored)[0]        # the mirrored ones have their direction already
-                w_i[lobe], weight = mats.sample_glossy(m[lobe], n[lobe], wo[lobe], self.rng.random((len(lobe), 2)))
-                throughput[lobe] *= weight
+            if bounce:                                # the mirrored ones have their direction already
+                self._along_lobes(np.nonzero(~mirrored)[0], w_i, throughput, m, n, wo)
             live = np.nonzero(np.any(throughput > 0, axis=1))[0]
             tri, t, bu, bv = self.tracer.first_hit(pts[live] + n[live] * self.tracer.eps, w_i[live])
             self.rays += len(live)
             hit = tri >= 0
             if light_mis is not None and len(live):      # the lobe's ray meets a lamp (MIS)
                 m_from, wo_from = (light_mis[0], light_mis[1]) if bounce == 0 else (m, wo)
-                dist = np.where(hit, t, np.inf)
-                le = self.direct.lobe_hits_light(pts[live], m_from[live], n[live], wo_from[live], w_i[live], tri,
-                                                 pts[live] + np.where(hit, t, 0.0)[:, None] * w_i[live],
-                                                 self.settings.light_samples, distance=dist,
-                                                 mirrored=mirrored[live] if bounce else None,
-                                                 receivers=None if groups is None else groups[live])
+                le = self._lamps_met(pts[live], n[live], m_from[live], wo_from[live], w_i[live], tri, t,
+                                     mirrored[live] if bounce else None, None if groups is None else groups[live])
                 np.add.at(light, pix[live], throughput[live] * le)
             if sc.world.emits:      # paths that leave the scene see the world
                 gone = live[~hit]
-                seen = throughput[gone] * sc.world.radiance(w_i[gone])
-                if world_mis is not None and bounce == 0:
-                    seen *= DirectLighting.mis_weight(world_mis[1][gone], world_mis[0][gone])[:, None]
-                np.add.at(light, pix[gone], seen)
+                mis = None if world_mis is None or bounce else (world_mis[0][gone], world_mis[1][gone])
+                np.add.at(light, pix[gone], throughput[gone] * self._world_seen(w_i[gone], mis))
             live, tri, t = live[hit], tri[hit], t[hit]
             bary = np.stack([1 - bu - bv, bu, bv], axis=1)[hit]
-            ts = sc.seen_tside(tri, w_i[live])
-            patch = sc.tside_side[ts]
-            e_hit = self.surface_values(e, vert, ts, bary)
-            hit_m = sc.triangle_material[tri]
-            hit_n = sc.tside_normal[ts]
-            w_back = -w_i[live]
+            patch, e_hit, hit_m, hit_n, w_back = self._hits(e, vert, tri, bary, w_i[live])
             go_on = (mats.is_glossy[hit_m] & (np.einsum("ij,ij->i", hit_n, w_back) > 0)
                      if bounce + 1 < depth else np.zeros(len(live), bool))
             L = solver.radiance(patch, w_back, diffuse_incoming=e_hit, first_shot_emission=False,
@@ -174,26 +157,20 @@ class GlossyEyePaths:
             if light_mis is not None and len(gi):
                 # the lamps in the glossy lobe of a hit the path goes on from: light samples, MIS-weighted
                 # against the next ray (E1 f(w_mean, w) spiked where a sharp lobe lined up with w_mean)
-                hp = pts[live[gi]] + t[gi, None] * w_i[live[gi]]
-                lit = reflected_radiance(self.direct, hp, hit_n[gi], hit_m[gi], w_back[gi], self.rng,
-                                                     self.settings.light_samples, mis=np.ones(len(gi), bool),
-                                                     diffuse_scale=np.zeros((len(gi), 3)),
-                                                     receivers=sc.link_groups(tri[gi]))
+                lit = self._lamps_in_lobe(pts[live[gi]] + t[gi, None] * w_i[live[gi]], hit_n[gi], hit_m[gi],
+                                          w_back[gi], tri[gi])
                 if scale is not None:
                     lit *= scale[gi, None]
                 np.add.at(light, pix[live[gi]], throughput[live[gi]] * lit)
-            stop = ~go_on & ~turn
-            if stop.any():   # paths that end here use the iterate for the hit's own glossy lobe,
-                s_idx = np.nonzero(stop)[0]      # spread evenly once a lobe has been followed
-                L[s_idx] = solver.radiance(patch[s_idx], w_back[s_idx], diffuse_incoming=e_hit[s_idx],
-                                           first_shot_emission=False, glossy_as_diffuse=bounce > 0,
-                                           sharp_interfaces=True)
+            # paths that end here use the iterate for the hit's own glossy lobe, spread evenly once a
+            # lobe has been followed
+            stop = np.nonzero(~go_on & ~turn)[0]
+            if len(stop):
+                L[stop] = solver.radiance(patch[stop], w_back[stop], diffuse_incoming=e_hit[stop],
+                                          first_shot_emission=False, glossy_as_diffuse=bounce > 0, sharp_interfaces=True)
             throughput = throughput[live]
             if scale is not None:         # the opaque rest of a transmissive surface, less its interface
-                rest = np.nonzero(self.tracer.glass[tri] & ~turn)[0]
-                e_mirror = e_hit[rest] - solver.sharp_incoming(patch[rest])
-                L[rest] = np.maximum(L[rest] - solver.mirror_over_pi[patch[rest]] * e_mirror, 0.0)
-                throughput[rest] *= scale[rest, None]
+                self._opaque_rest(L, throughput, self.tracer.glass[tri] & ~turn, e_hit, patch, scale)
             L[turn] = 0.0
             np.add.at(out, pix[live], throughput * L)
             pts = pts[live] + t[:, None] * w_i[live]
@@ -205,6 +182,56 @@ class GlossyEyePaths:
             pts, throughput, w_i, mirrored = pts[keep], throughput[keep], w_i[keep], turn[keep]
             groups = None if groups is None else sc.link_groups(tri[keep])
         return light, out
+
+    def _along_lobes(self, lobe, w_i, throughput, m, n, wo):
+        """The paths ``lobe`` go on along their glossy lobe: a new ``w_i``, ``throughput`` times the
+        sample's weight; in place."""
+        w_i[lobe], weight = self.scene.materials.sample_glossy(m[lobe], n[lobe], wo[lobe],
+                                                               self.rng.random((len(lobe), 2)))
+        throughput[lobe] *= weight
+
+    def _hits(self, e, vert, tri, bary, w):
+        """``(side, e, material, normal, w_back)`` at the hits of rays ``w`` on triangles ``tri``
+        (barycentric ``bary``): the side seen, its interpolated diffuse incoming radiance from
+        ``e`` and ``vert`` (:meth:`surface_values`), the material, the normal, the way back."""
+        sc = self.scene
+        ts = sc.seen_tside(tri, w)
+        return (sc.tside_side[ts], self.surface_values(e, vert, ts, bary), sc.triangle_material[tri],
+                sc.tside_normal[ts], -w)
+
+    def _lamps_met(self, p, n, m, wo, w, tri, t, mirrored, receivers):
+        """The emission (N, 3) of the first-shot mesh lights and area lamps that lobe-sampled rays
+        ``w`` from points ``p`` meet (triangle ``tri``, distance ``t``), MIS-weighted against the
+        light samples (:meth:`~raybundle.lights.direct.DirectLighting.lobe_hits_light`)."""
+        hit = tri >= 0
+        return self.direct.lobe_hits_light(p, m, n, wo, w, tri, p + np.where(hit, t, 0.0)[:, None] * w,
+                                           self.settings.light_samples, distance=np.where(hit, t, np.inf),
+                                           mirrored=mirrored, receivers=receivers)
+
+    def _world_seen(self, w, mis):
+        """The world's radiance (N, 3) along rays ``w`` that leave the scene, weighted
+        ``p_g^2 / (p_g^2 + p_w^2)`` against the world's samples when ``mis = (p_w, p_g)``."""
+        seen = self.scene.world.radiance(w)
+        if mis is not None:
+            seen *= DirectLighting.mis_weight(mis[1], mis[0])[:, None]
+        return seen
+
+    def _lamps_in_lobe(self, p, n, m, w_out, tri):
+        """The lamps' light (N, 3) reflected towards ``w_out`` by the glossy lobe alone at points
+        ``p`` on triangles ``tri``, MIS-weighted against the lobe's next ray."""
+        return reflected_radiance(self.direct, p, n, m, w_out, self.rng, self.settings.light_samples,
+                                  mis=np.ones(len(p), bool), diffuse_scale=np.zeros((len(p), 3)),
+                                  receivers=self.scene.link_groups(tri))
+
+    def _opaque_rest(self, L, throughput, rest, e_hit, patch, scale):
+        """At the hits ``rest`` (bool) on transmissive surfaces not followed through their
+        interface: the patch's radiance ``L`` less what the interface reflects (its first and
+        caustic shots left out), and the ``throughput`` times the opaque share ``scale``; in place."""
+        solver = self.solver
+        rest = np.nonzero(rest)[0]
+        e_mirror = e_hit[rest] - solver.sharp_incoming(patch[rest])
+        L[rest] = np.maximum(L[rest] - solver.mirror_over_pi[patch[rest]] * e_mirror, 0.0)
+        throughput[rest] *= scale[rest, None]
 
     def _interfaces(self, tri, normal, travel, w_back):
         """Where the paths' rays met (and stopped on, :meth:`~raybundle.tracing.visibility.

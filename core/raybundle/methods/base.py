@@ -21,7 +21,12 @@ class Method:
 
     Patch methods derive from :class:`~raybundle.methods.patch_solution.PatchSolution`
     (a solution per patch side: images and bakes); image-only methods from
-    :class:`~raybundle.imaging.progressive.ProgressiveImage` too (camera images, no patches)."""
+    :class:`~raybundle.imaging.progressive.ProgressiveImage` too (camera images, no patches).
+    Every method is made the same way, ``cls(scene, tracer, direct, settings, camera=None)``:
+    the prepared scene, its ray tracer, its first-shot lights
+    (:class:`~raybundle.lights.direct.DirectLighting`), the
+    :class:`~raybundle.imaging.settings.RenderSettings`, and for image-only methods the camera
+    (the scene's when None)."""
 
     #: the name users give (``--method``, the add-on's method list)
     name = ""

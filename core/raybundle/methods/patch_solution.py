@@ -22,7 +22,7 @@ from ..lights.world_light import GUIDE_CELLS, guide_cell
 from ..patches.reconstruction import LinearReconstruction
 from ..patches.side_points import SidePoints
 from ..scene.transmission import solver_share
-from ..tracing.sampling import (Stream, cosine_directions, frames_from_normals, stream,
+from ..tracing.sampling import (Stream, cosine_directions, frames_from_normals, make_sequence, stream,
                                 uniform_sphere, uniform_sphere_pdf)
 from .base import Method, SolverStats
 
@@ -43,22 +43,25 @@ class PatchSolution(Method, abc.ABC):
     #: the glossy sides' send rays traced in one batch, at most (several bundle directions at once)
     GLOSSY_SEND_BATCH = 1 << 18
 
-    def __init__(self, scene, tracer, direct, sequence, bundle_resolution=0, seed=0, directions_per_step=1,
-                 caustics=True, glossy_send_rays=2):
+    #: it takes the first shot's glossy reflection by lobe-sampled rays (``settings.caustics``)
+    TAKES_CAUSTIC_SHOT = True
+
+    def __init__(self, scene, tracer, direct, settings, camera=None):
+        """Every method's constructor (:class:`~raybundle.methods.base.Method`): the prepared
+        ``scene``, its ``tracer``, its first-shot lights ``direct`` and the
+        :class:`~raybundle.imaging.settings.RenderSettings` (validated); a patch method needs no
+        ``camera``."""
+        settings.validate()
         self.scene = scene
         self.tracer = tracer
         self.direct = direct
-        self.sequence = sequence
-        self.bundle_resolution = int(bundle_resolution) or auto_bundle_resolution(scene)
-        if int(directions_per_step) < 1:
-            raise ValueError("directions_per_step must be at least 1")
-        self.directions_per_step = int(directions_per_step)
-        if int(glossy_send_rays) < 1:
-            raise ValueError("glossy_send_rays must be at least 1")
-        self.glossy_send_rays = int(glossy_send_rays)
-        open_area = self._set_sides(scene, tracer, seed)
+        self.sequence = make_sequence(settings.sequence, settings.seed)
+        self.bundle_resolution = int(settings.bundle_resolution) or auto_bundle_resolution(scene)
+        self.directions_per_step = int(settings.directions_per_step)
+        self.glossy_send_rays = int(settings.glossy_send_rays)
+        open_area = self._set_sides(scene, tracer, settings.seed)
         self._set_glossy_sides(scene.materials, self.patch_material)
-        self._set_shots(scene, tracer, direct, seed, open_area, caustics)
+        self._set_shots(scene, tracer, direct, settings.seed, open_area, settings.caustics and self.TAKES_CAUSTIC_SHOT)
         self._set_iterate()
 
     def _set_sides(self, scene, tracer, seed):

@@ -81,7 +81,8 @@ class PathTracer(ProgressiveImage, Method):
     #: randomised Halton points
     SEQUENCES = ("prng", "stratified", "halton")
 
-    def __init__(self, scene, camera, tracer, direct, settings):
+    def __init__(self, scene, tracer, direct, settings, camera=None):
+        camera = scene.camera if camera is None else camera
         if camera is None:
             raise ValueError("the scene has no camera; give one (Camera.from_blender / Camera.look_at)")
         settings.validate()
@@ -172,28 +173,8 @@ class PathTracer(ProgressiveImage, Method):
                 out[row] += throughput * reflected_radiance(direct, x, nrm, mat, w_out, u_light, 1, mis=glossy,
                                                                    diffuse_scale=tex, receivers=sc.link_groups(tri))
                 self.image_rays += direct.rays - before
-            # the next direction: one lobe, chosen by its albedo
-            a_d = mats.albedo(mat, cos_o, glossy=False)
-            if tex is not None:
-                a_d = a_d * tex
-            a_g = mats.albedo(mat, cos_o, diffuse=False)
-            sd, sg = a_d.mean(axis=1), a_g.mean(axis=1)
-            q = np.where(sd + sg > 0, sg / np.maximum(sd + sg, 1e-300), 0.0)
             r = u.take(pix, 4)
-            take_glossy = r[:, 0] < q
-            w_next = np.empty_like(w_out)
-            weight = np.zeros_like(a_d)
-            d = np.nonzero(~take_glossy)[0]
-            if len(d):
-                tu, tv = frames_from_normals(nrm[d])
-                phi, s = 2.0 * np.pi * r[d, 1], np.sqrt(r[d, 2])
-                w_next[d] = (tu * (s * np.cos(phi))[:, None] + tv * (s * np.sin(phi))[:, None]
-                             + nrm[d] * np.sqrt(np.maximum(0.0, 1.0 - s * s))[:, None])
-                weight[d] = a_d[d] / (1.0 - q[d])[:, None]         # f_d cos / pdf = W_d kd
-            gi = np.nonzero(take_glossy)[0]
-            if len(gi):
-                w_next[gi], wg = mats.sample_glossy(mat[gi], nrm[gi], w_out[gi], r[gi, 1:3])
-                weight[gi] = wg / q[gi][:, None]
+            w_next, weight, take_glossy = self._next_direction(mat, nrm, w_out, cos_o, tex, r)
             throughput = throughput * weight
             if depth + 1 >= ROULETTE_DEPTH:
                 p = np.minimum(1.0, throughput.max(axis=1))
@@ -207,6 +188,33 @@ class PathTracer(ProgressiveImage, Method):
             org, w = x[k] + nrm[k] * tr.eps, w_next[k]
             row, pix, throughput = row[k], pix[k], throughput[k]
         return out
+
+    def _next_direction(self, mat, nrm, w_out, cos_o, tex, r):
+        """``(w, weight, glossy)`` of the paths' next rays: one lobe, chosen by its albedo
+        (``glossy`` (N,) bool: the glossy one), its direction from uniforms ``r`` (N, 4; columns
+        1-2) and the sample's weight ``f cos / pdf`` (N, 3)."""
+        mats = self.scene.materials
+        a_d = mats.albedo(mat, cos_o, glossy=False)
+        if tex is not None:
+            a_d = a_d * tex
+        a_g = mats.albedo(mat, cos_o, diffuse=False)
+        sd, sg = a_d.mean(axis=1), a_g.mean(axis=1)
+        q = np.where(sd + sg > 0, sg / np.maximum(sd + sg, 1e-300), 0.0)
+        take_glossy = r[:, 0] < q
+        w_next = np.empty_like(w_out)
+        weight = np.zeros_like(a_d)
+        d = np.nonzero(~take_glossy)[0]
+        if len(d):
+            tu, tv = frames_from_normals(nrm[d])
+            phi, s = 2.0 * np.pi * r[d, 1], np.sqrt(r[d, 2])
+            w_next[d] = (tu * (s * np.cos(phi))[:, None] + tv * (s * np.sin(phi))[:, None]
+                         + nrm[d] * np.sqrt(np.maximum(0.0, 1.0 - s * s))[:, None])
+            weight[d] = a_d[d] / (1.0 - q[d])[:, None]         # f_d cos / pdf = W_d kd
+        gi = np.nonzero(take_glossy)[0]
+        if len(gi):
+            w_next[gi], wg = mats.sample_glossy(mat[gi], nrm[gi], w_out[gi], r[gi, 1:3])
+            weight[gi] = wg / q[gi][:, None]
+        return w_next, weight, take_glossy
 
     def image(self, preview=False):
         """The mean of the passes (H, W, 3) float32 [W m^-2 sr^-1]."""

@@ -75,9 +75,11 @@ class PointCollocationSolver(PatchSolution):
     #: its vertex averages are not in :class:`~raybundle.app.chains.ChainState`
     merges_chains = False
 
-    def __init__(self, scene, tracer, direct, sequence, **kwargs):
-        kwargs["caustics"] = False
-        super().__init__(scene, tracer, direct, sequence, **kwargs)
+    #: diffuse scenes only: no glossy reflection of the first shot
+    TAKES_CAUSTIC_SHOT = False
+
+    def __init__(self, scene, tracer, direct, settings, camera=None):
+        super().__init__(scene, tracer, direct, settings)
         if not self.diffuse_only:
             raise ValueError("point collocation handles diffuse scenes only; this scene has glossy surfaces "
                              "(use stochastic-iteration)")

@@ -51,13 +51,15 @@ class RadiositySolver(PatchSolution):
     #: timing on `cornell`: docs/benchmarks.md, 'Measured choices behind the defaults')
     SWEEP_ENTRIES_PER_RAY = 600.0
 
-    def __init__(self, scene, tracer, direct, sequence, **kwargs):
+    #: diffuse scenes only: no glossy reflection of the first shot
+    TAKES_CAUSTIC_SHOT = False
+
+    def __init__(self, scene, tracer, direct, settings, camera=None):
         n = scene.n_sides
         if n > self.MAX_SIDES:
             raise ValueError(f"radiosity keeps an n x n form-factor matrix: {n:,} patch sides is more than "
                              f"{self.MAX_SIDES:,} (use fewer patches or stochastic-iteration)")
-        kwargs["caustics"] = False
-        super().__init__(scene, tracer, direct, sequence, **kwargs)
+        super().__init__(scene, tracer, direct, settings)
         if not self.diffuse_only:
             raise ValueError("radiosity handles diffuse scenes only; this scene has glossy surfaces "
                              "(use stochastic-iteration)")

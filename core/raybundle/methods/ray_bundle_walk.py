@@ -55,9 +55,11 @@ class RayBundleWalk(PatchSolution):
     #: the range of the continuation probability q (the scene's mean albedo)
     Q_RANGE = (0.25, 0.95)
 
-    def __init__(self, scene, tracer, direct, sequence, seed=0, **kwargs):
-        kwargs["caustics"] = False
-        super().__init__(scene, tracer, direct, sequence, seed=seed, **kwargs)
+    #: a walk's glossy sides carry the first shot's reflection themselves
+    TAKES_CAUSTIC_SHOT = False
+
+    def __init__(self, scene, tracer, direct, settings, camera=None):
+        super().__init__(scene, tracer, direct, settings)
         #: continuation probability: the scene's mean albedo (``mean_albedo``)
         self.q = float(np.clip(self.mean_albedo, *self.Q_RANGE))
         n = scene.n_sides
@@ -66,7 +68,7 @@ class RayBundleWalk(PatchSolution):
         self.walk_direction = np.zeros((n, 3))
         self.walk_step = 0                         # steps taken by the current walk
         self.walks = 0                             # walks started
-        self.roulette = stream(seed, Stream.ROULETTE)
+        self.roulette = stream(settings.seed, Stream.ROULETTE)
         if len(self.glossy_patches):
             rough = np.asarray(self.scene.materials.roughness)[self.patch_material[self.glossy_patches]].min()
             if rough < NEAR_MIRROR_ROUGHNESS:

@@ -205,7 +205,8 @@ class SingleRayIteration(ProgressiveImage, Method):
     #: the fewest steps left out of the running average (as the bundle iteration's)
     BURN_IN = 8
 
-    def __init__(self, scene, camera, tracer, direct, settings):
+    def __init__(self, scene, tracer, direct, settings, camera=None):
+        camera = scene.camera if camera is None else camera
         if camera is None:
             raise ValueError("the scene has no camera; give one (Camera.from_blender / Camera.look_at)")
         settings.validate()

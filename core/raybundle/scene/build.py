@@ -36,26 +36,7 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
     ``area_epsilon`` m^2) are dropped and counted in ``dropped_triangles`` (a
     warning is issued).  Without ``triangle_patch`` each triangle is its own patch.
     """
-    v = np.asarray(vertices, float).reshape(-1, 3)
-    t = np.asarray(triangles).reshape(-1, 3).astype(np.int64)
-    m = np.asarray(triangle_material).reshape(-1).astype(np.int64)
-    if len(t) == 0:
-        raise SceneError("the scene is empty: it has no triangles")
-    if len(m) != len(t):
-        raise SceneError(f"{len(m)} material ids for {len(t)} triangles")
-    if t.min() < 0 or t.max() >= len(v):
-        raise SceneError(f"triangle vertex indices must lie in [0, {len(v)})")
-    bad_v = ~np.isfinite(v).all(axis=1)
-    bad_t = bad_v[t].any(axis=1)
-    if bad_t.any():
-        raise SceneError(f"{int(bad_v.sum())} vertices are NaN or infinite (used by {int(bad_t.sum())} "
-                         "triangles); fix or delete them before rendering")
-    if m.min() < 0 or m.max() >= len(materials):
-        raise SceneError(f"triangle material ids must lie in [0, {len(materials)})")
-    try:
-        materials.validate()
-    except ValueError as e:
-        raise SceneError(str(e)) from e
+    v, t, m = _checked_triangles(vertices, triangles, triangle_material, materials)
     src = np.arange(len(t)) if triangle_source is None else np.asarray(triangle_source).reshape(-1).astype(np.int64)
     patch = None if triangle_patch is None else np.asarray(triangle_patch).reshape(-1).astype(np.int64)
     two = np.broadcast_to(np.asarray(two_sided, bool), (len(t),)) if np.ndim(two_sided) == 0 \
@@ -106,6 +87,33 @@ def build_scene(vertices, triangles, triangle_material, materials, point_lights=
     solid = None if triangle_solid is None else np.asarray(triangle_solid, bool).reshape(-1)[keep] & ~two
     return PatchScene(v, t, m, patch, src, materials, point_lights, camera, ar, name, dropped, solid,
                       two, sun_lights, area_lights, world, texture=texture, shading=shading, linking=linking)
+
+
+def _checked_triangles(vertices, triangles, triangle_material, materials):
+    """``(vertices (V, 3), triangles (T, 3), materials (T,))`` as arrays, or a :class:`SceneError`
+    naming what is wrong with them: no triangles, bad indices or material ids, non-finite
+    vertices, invalid materials."""
+    v = np.asarray(vertices, float).reshape(-1, 3)
+    t = np.asarray(triangles).reshape(-1, 3).astype(np.int64)
+    m = np.asarray(triangle_material).reshape(-1).astype(np.int64)
+    if len(t) == 0:
+        raise SceneError("the scene is empty: it has no triangles")
+    if len(m) != len(t):
+        raise SceneError(f"{len(m)} material ids for {len(t)} triangles")
+    if t.min() < 0 or t.max() >= len(v):
+        raise SceneError(f"triangle vertex indices must lie in [0, {len(v)})")
+    bad_v = ~np.isfinite(v).all(axis=1)
+    bad_t = bad_v[t].any(axis=1)
+    if bad_t.any():
+        raise SceneError(f"{int(bad_v.sum())} vertices are NaN or infinite (used by {int(bad_t.sum())} "
+                         "triangles); fix or delete them before rendering")
+    if m.min() < 0 or m.max() >= len(materials):
+        raise SceneError(f"triangle material ids must lie in [0, {len(materials)})")
+    try:
+        materials.validate()
+    except ValueError as e:
+        raise SceneError(str(e)) from e
+    return v, t, m
 
 
 def _world_and_suns(world, sun_lights):
