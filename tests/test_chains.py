@@ -56,8 +56,8 @@ def test_merged_chains_pool_their_sums_and_counts():
 
 def test_merged_solver_chains_bake_their_weighted_average():
     """Patch values (what bakes and color attributes read) pool by iterations averaged:
-    chains of 30 and 60 iterations weigh 30 - b : 60 - b after the b burn-in iterations each
-    (13 in this furnace, mean albedo 0.7: 0.7^13 < 1%)."""
+    chains of 30 and 60 iterations weigh 30 : 60 (their iterates warmed up by b transfers
+    before, 13 in this furnace, mean albedo 0.7: 0.7^13 < 1%, none of them averaged)."""
     sc = pipeline.prepare(scenes.furnace(), patches=150)
     solvers = []
     for seed, its in ((1, 30), (2, 60)):
@@ -67,10 +67,9 @@ def test_merged_solver_chains_bake_their_weighted_average():
         solvers.append(s)
     merged = chains.merge([chains.state(s) for s in solvers])
     fresh = chains.apply(merged, pipeline.make_solver(sc, RenderSettings(seed=1)))
-    b = solvers[0].burn_in
-    assert b == 13
-    w = np.array([30 - b, 60 - b]) / (90 - 2 * b)
-    assert [s.averaged for s in solvers] == [30 - b, 60 - b] and fresh.averaged == 90 - 2 * b
+    assert solvers[0].burn_in == solvers[0].stats.warm_up == 13
+    w = np.array([30, 60]) / 90
+    assert [s.averaged for s in solvers] == [30, 60] and fresh.averaged == 90
     assert np.allclose(fresh.mean_incoming, w[0] * solvers[0].mean_incoming + w[1] * solvers[1].mean_incoming)
     assert fresh.stats.iterations == 90
     # the first shot pools per-tside sample counts (different here: 30 and 60 refinements)

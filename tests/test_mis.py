@@ -12,6 +12,7 @@ import pytest
 from raybundle.app import pipeline
 from raybundle.imaging.settings import RenderSettings
 from raybundle.lights.sources import MeshLight
+from raybundle.methods.stochastic_iteration import StochasticIterationSolver
 from raybundle.patches.layout import subdivide
 from raybundle.scene.build import build_scene
 from raybundle.scene.camera import Camera
@@ -155,7 +156,7 @@ def test_mis_cuts_the_variance_of_a_sharp_highlight(lamp):
 
 
 @pytest.mark.parametrize("lamp", ["mesh", "area"])
-def test_the_lamps_a_glossy_lobe_meets_count_over_the_solvers_restart(lamp):
+def test_the_lamps_a_glossy_lobe_meets_count_over_the_solvers_restart(lamp, monkeypatch):
     """What the eye's glossy paths take from the lamps (and the world) does not depend on the
     solver's iterations: it counts with the pass, which the restart of the solver's running
     average after its burn-in keeps; only what the paths read from the solver is dropped there.
@@ -163,7 +164,11 @@ def test_the_lamps_a_glossy_lobe_meets_count_over_the_solvers_restart(lamp):
     highlight is in the passes' sum.  The old renderer put it with the solver's part and dropped
     every pass before the restart (the full-material hall of the interior bench: 2/3 of its
     passes at 60 s)."""
+    # no warm-up, so the average restarts after burn_in iterations (as a scene whose transient
+    # outlasts the warm-up's limit does)
+    monkeypatch.setattr(StochasticIterationSolver, "MAX_WARM_UP", 0)
     r = pipeline.make_renderer(lamp_over_plane(0.08, lamp), RenderSettings(seed=3))
+    assert r.solver.restart_at == r.solver.burn_in > 0
     r.run(iterations=r.solver.burn_in + 4)
     r.tracer.close()
     assert 0 < r.gather_passes < r.passes

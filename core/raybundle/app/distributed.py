@@ -14,7 +14,7 @@ what its chain did since its last report: the chain is not restarted elsewhere (
 would repeat), its last report counts.
 
 Over ``c`` chains the pooled image has the error of one chain run ``c`` times as long, less
-each chain's own start (burn-in, first image pass) and the client's resolve; on one machine
+each chain's own start (warm-up, first image pass) and the client's resolve; on one machine
 the chains share its cores, so ``--workers`` pays off only across machines (or with more
 cores than one chain's threads use).
 """

@@ -119,7 +119,14 @@ def make_solver(scene, settings: RenderSettings | None = None, solver=Stochastic
     try:
         _step(stage, stop, f"first shot and solver set-up for {scene.n_patches:,} patches")
         direct = DirectLighting(scene, tracer, first_shot=settings.first_shot, light_tree=settings.light_tree)
-        return SOLVERS[solver](scene, tracer, direct, settings)
+        method = SOLVERS[solver](scene, tracer, direct, settings)
+        if hasattr(method, "warm_up"):
+            _step(stage, stop, f"warming up the iteration ({method.warm_up_steps} transfers)")
+            stopped = None if stop is None else getattr(stop, "is_set", stop)
+            method.warm_up(stopped)
+            if stopped is not None and stopped():
+                raise Cancelled("stopped during set-up, while warming up the iteration")
+        return method
     except BaseException:           # Cancelled, bad input, Ctrl-C: the tracer's threads end now
         tracer.close()
         raise

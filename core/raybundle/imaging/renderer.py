@@ -198,12 +198,14 @@ class Renderer(ProgressiveImage):
 
     def _restart_solver_parts(self):
         """Drop what the passes and iterations read from the solver before its running
-        average restarted (after ``burn_in`` iterations, when the iterates have forgotten
-        their zero start): the glossy eye paths' sum and the glossy iterates.  Read from an
-        average still rising from zero, they kept a start-up bias that fell only as 1/n.
-        Done at the first pass after the restart, so a run always keeps at least one pass."""
+        average restarted (after ``restart_at`` iterations, when the iterates have forgotten
+        their zero start; a solver warmed up before its first iteration has 0 and never
+        restarts): the glossy eye paths' sum and the glossy iterates.  Read from an average still
+        rising from zero, they kept a start-up bias that fell only as 1/n.  Done at the first
+        pass after the restart, so a run always keeps at least one pass."""
         solver = self.solver
-        if self._restarted or solver.stats.iterations <= getattr(solver, "burn_in", 0):
+        restart = getattr(solver, "restart_at", 0)
+        if self._restarted or not restart or solver.stats.iterations <= restart:
             return
         self._restarted = True
         self.gather_sum[:] = 0.0

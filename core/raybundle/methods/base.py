@@ -14,6 +14,7 @@ class SolverStats:
     rays: int = 0           # Embree queries issued by the solver (bundles)
     bundle_rays: int = 0    # grid rays (one per line of the bundles)
     directions: int = 0     # global directions (bundles) used
+    warm_up: int = 0        # transfers before the running average started (not iterations)
 
 
 class Method:

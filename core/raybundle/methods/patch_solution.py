@@ -55,6 +55,7 @@ class PatchSolution(Method, abc.ABC):
         self.scene = scene
         self.tracer = tracer
         self.direct = direct
+        self.seed = int(settings.seed)
         self.sequence = make_sequence(settings.sequence, settings.seed)
         self.bundle_resolution = int(settings.bundle_resolution) or auto_bundle_resolution(scene)
         self.directions_per_step = int(settings.directions_per_step)
@@ -133,6 +134,8 @@ class PatchSolution(Method, abc.ABC):
         #: iterations left out of the running average: until the start-up transient,
         #: about mean_albedo^n, is below 1% (at least BURN_IN, at most 1,000)
         self.burn_in = int(np.clip(np.ceil(np.log(0.01) / np.log(max(self.mean_albedo, 1e-3))), self.BURN_IN, 1000))
+        #: iterations after which the running average restarts once (0: it never does)
+        self.restart_at = self.burn_in
 
     def _set_shots(self, scene, tracer, direct, seed, open_area, caustics):
         """The first shot of the small lights and its caustic shot, and how many rays refine
@@ -328,22 +331,24 @@ class PatchSolution(Method, abc.ABC):
         (:meth:`~raybundle.scene.world.World.radiance_along`, reversed), one look-up per direction."""
         return self.world.radiance_along(direction)[::-1]
 
-    def transfer(self):
-        """One random transport operator: ``directions_per_step`` directions d_k, one bundle
-        each (traced together on the thread pool), every side's received ``E_i(d_k)`` from
-        what the senders send now (:meth:`sent_radiance`, :meth:`glossy_sent_radiance`,
-        :meth:`sent_environment`).  Returns ``(E, e_glossy, t_glossy, bundles)``: the
-        diffuse lobe's mean over the K transfers (S, 3), each glossy side's one drawn
-        transfer and its travel direction t_i (S, 3; None for diffuse-only scenes).
-        Counts directions and rays, sets ``direction``; the caller stores the iterate."""
-        k_dirs = self.directions_per_step
-        d = np.array([uniform_sphere(*self.sequence.next(2)) for _ in range(k_dirs)])
+    def transfer(self, d=None, resolution=None):
+        """One random transport operator: ``directions_per_step`` directions d_k from the sequence
+        (or the unit ``d`` (K, 3) given), one bundle each of ``bundle_resolution`` rays a side
+        (or ``resolution``; traced together), every side's received ``E_i(d_k)`` from what the
+        senders send now (:meth:`sent_radiance`, :meth:`glossy_sent_radiance`,
+        :meth:`sent_environment`).  Returns ``(E, e_glossy, t_glossy, bundles)``: the diffuse
+        lobe's mean over the K transfers (S, 3), each glossy side's one drawn transfer and its
+        travel direction t_i (S, 3; None for diffuse-only scenes).  Counts directions and rays,
+        sets ``direction``; the caller stores the iterate."""
+        if d is None:
+            d = np.array([uniform_sphere(*self.sequence.next(2)) for _ in range(self.directions_per_step)])
+        k_dirs = len(d)
         g = self.grid_rng.random((k_dirs, 3))
-        bundles = self.tracer.bundles(d, self.bundle_resolution, offsets=g[:, :2], rotations=g[:, 2])
+        res = resolution or self.bundle_resolution
+        bundles = self.tracer.bundles(d, res, offsets=g[:, :2], rotations=g[:, 2])
         n = len(self.area)
         if self._tiny is None and len(bundles):
-            self._tiny = np.nonzero(self.area < bundles[0].cell_area / self.TINY_SIDE)[0]
-            self._tiny_points = SidePoints(self.scene, np.isin(np.arange(n), self._tiny))
+            self._find_tiny(bundles[0].cell_area * (res / self.bundle_resolution) ** 2)
         # diffuse senders send the same radiance into every direction they face (a bundle
         # pairs only sides that face each other): one evaluation serves all K bundles, and
         # only glossy sides are evaluated per direction
@@ -406,6 +411,12 @@ class PatchSolution(Method, abc.ABC):
         self.direction = d[-1]
         st.directions += k_dirs
         return E, e_glossy, t_glossy, bundles
+
+    def _find_tiny(self, cell_area):
+        """The sides smaller than a cell (``cell_area``) of the iterations' bundles over
+        :data:`TINY_SIDE` (:meth:`_gather_tiny`), and their points."""
+        self._tiny = np.nonzero(self.area < cell_area / self.TINY_SIDE)[0]
+        self._tiny_points = SidePoints(self.scene, np.isin(np.arange(len(self.area)), self._tiny))
 
     def _guide(self, bundle, sender, S, d, w):
         """Add what the bundle along ``d`` brought each side straight from the sky, by the sky's

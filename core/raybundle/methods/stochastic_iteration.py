@@ -56,6 +56,7 @@ from __future__ import annotations
 
 import time
 
+from ..tracing.sampling import Stream, stream, uniform_sphere
 from .patch_solution import PatchSolution
 
 
@@ -69,6 +70,56 @@ class StochasticIterationSolver(PatchSolution):
     #: independent chains of it merge exactly (:mod:`raybundle.app.chains`)
     merges_chains = True
 
+    #: at most this many warm-up transfers; a scene whose transient needs more also restarts its
+    #: running average once, after the rest (:attr:`restart_at`)
+    MAX_WARM_UP = 128
+    #: the warm-up's bundles have this many times fewer rays a side than the iterations'
+    WARM_UP_COARSER = 4
+
+    def __init__(self, scene, tracer, direct, settings, camera=None):
+        super().__init__(scene, tracer, direct, settings)
+        #: transfers of one direction each that bring the iterate near the solution before the
+        #: running average starts (:meth:`warm_up`)
+        self.warm_up_steps = min(self.burn_in, self.MAX_WARM_UP)
+        self.restart_at = self.burn_in - self.warm_up_steps
+        self.warmed_up = False
+
+    def warm_up(self, stop=None):
+        """Bring the iterate near the solution before the running average starts.
+
+        The iterates start from zero and approach the solution like ``mean_albedo^n``: averaged
+        from the first, a run of n iterations is dark by about ``1 / (n (1 - albedo))``.  Here
+        :attr:`warm_up_steps` transfers apply the same random operator to the iterate until the
+        transient is below 1%, and are not averaged.  Each takes the iterations' number of
+        directions (from a stream of their own, ``Stream.WARM_UP``, so the averaged iterations
+        keep the sequence's), whose mean keeps the iterate's total light steady (with one
+        direction a transfer, it is a product of random factors), but bundles of
+        :data:`WARM_UP_COARSER` times fewer rays a side.  Meanwhile the solver's readers of the
+        running average (the glossy senders' and tiny sides' gathers) read the current iterate.
+        ``stop`` (a callable) ends it early; the iteration then goes on from where it got."""
+        res = max(8, self.bundle_resolution // self.WARM_UP_COARSER)
+        rng = stream(self.seed, Stream.WARM_UP)
+        t0, before = time.perf_counter(), self.direct.rays
+        for _ in range(self.warm_up_steps if not self.warmed_up else 0):
+            if stop is not None and stop():
+                break
+            d = uniform_sphere(*rng.random((2, self.directions_per_step)))
+            E, e_glossy, t_glossy, _ = self.transfer(d, resolution=res)
+            self._store(E, e_glossy, t_glossy)
+            self.mean_incoming = E.copy()
+            if self.separates_world:
+                self.mean_world_incoming = self.world_incoming.copy()
+            self.stats.warm_up += 1
+        self.warmed_up = True
+        self.stats.rays += self.direct.rays - before
+        self.stats.seconds += time.perf_counter() - t0
+
+    def _store(self, E, e_glossy, t_glossy):
+        """Make the transfer's result the iterate."""
+        self.incoming = E
+        if not self.diffuse_only:
+            self.glossy_incoming, self.receive_direction = e_glossy, t_glossy
+
     def step(self):
         """One iteration: :meth:`transfer` from the current iterate, then the running average.
 
@@ -77,19 +128,18 @@ class StochasticIterationSolver(PatchSolution):
         glossy side keeps one of them, ``E_i(d_k)`` with k drawn uniformly per side, as its
         single stored direction t_i (unbiased too: its mean over k is the same average).
         """
+        if not self.warmed_up:
+            self.warm_up()
         t0 = time.perf_counter()
         before = self.direct.rays
         self.refine_first_shot()
         E, e_glossy, t_glossy, bundles = self.transfer()
-        self.incoming = E
-        if not self.diffuse_only:
-            self.glossy_incoming, self.receive_direction = e_glossy, t_glossy
+        self._store(E, e_glossy, t_glossy)
         st = self.stats
         st.iterations += 1
-        # the running average restarts once, after burn_in iterations: the iterates start from
-        # zero and approach the solution like albedo^n, a start-up bias ~ 1/(n (1 - albedo))
-        # that would otherwise fade only as fast as 1/n (3% after 100 iterations at albedo 0.7)
-        self.averaged = st.iterations - (self.burn_in if st.iterations > self.burn_in else 0)
+        # the running average starts after the warm-up; a scene whose transient outlasts it
+        # restarts the average once, after restart_at iterations
+        self.averaged = st.iterations - (self.restart_at if st.iterations > self.restart_at else 0)
         self.mean_incoming += (E - self.mean_incoming) / self.averaged
         if self._tiny is not None and len(self._tiny):
             # a side much smaller than a bundle line's cross-section receives, when a line meets it,

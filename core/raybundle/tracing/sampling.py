@@ -49,6 +49,7 @@ class Stream(enum.IntEnum):
     BUNDLE_GRID = 16            # each bundle's grid offset and rotation
     STRATIFIED = 17             # :class:`StratifiedSequence`'s streams, one more number each
     OPEN_FRACTION_FRAMES = 18   # the patches' open-fraction probes' random turns
+    WARM_UP = 19                # the iteration's warm-up directions and grids
     SOBOL_SHIFT = 23            # :class:`SobolSequence`'s digital shift
     RANDOM_ROOM = 29            # the built-in random rooms
     TEXTURE_MEANS = 31          # texture means over patches, by sampled points
