@@ -110,7 +110,7 @@ bench-lights: $(STAMP)
 # Real rooms (demo_scenes/interiors), RAYBUNDLE against Cycles from the same file at 320 x 180, references
 # committed: each room in its own materials at 60 s, then in clay (the view layer's Material Override) at
 # 60 and 300 s (about 35 minutes a room on 2 cores)
-INTERIORS = living-room dining-room modern-hall
+INTERIORS = living-room dining-room modern-hall bathroom bathroom2
 bench-interiors: $(STAMP)
 	for room in $(INTERIORS); do \
 	  $(PY) tools/bench_blender.py demo_scenes/interiors/$$room.blend --resolution 320 180 \

@@ -80,7 +80,7 @@ def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None, stage=None, stop=None
     if max_edge is not None:
         return subdivide(scene, max_edge=max_edge)
     if patches:
-        return make_patches(scene, patches=patches)
+        return make_patches(scene, patches=patches, stage=stage)
     return triangle_patches(scene)
 
 

@@ -226,13 +226,14 @@ def patch_size(scene: PatchScene, patches, grouping=None, steps=12):
     return best[1]
 
 
-def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> PatchScene:
+def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stage=None) -> PatchScene:
     """The patch layout of ``scene`` for about ``patches`` patches (or patch size ``size`` [m]):
     large triangles cut, small ones grouped (module docstring).  A scene without triangles
     smaller than a patch gets exactly :func:`~raybundle.patches.layout.subdivide`'s layout.  With
     ``contacts``, patches follow contact lines (:func:`~raybundle.patches.layout.cut_at_contacts`)
     and no cluster holds triangles both in and out of a gap narrower than 5% of a patch
-    (:func:`~raybundle.patches.gaps.gap_sides`)."""
+    (:func:`~raybundle.patches.gaps.gap_sides`).  ``stage(text)`` is told each step as it starts."""
+    stage = stage or (lambda text: None)
     if (patches is None) == (size is None):
         raise ValueError("give exactly one of patches and size")
     grouping = _Grouping(scene)
@@ -245,6 +246,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     if not small.any():
         return subdivide(scene, max_edge=h, contacts=contacts)
     # crowding is traced over the input (its pieces have the same surfaces), if a triangle is cut
+    stage(f"cutting faces larger than a patch ({h:.3g} m)")
     pieces = ~small & scene.materials.reflects[scene.triangle_material]
     probe = RayTracer(scene) if pieces.any() else None
     try:
@@ -260,6 +262,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
     tracer = RayTracer(fine) if contacts or lit_by_world else None
     try:
         if contacts:
+            stage("cutting patches along contacts and where surfaces pierce others")
             # cut the pieces of split faces and the triangles that straddle a contact; carry
             # each new triangle's row in ``fine`` through the cut as its source
             rows = replace(fine, triangle_source=np.arange(len(fine.triangles)))
@@ -267,6 +270,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True) -> P
             row = row[cut.triangle_source]
             fine = replace(cut, triangle_source=fine.triangle_source[cut.triangle_source])
         fine_small = small[row]
+        stage(f"grouping {int(fine_small.sum()):,} small triangles into patches")
         grouped = _Grouping(fine, lo=grouping.lo, rows=np.nonzero(fine_small)[0])
         gap = gap_sides(tracer, grouped.centroid, grouped.normal, CONTACT_SHARE * h) if contacts else None
         view = world_view_classes(tracer, grouped.centroid, grouped.normal) if lit_by_world else None
