@@ -424,3 +424,46 @@ def test_a_byte_srgb_checker_on_base_color_matches_cycles(fresh, tmp_path, inter
     ours = [render_raybundle(tmp_path / f"rb{s}.exr", iterations=6, seed=s) for s in (1, 2)]
     theirs = [render_cycles(tmp_path / f"cy{s}.exr", samples=32, seed=s) for s in (1, 2)]
     assert_like_cycles(ours, theirs)
+
+
+@pytest.mark.parametrize("coordinates", ["uv map", "texture coordinate"])
+def test_an_image_read_through_a_tiling_mapping_is_baked_once_as_cycles_renders_it(fresh, tmp_path, coordinates):
+    """UV -> Mapping (scale 2: the checker tiled twice) -> Vector Math (offset) -> Image Texture ->
+    Diffuse Color: a function of the UV map, so Blender bakes it once for the material, twice as
+    fine as the image for its tiling, however many objects use it (it was baked on each object at
+    1,024^2, or, with the image straight on the color, replaced by its mean with a warning); the
+    render follows Cycles pixel by pixel."""
+    from addon_helpers import render_cycles, render_raybundle
+
+    from raybundle_addon.translation.node_graphs import graph_input
+
+    plane, _ = textured_plane()
+    mat = plane.data.materials[0]
+    nt = mat.node_tree
+    tex = nt.nodes["Image Texture"]
+    if coordinates == "uv map":
+        uv = nt.nodes.new("ShaderNodeUVMap")
+        source = uv.outputs["UV"]
+    else:
+        source = nt.nodes.new("ShaderNodeTexCoord").outputs["UV"]
+    mapping = nt.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Scale"].default_value = (2.0, 2.0, 1.0)
+    offset = nt.nodes.new("ShaderNodeVectorMath")
+    offset.operation = "ADD"
+    offset.inputs[1].default_value = (0.0625, 0.0, 0.0)
+    nt.links.new(source, mapping.inputs["Vector"])
+    _between(nt, offset, mapping.outputs["Vector"], tex.inputs["Vector"])
+    got = graph_input(mat, nt.nodes["Diffuse BSDF"].inputs["Color"])
+    assert not isinstance(got, str) and not got.per_object and got.size == (128, 128), got
+    second = add_object("second", [(3, 0, 0), (4, 0, 0), (4, 1, 0), (3, 1, 0)], [(0, 1, 2, 3)], [mat])
+    second.data.uv_layers.new(name="UVMap")
+    ex = _export()
+    assert not any("Color" in w or "mean" in w for w in ex.warnings), ex.warnings
+    assert ex.scene.texture is not None and [im.shape for im in ex.scene.texture.images] == [(128, 128, 3)]
+    bpy.data.objects.remove(bpy.data.objects["second"])
+    ref = render_cycles(tmp_path / "cy.exr", samples=64, seed=2)
+    ours = render_raybundle(tmp_path / "rb.exr", iterations=40, seed=2)
+    rel = ours / ref - 1
+    # as the color ramp's test above: Cycles' noise at 64 samples
+    assert abs(rel.mean()) < 0.01 and np.percentile(np.abs(rel), 95) < 0.04 and np.abs(rel).max() < 0.1, \
+        (rel.mean(), np.percentile(np.abs(rel), 95), np.abs(rel).max())

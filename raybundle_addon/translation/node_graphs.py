@@ -70,6 +70,9 @@ READ_SHADERS = frozenset(("BSDF_DIFFUSE", "BSDF_GLOSSY", "BSDF_ANISOTROPIC", "EM
 #: :data:`MAX_BAKE_SCALE` times finer in each axis
 BAKE_TEXELS = 1_000_000
 MAX_BAKE_SCALE = 8
+#: ... and an image read through a tiling Mapping as many times finer again as it repeats, up to
+#: this many texels a side
+MAX_BAKE_SIDE = 4096
 #: seconds before the bake is given up
 BAKE_TIMEOUT = 300.0
 
@@ -104,9 +107,9 @@ def socket_key(mat, sock):
 def graph_input(mat, sock):
     """The :class:`GraphInput` of the graph that drives input ``sock`` of material ``mat``, or a
     one-line reason why Blender cannot evaluate it over a UV map."""
-    from .node_links import follow_reroutes, uv_source
+    from .node_links import follow_reroutes, uv_source, uv_through
 
-    images, uvs, seen, positional = {}, set(), set(), False
+    images, uvs, seen, positional, tiling = {}, set(), set(), False, 1.0
     stack = [sock.links[0]]
     while stack:
         link = stack.pop()
@@ -121,6 +124,9 @@ def graph_input(mat, sock):
                 return f"the Image Texture {node.name!r} has no image"
             images[node.name] = node.image
             uv = uv_source(node)
+            through = uv_through(node) if uv is None else None
+            if through is not None:         # a tiled or offset UV: still a function of the map
+                uv, tiling = through[0], max(tiling, through[1])
             if uv is None or getattr(node, "projection", "FLAT") != "FLAT":
                 positional = True           # read through other coordinates: baked on the object
             else:
@@ -151,7 +157,8 @@ def graph_input(mat, sock):
             size = (int(w), int(h))
     if images:
         k = bake_scale(size)
-        size = (size[0] * k, size[1] * k)
+        t = int(np.clip(np.ceil(tiling), 1, max(1, MAX_BAKE_SIDE // max(size[0] * k, size[1] * k))))
+        size = (size[0] * k * t, size[1] * k * t)
     return GraphInput(mat.name_full, sock.node.name, sock.identifier, images, uvs.pop() if uvs else "", size)
 
 

@@ -19,7 +19,7 @@ model.  A material's node tree is read from its Cycles output node:
 * **Principled BSDF**: :func:`.closures.principled_to_material` (the one place that maps it).
 * An **Image Texture** on a Diffuse BSDF's Color or a Principled BSDF's Base Color,
   looked up through a UV map (the Vector input unlinked, or from a UV Map node or
-  Texture Coordinate's UV), is an albedo texture (:attr:`MaterialConverter.textures`,
+  Texture Coordinate's UV; through vector nodes from one, Blender bakes it, below), is an albedo texture (:attr:`MaterialConverter.textures`,
   :mod:`raybundle.scene.textures`): the material holds the image's mean linear color, each
   patch its mean over the patch, and images and bakes its detail.  A **Color Attribute**
   node there is the albedo per point the same way (the material white, times the
@@ -58,7 +58,7 @@ from raybundle.scene.textures import modulation_map
 
 from .closures import Closures, clip_colors, flatten, luminance, principled_to_material
 from .images import image_bytes, linear_pixels, srgb_bytes
-from .node_links import follow_reroutes, uv_source
+from .node_links import follow_reroutes, uv_source, uv_through
 
 #: the diffuse color of faces without a material (Blender's default surface)
 DEFAULT_GREY = 0.8
@@ -391,7 +391,11 @@ class MaterialConverter:
             node = follow_reroutes(sock.links[0].from_node)
             if node is not None and node.type == "RGB":
                 return np.array(node.outputs[0].default_value[:3], float)
-            if node is not None and node.type in ("TEX_IMAGE", "TEX_ENVIRONMENT"):
+            if node is not None and not read_directly(sock, node):       # Blender evaluates the graph
+                got = self._graph(sock, node, notes)
+                if got is not None:
+                    return got
+            elif node is not None and node.type in ("TEX_IMAGE", "TEX_ENVIRONMENT"):
                 mean = self.image_mean(node.image)
                 if mean is not None:
                     uv = uv_source(node) if node.type == "TEX_IMAGE" else None
@@ -411,14 +415,10 @@ class MaterialConverter:
                                  f"{color_text(mean)} ({why})")
                     return mean
                 notes.append(f"image texture on {sock.name!r} has no image data: using the socket's value")
-            elif node is not None and node.type == "VERTEX_COLOR" and _is_albedo(sock):
+            elif node is not None and node.type == "VERTEX_COLOR":
                 # the attribute's color is the albedo itself: white here, times the color per point
                 self._albedo.append(AlbedoTexture(attribute=node.layer_name))
                 return np.ones(3)
-            elif node is not None:
-                got = self._graph(sock, node, notes)
-                if got is not None:
-                    return got
         return np.array(sock.default_value[:3], float)
 
     def value(self, sock, notes):
@@ -547,9 +547,12 @@ def _transparent_input(mix):
 def read_directly(sock, node):
     """Whether the converter reads input ``sock`` linked to ``node`` without Blender's help
     (:meth:`MaterialConverter.color`, :meth:`MaterialConverter.value`): an RGB or Value node, an
-    image texture on a color input, a color attribute on an albedo input."""
+    image texture on a color input (but one read through vector nodes from a UV map, which
+    Blender bakes: :func:`.node_links.uv_through`), a color attribute on an albedo input."""
     if sock.type == "VALUE":
         return node.type == "VALUE"
+    if node.type == "TEX_IMAGE" and uv_source(node) is None and uv_through(node) is not None:
+        return False
     return (node.type in ("RGB", "TEX_IMAGE", "TEX_ENVIRONMENT")
             or node.type == "VERTEX_COLOR" and _is_albedo(sock))
 
