@@ -78,8 +78,8 @@ class StochasticIterationSolver(PatchSolution):
 
     def __init__(self, scene, tracer, direct, settings, camera=None):
         super().__init__(scene, tracer, direct, settings)
-        #: transfers of one direction each that bring the iterate near the solution before the
-        #: running average starts (:meth:`warm_up`)
+        #: the transfers that bring the iterate near the solution before the running average
+        #: starts (:meth:`warm_up`)
         self.warm_up_steps = min(self.burn_in, self.MAX_WARM_UP)
         self.restart_at = self.burn_in - self.warm_up_steps
         self.warmed_up = False
