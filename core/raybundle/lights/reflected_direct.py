@@ -61,7 +61,10 @@ SELECT_MAX_LIGHTS = 64
 
 @dataclass
 class _Points:
-    """The shading points of one call and what they ask for (:func:`reflected_radiance`)."""
+    """The shading points of one call and what they ask for (:func:`reflected_radiance`), and
+    the lights (:meth:`~raybundle.lights.direct.DirectLighting.light_list`) with their bits."""
+    lights: list
+    bits: np.ndarray
     points: np.ndarray
     normals: np.ndarray
     mats: np.ndarray
@@ -135,15 +138,16 @@ def reflected_radiance(direct, points, normals, mats, w_out, u, samples_per_ligh
     out = np.zeros((n, 3))
     if isinstance(u, np.random.Generator):
         u = u.random((n, direct.samples_per_pass(samples_per_light), 3))
-    at = _Points(points, normals, mats, w_out, diffuse_scale, mis, shadow_flags, receivers)
     lights = direct.light_list()
+    at = _Points(lights, light_bits(len(lights)), points, normals, mats, w_out, diffuse_scale, mis, shadow_flags,
+                 receivers)
     an = np.asarray(analytic)
     an = np.where(np.broadcast_to(an, n), ALL_LIGHTS, np.uint64(0)) if an.dtype == bool else an.astype(np.uint64)
     f_d_all = _diffuse_part(direct, at, an)
     # with a light tree, the tree's samples (TREE) and the suns on their own
     own = range(len(lights)) if direct.tree is None else direct.suns
     reach, exact = _lights_reaching(direct, at, None if f_d_all is None else an, own)
-    chance = _selection(direct, points, normals, reach, exact) if select is not None and direct.tree is None else None
+    chance = _selection(at, reach, exact) if select is not None and direct.tree is None else None
     k = 0
     for li in ([TREE] if direct.tree is not None else []) + list(own):
         light = lights[li] if li != TREE else None
@@ -152,7 +156,7 @@ def reflected_radiance(direct, points, normals, mats, w_out, u, samples_per_ligh
         base, picked = (reach[li], 1.0) if li != TREE else (np.arange(n), 1.0)
         if chance is not None:                 # the lamps chosen by their contribution
             base, picked = _chosen(li, base, chance[li], select, mis if polygonal else None)
-        s = _light_samples(direct, li, base, picked, n_s, penumbra, chance is not None)
+        s = _light_samples(direct, at, li, base, picked, n_s, penumbra, chance is not None)
         acc = np.zeros((len(s.pt), 3))
         f_d = None
         if li != TREE and exact[li] is not None:       # the control variate's exact part
@@ -177,8 +181,7 @@ def _diffuse_part(direct, at, an):
     """(N, 3) the diffuse BRDF at the points where the control variate applies (``an`` (N,)
     uint64 masks not 0), or None where none does (no polygonal light, or no mask set); f_d does
     not depend on the incoming direction."""
-    lights = direct.light_list()
-    cv = np.nonzero(an)[0] if any(isinstance(light, (MeshLight, ShapeLight)) for light in lights) else []
+    cv = np.nonzero(an)[0] if any(isinstance(light, (MeshLight, ShapeLight)) for light in at.lights) else []
     if not len(cv):
         return None
     f_d = np.zeros((len(at.points), 3))
@@ -191,23 +194,21 @@ def _lights_reaching(direct, at, an, own):
     """``(reach, exact)``, per light of ``own``: the points it can reach (the rest get nothing,
     and no shadow flag) and, where the control variate applies (``an``, or None: nowhere), its
     exact unoccluded irradiance there, ``(here, irradiance, ok)`` or None."""
-    lights = direct.light_list()
-    bits = light_bits(len(lights))
-    reach, exact = [None] * len(lights), [None] * len(lights)
+    reach, exact = [None] * len(at.lights), [None] * len(at.lights)
     for li in own:
-        light = lights[li]
+        light = at.lights[li]
         base = np.nonzero(may_light(light, at.points, at.normals))[0]
         if direct.linking is not None and at.receivers is not None:
             base = base[direct.linking.receives[direct.light_link[li], at.receivers[base]]]
         polygonal = isinstance(light, (MeshLight, ShapeLight))
-        here = base[(an[base] & bits[li]) != 0] if an is not None and polygonal else []
+        here = base[(an[base] & at.bits[li]) != 0] if an is not None and polygonal else []
         ex = light_polygon_irradiance(light, at.points[here], at.normals[here]) if len(here) else None
         reach[li] = base
         exact[li] = None if ex is None else (here, ex[0], ex[1])
     return reach, exact
 
 
-def _selection(direct, points, normals, reach, exact):
+def _selection(at, reach, exact):
     """Per light, the probability (one value per point in ``reach[l]``) that it is taken at
     the points: ``clip(c_l / (SELECT_SHARE C), SELECT_MIN, 1)``, ``c_l`` the lamp's
     unoccluded irradiance at the point (luminance: the exact ``Le I(x)`` where ``exact``
@@ -216,7 +217,7 @@ def _selection(direct, points, normals, reach, exact):
     ``C`` the sum over the lamps; None (every lamp always taken) for a single lamp or
     more than :data:`SELECT_MAX_LIGHTS`.  Unbiased whatever the estimates: each lamp's
     samples are weighted 1 / probability."""
-    lights = direct.light_list()
+    lights, points, normals = at.lights, at.points, at.normals
     if not 1 < len(lights) <= SELECT_MAX_LIGHTS:
         return None
     c = np.zeros((len(points), len(lights)))
@@ -244,13 +245,12 @@ def _chosen(li, base, chance, select, mis):
     return base[keep], 1.0 / chance[keep]
 
 
-def _light_samples(direct, li, base, picked, n_s, penumbra, by_chance):
+def _light_samples(direct, at, li, base, picked, n_s, penumbra, by_chance):
     """The :class:`_Samples` of light ``li`` at points ``base`` taken with weight ``picked``
     (1 / the chance of taking it), ``n_s`` a set: repeated where the light takes penumbra
     samples (not where it was taken by chance: it gives little there)."""
-    lights = direct.light_list()
-    light = lights[li] if li != TREE else None
-    bit = light_bits(len(lights))[li] if li != TREE else direct.tree_mask
+    light = at.lights[li] if li != TREE else None
+    bit = at.bits[li] if li != TREE else direct.tree_mask
     if penumbra is None:
         return _Samples(li, light, bit, base, np.broadcast_to(picked / n_s, len(base))[:, None])
     mask, more, shift, first = penumbra
@@ -262,7 +262,7 @@ def _light_samples(direct, li, base, picked, n_s, penumbra, by_chance):
     copy = ranges(0, reps)
     kron = np.nonzero(np.repeat(on, reps))[0] if first is None else np.arange(len(pt))
     start = copy[kron] * n_s + (0 if first is None else first[pt[kron]])
-    light_shift = shift[pt[kron]] + (li if li != TREE else len(lights)) * _LIGHT_OFFSET
+    light_shift = shift[pt[kron]] + (li if li != TREE else len(at.lights)) * _LIGHT_OFFSET
     return _Samples(li, light, bit, pt, np.repeat(picked / (n_s * reps), reps)[:, None], kron, start, light_shift)
 
 
@@ -286,7 +286,7 @@ def _one_sample(direct, at, s, shading, uk, f_d, n_s, polygonal, acc):
         e, travel, cos_x, free = direct.shadowed(p, nrm, y, e, unshadowed=True, lights=ids, receivers=rec)
         live, blocked = seen_blocked(e, free)
         if at.shadow_flags is not None and s.li == TREE:     # each sample its own light's bit
-            lb = light_bits(direct.n_lights)[direct.tree.light[np.maximum(em, 0)]]
+            lb = at.bits[direct.tree.light[np.maximum(em, 0)]]
             np.bitwise_or.at(at.shadow_flags, (s.pt[live], 0), lb[live])
             np.bitwise_or.at(at.shadow_flags, (s.pt[blocked], 1), lb[blocked])
         elif at.shadow_flags is not None:

@@ -97,10 +97,12 @@ class StochasticIterationSolver(PatchSolution):
         :data:`WARM_UP_COARSER` times fewer rays a side.  Meanwhile the solver's readers of the
         running average (the glossy senders' and tiny sides' gathers) read the current iterate.
         ``stop`` (a callable) ends it early; the iteration then goes on from where it got."""
+        if self.warmed_up:
+            return
         res = max(8, self.bundle_resolution // self.WARM_UP_COARSER)
         rng = stream(self.seed, Stream.WARM_UP)
         t0, before = time.perf_counter(), self.direct.rays
-        for _ in range(self.warm_up_steps if not self.warmed_up else 0):
+        for _ in range(self.warm_up_steps):
             if stop is not None and stop():
                 break
             d = uniform_sphere(*rng.random((2, self.directions_per_step)))
