@@ -41,9 +41,11 @@ def charts(page_dir, section, n):
 def test_the_blender_bench_writes_its_section(tmp_path):
     _, _, body = run_tool(tmp_path, "bench_blender", "blender-cornell_box", "demo_scenes/cornell_box.blend",
                           "--resolution", 24, 16, "--reference-samples", 4, "--times", 0.5,
-                          "--max-cycles-seconds", 1)
+                          "--max-cycles-seconds", 1, "--twin")
     assert "`demo_scenes/cornell_box.blend`, its own materials, 24 × 16 px" in body
-    assert re.search(r"\| 0\.5 s \| [\d.]+ \| [\d.]+ s \| ×[\d.]+ \| [\d.]+% \|", body), body
+    # set-up, mean, bias, noise, error
+    assert re.search(r"\| 0\.5 s \| [\d.]+ \| [\d.]+ s \| ×[\d.]+ \| [\d.]+% \| [\d.]+% \| [\d.]+% \|", body), body
+    assert re.search(r"\| bottom \| ×[\d.]+, \d+% \| ×[\d.]+, \d+% \| ×[\d.]+, \d+% \|", body), body
     assert "| Cycles spp | 1 | 2 |" in body and "| time to an error of | 5% |" in body
     charts(tmp_path / "docs", "blender-cornell_box", 1)
 

@@ -258,11 +258,13 @@ def main(argv=None):
     p.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="override the file's resolution")
     p.add_argument("--references", help="folder of committed reference halves <file>-<clay|full>-<seed>.exr "
                    "(rendered there when missing)")
+    p.add_argument("--twin", action="store_true", help="render each RAYBUNDLE time again with another seed, and "
+                   "split its error into bias and noise (raybundle.app.metrics.bias_and_noise)")
     add_page_argument(p, "blender-<file>[-clay]")
     a = p.parse_args(argv)
     checked_page(a.page, "bench_blender")
     OPEN_SETTINGS.update(clay=a.clay, resolution=a.resolution)
-    from raybundle.app.metrics import image_error
+    from raybundle.app.metrics import bias_and_noise, image_error, region_errors
     from raybundle.util.io import read_exr_header
 
     os.makedirs(a.out, exist_ok=True)
@@ -298,6 +300,16 @@ def main(argv=None):
         img, wall = render(a.blend, os.path.join(a.out, f"raybundle-{t:g}s.exr"), "RAYBUNDLE", seconds=t,
                            seed=3, patches=a.patches)
         rows.append(row("raybundle", t, img, wall))
+        rows[-1]["regions"] = region_errors(img, reference, halves, mask)
+        print("  by region (mean ratio, share of the squared error), top row first: " + "; ".join(
+            " ".join(f"x{g['mean_ratio']:.2f} {100 * g['share']:.0f}%" for g in rows[-1]["regions"][i:i + 3])
+            for i in (0, 3, 6)), flush=True)
+        if a.twin:
+            twin, _ = render(a.blend, os.path.join(a.out, f"raybundle-{t:g}s-twin.exr"), "RAYBUNDLE", seconds=t,
+                             seed=4, patches=a.patches)
+            split = bias_and_noise(img, twin, reference, halves, mask)
+            rows[-1].update(bias=split["bias"], noise=split["noise"])
+            print(f"  split: bias {split['bias']:.4f}, noise {split['noise']:.4f}", flush=True)
     warnings = list(LAST_RUN_FIGURES.get("warnings", []))
     for w in warnings:
         print(f"raybundle warning: {w}")
@@ -317,7 +329,7 @@ def main(argv=None):
     summary = side_by_side(rows)
     targets = time_to_errors(rows, goals=(0.05, 0.02, 0.015, 0.01))
     with open(os.path.join(a.out, "bench.csv"), "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w = csv.DictWriter(f, fieldnames=[k for k in rows[0] if k != "regions"], extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
     with open(os.path.join(a.out, "summary.json"), "w") as f:
@@ -348,6 +360,14 @@ def page_body(a, reference, reference_samples, noise, rows, summary, targets, wa
             f"2 × {reference_samples} spp, its own noise ({percent(noise['reference_noise'])} per pixel) "
             "subtracted. Error: relative RMSE over pixels at least 2 px from a directly seen light "
             "(`raybundle.app.metrics.image_error`).", "", comparison_tables(rows, summary, targets)]
+    last = [r for r in rows if r.get("regions")][-1:]
+    if last:
+        g = last[0]["regions"]
+        text += ["", f"raybundle at {last[0]['setting']:g} s by image region (3 × 3, top row first): its mean "
+                 "against the reference's, and the region's share of the squared error.", "",
+                 table(["", "left", "middle", "right"],
+                       [[["top", "middle", "bottom"][i]] + [f"×{c['mean_ratio']:.3f}, {100 * c['share']:.0f}%"
+                                                           for c in g[3 * i:3 * i + 3]] for i in range(3)])]
     if warnings:
         text.append("raybundle's warnings: " + "; ".join(warnings))
     return "\n".join(text)
@@ -362,8 +382,9 @@ def comparison_tables(rows, summary, targets):
     Cycles at the same time (``summary``, from :func:`side_by_side`), Cycles' ladder, and the
     time each engine needs for each error level (``targets``, from :func:`time_to_errors`)."""
     ours = [r for r in rows if r["engine"] == "raybundle"]
-    names = {"setup_seconds": "set-up", "mean_ratio": "its mean"}
-    shown = {"setup_seconds": lambda v: "–" if v is None else f"{v:.1f} s", "mean_ratio": lambda v: f"×{v:.3f}"}
+    names = {"setup_seconds": "set-up", "mean_ratio": "its mean", "bias": "its bias", "noise": "its noise"}
+    shown = {"setup_seconds": lambda v: "–" if v is None else f"{v:.1f} s", "mean_ratio": lambda v: f"×{v:.3f}",
+             "bias": percent, "noise": percent}
     extra = [k for k in names if any(r.get(k) is not None for r in ours)]
     cycles = [r for r in rows if r["engine"] == "cycles"]
     return "\n".join([

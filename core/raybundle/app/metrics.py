@@ -107,3 +107,51 @@ def image_error(image, reference, reference_halves=None, exclude=None):
         out["reference_p99_9"] = float(np.percentile(half / grey, 99.9))
     return {"error": float(np.sqrt(max(0.0, e2 - s2))), "raw": float(np.sqrt(e2)),
             "reference_noise": float(np.sqrt(s2)), **out}
+
+
+def bias_and_noise(image, twin, reference, reference_halves=None, exclude=None):
+    """:func:`image_error` of ``image`` split into its noise and its bias, from ``twin``: the
+    same render with another seed.  Per render, relative to the reference's mean::
+
+        noise^2 = mean((x1 - x2)^2) / 2 / mean(r)^2
+        bias    = sqrt(max(0, error^2 - noise^2))
+
+    (``error`` noise-corrected as in :func:`image_error`; the bias is what more time at the
+    same settings does not remove).  Returns ``error``, ``noise``, ``bias`` and
+    ``mean_ratio``, each of ``image``."""
+    one = image_error(image, reference, reference_halves, exclude)
+    x1, x2, r = (np.asarray(a, float) for a in (image, twin, reference))
+    keep = np.ones(r.shape[:2], bool) if exclude is None else ~np.asarray(exclude, bool)
+    n2 = ((x1[keep] - x2[keep]) ** 2).mean() / 2.0 / r[keep].mean() ** 2
+    return {"error": one["error"], "noise": float(np.sqrt(n2)),
+            "bias": float(np.sqrt(max(0.0, one["error"] ** 2 - n2))), "mean_ratio": one["mean_ratio"]}
+
+
+def region_errors(image, reference, reference_halves=None, exclude=None, grid=(3, 3)):
+    """The error by image region: ``grid`` (rows, columns) blocks, each block's share of
+    the squared error (``share``, the shares sum to 1; a block within the reference's noise has none), its own error
+    relative to the whole reference's mean (``error``, noise-corrected with the halves), and its
+    mean against the reference's (``mean_ratio``).  A list of dicts, row by row from the top."""
+    x, r = np.asarray(image, float), np.asarray(reference, float)
+    keep = np.ones(r.shape[:2], bool) if exclude is None else ~np.asarray(exclude, bool)
+    mean = r[keep].mean()
+    d2 = ((x - r) ** 2).sum(axis=-1) / r.shape[-1]
+    if reference_halves is not None:
+        a, b = (np.asarray(h, float) for h in reference_halves)
+        d2 = d2 - ((a - b) ** 2).sum(axis=-1) / r.shape[-1] / 4.0
+    h, w = keep.shape
+    rows, cols = np.linspace(0, h, grid[0] + 1).astype(int), np.linspace(0, w, grid[1] + 1).astype(int)
+    out = []
+    for i in range(grid[0]):
+        for j in range(grid[1]):
+            k = np.zeros_like(keep)
+            k[rows[i]:rows[i + 1], cols[j]:cols[j + 1]] = True
+            k &= keep
+            s2 = max(float(d2[k].sum()), 0.0)          # below the reference's noise: none
+            out.append({"row": i, "column": j, "s2": s2,
+                        "error": float(np.sqrt(s2 / max(int(k.sum()), 1)) / mean),
+                        "mean_ratio": float(x[k].mean() / r[k].mean()) if k.any() and r[k].mean() > 0 else 1.0})
+    total = sum(g["s2"] for g in out)
+    for g in out:
+        g["share"] = g.pop("s2") / total if total > 0 else 0.0
+    return out
