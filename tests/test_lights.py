@@ -589,3 +589,38 @@ def test_an_ies_file_is_read_as_cycles_reads_it():
     lights = PointLights([[0, 0, 1.0]], [[1.0, 1, 1]], profile=[0], profiles=[p])
     back = PointLights.from_arrays(lights.to_arrays())
     assert np.allclose(back.profiles[0].values, p.values) and back.profile[0] == 0
+
+
+def test_the_first_shot_refines_where_its_samples_spread():
+    """A 0.4 m lamp 5 cm above a 4 x 4 m floor of 0.5 m patches: the few patches under it
+    take nearly all of its power pi Le A, each lit on part of its area, so their samples are
+    0 or nearly pi Le.  With 16 samples a side and 64 refinements of 64 samples, the floor's
+    power over 8 seeds is unbiased (4.5 SE) and spreads less than half as much as when the
+    refinements went round robin over the floor's 128 triangles alone (measured: 1.7%
+    against 5.1% of pi Le A)."""
+    s, h = 0.4, 0.05
+    v = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0],
+                  [-s / 2, -s / 2, h], [-s / 2, s / 2, h], [s / 2, s / 2, h], [s / 2, -s / 2, h]], float)
+    sc = subdivide(build_scene(v, np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]), [0, 0, 1, 1], LAMP),
+                   max_edge=0.5)
+    tr = RayTracer(sc)
+    dl = DirectLighting(sc, tr)
+    floor = sc.patch_material[sc.side_patch] == 0
+    exact = np.pi * dl.area_lights[0].radiance[0] * s * s
+
+    def spread(round_robin_only):
+        got = []
+        for seed in range(8):
+            fs = PatchFirstShot(dl, np.random.default_rng(seed), initial_samples=16)
+            if round_robin_only:
+                fs._targeted = lambda n: np.zeros(0, np.int64)
+            for _ in range(64):
+                fs.refine(64)
+            got.append((fs.E[floor, 0, 0] * fs.receiving_area[floor]).sum())
+        return np.mean(got), np.std(got, ddof=1)
+
+    mean, sd = spread(False)
+    assert abs(mean - exact) < 4.5 * sd / np.sqrt(8), (mean, exact, sd)
+    _, sd_round_robin = spread(True)
+    assert sd < 0.5 * sd_round_robin, (sd / exact, sd_round_robin / exact)
+    tr.close()

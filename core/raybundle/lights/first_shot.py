@@ -25,7 +25,13 @@ class PatchFirstShot:
     A fixed first shot would freeze its Monte Carlo noise into the solution (a
     bias that no number of iterations removes); refining it with a few shadow
     rays per iteration (:meth:`refine`) keeps E a running average of unbiased
-    samples.  For glossy patches the reflected first shot uses one mean
+    samples.  Half of those go round robin over the tsides, half where the
+    noise is: to the sides in proportion to ``A_s sigma_s`` (Neyman's allocation,
+    which minimises the variance ``sum_s A_s^2 sigma_s^2 / n_s`` of the light's power
+    over the sides), ``sigma_s`` the spread of the side's samples of
+    ``sum_l e`` (their mean over RGB) and ``n_s`` their number.  A side cut by a
+    lamp's edge or plane, lit on a small part of its area, has samples of 0
+    and of pi Le: its power was a few samples' guess.  For glossy patches the reflected first shot uses one mean
     direction per light, ``E f(w_mean, w)``: an approximation (exact for point
     lights, close for lights small as seen from the patch), used only inside
     the iteration; the image's direct light is per pixel and exact.
@@ -44,6 +50,10 @@ class PatchFirstShot:
         self._d_sum = np.zeros((n_t, n_l, 3))
         self._count = np.zeros(n_t)
         self._next = 0
+        # per side: samples, and the sums of their sum_l e (mean over RGB) and its square
+        self._side_n = np.zeros(sc.n_sides)
+        self._side_y = np.zeros(sc.n_sides)
+        self._side_y2 = np.zeros(sc.n_sides)
         self.E = np.zeros((sc.n_sides, n_l, 3))
         self._d_patch = np.zeros((sc.n_sides, n_l, 3))
         self.direction = np.zeros((sc.n_sides, n_l, 3))
@@ -71,6 +81,7 @@ class PatchFirstShot:
         nrm = sc.tside_normal[tri]
         old = self._e_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
         old_d = self._d_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
+        y = np.zeros(len(tri))
         for li, light in enumerate(self.lights):
             u_l = self.rng.random((len(tri), 3))
             at = np.nonzero(may_light(light, pts, nrm))[0]       # elsewhere the light gives nothing
@@ -80,9 +91,14 @@ class PatchFirstShot:
                                                         receivers=sc.link_groups(sc.tside_triangle[tri[at]]))
             self._e_sum[tri[at], li] += e
             self._d_sum[tri[at], li] += e.sum(axis=1, keepdims=True) * travel
+            y[at] += e.mean(axis=1)
         self._count[tri] += 1
         # side average = sum over its tsides of area * (tside mean) / side area
         side = sc.tside_side[tri]
+        n_s = self.scene.n_sides
+        self._side_n += np.bincount(side, minlength=n_s)
+        self._side_y += np.bincount(side, y, minlength=n_s)
+        self._side_y2 += np.bincount(side, y * y, minlength=n_s)
         w = (sc.triangle_area[sc.tside_triangle[tri]] / self.receiving_area[side])[:, None, None]
         new = self._e_sum[tri] / self._count[tri][:, None, None]
         new_d = self._d_sum[tri] / self._count[tri][:, None, None]
@@ -112,14 +128,41 @@ class PatchFirstShot:
         norm = np.linalg.norm(self._d_patch, axis=2, keepdims=True)
         self.direction = np.where(norm > 0, self._d_patch / np.maximum(norm, 1e-300), 0.0)
 
-    def refine(self, n_triangles):
-        """One more sample on the next ``n_triangles`` receiving tsides (round robin)."""
+    def refine(self, n_samples):
+        """``n_samples`` more samples: one on each of the next ``n_samples / 2`` receiving tsides
+        (round robin), the rest on the sides in proportion to ``A_s sigma_s`` (class docstring),
+        each on a tside of the side drawn by area."""
         n_t = len(self.receiving_tsides)
-        if n_t == 0 or n_triangles <= 0:
+        if n_t == 0 or n_samples <= 0:
             return
-        k = (self._next + np.arange(min(n_triangles, n_t))) % n_t
+        targeted = self._targeted(n_samples - n_samples // 2 if n_samples > 1 else 0)
+        k = (self._next + np.arange(min(n_samples - len(targeted), n_t))) % n_t
         self._next = int((self._next + len(k)) % n_t)
         self._add(self.receiving_tsides[k])
+        while len(targeted):                       # _add takes distinct tsides: in rounds
+            first, at = np.unique(targeted, return_index=True)
+            self._add(first)
+            targeted = np.delete(targeted, at)
+
+    def _targeted(self, n):
+        """(n,) receiving tsides drawn for Neyman's allocation (with repeats): a side with
+        probability ``A_s sigma_s / sum``, then a tside of it by area; none while no side's
+        samples spread."""
+        n_s = np.maximum(self._side_n, 1)
+        var = np.maximum(self._side_y2 / n_s - (self._side_y / n_s) ** 2, 0.0) * self._side_n / np.maximum(n_s - 1, 1)
+        weight = self.receiving_area * np.sqrt(var)
+        total = weight.sum()
+        if n <= 0 or not total > 0:
+            return np.zeros(0, np.int64)
+        sc = self.scene
+        ts = self.receiving_tsides
+        a = sc.triangle_area[sc.tside_triangle[ts]]
+        side = sc.tside_side[ts]
+        # one draw: a tside with probability weight(side) * a_t / A(side), A the side's receiving tsides' area
+        side_area = np.bincount(side, a, minlength=sc.n_sides)
+        p = weight[side] * a / np.maximum(side_area[side], 1e-300)
+        cdf = np.cumsum(p)
+        return ts[np.minimum(np.searchsorted(cdf, self.rng.random(n) * cdf[-1], side="right"), len(ts) - 1)]
 
 
 def _summed(group, n, values):
