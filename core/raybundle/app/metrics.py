@@ -128,10 +128,11 @@ def bias_and_noise(image, twin, reference, reference_halves=None, exclude=None):
 
 
 def region_errors(image, reference, reference_halves=None, exclude=None, grid=(3, 3)):
-    """The error by image region: ``grid`` (rows, columns) blocks, each block's share of
-    the squared error (``share``, the shares sum to 1; a block within the reference's noise has none), its own error
-    relative to the whole reference's mean (``error``, noise-corrected with the halves), and its
-    mean against the reference's (``mean_ratio``).  A list of dicts, row by row from the top."""
+    """The error by image region: ``grid`` (rows, columns) blocks, each block's share of the
+    squared error (``share``; the shares sum to 1, a block within the reference's noise has
+    none), its own error relative to the whole reference's mean (``error``, noise-corrected
+    with the halves) and its mean against the reference's (``mean_ratio``).  A list of dicts,
+    row by row from the top."""
     x, r = np.asarray(image, float), np.asarray(reference, float)
     keep = np.ones(r.shape[:2], bool) if exclude is None else ~np.asarray(exclude, bool)
     mean = r[keep].mean()

@@ -28,10 +28,12 @@ class PatchFirstShot:
     samples.  Half of those go round robin over the tsides, half where the
     noise is: to the sides in proportion to ``A_s sigma_s`` (Neyman's allocation,
     which minimises the variance ``sum_s A_s^2 sigma_s^2 / n_s`` of the light's power
-    over the sides), ``sigma_s`` the spread of the side's samples of
-    ``sum_l e`` (their mean over RGB) and ``n_s`` their number.  A side cut by a
-    lamp's edge or plane, lit on a small part of its area, has samples of 0
-    and of pi Le: its power was a few samples' guess.  For glossy patches the reflected first shot uses one mean
+    over the sides), ``sigma_s`` the spread of the side's samples of ``sum_l e``
+    (their mean over RGB) and ``n_s`` their number.  A side cut by a lamp's edge
+    or plane, lit on a small part of its area, has samples of 0 and of nearly
+    pi Le: round robin alone leaves its power a few samples' guess.
+
+    For glossy patches the reflected first shot uses one mean
     direction per light, ``E f(w_mean, w)``: an approximation (exact for point
     lights, close for lights small as seen from the patch), used only inside
     the iteration; the image's direct light is per pixel and exact.
