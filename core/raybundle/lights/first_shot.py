@@ -63,6 +63,10 @@ class PatchFirstShot:
         origin = sc.triangle_corners[sc.tside_triangle, 0]
         self.receiving_tsides = np.nonzero(np.any([light.in_front(origin, sc.tside_normal) for light in self.lights],
                                             axis=0))[0] if n_l else np.zeros(0, np.int64)
+        # each receiving tside's share of its side's receiving tsides' area (Neyman's draws, _targeted)
+        ts_area = sc.triangle_area[sc.tside_triangle[self.receiving_tsides]]
+        ts_side = sc.tside_side[self.receiving_tsides]
+        self._share_in_side = ts_area / np.maximum(np.bincount(ts_side, ts_area, minlength=sc.n_sides)[ts_side], 1e-300)
         # initial_samples per side, shared out over a cluster's triangles by area
         counts = sc.tside_samples(initial_samples)[self.receiving_tsides]
         for r in range(initial_samples if len(self.receiving_tsides) else 0):
@@ -97,10 +101,9 @@ class PatchFirstShot:
         self._count[tri] += 1
         # side average = sum over its tsides of area * (tside mean) / side area
         side = sc.tside_side[tri]
-        n_s = self.scene.n_sides
-        self._side_n += np.bincount(side, minlength=n_s)
-        self._side_y += np.bincount(side, y, minlength=n_s)
-        self._side_y2 += np.bincount(side, y * y, minlength=n_s)
+        self._side_n += np.bincount(side, minlength=sc.n_sides)
+        self._side_y += np.bincount(side, y, minlength=sc.n_sides)
+        self._side_y2 += np.bincount(side, y * y, minlength=sc.n_sides)
         w = (sc.triangle_area[sc.tside_triangle[tri]] / self.receiving_area[side])[:, None, None]
         new = self._e_sum[tri] / self._count[tri][:, None, None]
         new_d = self._d_sum[tri] / self._count[tri][:, None, None]
@@ -156,14 +159,9 @@ class PatchFirstShot:
         total = weight.sum()
         if n <= 0 or not total > 0:
             return np.zeros(0, np.int64)
-        sc = self.scene
         ts = self.receiving_tsides
-        a = sc.triangle_area[sc.tside_triangle[ts]]
-        side = sc.tside_side[ts]
-        # one draw: a tside with probability weight(side) * a_t / A(side), A the side's receiving tsides' area
-        side_area = np.bincount(side, a, minlength=sc.n_sides)
-        p = weight[side] * a / np.maximum(side_area[side], 1e-300)
-        cdf = np.cumsum(p)
+        # one draw: a tside with probability weight(side) * its share of the side's area
+        cdf = np.cumsum(weight[self.scene.tside_side[ts]] * self._share_in_side)
         return ts[np.minimum(np.searchsorted(cdf, self.rng.random(n) * cdf[-1], side="right"), len(ts) - 1)]
 
 
