@@ -141,6 +141,7 @@ class RenderJob:
         SceneError/ValueError for scenes and settings that cannot be rendered, and
         :class:`raybundle.app.pipeline.Cancelled` when stopped during set-up (no image yet)."""
         from raybundle.app import pipeline
+        from raybundle.app.phases import PhaseClock
         from raybundle.app.plan import check, plan
 
         self.t_start = time.perf_counter()
@@ -149,19 +150,17 @@ class RenderJob:
         check(self.options)
         active_jobs.add(self)
         try:
-            if self.stats_cb is not None:
-                self.stats_cb("Ray Bundle GI | Exporting the scene")
+            stage = PhaseClock(None if self.stats_cb is None else
+                               (lambda text: self.stats_cb(f"Ray Bundle GI | {text}")))
+            stage("exporting the scene")
             # the world's render (where Blender must render it) runs on while the patches are laid out
             self.export = export_scene(self.depsgraph, camera_object=self.camera_object, defer_world=True)
             t_export = time.perf_counter() - self.t_start
             self._notify("export")
-            if self.stats_cb is not None:
-                self.stats_cb(f"Ray Bundle GI | Preparing {self.export.counts['triangles']} triangles")
-            stage = None if self.stats_cb is None else (lambda text: self.stats_cb(f"Ray Bundle GI | {text}"))
             def attach(scene):
                 """Between the layout and the renderer: the world Blender rendered meanwhile."""
-                if self.export.world_render is not None and stage is not None:
-                    stage("Waiting for Blender's render of the world")
+                if self.export.world_render is not None:
+                    stage("waiting for Blender's render of the world")
                 self.world_wait = self.export.attach_world(scene)
                 if scene is not self.export.scene:
                     self.export.scene.release_caches()          # the prepared copy renders
@@ -187,7 +186,8 @@ class RenderJob:
                      world_wait_seconds=round(self.world_wait, 4),
                      first_image_seconds=round(self.first_image_seconds, 4),
                      total_seconds=round(time.perf_counter() - self.t_start, 4),
-                     warnings=len(self.export.warnings))
+                     warnings=len(self.export.warnings), phases=stage.finish(),
+                     **{f"scene_{k}": v for k, v in self.export.counts.items()})
         if "budget_note" in stats:
             self.export.warnings.append(stats["budget_note"] + ": raise the time limit")
         if self.choice is not None:

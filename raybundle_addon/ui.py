@@ -64,7 +64,15 @@ class RAYBUNDLE_PT_stats(RaybundlePanel, bpy.types.Panel):
                              ("First image", f"{rb.last_first_image:.2f} s")):
             grid.label(text=label)
             grid.label(text=value)
-        for w in LAST_RUN.get(context.scene.name, {}).get("warnings", [])[:6]:
+        last = LAST_RUN.get(context.scene.name, {})
+        phases = [p for p in last.get("stats", {}).get("phases", []) if p["seconds"] >= 0.05]
+        if phases:
+            layout.label(text="Phases")
+            grid = layout.grid_flow(columns=2, even_columns=True)
+            for p in phases:
+                grid.label(text=p["name"].capitalize())
+                grid.label(text=f"{p['seconds']:.1f} s")
+        for w in last.get("warnings", [])[:6]:
             layout.label(text=w, icon="ERROR")
 
 

@@ -71,6 +71,14 @@ def test_the_scale_bench_writes_its_section(tmp_path):
     charts(tmp_path / "docs", "scale", 1)
 
 
+def test_the_stress_bench_writes_its_section(tmp_path):
+    """A stress scene built, rendered through the add-on, its set-up per phase and its memory reported."""
+    p, _, body = run_tool(tmp_path, "bench_scale", "stress", "--stress", "transmission-chain", "--time", 2)
+    assert re.search(r"\| transmission-chain \| [\d,]+ \| 11 \| 2 \|( [\d.]+ \|){8} [\d.]+ s \| \d+ \| [\d.]+ s \| "
+                     r"-?[\d.]+ GB \| met \|", body), body
+    assert "first shot" in p.stdout and (tmp_path / "out" / "stress.json").exists()
+
+
 def test_the_invariance_bench_writes_its_section(tmp_path):
     _, _, body = run_tool(tmp_path, "bench_invariance", "invariance", "--batches", 2, "--per-batch", 2,
                           "--patches", 300, "--convergence", 300, 600, "--cases", "subdivide 2x")

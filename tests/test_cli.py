@@ -35,6 +35,11 @@ def test_render_furnace_writes_exr_png_and_stats(tmp_path):
     # set-up reports its steps, in order, before the iterations
     steps = [p.stderr.find(t) for t in ("laying out the patches", "building the ray tracer", "first shot and solver")]
     assert -1 not in steps and steps == sorted(steps), p.stderr
+    # ... and --stats holds each phase's seconds, the iterations' beside them, in the order shown
+    names = [ph["name"] for ph in s["phases"]]
+    assert names[0].startswith("laying out the patches") and names[-2:] == ["iterating", "forming the final image"]
+    assert all(ph["seconds"] >= 0 and ph["peak_rss_mb"] > 0 for ph in s["phases"])
+    assert sum(ph["seconds"] for ph in s["phases"] if ph["name"] == "iterating") >= s["seconds"] * 0.9
 
 
 def test_ctrl_c_stops_and_still_writes_the_image(tmp_path):

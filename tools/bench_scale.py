@@ -23,6 +23,12 @@ Each row runs in two fresh processes, one after the other:
 its own patch) of the same tessellations, for comparison.  Writes ``scale.csv``,
 ``summary.json`` and ``scale.png`` (error, set-up time and memory against triangles) into
 ``--out`` and prints one line per row.
+
+``--stress`` (names, or none for all) renders instead the stress scenes of
+``tools/stress_scenes.py`` (built once into ``--out``/stress) through the add-on for ``--time``
+seconds, each in a fresh process timed from opening the file, and reports each phase's seconds
+(as the progress display shows them) and the process's peak memory beyond the opened file's,
+against the scene's triangles, objects and materials: ``stress.csv``, ``stress.json``.
 """
 from __future__ import annotations
 
@@ -34,6 +40,7 @@ import subprocess
 import sys
 
 _ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path[:0] = [os.path.join(_ROOT, "tools"), _ROOT]          # bench_blender, stress_scenes; raybundle_addon
 
 from raybundle.app.bench_page import add_page_argument, checked_page, command_line, table, write_section  # noqa: E402
 
@@ -92,6 +99,86 @@ def one(triangles, seconds, patches, mode, reference=REFERENCE, resolution=None)
                 peak_rss_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
 
 
+#: the benches' columns: each phase the progress display shows, by the start of its text
+PHASES = {"exporting": "export", "laying out": "layout", "cutting faces": "layout", "cutting patches": "contacts",
+          "grouping": "layout", "welding": "welding", "waiting for Blender": "world", "building the ray tracer": "tracer",
+          "first shot": "first shot", "warming up": "warm-up", "iterating": "iterating", "forming": "final image"}
+#: the set-up's phases, in order
+SETUP = ("export", "layout", "contacts", "welding", "world", "tracer", "first shot", "warm-up")
+
+
+def phase_seconds(phases):
+    """{column of :data:`PHASES`: seconds} of a run's phases (``stats["phases"]``), summed."""
+    out = {}
+    for p in phases:
+        col = next((c for start, c in PHASES.items() if p["name"].startswith(start)), "other")
+        out[col] = out.get(col, 0.0) + p["seconds"]
+    return out
+
+
+def stress_one(blend, seconds):
+    """Render the stress scene ``blend`` through the add-on in this process (a fresh one): its
+    counts, each phase's seconds, the iterations and the peak memory beyond the opened file's."""
+    import time
+
+    import bench_blender
+
+    from raybundle.app.phases import peak_rss_mb
+
+    bench_blender._open(blend)
+    with open("/proc/self/statm") as f:
+        opened_mb = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
+    t0 = time.perf_counter()
+    bench_blender.render(blend, os.path.splitext(blend)[0] + ".exr", "RAYBUNDLE", seconds=seconds)
+    wall = time.perf_counter() - t0
+    import bpy
+
+    from raybundle_addon.engine import LAST_RUN
+
+    st = LAST_RUN[bpy.context.scene.name]["stats"]
+    return dict(scene=os.path.splitext(os.path.basename(blend))[0], triangles=st["scene_triangles"],
+                objects=st["scene_objects"], materials=st["scene_materials"], patches=st["patches"],
+                iterations=st["iterations"], setup_s=st["setup_seconds"], wall_s=wall,
+                beyond_file_gb=(peak_rss_mb() - opened_mb) / 1024, phases=st["phases"],
+                **{f"{k}_s": v for k, v in phase_seconds(st["phases"]).items()})
+
+
+def run_stress(names, out, seconds):
+    """Build (once) and render each stress scene in a fresh process; the rows."""
+    folder = os.path.join(out, "stress")
+    rows = []
+    for name in names:
+        blend = os.path.join(folder, name + ".blend")
+        if not os.path.exists(blend):
+            subprocess.run([sys.executable, os.path.join(_ROOT, "tools", "stress_scenes.py"), "--out", folder,
+                            "--only", name], check=True, capture_output=True)
+        got = subprocess.run([sys.executable, __file__, "--stress-one", json.dumps([blend, seconds])], check=True,
+                             capture_output=True, text=True).stdout
+        row = json.loads(got.strip().splitlines()[-1])
+        rows.append(row)
+        print(f"{name:>20}: {row['triangles']:>9,} triangles, {row['objects']:>5} objects, {row['materials']:>3} "
+              f"materials: set-up {row['setup_s']:.1f} s (" + ", ".join(
+                  f"{c} {row.get(c + '_s', 0):.1f}" for c in SETUP) + f"), {row['iterations']} iterations, "
+              f"wall {row['wall_s']:.1f} s, peak {row['beyond_file_gb']:.2f} GB beyond the file", flush=True)
+    return rows
+
+
+def stress_body(seconds, rows):
+    """The stress bench's section of the benchmark page."""
+    head = ["scene", "triangles", "objects", "materials", *SETUP, "set-up", "iterations", "wall",
+            "peak beyond the file", "memory goal"]
+    return ("Each stress scene of `tools/stress_scenes.py` (what real rooms bring, alone in a plain room) rendered "
+            f"through the add-on with a Time Limit of {seconds:g} s at 320 x 180, in a fresh process timed from "
+            "opening the file. Seconds per phase as the progress display shows them (layout: cutting large faces "
+            "and grouping small triangles; contacts: the cuts along contacts and piercings); memory: the process's "
+            "peak beyond its size with the file open, against the goal of 0.5 GB + 1 KB per triangle.\n\n"
+            + table(head, [(r["scene"], f"{r['triangles']:,}", r["objects"], r["materials"],
+                            *(f"{r.get(c + '_s', 0):.1f}" for c in SETUP), f"{r['setup_s']:.1f} s", r["iterations"],
+                            f"{r['wall_s']:.1f} s", f"{r['beyond_file_gb']:.2f} GB",
+                            "met" if r["beyond_file_gb"] <= 0.5 + r["triangles"] * 1e3 / 2 ** 30 else "**over**")
+                           for r in rows]))
+
+
 def run_row(triangles, seconds, patches, reference, resolution):
     row = {}
     for mode in ("memory", "render"):
@@ -138,12 +225,19 @@ def main(argv=None):
     p.add_argument("--reference", default=REFERENCE, help="folder of the box's reference halves reference-{1,2}.exr")
     p.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="the box's camera (default: "
                    "the built-in's, as the reference)")
+    p.add_argument("--stress", nargs="*", metavar="NAME", help="the stress scenes (none named: all) instead")
     p.add_argument("--one", help=argparse.SUPPRESS)
+    p.add_argument("--stress-one", help=argparse.SUPPRESS)
     add_page_argument(p, "scale")
     a = p.parse_args(argv)
     if a.one:
         print(json.dumps(one(**json.loads(a.one))))
         return 0
+    if a.stress_one:
+        print(json.dumps(stress_one(*json.loads(a.stress_one))))
+        return 0
+    if a.stress is not None:
+        return stress_main(a, argv)
     if not all(os.path.exists(os.path.join(a.reference, f"reference-{k}.exr")) for k in (1, 2)):
         print(f"no Cycles reference in {a.reference}: run tools/bench_blender.py cornell --out {a.reference} first",
               file=sys.stderr)
@@ -173,6 +267,30 @@ def main(argv=None):
         write_section(a.page, a.section or "scale", "Scale: the Cornell box meshed with more and more triangles",
                       page_body(a, rows), [os.path.join(a.out, "scale.png")],
                       command=command_line("tools/bench_scale.py", argv))
+        print(f"wrote its section of {a.page}")
+    return 0
+
+
+def stress_main(a, argv):
+    from stress_scenes import SCENES
+
+    unknown = sorted(set(a.stress) - set(SCENES))
+    if unknown:
+        print(f"bench_scale: no stress scene {', '.join(unknown)} (there are {', '.join(SCENES)})", file=sys.stderr)
+        return 2
+    checked_page(a.page, "bench_scale")
+    os.makedirs(a.out, exist_ok=True)
+    rows = run_stress(a.stress or list(SCENES), a.out, a.time)
+    with open(os.path.join(a.out, "stress.csv"), "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=[k for k in rows[0] if k != "phases"], extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    with open(os.path.join(a.out, "stress.json"), "w") as f:
+        json.dump(dict(seconds=a.time, rows=rows), f, indent=1)
+    print(f"wrote {a.out}/stress.csv, stress.json")
+    if a.page:
+        write_section(a.page, a.section or "stress", "Stress scenes: the set-up per phase", stress_body(a.time, rows),
+                      [], command=command_line("tools/bench_scale.py", argv))
         print(f"wrote its section of {a.page}")
     return 0
 

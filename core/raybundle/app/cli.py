@@ -22,6 +22,7 @@ from ..methods.stochastic_iteration import StochasticIterationSolver
 from ..patches.clusters import DEFAULT_PATCHES
 from ..tracing.sampling import DEFAULT_SEQUENCE, SEQUENCES
 from .bench import METHODS
+from .phases import PhaseClock
 from .plan import DEFAULT_TIME_LIMIT
 
 
@@ -101,9 +102,11 @@ def cmd_render(args):
 
     bar = ProgressBar()
 
-    def stage(text):
+    def tell(text):
         bar.end_line()
         print(f"raybundle: {text} ({time.perf_counter() - t_start:.1f} s)", file=sys.stderr, flush=True)
+
+    stage = PhaseClock(tell)
 
     stop = threading.Event()
     old = signal.signal(signal.SIGINT, lambda *_: stop.set())   # Ctrl-C: set-up stops, the iteration writes
@@ -132,8 +135,10 @@ def cmd_render(args):
     finally:
         signal.signal(signal.SIGINT, old)
         bar.close()
-    stats = _write_outputs(args, scene, result.image, dict(result.stats, auto=p.choice.as_dict()) if p.choice
-                           else result.stats)
+    stats = dict(result.stats, phases=stage.finish())
+    if p.choice:
+        stats["auto"] = p.choice.as_dict()
+    stats = _write_outputs(args, scene, result.image, stats)
     if "budget_note" in stats:
         print(f"raybundle: warning: {stats['budget_note']}: give --time more seconds", file=sys.stderr)
     state = "stopped early" if result.cancelled else "done"

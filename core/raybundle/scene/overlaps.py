@@ -9,9 +9,9 @@ surface.  Neither is modelled as the other: the export warns, naming the objects
 
 Faces are grouped by plane (their unit normal rounded to 1e-4 and their offset to 1e-6 of
 the scene radius, not canonicalised: a box's bottom on a floor faces the other way and is a
-contact, not an overlap); in each plane holding faces of two groups, points of one group's
-triangles (centroid and three points halfway to the corners) are tested against the other
-group's triangles, vectorised in blocks.
+contact, not an overlap); in each plane holding faces of two groups, points of every
+triangle (centroid and three points halfway to the corners) are tested against the plane's
+triangles of other groups at once, vectorised in blocks, whatever the number of groups.
 """
 from __future__ import annotations
 
@@ -22,8 +22,8 @@ from ..util.arrays import group_ids
 
 #: points x triangles tested at a time (memory: about 50 bytes each)
 BLOCK = 1 << 22
-#: at most this many point-in-triangle tests per plane and group: beyond, a random subset of the
-#: group's triangles is tested and the covered area scaled up by the area sampled
+#: at most about this many point-in-triangle tests per plane: beyond, a random subset of each
+#: group's triangles is tested and its covered area scaled up by the area sampled
 MAX_TESTS = 1 << 27
 #: sample points per triangle: its centroid and three points halfway to its corners (barycentric)
 _SAMPLES = np.array([[1, 1, 1], [4, 1, 1], [1, 4, 1], [1, 1, 4]], float) / np.array([[3.0], [6.0], [6.0], [6.0]])
@@ -60,39 +60,59 @@ def coplanar_overlaps(corners, groups, min_area=0.0):
         tri = members[lo:hi]
         e1, e2 = orthonormal_basis(n[tri[0]])
         c2 = np.stack([corners[tri] @ e1, corners[tri] @ e2], axis=-1)                   # (P, 3, 2)
-        pts = np.einsum("sk,pkx->psx", _SAMPLES, c2)                                      # (P, 4, 2)
         g = groups[tri]
-        for a in np.unique(g):
-            every, theirs = np.nonzero(g == a)[0], np.nonzero(g != a)[0]
-            keep = max(16, MAX_TESTS // (len(_SAMPLES) * len(theirs)))
-            mine = every if len(every) <= keep else np.sort(rng.choice(every, keep, replace=False))
-            scale = area[tri[every]].sum() / area[tri[mine]].sum()
-            covered = _covered(pts[mine].reshape(-1, 2), c2[theirs], g[theirs])
-            for b, hits in covered.items():
-                share = hits.reshape(len(mine), len(_SAMPLES)).mean(axis=1)
-                key = (min(a, b), max(a, b))
-                # each pair is measured from both sides: keep the larger estimate
-                found[key] = max(found.get(key, 0.0), scale * float((share * area[tri[mine]]).sum()))
+        mine, scale = _sampled(g, area[tri], rng)
+        pts = np.einsum("sk,pkx->psx", _SAMPLES, c2[mine]).reshape(-1, 2)                 # (4 m, 2)
+        point_tri = np.repeat(mine, len(_SAMPLES))
+        weight = area[tri][point_tri] * scale[point_tri] / len(_SAMPLES)
+        ga, gb, covered = _covered_area(pts, g[point_tri], weight, c2, g)
+        for a, b, s_ab in zip(ga.tolist(), gb.tolist(), covered.tolist()):
+            key = (min(a, b), max(a, b))
+            # each pair is measured from both sides: keep the larger estimate
+            found[key] = max(found.get(key, 0.0), s_ab)
     out = [(a, b, s) for (a, b), s in found.items() if s > 0 and s >= min_area]
     return sorted(out, key=lambda x: -x[2])
 
 
-def _covered(points, tris, tri_group):
-    """``{group: (N,) bool}``: which ``points`` (N, 2) lie strictly inside some triangle of
-    ``tris`` (M, 3, 2) of each group ``tri_group`` (M,), in blocks of :data:`BLOCK` tests."""
-    out = {}
+def _sampled(g, area, rng):
+    """``(triangles tested, scale)``: every triangle of the plane, or, beyond :data:`MAX_TESTS`
+    tests, a random subset of each group's (at least 16 of it); ``scale`` (P,): the group's area
+    over the area of its triangles tested."""
+    every = np.arange(len(g))
+    keep = max(16, MAX_TESTS // (len(_SAMPLES) * len(g)))
+    if len(g) > keep:
+        order = np.lexsort((rng.random(len(g)), g))                    # each group's triangles, shuffled
+        start = np.searchsorted(g[order], g[order])                       # first place of its group
+        rank = np.arange(len(g)) - start
+        count = np.bincount(g - g.min())[g[order] - g.min()]
+        every = np.sort(order[rank < np.maximum(16, np.ceil(count * keep / len(g)))])
+    total = np.bincount(g - g.min(), weights=area)
+    tested = np.bincount(g[every] - g.min(), weights=area[every], minlength=len(total))
+    scale = np.zeros(len(g))
+    scale[every] = total[g[every] - g.min()] / tested[g[every] - g.min()]
+    return every, scale
+
+
+def _covered_area(points, point_group, weight, tris, tri_group):
+    """``(a, b, area)`` arrays: for each pair of groups, the summed ``weight`` of the points of
+    group ``a`` that lie strictly inside some triangle of ``tris`` (M, 3, 2) of another group
+    ``b``; a point counts once per covering group.  In blocks of :data:`BLOCK` tests."""
     a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
     det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
     live = np.abs(det) > 0
     a, b, c, det, tri_group = a[live], b[live], c[live], det[live], tri_group[live]
     step = max(1, BLOCK // max(len(a), 1))
-    for g in np.unique(tri_group):
-        out[int(g)] = np.zeros(len(points), bool)
+    hit_point, hit_group = [], []
     for lo in range(0, len(points), step):
         p = points[lo:lo + step, None, :]                                                # (n, 1, 2)
         u = ((p[..., 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (p[..., 1] - a[:, 1]) * (c[:, 0] - a[:, 0])) / det
         v = ((b[:, 0] - a[:, 0]) * (p[..., 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (p[..., 0] - a[:, 0])) / det
-        inside = (u > 1e-9) & (v > 1e-9) & (u + v < 1 - 1e-9)                            # (n, M)
-        for g in out:
-            out[g][lo:lo + step] = inside[:, tri_group == g].any(axis=1)
-    return out
+        pi, ti = np.nonzero((u > 1e-9) & (v > 1e-9) & (u + v < 1 - 1e-9))                 # (n, M) inside
+        pi = pi + lo
+        other = point_group[pi] != tri_group[ti]
+        hit_point.append(pi[other])
+        hit_group.append(tri_group[ti[other]])
+    pi, gb = np.concatenate(hit_point), np.concatenate(hit_group)
+    pi, gb = np.unique(np.stack([pi, gb]), axis=1)                                       # once per covering group
+    pairs, inverse = np.unique(np.stack([point_group[pi], gb]), axis=1, return_inverse=True)
+    return pairs[0], pairs[1], np.bincount(inverse.ravel(), weights=weight[pi], minlength=pairs.shape[1])
