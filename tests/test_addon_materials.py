@@ -81,9 +81,10 @@ def test_a_color_ramp_on_an_image_drives_the_albedo_as_in_cycles(fresh, tmp_path
 
 def test_a_color_ramp_on_a_noise_texture_is_baked_on_the_object_as_cycles_renders_it(fresh, tmp_path):
     """A Noise Texture (Generated coordinates, the object's own) through a Color Ramp on the
-    Diffuse Color: Blender bakes it on the plate itself, through its UV map, 1024 texels a side;
-    the render follows Cycles pixel by pixel.  Another object without a UV map gets the mean,
-    with a warning."""
+    Diffuse Color: Blender bakes it on the plate itself, through its UV map, as finely as the
+    image needs (its 32 x 32 pixels: the fewest, 128 texels a side, where it was 1,024), its edges
+    extended; the render follows Cycles pixel by pixel.  Another object without a UV map gets the
+    mean, with a warning."""
     from addon_helpers import render_cycles, render_raybundle
 
     plane, _ = textured_plane()
@@ -97,7 +98,8 @@ def test_a_color_ramp_on_a_noise_texture_is_baked_on_the_object_as_cycles_render
     ramp.color_ramp.elements[1].color = (0.05, 0.2, 0.8, 1)
     ex = _export()
     assert not any("Color" in w for w in ex.warnings), ex.warnings
-    assert ex.scene.texture is not None and ex.scene.texture.images[0].shape == (1024, 1024, 3)
+    assert ex.scene.texture is not None and ex.scene.texture.images[0].shape == (128, 128, 3)
+    assert ex.scene.texture.extend == [True]
     ref = render_cycles(tmp_path / "cy.exr", samples=64, seed=2)
     ours = render_raybundle(tmp_path / "rb.exr", iterations=40, seed=2)
     rel = ours / ref - 1
@@ -109,6 +111,50 @@ def test_a_color_ramp_on_a_noise_texture_is_baked_on_the_object_as_cycles_render
     ex = _export()
     assert any("is not baked on every object" in w and "'no uv' has no UV map" in w for w in ex.warnings), \
         ex.warnings
+
+
+def test_a_graph_baked_on_an_object_is_as_fine_as_the_image_needs(fresh):
+    """Texels a side of a graph baked on an object: four for each pixel its bounding box may cover,
+    over the share of the square its UV map covers, between 128 and 1,024; the whole image's where
+    the object reaches behind the camera, the most without a camera."""
+    from raybundle_addon.translation.node_graphs import object_bake_size
+
+    plane = plane_with_uvs(size=2.0)
+    add_light("POINT", location=(0, 0, 1))
+    add_camera((0, 0, 3), resolution=(200, 100), ortho_scale=8.0)      # 25 px a metre: 50 x 50 px
+    camera = _export().scene.camera
+    assert object_bake_size(plane, camera, 1.0) == 128                 # sqrt(4 x 2,500) = 100: the fewest, 128
+    assert object_bake_size(plane, camera, 0.25) == 208               # 200 -> a multiple of 16
+    plane.scale = (3.0, 3.0, 1.0)                                      # 150 x 100 px (clipped by the image)
+    bpy.context.view_layer.update()
+    assert object_bake_size(plane, camera, 1.0) == 256                 # sqrt(4 x 15,000) = 245
+    plane.location.z = 3.5                                             # behind the camera
+    bpy.context.view_layer.update()
+    assert object_bake_size(plane, camera, 1.0) == 288                 # sqrt(4 x 20,000) = 283
+    assert object_bake_size(plane, None, 1.0) == 1024
+
+
+@pytest.mark.parametrize("extension", ["EXTEND", "REPEAT"])
+def test_an_image_extended_or_repeated_beyond_its_uv_square_is_as_cycles_renders_it(fresh, tmp_path, extension):
+    """A checker whose UVs reach from -0.5 to 1.5 over the plane: with Extend its edge texels
+    stretch to the plane's rim, with Repeat it tiles; both as in Cycles (Extend was read as
+    Repeat, with a warning)."""
+    from addon_helpers import assert_like_cycles, render_cycles, render_raybundle
+
+    plane, _ = textured_plane()
+    uv = plane.data.uv_layers["UVMap"].uv
+    co = np.empty(2 * len(uv), np.float32)
+    uv.foreach_get("vector", co)
+    uv.foreach_set("vector", (co - 0.5) * 2 + 0.5)
+    plane.data.materials[0].node_tree.nodes["Image Texture"].extension = extension
+    # a fifth of a pixel off the quads' diagonals: Cycles darkens a pixel 1.6% where one of its
+    # 64 samples falls exactly on the edge between two triangles (ours, the exact value, does not)
+    bpy.context.scene.camera.location.x += 0.013
+    assert not any("extension" in w for w in _export().warnings)
+    bpy.context.scene.cycles.pixel_filter_type = "BOX"
+    ours = [render_raybundle(tmp_path / f"rb{s}.exr", iterations=6, seed=s) for s in (1, 2)]
+    theirs = [render_cycles(tmp_path / f"cy{s}.exr", samples=32, seed=s) for s in (1, 2)]
+    assert_like_cycles(ours, theirs)
 
 
 def test_a_node_driven_roughness_and_color_are_blenders_values(fresh, tmp_path):

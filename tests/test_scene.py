@@ -326,3 +326,21 @@ def test_an_encoded_map_is_decoded_after_the_lookup_and_kept_by_the_npz_arrays()
     assert np.allclose(tex.level(0, 1), 2.0 * 0.5 * (srgb_to_linear(0.8) + srgb_to_linear(0.1)))
     back = SurfaceTexture.from_arrays(tex.to_arrays())
     assert np.allclose(back.encoded[0], scale) and back.encoded[1] is None and back.closest == [False, True]
+
+
+def test_an_extended_map_reads_its_edge_texels_beyond_its_edges():
+    """Extend (Blender's Extension, and graphs baked on one object): beyond the outer texel
+    centres a lookup reads the edge texel, where Repeat blends it with the opposite edge; inside,
+    both interpolate alike; the ``.npz`` arrays keep the setting."""
+    from raybundle.scene.textures import SurfaceTexture
+
+    im = np.array([[[1.0] * 3, [2.0] * 3, [3.0] * 3, [4.0] * 3]], np.float32)      # 1 x 4 texels
+    corners, uv = np.zeros((1, 3, 3)), np.zeros((1, 3, 2))
+    tex = SurfaceTexture([im, im], [0], corners, uv, extend=[False, True])
+    edge = np.array([[0.01, 0.5], [0.99, 0.5], [-0.2, 0.5], [1.3, 0.5]])
+    assert np.allclose(tex.lookup(1, edge)[:, 0], [1, 4, 1, 4])
+    assert np.allclose(tex.lookup(0, edge[:2])[:, 0], [2.38, 2.62])                 # 1 and 4 blended
+    inside = np.array([[0.3, 0.5], [0.6, 0.5]])
+    assert np.allclose(tex.lookup(0, inside), tex.lookup(1, inside))
+    assert np.allclose(tex.level(1, 2)[..., 0], [2.5]) and np.allclose(tex.level(1, 1)[..., 0], [1.5, 3.5])
+    assert SurfaceTexture.from_arrays(tex.to_arrays()).extend == [False, True]

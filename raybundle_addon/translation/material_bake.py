@@ -17,7 +17,8 @@ margin) of a unit square whose UV maps (``uv_maps``, and the default one) cover 
 into a W x H float image: texel (i, j) is the graph's value at UV ((i + 0.5) / W, (j + 0.5) / H)
 (where W, H are the image's own, every image is read at its own texel there).
 A task with an ``"object"`` (its name in the library) bakes on that object instead, every face
-of it with the rewired material, through its UV map ``uv_maps[0]``.  Its (H, W, 3) linear RGB goes to ``out``
+of it with the rewired material, through its UV map ``uv_maps[0]``, its islands extended by
+``"margin"`` texels.  Its (H, W, 3) linear RGB goes to ``out``
 (row 0 at the bottom, as ``Image.pixels``).
 """
 import json
@@ -53,7 +54,7 @@ def main(argv):
         for other in sc.objects:
             other.select_set(other is ob)
         bpy.context.view_layer.objects.active = ob
-        bpy.ops.object.bake(type="EMIT", margin=0, use_clear=True, target="IMAGE_TEXTURES")
+        bpy.ops.object.bake(type="EMIT", margin=int(task.get("margin", 0)), use_clear=True, target="IMAGE_TEXTURES")
         w, h = task["size"]
         px = np.empty(w * h * 4, np.float32)
         target.pixels.foreach_get(px)

@@ -102,8 +102,8 @@ def texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, war
             colors[sel] = corner_colors(me, got.attribute, ob, slots[k], warn)[loops[sel]]
             img[sel] = -2
         elif got is not None and read_uv(got.uv, f"the image texture {got.image.name!r}", sel, k):
-            img[sel] = images.setdefault((got.image.name_full, got.closest),
-                                         (len(images), got.image, "albedo", got.closest))[0]
+            img[sel] = images.setdefault((got.image.name_full, got.closest, got.extend),
+                                         (len(images), got.image, "albedo", got.closest, got.extend))[0]
             read = got.uv
         for what, m, label in (("alpha", cover, "cut-out (Alpha)"), ("normal", nmap, "normal or bump map")):
             if m is None:
@@ -116,7 +116,7 @@ def texture_uvs(me, ob, slots, tri_poly, poly_mat, loops, converter, images, war
                     if not read_uv(m.uv, f"a {label}", sel, k):
                         continue
                     read = m.uv
-            index = images.setdefault((what, m.image.name_full), (len(images), m.image, what, False))[0]
+            index = images.setdefault((what, m.image.name_full), (len(images), m.image, what, False, False))[0]
             if what == "alpha":
                 alpha[sel] = index
             else:

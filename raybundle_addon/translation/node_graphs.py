@@ -29,8 +29,11 @@ the material's value, with a warning when it varies over the surface.
 A graph that reads the position on the object (procedural textures, Texture Coordinate's
 Generated, Object or Normal, Mapping, Object Info, images through other coordinates:
 :data:`POSITIONAL`) is baked on each object that uses the material, through the object's own
-UV map (:data:`OBJECT_BAKE_SIZE` texels a side) where that map lies inside [0, 1] without
-overlaps (its faces' UV area at most 1): the albedo texture is then the object's own.  Graphs
+UV map where that map lies inside [0, 1] without overlaps (its faces' UV area at most 1), with
+a margin of :data:`OBJECT_BAKE_MARGIN` texels around its islands: the albedo texture is then the
+object's own, its edges extended.  Its texels follow the object's size in the image
+(:func:`object_bake_size`: :data:`TEXELS_PER_PIXEL` for each pixel its bounding box may cover,
+between :data:`OBJECT_BAKE_MIN` and :data:`OBJECT_BAKE_SIZE` a side).  Graphs
 reading the view or the light (Fresnel, Layer Weight, Light Path, Geometry, Texture
 Coordinate's Camera, Window or Reflection), attributes or node groups are not evaluated: the
 socket's own value is used, with a warning naming the node.  One process bakes every graph of
@@ -61,8 +64,10 @@ POSITIONAL = frozenset((
     "UVMAP"))
 #: Texture Coordinate outputs that depend on the view: not baked
 VIEW_COORDINATES = frozenset(("Camera", "Window", "Reflection"))
-#: texels a side of a graph baked on an object
-OBJECT_BAKE_SIZE = 1024
+#: texels a side of a graph baked on an object: at most, at least, and per pixel it may cover
+OBJECT_BAKE_SIZE, OBJECT_BAKE_MIN, TEXELS_PER_PIXEL = 1024, 128, 4
+#: texels the bake extends an object's UV islands by (bilinear lookups at their edges read them)
+OBJECT_BAKE_MARGIN = 2
 #: shader nodes whose color and value inputs the converter reads
 READ_SHADERS = frozenset(("BSDF_DIFFUSE", "BSDF_GLOSSY", "BSDF_ANISOTROPIC", "EMISSION", "MIX_SHADER",
                           "BSDF_PRINCIPLED"))
@@ -256,20 +261,41 @@ class GraphBake:
             self._job = None
 
 
+def object_bake_size(ob, camera, uv_area):
+    """Texels a side of a graph baked on object ``ob`` (a bpy Object): :data:`TEXELS_PER_PIXEL`
+    for each pixel of ``camera``'s image (:class:`~raybundle.scene.camera.Camera`) its bounding
+    box may cover (the whole image where the box reaches behind the camera), over ``uv_area``,
+    the share of the unit square its UV map covers; between :data:`OBJECT_BAKE_MIN` and
+    :data:`OBJECT_BAKE_SIZE`, the largest without a camera."""
+    if camera is None:
+        return OBJECT_BAKE_SIZE
+    m = np.array(ob.matrix_world, float)
+    corners = np.array([tuple(c) for c in ob.bound_box], float) @ m[:3, :3].T + m[:3, 3]
+    px, py, _, _, density = camera.project(corners)
+    if np.any(density <= 0):
+        pixels = camera.width * camera.height
+    else:
+        pixels = ((np.clip(px.max(), 0, camera.width) - np.clip(px.min(), 0, camera.width))
+                  * (np.clip(py.max(), 0, camera.height) - np.clip(py.min(), 0, camera.height)))
+    side = np.sqrt(TEXELS_PER_PIXEL * pixels / max(uv_area, 1 / 64))
+    return int(np.clip(16 * np.ceil(side / 16), OBJECT_BAKE_MIN, OBJECT_BAKE_SIZE))
+
+
 def object_uv(ob):
-    """``(name, reason)``: the UV map of object ``ob`` a graph is baked through (its active
-    render one), or None and a one-line reason why there is none: the map must lie inside
-    [0, 1] with its faces' UV area at most 1 (no overlaps, no tiling)."""
+    """``(name, reason, area)``: the UV map of object ``ob`` a graph is baked through (its active
+    render one) and the share of the unit square its faces cover, or None, a one-line reason why
+    there is none and 0: the map must lie inside [0, 1] with its faces' UV area at most 1 (no
+    overlaps, no tiling)."""
     me = getattr(ob, "data", None)
     layers = getattr(me, "uv_layers", None)
     layer = None if not layers else next((l for l in layers if l.active_render), layers.active)
     if layer is None:
-        return None, f"object {ob.name!r} has no UV map to bake it through"
+        return None, f"object {ob.name!r} has no UV map to bake it through", 0.0
     uv = np.empty(2 * len(me.loops), np.float32)
     layer.uv.foreach_get("vector", uv)
     uv = uv.reshape(-1, 2).astype(float)
     if len(uv) == 0:
-        return None, f"object {ob.name!r} has no faces"
+        return None, f"object {ob.name!r} has no faces", 0.0
     start = np.empty(len(me.polygons), np.int64)
     me.polygons.foreach_get("loop_start", start)
     nxt = np.arange(len(uv)) + 1
@@ -279,17 +305,17 @@ def object_uv(ob):
     area = np.abs(np.add.reduceat(cross, start)).sum() / 2
     if uv.min() < -1e-6 or uv.max() > 1 + 1e-6 or area > 1 + 1e-3:
         return None, (f"object {ob.name!r}'s UV map {layer.name!r} leaves [0, 1] or overlaps itself (UV area "
-                      f"{area:.3g}): its graph needs a map that covers it once")
-    return layer.name, None
+                      f"{area:.3g}): its graph needs a map that covers it once"), 0.0
+    return layer.name, None, float(area)
 
 
-def _graph_inputs(materials, users):
+def _graph_inputs(materials, users, camera):
     """What :func:`start_graph_bake` bakes: ``(inputs, reasons, originals, objects, uv_of,
-    bake_objects)``, the graph inputs Blender can evaluate by key, why the others cannot be
-    (key -> reason), the original of each material, the per-object keys of each graph baked on
-    each object (``users``: material name -> its objects), each such key's UV map, and those
-    objects by name."""
-    objects, uv_of, bake_objects = {}, {}, {}
+    size_of, bake_objects)``, the graph inputs Blender can evaluate by key, why the others cannot
+    be (key -> reason), the original of each material, the per-object keys of each graph baked on
+    each object (``users``: material name -> its objects), each such key's UV map and texels a
+    side (seen by ``camera``, :func:`object_bake_size`), and those objects by name."""
+    objects, uv_of, size_of, bake_objects = {}, {}, {}, {}
     inputs, reasons, originals = {}, {}, {}
     for mat in dict.fromkeys(m for m in materials if m is not None):
         for sock in linked_inputs(mat):
@@ -302,27 +328,31 @@ def _graph_inputs(materials, users):
                 if got.per_object:
                     objects[got.key] = []
                     for ob in users.get(mat.name_full, []):
-                        where, why = object_uv(ob)
+                        where, why, area = object_uv(ob)
                         key = got.key + (ob.name_full,)
                         objects[got.key].append(key)
                         if where is None:
                             reasons[key] = why
                         else:
                             uv_of[key] = where
+                            size_of[key] = object_bake_size(ob, camera, area)
                             bake_objects[ob.name_full] = ob
-    return inputs, reasons, originals, objects, uv_of, bake_objects
+    return inputs, reasons, originals, objects, uv_of, size_of, bake_objects
 
 
-def start_graph_bake(materials, users=None, threads=0):
+def start_graph_bake(materials, users=None, threads=0, camera=None):
     """Begin baking the graphs Blender can evaluate on the inputs of ``materials`` (bpy
     Materials, None skipped) in one process on ``threads`` CPU threads (0: all): a
     :class:`GraphBake`.  ``users``: material name -> the objects that use it (their originals),
-    for graphs baked on each object.  Graphs baked before in this session are not baked again."""
+    for graphs baked on each object, as finely as ``camera`` (the exported
+    :class:`~raybundle.scene.camera.Camera`, or None) sees them.  Graphs baked before in this
+    session are not baked again."""
     import bpy
 
     from .images import image_rgba
 
-    inputs, reasons, originals, objects, uv_of, bake_objects = _graph_inputs(materials, users or {})
+    inputs, reasons, originals, objects, uv_of, size_of, bake_objects = _graph_inputs(materials, users or {},
+                                                                                     camera)
     if not inputs:
         return GraphBake(inputs, reasons, results={})
     folder = temporary_folder("raybundle-graphs-")
@@ -352,7 +382,8 @@ def start_graph_bake(materials, users=None, threads=0):
                         continue
                     paths[key] = os.path.join(folder.name, f"bake{len(paths)}.npy")
                     tasks.append(dict(task, out=paths[key], **(
-                        dict(object=bake_objects[key[3]].name, uv_maps=[uv_of[key]]) if g.per_object else {})))
+                        dict(object=bake_objects[key[3]].name, uv_maps=[uv_of[key]], size=[size_of[key]] * 2,
+                             margin=OBJECT_BAKE_MARGIN) if g.per_object else {})))
         for k in [k for k in inputs if k in reasons]:
             del inputs[k]
         if not tasks:

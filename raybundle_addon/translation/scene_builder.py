@@ -26,7 +26,7 @@ class _Part:
 class SceneBuilder:
     """Collects the export object by object (:meth:`add_object`, :attr:`lights`), converting
     each material once (``converter``, :class:`.shaders.MaterialConverter`), and makes the
-    core's scene (:meth:`scene`).  ``images`` (key -> (index, image, kind, closest)) grows as
+    core's scene (:meth:`scene`).  ``images`` (key -> (index, image, kind, closest, extend)) grows as
     the objects' textures meet new images (:func:`.mesh_data.texture_uvs`)."""
 
     def __init__(self, converter):
@@ -85,11 +85,11 @@ class SceneBuilder:
         # texels encoded, as Cycles keeps them), coverage and normal maps as they are
         ordered = sorted(self.images.values(), key=lambda x: x[0])
         maps = [self.converter.albedo_map(im) if kind == "albedo"
-                else (np.asarray(self.converter.image_pixels(im), np.float32), None) for _, im, kind, _ in ordered]
+                else (np.asarray(self.converter.image_pixels(im), np.float32), None) for _, im, kind, *_ in ordered]
         return SurfaceTexture([m for m, _ in maps], faces(1, -1), corners, faces(0, 0.0, (3, 2), float),
                               faces(2, 0.0, (3, 3), float), faces(3, -1), faces(4, -1), faces(5, False, (), bool),
                               encoded=[e for _, e in maps],
-                              closest=[closest for *_, closest in ordered])
+                              closest=[closest for *_, closest, _ in ordered], extend=[extend for *_, extend in ordered])
 
     def scene(self, world, camera, name, link_sets, warn):
         """``(scene, vertices, triangles, materials)``: the validated two-sided

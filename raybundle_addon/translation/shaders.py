@@ -110,17 +110,20 @@ class AlbedoTexture:
     """What drives a material's diffuse albedo point by point: an image through a UV map
     (``uv`` the map's name, "" for the active render UV map) or a color attribute
     (``attribute`` its name, "" for the active render one); ``closest``: the Image Texture node
-    reads the nearest texel (Closest interpolation), else it interpolates linearly."""
+    reads the nearest texel (Closest interpolation), else it interpolates linearly; ``extend``: beyond
+    the image's edges its edge texels are read (Extend extension, a graph baked on one object), else
+    it repeats."""
 
     image: object = None
     uv: str = ""
     attribute: str | None = None
     closest: bool = False
+    extend: bool = False
 
     @property
     def key(self):
         return (("attribute", self.attribute) if self.attribute is not None else
-                (self.image.name_full, self.uv, self.closest))
+                (self.image.name_full, self.uv, self.closest, self.extend))
 
 
 class MaterialConverter:
@@ -401,8 +404,9 @@ class MaterialConverter:
                     uv = uv_source(node) if node.type == "TEX_IMAGE" else None
                     albedo = _is_albedo(sock)
                     if albedo and uv is not None:
-                        self._albedo.append(AlbedoTexture(node.image, uv, closest=node.interpolation == "Closest"))
-                        if node.extension != "REPEAT":
+                        self._albedo.append(AlbedoTexture(node.image, uv, closest=node.interpolation == "Closest",
+                                                          extend=node.extension == "EXTEND"))
+                        if node.extension not in ("REPEAT", "EXTEND"):
                             notes.append(f"image texture {node.image.name!r}: {node.extension.lower()} extension "
                                          "is treated as repeat")
                         if node.interpolation not in ("Linear", "Closest"):
@@ -477,7 +481,7 @@ class MaterialConverter:
                 image = self._evaluated(sock, px, obj)
                 self._normalizer[image.name_full] = mean
                 self.object_textures[(obj, self._material.name_full)] = AlbedoTexture(
-                    image, self.graphs.uv(self._material, sock, obj))
+                    image, self.graphs.uv(self._material, sock, obj), extend=True)
         elif sock.type == "RGBA":
             notes.append(f"{sock.name!r} varies over the surface with its node graph: its mean color "
                          f"{color_text(mean)} is used")

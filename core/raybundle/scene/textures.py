@@ -5,7 +5,8 @@ A textured material's diffuse reflectance varies over a surface as
 mean color (what :class:`~raybundle.scene.materials.MaterialTable` holds) and ``M`` the
 *modulation map*, the image divided by its mean color per channel (mean 1), looked
 up bilinearly with repeat at the point's UV (as Cycles' Image Texture node with
-Linear interpolation and Repeat extension does; texel centres at (i + 0.5) / W), or at the
+Linear interpolation and Repeat extension does; texel centres at (i + 0.5) / W), or with its
+edge texels extended beyond [0, 1] (Extend extension, and graphs baked on one object), or at the
 nearest texel (Closest interpolation).  A byte image in the sRGB color space is kept as Cycles
 keeps it, its texels sRGB-encoded: a lookup interpolates the encoded values, then decodes them
 and scales them by the inverse of the image's linear mean (interpolating the decoded values
@@ -83,7 +84,8 @@ class SurfaceTexture:
     (-1: none), ``face_bump`` (F,) bool or None: that map is a bump's (module docstring).
     ``encoded`` (one per map, or None for none): None for a map of linear values, or the (3,)
     scale of a map whose texels are sRGB-encoded (``M = scale * decode(lookup)``); ``closest``
-    (one bool per map, or None for none): the map is read at the nearest texel."""
+    (one bool per map, or None for none): the map is read at the nearest texel; ``extend`` (one
+    bool per map, or None for none): beyond [0, 1] the map's edge texels are read, else it repeats."""
 
     images: list
     face_image: np.ndarray
@@ -95,6 +97,7 @@ class SurfaceTexture:
     face_bump: np.ndarray | None = None
     encoded: list | None = None
     closest: list | None = None
+    extend: list | None = None
     _pyramids: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -113,8 +116,9 @@ class SurfaceTexture:
         self.encoded = [None if e is None or not np.all(np.isfinite(e)) else np.asarray(e, float).reshape(3)
                         for e in (self.encoded or [None] * len(self.images))]
         self.closest = [bool(c) for c in (self.closest if self.closest is not None else [False] * len(self.images))]
-        if len(self.encoded) != len(self.images) or len(self.closest) != len(self.images):
-            raise ValueError("texture: 'encoded' and 'closest' need one entry per map")
+        self.extend = [bool(c) for c in (self.extend if self.extend is not None else [False] * len(self.images))]
+        if not len(self.encoded) == len(self.closest) == len(self.extend) == len(self.images):
+            raise ValueError("texture: 'encoded', 'closest' and 'extend' need one entry per map")
 
     def to_arrays(self):
         """Flat arrays for a scene's ``.npz`` (``texture_*``): the maps one after another."""
@@ -132,6 +136,8 @@ class SurfaceTexture:
         if any(e is not None for e in self.encoded) or any(self.closest):
             d["texture_encoded"] = np.array([np.full(3, np.nan) if e is None else e for e in self.encoded]).reshape(-1, 3)
             d["texture_closest"] = np.array(self.closest, bool)
+        if any(self.extend):
+            d["texture_extend"] = np.array(self.extend, bool)
         return d
 
     @classmethod
@@ -147,24 +153,25 @@ class SurfaceTexture:
         return cls(images, d["texture_face_image"], d["texture_face_corners"], d["texture_face_uv"],
                    d.get("texture_face_color"), d.get("texture_face_alpha"), d.get("texture_face_normal"),
                    d.get("texture_face_bump"), None if encoded is None else list(np.asarray(encoded, float)),
-                   d.get("texture_closest"))
+                   d.get("texture_closest"), d.get("texture_extend"))
 
     def lookup(self, image, uv, level=0):
-        """Repeating lookup (N, 3) of map ``image`` at ``uv`` (N, 2), bilinear or at the nearest
-        texel (:attr:`closest`), on ``level`` of its pyramid (0: the map itself, decoded after the
+        """Lookup (N, 3) of map ``image`` at ``uv`` (N, 2), repeating or with its edges extended
+        (:attr:`extend`), bilinear or at the nearest texel (:attr:`closest`), on ``level`` of its pyramid (0: the map itself, decoded after the
         lookup where its texels are sRGB-encoded; each next level the 2 x 2 means of the one below,
         of decoded values)."""
         im = self.level(image, level)
         h, w = im.shape[:2]
         x = uv[:, 0] * w - 0.5
         y = uv[:, 1] * h - 0.5
+        wrap = (lambda i, n: np.clip(i, 0, n - 1)) if self.extend[image] else (lambda i, n: i % n)
         if self.closest[image] and level == 0:
-            out = im[np.floor(y + 0.5).astype(np.int64) % h, np.floor(x + 0.5).astype(np.int64) % w]
+            out = im[wrap(np.floor(y + 0.5).astype(np.int64), h), wrap(np.floor(x + 0.5).astype(np.int64), w)]
         else:
             x0, y0 = np.floor(x), np.floor(y)
             fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-            x0, y0 = x0.astype(np.int64) % w, y0.astype(np.int64) % h
-            x1, y1 = (x0 + 1) % w, (y0 + 1) % h
+            x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
+            x0, y0, x1, y1 = wrap(x0, w), wrap(y0, h), wrap(x0 + 1, w), wrap(y0 + 1, h)
             out = ((1 - fy) * ((1 - fx) * im[y0, x0] + fx * im[y0, x1])
                    + fy * ((1 - fx) * im[y1, x0] + fx * im[y1, x1]))
         if level == 0 and self.encoded[image] is not None:
@@ -174,7 +181,7 @@ class SurfaceTexture:
     def level(self, image, level):
         """Level ``level`` of map ``image``'s pyramid (kept once made): level 0 is the map as
         stored, each next level the means of 2 x 2 texels of decoded values (an odd row or column
-        is averaged with the first, as the map repeats)."""
+        is averaged with the first, as the map repeats, or with itself where its edges extend)."""
         if level == 0:
             return self.images[image]
         key = (image, level)
@@ -185,7 +192,8 @@ class SurfaceTexture:
             for axis in (0, 1):
                 if im.shape[axis] > 1:
                     if im.shape[axis] % 2:
-                        im = np.concatenate([im, np.take(im, [0], axis=axis)], axis=axis)
+                        im = np.concatenate([im, np.take(im, [-1 if self.extend[image] else 0], axis=axis)],
+                                            axis=axis)
                     im = 0.5 * (np.take(im, np.arange(0, im.shape[axis], 2), axis=axis)
                                 + np.take(im, np.arange(1, im.shape[axis], 2), axis=axis))
             self._pyramids[key] = np.ascontiguousarray(im, np.float32)
