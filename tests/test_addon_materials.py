@@ -134,6 +134,17 @@ def test_a_graph_baked_on_an_object_is_as_fine_as_the_image_needs(fresh):
     assert object_bake_size(plane, None, 1.0) == 1024
 
 
+def test_a_byte_images_values_decode_through_a_table_to_the_transfer_functions_numbers():
+    """A byte sRGB image's 256 values decode through a table to the very numbers of the transfer
+    function applied texel by texel."""
+    from raybundle.scene.textures import srgb_to_linear
+    from raybundle_addon.translation.images import decode_srgb_bytes
+
+    rgb = np.random.default_rng(1).permutation(np.arange(256 * 3) % 256).reshape(16, 16, 3).astype(np.float32) / 255
+    got = decode_srgb_bytes(rgb)
+    assert got.dtype == np.float32 and np.array_equal(got, srgb_to_linear(rgb).astype(np.float32))
+
+
 @pytest.mark.parametrize("extension", ["EXTEND", "REPEAT"])
 def test_an_image_extended_or_repeated_beyond_its_uv_square_is_as_cycles_renders_it(fresh, tmp_path, extension):
     """A checker whose UVs reach from -0.5 to 1.5 over the plane: with Extend its edge texels

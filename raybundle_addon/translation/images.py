@@ -26,6 +26,15 @@ def linear_pixels(image):
     return None if px is None else np.ascontiguousarray(px[..., :3])
 
 
+def decode_srgb_bytes(rgb):
+    """:func:`~raybundle.scene.textures.srgb_to_linear` of a byte image's values (each one of 256,
+    k / 255), through a table of the values it holds: the same numbers, without the power per texel."""
+    k = np.rint(np.clip(rgb, 0.0, 1.0) * 255).astype(np.uint8)
+    held = np.zeros(256, np.float32)
+    held[k] = rgb                                   # each byte's value as the image holds it
+    return srgb_to_linear(held).astype(np.float32)[k]
+
+
 def image_rgba(image, decode=True):
     """(H, W, 4) float32 linear RGB and alpha of an image's pixels (None without data), row 0
     at the bottom.  Byte images in an sRGB color space hold encoded values in
@@ -44,7 +53,7 @@ def image_rgba(image, decode=True):
     px = px.reshape(h, w, ch)
     rgb = px[..., :3] if ch >= 3 else np.repeat(px[..., :1], 3, axis=2)
     if decode and srgb_bytes(image):
-        rgb = srgb_to_linear(rgb)
+        rgb = decode_srgb_bytes(rgb)
     alpha = px[..., 3:4] if ch in (2, 4) else np.ones((h, w, 1), np.float32)
     if ch == 2:
         alpha = px[..., 1:2]

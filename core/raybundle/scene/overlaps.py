@@ -9,9 +9,10 @@ surface.  Neither is modelled as the other: the export warns, naming the objects
 
 Faces are grouped by plane (their unit normal rounded to 1e-4 and their offset to 1e-6 of
 the scene radius, not canonicalised: a box's bottom on a floor faces the other way and is a
-contact, not an overlap); in each plane holding faces of two groups, points of every
-triangle (centroid and three points halfway to the corners) are tested against the plane's
-triangles of other groups at once, vectorised in blocks, whatever the number of groups.
+contact, not an overlap); in each plane holding faces of two groups, the triangles whose
+bounding box meets another group's are kept, and points of each (centroid and three points
+halfway to the corners) are tested against the kept triangles of other groups at once,
+vectorised in blocks, whatever the number of groups.
 """
 from __future__ import annotations
 
@@ -60,7 +61,11 @@ def coplanar_overlaps(corners, groups, min_area=0.0):
         tri = members[lo:hi]
         e1, e2 = orthonormal_basis(n[tri[0]])
         c2 = np.stack([corners[tri] @ e1, corners[tri] @ e2], axis=-1)                   # (P, 3, 2)
+        near = _near_other_groups(c2, groups[tri])
+        tri, c2 = tri[near], c2[near]
         g = groups[tri]
+        if len(np.unique(g)) < 2:
+            continue
         mine, scale = _sampled(g, area[tri], rng)
         pts = np.einsum("sk,pkx->psx", _SAMPLES, c2[mine]).reshape(-1, 2)                 # (4 m, 2)
         point_tri = np.repeat(mine, len(_SAMPLES))
@@ -72,6 +77,24 @@ def coplanar_overlaps(corners, groups, min_area=0.0):
             found[key] = max(found.get(key, 0.0), s_ab)
     out = [(a, b, s) for (a, b), s in found.items() if s > 0 and s >= min_area]
     return sorted(out, key=lambda x: -x[2])
+
+
+def _near_other_groups(c2, g):
+    """(P,) bool: which triangles ``c2`` (P, 3, 2) of a plane have a bounding box that meets
+    the bounding box of another group's triangles (the others cannot overlap another group);
+    in blocks of :data:`BLOCK` tests."""
+    ids, gi = np.unique(g, return_inverse=True)
+    lo, hi = c2.min(axis=1), c2.max(axis=1)
+    glo, ghi = np.full((len(ids), 2), np.inf), np.full((len(ids), 2), -np.inf)
+    np.minimum.at(glo, gi, lo)
+    np.maximum.at(ghi, gi, hi)
+    near = np.zeros(len(g), bool)
+    step = max(1, BLOCK // len(ids))
+    for s in range(0, len(g), step):
+        meets = ((lo[s:s + step, None] <= ghi[None]) & (hi[s:s + step, None] >= glo[None])).all(axis=2)
+        meets[np.arange(len(meets)), gi[s:s + step]] = False                     # its own group
+        near[s:s + step] = meets.any(axis=1)
+    return near
 
 
 def _sampled(g, area, rng):
