@@ -247,3 +247,23 @@ def test_layered_arrays_round_trip_and_old_files_load():
 def test_invalid_layered_materials_are_rejected(spec, msg):
     with pytest.raises(ValueError, match=msg):
         MaterialTable.from_list([dict(name="bad", **spec)]).validate()
+
+
+def test_the_untinted_f82_moment_is_the_quadrature_of_f82_and_one_quadrature_serves_every_color():
+    """E[w F82(c)] of an untinted F82 (b = 0) comes from two scalar moments of the lobe (F82 is
+    linear in f0 there): the same as the quadrature of F82 itself, for any f0; and the lobe's
+    quadrature is made once for a roughness, an IOR and the mu grid, whatever the colors."""
+    from raybundle.scene import microfacet as mf
+
+    mu = np.linspace(0.05, 1.0, 7)
+    f0 = np.array([0.9, 0.5, 0.04])
+    got = mf.ggx_fresnel_moments(0.37, mu, eta=1.45, f82=(f0, np.zeros(3)), n_theta=64, n_phi=8)["F82"]
+    want = np.stack([(w[:, None] * mf.fresnel_f82(c, f0, np.zeros(3))).mean(axis=0)
+                     for w, _, c in mf._lobe_points(0.37, mu, 64, 8)])
+    assert np.allclose(got, want, rtol=1e-12, atol=1e-15)
+    hits = mf._moments.cache_info().hits
+    mf.ggx_fresnel_moments(0.37, mu, eta=1.45, f82=(np.array([0.2, 0.3, 0.4]), np.zeros(3)), n_theta=64, n_phi=8)
+    assert mf._moments.cache_info().hits == hits + 1
+    tinted = mf.ggx_fresnel_moments(0.37, mu, f82=(f0, np.full(3, 0.3)), n_theta=64, n_phi=8)["F82"]
+    assert np.allclose(tinted, [(w[:, None] * mf.fresnel_f82(c, f0, np.full(3, 0.3))).mean(axis=0)
+                                for w, _, c in mf._lobe_points(0.37, mu, 64, 8)])

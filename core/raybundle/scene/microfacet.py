@@ -9,6 +9,8 @@ sampler's unit square.  Directions follow :mod:`raybundle.scene.materials`' conv
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 
@@ -179,39 +181,56 @@ def ggx_fresnel_moments(alpha, cos_out, eta=0.0, f82=None, n_theta=256, n_phi=32
     * ``Sd`` = E[valid s(c)]: the mean of ``s`` over visible normals, 0 for invalid
       reflections, which is what Cycles tabulates as ``ggx_gen_schlick_ior_s`` for its
       layering estimate;
-    * ``F82`` (K, 3) = E[w F82(c)] if ``f82 = (f0, b)`` is given.
+    * ``F82`` (K, 3) = E[w F82(c)] if ``f82 = (f0, b)`` is given: for an untinted F82 (b = 0),
+      ``f0 E + (1 - f0) E[w (1 - c)^5]``, the F82 model being linear in f0 there.
 
     The lobe is smooth in the azimuth: 256 x 32 points give the albedo of 256 x 128 to 1e-7
-    (within 2e-5 of a 16x finer rule, :func:`ggx_albedo`) in a quarter of the time, and each
-    distinct layered material's table takes one such quadrature per row of the mu table at
-    set-up.
+    (within 2e-5 of a 16x finer rule, :func:`ggx_albedo`) in a quarter of the time.  The
+    moments without F82's colors are kept per (alpha, eta, cos_out), so the materials of a
+    scene that share a roughness and an IOR take one quadrature.
     """
     cos_out = np.atleast_1d(np.asarray(cos_out, float))
+    base = _moments(float(alpha), float(eta), tuple(cos_out.tolist()), n_theta, n_phi)
+    out = {k: base[k].copy() for k in ("E", "Ed", "Sd")}
+    if f82 is not None:
+        f0, b = (np.asarray(x, float) for x in f82)
+        if np.all(b == 0):
+            out["F82"] = f0[None, :] * base["E"][:, None] + (1.0 - f0[None, :]) * base["F5"][:, None]
+        else:
+            out["F82"] = np.stack([(w[:, None] * fresnel_f82(c, f0, b)).mean(axis=0)
+                                   for w, _, c in _lobe_points(alpha, cos_out, n_theta, n_phi)])
+    return out
+
+
+@functools.lru_cache(maxsize=256)
+def _moments(alpha, eta, cos_out, n_theta, n_phi):
+    """:func:`ggx_fresnel_moments`' ``E``, ``Ed``, ``Sd`` and ``F5`` = E[w (1 - c)^5], kept."""
+    k = len(cos_out)
+    out = {"E": np.empty(k), "Ed": np.zeros(k), "Sd": np.zeros(k), "F5": np.empty(k)}
+    f0_real = f0_from_ior(eta) if eta > 1 else 0.0
+    for j, (w, valid, c) in enumerate(_lobe_points(alpha, np.asarray(cos_out), n_theta, n_phi)):
+        out["E"][j] = w.mean()
+        out["F5"][j] = (w * (1.0 - c) ** 5).mean()
+        if eta > 1:
+            s = np.clip((fresnel_dielectric_cos(c, eta) - f0_real) / (1.0 - f0_real), 0.0, 1.0)
+            out["Ed"][j] = (w * s).mean()
+            out["Sd"][j] = (valid * s).mean()
+    return out
+
+
+def _lobe_points(alpha, cos_out, n_theta, n_phi):
+    """For each of ``cos_out``: the quadrature's weights ``w`` (the sampler's weight times the
+    Jacobian), ``valid`` (the Jacobian where w_i is above the surface, else 0) and ``c = h.w_out``."""
     t = (np.arange(n_theta) + 0.5) / n_theta
     u = np.stack(np.meshgrid(1.0 - (1.0 - t) ** 3, (np.arange(n_phi) + 0.5) / n_phi, indexing="ij"),
                  axis=-1).reshape(-1, 2)
     jac = np.repeat(3.0 * (1.0 - t) ** 2, n_phi)         # du/dt: the quadrature weight
     normal = np.tile([0.0, 0.0, 1.0], (len(u), 1))
     a = np.full(len(u), float(alpha))
-    k = len(cos_out)
-    out = {"E": np.empty(k), "Ed": np.zeros(k), "Sd": np.zeros(k)}
-    if f82 is not None:
-        out["F82"] = np.empty((k, 3))
-        f82_f0, f82_b = (np.asarray(x, float) for x in f82)
-    f0_real = f0_from_ior(eta) if eta > 1 else 0.0
-    for j, mu in enumerate(cos_out):
+    for mu in cos_out:
         mu = float(np.clip(mu, 1e-6, 1.0))
         wo = np.broadcast_to([np.sqrt(1 - mu * mu), 0.0, mu], normal.shape)
         w_i, w = sample_ggx_reflection(a, normal, wo, u)
         h = w_i + wo
         c = np.clip(np.einsum("ij,ij->i", h, wo) / np.linalg.norm(h, axis=1).clip(1e-300), 0.0, 1.0)
-        valid = jac * (w > 0)
-        w = w * jac
-        out["E"][j] = w.mean()
-        if eta > 1:
-            s = np.clip((fresnel_dielectric_cos(c, eta) - f0_real) / (1.0 - f0_real), 0.0, 1.0)
-            out["Ed"][j] = (w * s).mean()
-            out["Sd"][j] = (valid * s).mean()
-        if f82 is not None:
-            out["F82"][j] = (w[:, None] * fresnel_f82(c, f82_f0, f82_b)).mean(axis=0)
-    return out
+        yield w * jac, jac * (w > 0), c
