@@ -303,3 +303,26 @@ def test_a_contact_across_the_cut_of_a_pierced_wall_keeps_both_tags(monkeypatch)
                       np.concatenate([base.triangle_material, m]), MATS, point_lights=base.point_lights,
                       two_sided=True)
     assert_the_shelf_is_dark_in_the_room(pipeline.prepare(tessellate(sc0, 4200), patches=300))
+
+
+def test_a_small_round_footprint_does_not_shred_the_floor():
+    """A 64-sided post 6 cm across standing on the floor beside the box: each of its edges on
+    the floor is under 5% of a floor patch, so none cuts the patches (each would run across the
+    whole patch, far from the post): the floor patches near the post stay whole (on the old code
+    its 64 lines cut them into some 50 slivers under a tenth of a patch)."""
+    sc = box_on_floor()
+    ring = np.array([[0.6 + 0.03 * np.cos(a), -0.6 + 0.03 * np.sin(a), 0.0]
+                     for a in np.linspace(0, 2 * np.pi, 64, endpoint=False)])
+    quads = [(np.array([ring[i], ring[(i + 1) % 64], ring[(i + 1) % 64] + [0, 0, 0.2], ring[i] + [0, 0, 0.2]]), 0)
+             for i in range(64)]
+    v, t, m = _mesh(quads)
+    both = build_scene(np.concatenate([sc.vertices, v]), np.concatenate([sc.triangles, t + len(sc.vertices)]),
+                       np.concatenate([sc.triangle_material, m]), MATS, point_lights=sc.point_lights,
+                       camera=sc.camera, two_sided=True)
+    cut = subdivide(both, patches=600)
+    floor = np.abs(cut.triangle_corners[:, :, 2]).max(axis=1) < 1e-12
+    patches = np.unique(cut.triangle_patch[floor])
+    centre = np.array([cut.triangle_corners[cut.triangle_patch == p].reshape(-1, 3).mean(axis=0) for p in patches])
+    near = np.linalg.norm(centre[:, :2] - [0.6, -0.6], axis=1) < 0.25
+    area = cut.patch_area[patches]
+    assert near.sum() > 4 and area[near].min() > 0.5 * np.median(area), (near.sum(), area[near].min())

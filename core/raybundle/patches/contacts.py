@@ -20,7 +20,10 @@ dropped), and the lines where triangles cross it.  :func:`split_at_contacts`
 cuts every patch that such a segment crosses along the segment's line into
 convex pieces; each piece is a patch of its own (one or more triangles).
 Pieces smaller than ``min_fraction`` (0.5%) of the patch are not cut off (their
-leak is that small).  Corners that lie on a contact segment get a *weld tag*
+leak is that small).  A patch is cut only along lines whose segments in the plane add up to at
+least :data:`CUT_SHARE` of its longest edge, the :data:`MAX_CUTS` longest (the footprint of a
+small object on a large patch tags its corners and cuts nothing: its cuts would run across the
+whole patch, far from the contact, and a curved object brings a line per edge).  Corners that lie on a contact segment get a *weld tag*
 naming the segment's line and the side of it the triangle lies on, so that
 smooth interpolation of patch values does not blend across the contact but
 does along it; triangles that touch a contact without being cut keep their
@@ -268,6 +271,47 @@ def _cross2(u, v):
 #: pairs of a triangle and a segment tested at once in :func:`split_at_contacts` (memory: about
 #: 200 bytes a pair)
 PAIR_CHUNK = 1 << 20
+#: a patch is cut along a contact line whose segments in it reach this share of its longest edge,
+#: along at most this many such lines, the longest
+CUT_SHARE, MAX_CUTS = 0.05, 16
+
+
+def _worth_cutting(tri2d, f, k, crosses, seg, key):
+    """(P,) bool: the pairs ``(f, k)`` (triangle ``tri2d[f]`` (F, 3, 2), segment ``seg[k]``
+    (K, 2, 2) on line ``key[k]`` (K, 3) int, :func:`_lines`) whose line cuts the triangle
+    (``crosses``) and is worth cutting along: the segments of its line in the plane add up to
+    :data:`CUT_SHARE` of the triangle's longest edge, and the line is among the :data:`MAX_CUTS`
+    longest that cut it."""
+    out = np.zeros(len(f), bool)
+    sel = np.nonzero(crosses)[0]
+    if len(sel) == 0:
+        return out
+    _, line = np.unique(key, axis=0, return_inverse=True)
+    line = line.ravel()
+    length = np.bincount(line, np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1))            # each line's
+    pair, inverse = np.unique(np.stack([f[sel], line[k[sel]]], axis=1), axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    total = length[pair[:, 1]]
+    edges = np.linalg.norm(tri2d - np.roll(tri2d, 1, axis=1), axis=2).max(axis=1)           # (F,)
+    long_enough = total >= CUT_SHARE * edges[pair[:, 0]]
+    order = np.lexsort((-total, pair[:, 0]))                          # each triangle's lines, longest first
+    rank = np.empty(len(pair), np.int64)
+    first = np.searchsorted(pair[order, 0], pair[order, 0])
+    rank[order] = np.arange(len(pair)) - first
+    out[sel] = (long_enough & (rank < MAX_CUTS))[inverse]
+    return out
+    _, line = np.unique(key[sel], axis=0, return_inverse=True)
+    pair, inverse = np.unique(np.stack([f[sel], line.ravel()], axis=1), axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    total = np.bincount(inverse, np.linalg.norm(seg[sel, 1] - seg[sel, 0], axis=1), minlength=len(pair))
+    edges = np.linalg.norm(tri2d - np.roll(tri2d, 1, axis=1), axis=2).max(axis=1)           # (F,)
+    long_enough = total >= CUT_SHARE * edges[pair[:, 0]]
+    order = np.lexsort((-total, pair[:, 0]))                          # each triangle's lines, longest first
+    rank = np.empty(len(pair), np.int64)
+    first = np.searchsorted(pair[order, 0], pair[order, 0])
+    rank[order] = np.arange(len(pair)) - first
+    out[sel] = (long_enough & (rank < MAX_CUTS))[inverse]
+    return out
 
 
 def _touching_pairs(tri2d, seg, eps):
@@ -373,6 +417,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
         c2 = (scene.triangle_corners[group] - origin) @ to2d                 # (F, 3, 2)
         f, k, crosses = _touching_pairs(c2, seg, eps)
         lines = _lines(seg, eps)
+        crosses = _worth_cutting(c2, f, k, crosses, seg, lines[1])
         # triangles no touching line cuts (every corner on one side of each): only their corners' tags
         cut = np.unique(f[crosses])
         whole = ~np.isin(f, cut)
