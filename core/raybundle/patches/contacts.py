@@ -21,9 +21,11 @@ cuts every patch that such a segment crosses along the segment's line into
 convex pieces; each piece is a patch of its own (one or more triangles).
 Pieces smaller than ``min_fraction`` (0.5%) of the patch are not cut off (their
 leak is that small).  A patch is cut only along lines whose segments in the plane add up to at
-least :data:`CUT_SHARE` of its longest edge, the :data:`MAX_CUTS` longest (the footprint of a
-small object on a large patch tags its corners and cuts nothing: its cuts would run across the
-whole patch, far from the contact, and a curved object brings a line per edge).  Corners that lie on a contact segment get a *weld tag*
+least :data:`~raybundle.patches.convex_cuts.CUT_SHARE` of its longest edge, the
+:data:`~raybundle.patches.convex_cuts.MAX_CUTS` longest (the footprint of a small object on a
+large patch tags its corners and cuts nothing: its cuts would run across the whole patch, far
+from the contact, and a curved object brings a line per edge).  Corners that lie on a contact
+segment get a *weld tag*
 naming the segment's line and the side of it the triangle lies on, so that
 smooth interpolation of patch values does not blend across the contact but
 does along it; triangles that touch a contact without being cut keep their
@@ -31,13 +33,13 @@ patch and only get the tags.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..tracing.sampling import orthonormal_basis
 from ..util.arrays import ranges, unique_rows
+from .convex_cuts import cut_triangles, worth_cutting
 
 
 def _plane_groups(scene, faces):
@@ -202,66 +204,13 @@ def _in_plane_frame(a3, b3, origin, e1, e2, r):
     return seg[np.unique(q, axis=0, return_index=True)[1]]
 
 
-def _split(poly, a, b, eps):
-    """Split the convex polygon ``poly`` (M corners [x, y], a list) by the line through the
-    points a, b: (left, right) polygons (lists), either None when the line misses the interior."""
-    # Python floats: the same IEEE arithmetic as on arrays, without numpy's cost per call on
-    # polygons of three to six corners (called once per piece and line: 95k times for 270k triangles)
-    ax, ay = float(a[0]), float(a[1])
-    dx, dy = float(b[0]) - ax, float(b[1]) - ay
-    h = math.hypot(dx, dy)
-    if not h > 0:                                # a point, not a line (on arrays: NaN, no split)
-        return None, None
-    ux, uy = dx / h, dy / h
-    pts = poly
-    s = [ux * (p[1] - ay) - uy * (p[0] - ax) for p in pts]                     # signed distance [m]
-    s = [0.0 if abs(v) <= eps else v for v in s]
-    if not any(v > 0 for v in s) or not any(v < 0 for v in s):
-        return None, None
-    left, right = [], []
-    m = len(pts)
-    for i in range(m):
-        j = (i + 1) % m
-        p, q, sp, sq = pts[i], pts[j], s[i], s[j]
-        if sp >= 0:
-            left.append(p)
-        if sp <= 0:
-            right.append(p)
-        if sp * sq < 0:
-            t = sp / (sp - sq)
-            x = [p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]
-            left.append(x)
-            right.append(x)
-    return left, right
-
-
-def _without_collinear(poly, eps):
-    """The convex polygon ``poly`` (a list of [x, y], as :func:`_split` makes) as an (M, 2)
-    array without the corners lying on the line through their neighbours (they would give
-    zero-area fan triangles)."""
-    keep = []
-    m = len(poly)
-    for i in range(m):
-        (ax, ay), (px, py), (bx, by) = poly[i - 1], poly[i], poly[(i + 1) % m]
-        length = math.hypot(bx - ax, by - ay)
-        if length > 0 and abs((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / length > eps:
-            keep.append(poly[i])
-    return np.array(keep, float).reshape(-1, 2)
-
-
 def _crosses(tri, segs, eps):
     """(P,) bool: the line of segment ``segs[p]`` (P, 2, 2) has corners of triangle ``tri[p]``
-    (P, 3, 2) strictly on both sides (farther than ``eps``), as :func:`_split` decides."""
+    (P, 3, 2) strictly on both sides (farther than ``eps``), as :func:`~raybundle.patches.convex_cuts.split_polygon` decides."""
     a, d = segs[:, 0], segs[:, 1] - segs[:, 0]
     dvec = d / np.hypot(d[:, 0], d[:, 1])[:, None]
     s = dvec[:, None, 0] * (tri[:, :, 1] - a[:, None, 1]) - dvec[:, None, 1] * (tri[:, :, 0] - a[:, None, 0])
     return ((s > eps).any(axis=1)) & ((s < -eps).any(axis=1))
-
-
-def _area(poly):
-    """The area of the polygon ``poly`` (M corners [x, y], a list): the shoelace formula."""
-    m = len(poly)
-    return 0.5 * abs(sum(poly[i][0] * poly[(i + 1) % m][1] - poly[i][1] * poly[(i + 1) % m][0] for i in range(m)))
 
 
 def _cross2(u, v):
@@ -271,49 +220,6 @@ def _cross2(u, v):
 #: pairs of a triangle and a segment tested at once in :func:`split_at_contacts` (memory: about
 #: 200 bytes a pair)
 PAIR_CHUNK = 1 << 20
-#: a patch is cut along a contact line whose segments in it reach this share of its longest edge,
-#: along at most this many such lines, the longest
-CUT_SHARE, MAX_CUTS = 0.05, 16
-
-
-def _worth_cutting(tri2d, f, k, crosses, seg, key):
-    """(P,) bool: the pairs ``(f, k)`` (triangle ``tri2d[f]`` (F, 3, 2), segment ``seg[k]``
-    (K, 2, 2) on line ``key[k]`` (K, 3) int, :func:`_lines`) whose line cuts the triangle
-    (``crosses``) and is worth cutting along: the segments of its line in the plane add up to
-    :data:`CUT_SHARE` of the triangle's longest edge, and the line is among the :data:`MAX_CUTS`
-    longest that cut it."""
-    out = np.zeros(len(f), bool)
-    sel = np.nonzero(crosses)[0]
-    if len(sel) == 0:
-        return out
-    _, line = np.unique(key, axis=0, return_inverse=True)
-    line = line.ravel()
-    length = np.bincount(line, np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1))            # each line's
-    pair, inverse = np.unique(np.stack([f[sel], line[k[sel]]], axis=1), axis=0, return_inverse=True)
-    inverse = inverse.ravel()
-    total = length[pair[:, 1]]
-    edges = np.linalg.norm(tri2d - np.roll(tri2d, 1, axis=1), axis=2).max(axis=1)           # (F,)
-    long_enough = total >= CUT_SHARE * edges[pair[:, 0]]
-    order = np.lexsort((-total, pair[:, 0]))                          # each triangle's lines, longest first
-    rank = np.empty(len(pair), np.int64)
-    first = np.searchsorted(pair[order, 0], pair[order, 0])
-    rank[order] = np.arange(len(pair)) - first
-    out[sel] = (long_enough & (rank < MAX_CUTS))[inverse]
-    return out
-    _, line = np.unique(key[sel], axis=0, return_inverse=True)
-    pair, inverse = np.unique(np.stack([f[sel], line.ravel()], axis=1), axis=0, return_inverse=True)
-    inverse = inverse.ravel()
-    total = np.bincount(inverse, np.linalg.norm(seg[sel, 1] - seg[sel, 0], axis=1), minlength=len(pair))
-    edges = np.linalg.norm(tri2d - np.roll(tri2d, 1, axis=1), axis=2).max(axis=1)           # (F,)
-    long_enough = total >= CUT_SHARE * edges[pair[:, 0]]
-    order = np.lexsort((-total, pair[:, 0]))                          # each triangle's lines, longest first
-    rank = np.empty(len(pair), np.int64)
-    first = np.searchsorted(pair[order, 0], pair[order, 0])
-    rank[order] = np.arange(len(pair)) - first
-    out[sel] = (long_enough & (rank < MAX_CUTS))[inverse]
-    return out
-
-
 def _touching_pairs(tri2d, seg, eps):
     """``(f, k, crosses)`` (P,): the pairs, sorted by f then k, of a triangle ``tri2d[f]``
     (F, 3, 2) and a segment ``seg[k]`` (K, 2, 2) that touch, along a piece of positive length
@@ -417,7 +323,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
         c2 = (scene.triangle_corners[group] - origin) @ to2d                 # (F, 3, 2)
         f, k, crosses = _touching_pairs(c2, seg, eps)
         lines = _lines(seg, eps)
-        crosses = _worth_cutting(c2, f, k, crosses, seg, lines[1])
+        crosses = worth_cutting(c2, f, k, crosses, seg, lines[1])
         # triangles no touching line cuts (every corner on one side of each): only their corners' tags
         cut = np.unique(f[crosses])
         whole = ~np.isin(f, cut)
@@ -428,7 +334,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
         # the others cut into convex pieces
         start = np.searchsorted(f, cut)
         count = np.searchsorted(f, cut, side="right") - start
-        pieces = _cut_triangles(c2, cut, start, count, seg[k], crosses, eps, min_fraction)
+        pieces = cut_triangles(c2, cut, start, count, seg[k], crosses, eps, min_fraction)
         tags = _piece_tags(pieces, start, count, k, seg, lines, seg_base, eps, tag_ids)
         j = 0
         for fi, polys in zip(cut.tolist(), pieces):
@@ -448,30 +354,6 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     if not replaced.any() and not corner_tag.any():
         return scene, 0
     return _with_pieces(scene, replaced, corner_tag, out), n_cut
-
-
-def _cut_triangles(c2, cut, start, count, seg_k, crosses, eps, min_fraction):
-    """The convex pieces (lists of (M, 2) arrays) of each triangle ``cut`` (ids into ``c2``
-    (F, 3, 2)), cut along the lines of the segments that cross it (``seg_k``, ``crosses`` from
-    ``start`` for ``count`` pairs); a cut that would leave a piece under ``min_fraction`` of the
-    triangle is not made.  Corners are plain lists while cutting (NumPy's cost per call on 3-6
-    corners)."""
-    pieces = []
-    for fi, lo, n in zip(cut.tolist(), start.tolist(), count.tolist()):
-        polys = [c2[fi].tolist()]
-        least = min_fraction * _area(polys[0])
-        # a line that leaves the triangle's corners on one side misses every piece of it
-        for a, b in seg_k[lo:lo + n][crosses[lo:lo + n]].tolist():
-            nxt = []
-            for poly in polys:
-                lft, rgt = _split(poly, a, b, eps)
-                if lft is None or min(_area(lft), _area(rgt)) < least:
-                    nxt.append(poly)
-                else:
-                    nxt += [lft, rgt]
-            polys = nxt
-        pieces.append([_without_collinear(poly, eps) for poly in polys])
-    return pieces
 
 
 def _piece_tags(pieces, start, count, k, seg, lines, seg_base, eps, tag_ids):
@@ -596,7 +478,7 @@ def _inherited_tags(poly, tri2d, tags, eps):
 
 def _tags_in_order(tags, poly, tri2d, eps):
     """Tags of the corners of an uncut triangle, in the triangle's corner order
-    (``_without_collinear`` may have rotated the polygon)."""
+    (:func:`~raybundle.patches.convex_cuts.without_collinear` may have rotated the polygon)."""
     out = [0, 0, 0]
     for tg, p in zip(tags, poly):
         out[int(np.argmin(np.linalg.norm(tri2d - p, axis=1)))] = tg
