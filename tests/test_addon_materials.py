@@ -82,8 +82,7 @@ def test_a_color_ramp_on_an_image_drives_the_albedo_as_in_cycles(fresh, tmp_path
 def test_a_color_ramp_on_a_noise_texture_is_baked_on_the_object_as_cycles_renders_it(fresh, tmp_path):
     """A Noise Texture (Generated coordinates, the object's own) through a Color Ramp on the
     Diffuse Color: Blender bakes it on the plate itself, through its UV map, as finely as the
-    image needs (its 32 x 32 pixels: the fewest, 128 texels a side, where it was 1,024), its edges
-    extended; the render follows Cycles pixel by pixel.  Another object without a UV map gets the
+    image needs (its 32 x 32 pixels: 128 texels a side, where it was 1,024), its edges extended; the render follows Cycles pixel by pixel.  Another object without a UV map gets the
     mean, with a warning."""
     from addon_helpers import render_cycles, render_raybundle
 
@@ -114,23 +113,27 @@ def test_a_color_ramp_on_a_noise_texture_is_baked_on_the_object_as_cycles_render
 
 
 def test_a_graph_baked_on_an_object_is_as_fine_as_the_image_needs(fresh):
-    """Texels a side of a graph baked on an object: four for each pixel its bounding box may cover,
-    over the share of the square its UV map covers, between 128 and 1,024; the whole image's where
-    the object reaches behind the camera, the most without a camera."""
+    """Texels a side of a graph baked on an object: 16 (four a side) for each pixel its bounding
+    box may cover, over the share of the square its UV map covers, between 128 and 1,024; the whole
+    image's where the object reaches behind the camera, the most without a camera."""
     from raybundle_addon.translation.node_graphs import object_bake_size
 
     plane = plane_with_uvs(size=2.0)
     add_light("POINT", location=(0, 0, 1))
     add_camera((0, 0, 3), resolution=(200, 100), ortho_scale=8.0)      # 25 px a metre: 50 x 50 px
     camera = _export().scene.camera
-    assert object_bake_size(plane, camera, 1.0) == 128                 # sqrt(4 x 2,500) = 100: the fewest, 128
-    assert object_bake_size(plane, camera, 0.25) == 208               # 200 -> a multiple of 16
+    assert object_bake_size(plane, camera, 1.0) == 208                 # sqrt(16 x 2,500) = 200 -> a multiple of 16
+    assert object_bake_size(plane, camera, 0.25) == 400
+    plane.location.x = 100.0                                           # out of the image: the fewest
+    bpy.context.view_layer.update()
+    assert object_bake_size(plane, camera, 1.0) == 128
+    plane.location.x = 0.0
     plane.scale = (3.0, 3.0, 1.0)                                      # 150 x 100 px (clipped by the image)
     bpy.context.view_layer.update()
-    assert object_bake_size(plane, camera, 1.0) == 256                 # sqrt(4 x 15,000) = 245
+    assert object_bake_size(plane, camera, 1.0) == 496                 # sqrt(16 x 15,000) = 490
     plane.location.z = 3.5                                             # behind the camera
     bpy.context.view_layer.update()
-    assert object_bake_size(plane, camera, 1.0) == 288                 # sqrt(4 x 20,000) = 283
+    assert object_bake_size(plane, camera, 1.0) == 576                 # sqrt(16 x 20,000) = 566
     assert object_bake_size(plane, None, 1.0) == 1024
 
 
@@ -489,7 +492,8 @@ def test_an_image_read_through_a_tiling_mapping_is_baked_once_as_cycles_renders_
     Diffuse Color: a function of the UV map, so Blender bakes it once for the material, twice as
     fine as the image for its tiling, however many objects use it (it was baked on each object at
     1,024^2, or, with the image straight on the color, replaced by its mean with a warning); the
-    render follows Cycles pixel by pixel."""
+    render follows Cycles pixel by pixel.  Seen by an image of 8 x 8 pixels, the bake is only as
+    fine as that image needs (it was as fine as for the 32 x 32 one)."""
     from addon_helpers import render_cycles, render_raybundle
 
     from raybundle_addon.translation.node_graphs import graph_input
@@ -524,3 +528,5 @@ def test_an_image_read_through_a_tiling_mapping_is_baked_once_as_cycles_renders_
     # as the color ramp's test above: Cycles' noise at 64 samples
     assert abs(rel.mean()) < 0.01 and np.percentile(np.abs(rel), 95) < 0.04 and np.abs(rel).max() < 0.1, \
         (rel.mean(), np.percentile(np.abs(rel), 95), np.abs(rel).max())
+    bpy.context.scene.render.resolution_x = bpy.context.scene.render.resolution_y = 8
+    assert [im.shape for im in _export().scene.texture.images] == [(32, 32, 3)]      # sqrt(16 x 64) = 32

@@ -12,7 +12,8 @@ square whose UV covers the images once: the graph's exact value at the centres o
 interpolation.  A non-linear graph of an interpolated image is not the interpolation of the
 graph's values at the texels (a checker through a Color Ramp): the finer grid keeps the
 difference below the bilinear error of the finer grid where images are small (magnified on
-screen), while large images are baked at their own resolution.  A graph without images is a
+screen), while large images are baked at their own resolution; and no finer than the image
+needs for the objects that use the material (:func:`seen_finer`).  A graph without images is a
 constant, baked into one texel.
 
 A shader's Normal input (a Normal Map node in tangent space, a Bump node, anything between them
@@ -65,7 +66,7 @@ POSITIONAL = frozenset((
 #: Texture Coordinate outputs that depend on the view: not baked
 VIEW_COORDINATES = frozenset(("Camera", "Window", "Reflection"))
 #: texels a side of a graph baked on an object: at most, at least, and per pixel it may cover
-OBJECT_BAKE_SIZE, OBJECT_BAKE_MIN, TEXELS_PER_PIXEL = 1024, 128, 4
+OBJECT_BAKE_SIZE, OBJECT_BAKE_MIN, TEXELS_PER_PIXEL = 1024, 128, 16
 #: texels the bake extends an object's UV islands by (bilinear lookups at their edges read them)
 OBJECT_BAKE_MARGIN = 2
 #: shader nodes whose color and value inputs the converter reads
@@ -98,6 +99,8 @@ class GraphInput:
     size: tuple = (1, 1)
     #: baked on each object that uses the material (the graph reads the point of the object)
     per_object: bool = False
+    #: how many times finer than its images' texels (and their tiling) ``size`` is in each axis
+    finer: int = 1
 
     @property
     def key(self):
@@ -164,6 +167,8 @@ def graph_input(mat, sock):
         k = bake_scale(size)
         t = int(np.clip(np.ceil(tiling), 1, max(1, MAX_BAKE_SIDE // max(size[0] * k, size[1] * k))))
         size = (size[0] * k * t, size[1] * k * t)
+        return GraphInput(mat.name_full, sock.node.name, sock.identifier, images, uvs.pop() if uvs else "", size,
+                          finer=k)
     return GraphInput(mat.name_full, sock.node.name, sock.identifier, images, uvs.pop() if uvs else "", size)
 
 
@@ -261,14 +266,14 @@ class GraphBake:
             self._job = None
 
 
-def object_bake_size(ob, camera, uv_area):
-    """Texels a side of a graph baked on object ``ob`` (a bpy Object): :data:`TEXELS_PER_PIXEL`
-    for each pixel of ``camera``'s image (:class:`~raybundle.scene.camera.Camera`) its bounding
+def texels_seen(ob, camera, uv_area):
+    """Texels of the unit square a graph baked over ``ob``'s UV map needs in ``camera``'s image
+    (:class:`~raybundle.scene.camera.Camera`): :data:`TEXELS_PER_PIXEL` for each pixel its bounding
     box may cover (the whole image where the box reaches behind the camera), over ``uv_area``,
-    the share of the unit square its UV map covers; between :data:`OBJECT_BAKE_MIN` and
-    :data:`OBJECT_BAKE_SIZE`, the largest without a camera."""
+    the area of the unit square its UV map covers (more than 1 where it tiles); infinite
+    without a camera."""
     if camera is None:
-        return OBJECT_BAKE_SIZE
+        return np.inf
     m = np.array(ob.matrix_world, float)
     corners = np.array([tuple(c) for c in ob.bound_box], float) @ m[:3, :3].T + m[:3, 3]
     px, py, _, _, density = camera.project(corners)
@@ -277,8 +282,53 @@ def object_bake_size(ob, camera, uv_area):
     else:
         pixels = ((np.clip(px.max(), 0, camera.width) - np.clip(px.min(), 0, camera.width))
                   * (np.clip(py.max(), 0, camera.height) - np.clip(py.min(), 0, camera.height)))
-    side = np.sqrt(TEXELS_PER_PIXEL * pixels / max(uv_area, 1 / 64))
-    return int(np.clip(16 * np.ceil(side / 16), OBJECT_BAKE_MIN, OBJECT_BAKE_SIZE))
+    return TEXELS_PER_PIXEL * pixels / max(uv_area, 1 / 64)
+
+
+def object_bake_size(ob, camera, uv_area):
+    """Texels a side of a graph baked on object ``ob`` (a bpy Object), as many as
+    :func:`texels_seen` (``uv_area``: the share of the unit square its UV map covers), between
+    :data:`OBJECT_BAKE_MIN` and :data:`OBJECT_BAKE_SIZE`, the largest without a camera."""
+    side = np.sqrt(texels_seen(ob, camera, uv_area))
+    return int(np.clip(16 * np.ceil(min(side, OBJECT_BAKE_SIZE) / 16), OBJECT_BAKE_MIN, OBJECT_BAKE_SIZE))
+
+
+def seen_finer(g, objects, camera):
+    """How many times finer than its images' texels (at most ``g.finer``) graph ``g``, baked once
+    over the unit square for ``objects`` (those using its material), is baked in ``camera``'s
+    image: the grid finer than the images serves non-linear graphs of images magnified on
+    screen, and no finer than the objects' :func:`texels_seen` needs."""
+    if camera is None or g.finer <= 1 or not objects:
+        return g.finer
+    need = np.sqrt(sum(texels_seen(ob, camera, uv_map_area(ob, g.uv)) for ob in objects))
+    own = max(g.size) / g.finer
+    return int(np.clip(np.ceil(need / own), 1, g.finer)) if np.isfinite(need) else g.finer
+
+
+def uv_map_area(ob, name=""):
+    """The area of the unit square object ``ob``'s UV map ``name`` ("" its active render one)
+    covers, overlaps and tiles counted (0 without that map)."""
+    me = getattr(ob, "data", None)
+    layers = getattr(me, "uv_layers", None)
+    layer = None if not layers else (layers.get(name) if name else
+                                     next((l for l in layers if l.active_render), layers.active))
+    return 0.0 if layer is None else _uv_area(me, layer)[1]
+
+
+def _uv_area(me, layer):
+    """``(uv (L, 2), area)``: mesh ``me``'s UVs of ``layer`` per loop and its faces' UV area."""
+    uv = np.empty(2 * len(me.loops), np.float32)
+    layer.uv.foreach_get("vector", uv)
+    uv = uv.reshape(-1, 2).astype(float)
+    if len(uv) == 0:
+        return uv, 0.0
+    start = np.empty(len(me.polygons), np.int64)
+    me.polygons.foreach_get("loop_start", start)
+    nxt = np.arange(len(uv)) + 1
+    ends = np.r_[start[1:], len(uv)]
+    nxt[ends - 1] = start                       # each polygon's loop closes on its first corner
+    cross = uv[:, 0] * uv[nxt, 1] - uv[nxt, 0] * uv[:, 1]
+    return uv, float(np.abs(np.add.reduceat(cross, start)).sum() / 2)
 
 
 def object_uv(ob):
@@ -291,22 +341,13 @@ def object_uv(ob):
     layer = None if not layers else next((l for l in layers if l.active_render), layers.active)
     if layer is None:
         return None, f"object {ob.name!r} has no UV map to bake it through", 0.0
-    uv = np.empty(2 * len(me.loops), np.float32)
-    layer.uv.foreach_get("vector", uv)
-    uv = uv.reshape(-1, 2).astype(float)
+    uv, area = _uv_area(me, layer)
     if len(uv) == 0:
         return None, f"object {ob.name!r} has no faces", 0.0
-    start = np.empty(len(me.polygons), np.int64)
-    me.polygons.foreach_get("loop_start", start)
-    nxt = np.arange(len(uv)) + 1
-    ends = np.r_[start[1:], len(uv)]
-    nxt[ends - 1] = start                       # each polygon's loop closes on its first corner
-    cross = uv[:, 0] * uv[nxt, 1] - uv[nxt, 0] * uv[:, 1]
-    area = np.abs(np.add.reduceat(cross, start)).sum() / 2
     if uv.min() < -1e-6 or uv.max() > 1 + 1e-6 or area > 1 + 1e-3:
         return None, (f"object {ob.name!r}'s UV map {layer.name!r} leaves [0, 1] or overlaps itself (UV area "
                       f"{area:.3g}): its graph needs a map that covers it once"), 0.0
-    return layer.name, None, float(area)
+    return layer.name, None, area
 
 
 def _graph_inputs(materials, users, camera):
@@ -325,6 +366,9 @@ def _graph_inputs(materials, users, camera):
             else:
                 inputs[got.key] = got
                 originals[mat.name_full] = getattr(mat, "original", mat)
+                if not got.per_object and got.finer > 1:
+                    finer = seen_finer(got, users.get(mat.name_full, []), camera)
+                    got.size = tuple(side // got.finer * finer for side in got.size)
                 if got.per_object:
                     objects[got.key] = []
                     for ob in users.get(mat.name_full, []):
