@@ -89,7 +89,8 @@ class SceneBuilder:
         return SurfaceTexture([m for m, _ in maps], faces(1, -1), corners, faces(0, 0.0, (3, 2), float),
                               faces(2, 0.0, (3, 3), float), faces(3, -1), faces(4, -1), faces(5, False, (), bool),
                               encoded=[e for _, e in maps],
-                              closest=[closest for *_, closest, _ in ordered], extend=[extend for *_, extend in ordered])
+                              closest=[closest for *_, closest, _ in ordered],
+                              extend=[extend for *_, extend in ordered])
 
     def scene(self, world, camera, name, link_sets, warn):
         """``(scene, vertices, triangles, materials)``: the validated two-sided

@@ -49,9 +49,10 @@ class ProgressiveImage:
         image; returns :class:`RenderResult`, whose stats add the set-up's seconds
         (``setup_seconds``), the run's (``total_seconds``) and, when the budget was too short
         for the minimum of iterations, ``budget_note``.  ``stage(text)`` is told when the
-        iterations start and when the final image is formed.  ``on_snapshot(seconds, iterations, image)`` is called when the
-        run's clock passes each of ``snapshots`` (seconds): ``seconds`` includes forming that
-        image (what stopping there would have cost); the run's clock then leaves it out."""
+        iterations start and when the final image is formed.  ``on_snapshot(seconds, iterations,
+        image)`` is called when the run's clock passes each of ``snapshots`` (seconds): ``seconds``
+        includes forming that image (what stopping there would have cost); the run's clock then
+        leaves it out."""
         loop = RunLoop(self, iterations, time_limit, started, final_share=self.final_share(), progress=progress,
                        stop=stop, between=between)
         pending = sorted(snapshots) if on_snapshot is not None else []

@@ -206,7 +206,8 @@ def _in_plane_frame(a3, b3, origin, e1, e2, r):
 
 def _crosses(tri, segs, eps):
     """(P,) bool: the line of segment ``segs[p]`` (P, 2, 2) has corners of triangle ``tri[p]``
-    (P, 3, 2) strictly on both sides (farther than ``eps``), as :func:`~raybundle.patches.convex_cuts.split_polygon` decides."""
+    (P, 3, 2) strictly on both sides (farther than ``eps``), as
+    :func:`~raybundle.patches.convex_cuts.split_polygon` decides."""
     a, d = segs[:, 0], segs[:, 1] - segs[:, 0]
     dvec = d / np.hypot(d[:, 0], d[:, 1])[:, None]
     s = dvec[:, None, 0] * (tri[:, :, 1] - a[:, None, 1]) - dvec[:, None, 1] * (tri[:, :, 0] - a[:, None, 0])

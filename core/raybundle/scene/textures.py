@@ -157,9 +157,9 @@ class SurfaceTexture:
 
     def lookup(self, image, uv, level=0):
         """Lookup (N, 3) of map ``image`` at ``uv`` (N, 2), repeating or with its edges extended
-        (:attr:`extend`), bilinear or at the nearest texel (:attr:`closest`), on ``level`` of its pyramid (0: the map itself, decoded after the
-        lookup where its texels are sRGB-encoded; each next level the 2 x 2 means of the one below,
-        of decoded values)."""
+        (:attr:`extend`), bilinear or at the nearest texel (:attr:`closest`), on ``level`` of its
+        pyramid (0: the map itself, decoded after the lookup where its texels are sRGB-encoded;
+        each next level the 2 x 2 means of the one below, of decoded values)."""
         im = self.level(image, level)
         h, w = im.shape[:2]
         x = uv[:, 0] * w - 0.5
