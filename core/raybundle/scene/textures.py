@@ -64,6 +64,8 @@ import numpy as np
 
 #: most modulation samples per patch triangle for its mean
 MAX_SAMPLES = 256
+#: points a patch's mean albedo takes at the least (:meth:`SurfaceTexture.side_means`)
+PATCH_SAMPLES = 16
 #: fewest samples per triangle for its mean coverage: a patch's radiance is the light it
 #: receives over its covered area, so an error there is an error of the patch
 MIN_COVERAGE_SAMPLES = 64
@@ -298,9 +300,13 @@ class SurfaceTexture:
 
     def side_means(self, scene, seed=0):
         """(S, 3) the area-weighted mean modulation over each patch side of ``scene``
-        (:meth:`_triangle_means` of the albedo maps)."""
+        (:meth:`_triangle_means` of the albedo maps): a patch takes :data:`PATCH_SAMPLES` to
+        :data:`MAX_SAMPLES` points, shared among its triangles by area (at least one each), an
+        unbiased mean of the patch whatever the number of its triangles."""
         tri_face = scene.triangle_source
-        mod = self._triangle_means(scene, self.face_image, seed)
+        share = scene.triangle_area / np.maximum(scene.patch_area[scene.triangle_patch], 1e-300)
+        mod = self._triangle_means(scene, self.face_image, seed, np.clip(np.ceil(PATCH_SAMPLES * share), 1, 16),
+                                   2.0 ** np.floor(np.log2(np.maximum(MAX_SAMPLES * share, 1.0))))
         col = np.nonzero(self.face_image[tri_face] == -2)[0]
         if len(col):          # linear over the face: the mean over a triangle is at its centroid
             mod[col] = self.at(tri_face[col], scene.triangle_corners[col].mean(axis=1))
@@ -311,12 +317,12 @@ class SurfaceTexture:
         den = np.bincount(side, area, minlength=scene.n_sides)
         return num / np.maximum(den, 1e-300)[:, None]
 
-    def _triangle_means(self, scene, face_map, seed, fewest=16):
+    def _triangle_means(self, scene, face_map, seed, fewest=16, most=MAX_SAMPLES):
         """(T, 3) the mean over each triangle of ``scene`` of the map ``face_map`` (F,) gives its
         face (ones where it gives none): the map at stratified points, one per texel the triangle
-        covers, ``fewest`` to :data:`MAX_SAMPLES`.  A triangle that covers more texels reads a
-        coarser level of the map's pyramid (each texel the mean of 2 x 2 of the level below),
-        where it covers at most :data:`MAX_SAMPLES`.  The points' UVs are the triangle's corner
+        covers, ``fewest`` to ``most`` (numbers, or one per triangle; ``most`` a power of 2).  A
+        triangle that covers more texels reads a coarser level of the map's pyramid (each texel
+        the mean of 2 x 2 of the level below), where it covers at most ``most``.  The points' UVs are the triangle's corner
         UVs interpolated (UV is affine over a face)."""
         from ..tracing.sampling import Stream, stratified_2d_sets, stream, uniform_triangle
 
@@ -331,10 +337,11 @@ class SurfaceTexture:
         du, dv = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
         texels = np.array([im.shape[0] * im.shape[1] for im in self.images], float)[img[textured]]
         covered = 0.5 * np.abs(du[:, 0] * dv[:, 1] - du[:, 1] * dv[:, 0]) * texels
-        level = np.maximum(0, np.ceil(np.log(np.maximum(covered, 1.0) / MAX_SAMPLES) / np.log(4.0))).astype(np.int64)
+        most = np.broadcast_to(most, img.shape)[textured]
+        level = np.maximum(0, np.ceil(np.log(np.maximum(covered, 1.0) / most) / np.log(4.0))).astype(np.int64)
         # points per triangle: the texels it covers on its level, rounded up to a power of 2
-        k = np.clip(np.ceil(covered / 4.0 ** level), fewest, MAX_SAMPLES)
-        k = np.minimum(2 ** np.ceil(np.log2(k)), MAX_SAMPLES).astype(np.int64)
+        k = np.clip(np.ceil(covered / 4.0 ** level), np.broadcast_to(fewest, img.shape)[textured], most)
+        k = np.minimum(2 ** np.ceil(np.log2(k)), most).astype(np.int64)
         rng = stream(seed, Stream.TEXTURE_MEANS)
         groups, which = np.unique(np.stack([k, level, img[textured]], axis=1), axis=0, return_inverse=True)
         order = np.argsort(which.ravel(), kind="stable")
