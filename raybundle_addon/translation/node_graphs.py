@@ -163,13 +163,13 @@ def graph_input(mat, sock):
         w, h = im.size
         if w * h > size[0] * size[1]:
             size = (int(w), int(h))
+    k = 1
     if images:
         k = bake_scale(size)
         t = int(np.clip(np.ceil(tiling), 1, max(1, MAX_BAKE_SIDE // max(size[0] * k, size[1] * k))))
         size = (size[0] * k * t, size[1] * k * t)
-        return GraphInput(mat.name_full, sock.node.name, sock.identifier, images, uvs.pop() if uvs else "", size,
-                          finer=k)
-    return GraphInput(mat.name_full, sock.node.name, sock.identifier, images, uvs.pop() if uvs else "", size)
+    return GraphInput(mat.name_full, sock.node.name, sock.identifier, images, uvs.pop() if uvs else "", size,
+                      finer=k)
 
 
 def bake_scale(size):
