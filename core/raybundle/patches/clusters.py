@@ -318,27 +318,33 @@ def _sides_apart(ids, part, row, plane, behind):
     that of its part (a part never crosses the cut); triangles of no tagged part, or of a part
     that does not reach the plane, form a third group.  (Splitting by every such plane at once
     makes many more patches in furnished rooms.)"""
-    pair, count = np.unique(np.stack([ids[row], plane], axis=1), axis=0, return_counts=True)
-    sides = np.unique(np.stack([ids[row], plane, behind], axis=1), axis=0)[:, :2]
-    both = np.unique(sides, axis=0, return_counts=True)
-    conflict = both[0][both[1] > 1]
+    # (cluster, plane) pairs as one key each, in their lexicographic order; ``behind`` is 0 or 1
+    span = int(plane.max()) + 1
+    cp = ids[row].astype(np.int64) * span + plane
+    pair_key, count = np.unique(cp, return_counts=True)
+    sides, n_sides = np.unique(np.unique(2 * cp + behind) // 2, return_counts=True)
+    conflict = sides[n_sides > 1]
     if len(conflict) == 0:
         return ids
     # per conflict cluster its plane with the most tagged corners
-    span = int(plane.max()) + 1
-    at = np.isin(pair[:, 0] * span + pair[:, 1], conflict[:, 0] * span + conflict[:, 1])
-    pair, count = pair[at], count[at]
+    at = np.isin(pair_key, conflict)
+    pair, count = np.stack(np.divmod(pair_key[at], span), axis=1), count[at]
     order = np.lexsort((-count, pair[:, 0]))
     first = order[np.r_[True, pair[order[1:], 0] != pair[order[:-1], 0]]]
-    c_plane = dict(zip(pair[first, 0].tolist(), pair[first, 1].tolist()))
-    in_conflict = np.zeros(int(ids.max()) + 1, bool)
-    in_conflict[pair[first, 0]] = True
-    split = np.flatnonzero(in_conflict[ids])
-    side_of = {}
-    for key in zip(part[row].tolist(), plane.tolist(), behind.tolist()):
-        side_of[key[:2]] = key[2] if side_of.get(key[:2], key[2]) == key[2] else 2   # a part on both sides: apart
-    side = np.array([2 if p < 0 else side_of.get((p, c_plane[c]), 2)
-                     for p, c in zip(part[split].tolist(), ids[split].tolist())], np.int64)
+    c_plane = np.full(int(ids.max()) + 1, -1, np.int64)
+    c_plane[pair[first, 0]] = pair[first, 1]
+    split = np.flatnonzero(c_plane[ids] >= 0)
+    # each (part, plane)'s side: its tagged corners' ``behind`` where they agree, else 2 (apart)
+    key = (part[row].astype(np.int64) + 1) * span + plane
+    keys, inv = np.unique(key, return_inverse=True)
+    inv = inv.reshape(-1)
+    lo, hi = np.full(len(keys), np.iinfo(np.int64).max), np.full(len(keys), np.iinfo(np.int64).min)
+    np.minimum.at(lo, inv, behind.astype(np.int64))
+    np.maximum.at(hi, inv, behind.astype(np.int64))
+    want = (part[split].astype(np.int64) + 1) * span + c_plane[ids[split]]
+    at = np.minimum(np.searchsorted(keys, want), len(keys) - 1)
+    known = (part[split] >= 0) & (keys[at] == want)
+    side = np.where(known, np.where(lo[at] == hi[at], lo[at], 2), 2).astype(np.int64)
     # each conflict cluster's first group keeps its id, the others get new ones: still dense
     sub = group_ids([ids[split], side])
     cluster = np.zeros(int(sub.max()) + 1, np.int64)
