@@ -62,7 +62,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: most modulation samples per patch triangle for its mean
+#: most modulation samples per triangle for its mean (per patch for a patch's mean albedo)
 MAX_SAMPLES = 256
 #: points a patch's mean albedo takes at the least (:meth:`SurfaceTexture.side_means`)
 PATCH_SAMPLES = 16
@@ -305,7 +305,8 @@ class SurfaceTexture:
         unbiased mean of the patch whatever the number of its triangles."""
         tri_face = scene.triangle_source
         share = scene.triangle_area / np.maximum(scene.patch_area[scene.triangle_patch], 1e-300)
-        mod = self._triangle_means(scene, self.face_image, seed, np.clip(np.ceil(PATCH_SAMPLES * share), 1, 16),
+        mod = self._triangle_means(scene, self.face_image, seed,
+                                   np.clip(np.ceil(PATCH_SAMPLES * share), 1, PATCH_SAMPLES),
                                    2.0 ** np.floor(np.log2(np.maximum(MAX_SAMPLES * share, 1.0))))
         col = np.nonzero(self.face_image[tri_face] == -2)[0]
         if len(col):          # linear over the face: the mean over a triangle is at its centroid
