@@ -111,14 +111,15 @@ bench-lights: $(STAMP)
 
 # Real rooms (demo_scenes/interiors), RAYBUNDLE against Cycles from the same file at 320 x 180, references
 # committed: each room in its own materials and in clay (the view layer's Material Override) at 60 s, twice
-# (seeds 3 and 4: the error's bias and noise), Cycles' ladder up to 120 s (about 15 minutes a room on 2
-# cores); `make bench-interiors-quick` runs one room
+# (seeds 3 and 4: the error's bias and noise), Cycles' ladder up to 120 s, and the error by component
+# against Cycles' light passes (tools/breakdown.py; pass references of 2 x 256 samples, committed beside
+# the others) (about 20 minutes a room on 2 cores); `make bench-interiors-quick` runs one room
 INTERIORS = living-room dining-room modern-hall bathroom bathroom2
 bench-interiors: $(STAMP)
 	for room in $(INTERIORS); do \
 	  for mode in full clay; do \
 	    $(PY) tools/bench_blender.py demo_scenes/interiors/$$room.blend $$([ $$mode = clay ] && echo --clay) \
-	      --resolution 320 180 --references demo_scenes/interiors/references --times 60 --twin \
+	      --resolution 320 180 --references demo_scenes/interiors/references --times 60 --twin --breakdown \
 	      --max-cycles-seconds 120 --out out/bench-interiors/$$room-$$mode --page $(PAGE) || exit 1; \
 	  done; \
 	done

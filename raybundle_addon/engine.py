@@ -17,7 +17,9 @@ The engine pushes images with ``RenderPass.rect.foreach_set`` (rows bottom-up,
 RGBA float32, alpha 1) into one result per view layer; the pixels are linear
 radiance [W m^-2 sr^-1], so a 32-bit OpenEXR save holds the core's numbers.
 Resolution percentage and the render border (cropped or not) are honoured; each
-view layer is rendered in turn (each for the whole time limit).  Errors
+view layer is rendered in turn (each for the whole time limit).  A view layer's Light
+Components (``view_layer.raybundle.use_pass_components``) adds the image's parts as passes
+(:data:`COMPONENT_PASSES`), written with the final image.  Errors
 (:class:`raybundle.scene.model.SceneError`, ValueError) become one-line ``ERROR``
 reports; export warnings become ``WARNING`` reports.
 """
@@ -32,7 +34,7 @@ import bpy
 import numpy as np
 
 from .translation.export import export_scene
-from .properties import LAST_RUN, run_options
+from .properties import LAST_RUN, run_options, wants_components
 
 #: callables ``fn(job, event)`` told about every job: events "export" (after export),
 #: "progress" (as the run loop reports it), "image" (after each displayed image) and "done".
@@ -41,6 +43,15 @@ from .properties import LAST_RUN, run_options
 observers: list = []
 #: jobs running now (``cancel_all`` sets their stop flags)
 active_jobs: set = set()
+#: the component passes: the core's part (:mod:`raybundle.imaging.components`), Blender's pass
+#: name (prefixed "RB ": Blender's own passes of these names mean other things), its
+#: channels and their ids
+COMPONENT_PASSES = [("emission", "RB Emission", 3, "RGB"), ("lamps", "RB Lamps", 3, "RGB"),
+                    ("world", "RB World", 3, "RGB"), ("glossy", "RB Glossy", 3, "RGB"),
+                    ("diffuse indirect", "RB Diffuse Indirect", 3, "RGB"), ("caustics", "RB Caustics", 3, "RGB"),
+                    ("glass", "RB Glass", 1, "X")]
+
+
 def cancel_all():
     """Ask every running job to stop after its current iteration (keeps the image so far)."""
     for job in list(active_jobs):
@@ -55,6 +66,8 @@ class RenderOutcome:
     cancelled: bool
     export: object = None        # the ExportResult
     timings: dict = field(default_factory=dict)
+    #: the image's parts by name (:class:`raybundle.imaging.progressive.RenderResult`), or None
+    components: dict | None = None
 
 
 class RenderJob:
@@ -146,7 +159,7 @@ class RenderJob:
 
         self.t_start = time.perf_counter()
         if self.options is None:
-            self.options = run_options(self.depsgraph.scene)
+            self.options = run_options(self.depsgraph.scene, self.depsgraph.view_layer)
         check(self.options)
         active_jobs.add(self)
         try:
@@ -192,7 +205,11 @@ class RenderJob:
             self.export.warnings.append(stats["budget_note"] + ": raise the time limit")
         if self.choice is not None:
             stats["auto"] = self.choice.as_dict()
-        outcome = RenderOutcome(result.image, stats, list(self.export.warnings), result.cancelled, self.export)
+        if self.options.components and result.components is None:
+            self.export.warnings.append(f"{stats['solver']} does not keep the image's parts apart: "
+                                        "the Light Components passes are black")
+        outcome = RenderOutcome(result.image, stats, list(self.export.warnings), result.cancelled, self.export,
+                                components=result.components)
         self._notify("done")
         return outcome
 
@@ -221,6 +238,10 @@ def render_with_engine(engine, depsgraph):
     layer = depsgraph.view_layer.name
     width, height = engine.resolution_x, engine.resolution_y
     state = {"result": None}
+    components = wants_components(depsgraph.view_layer)
+    if components:                     # before the result is begun
+        for _, name, channels, chan_id in COMPONENT_PASSES:
+            engine.add_pass(name, channels, chan_id, layer=layer)
 
     def display(image, final):
         res = state["result"]
@@ -251,6 +272,9 @@ def render_with_engine(engine, depsgraph):
                                        "(see the panel / the console)")
             for w in outcome.warnings[8:]:
                 print(f"Ray Bundle GI: warning: {w}")
+        if components and outcome.components is not None and state["result"] is not None:
+            write_components(state["result"], outcome.components)
+            engine.update_result(state["result"])
         _record(scene.name, outcome)
         st = outcome.stats
         engine.update_stats("", f"Ray Bundle GI | {'Stopped' if outcome.cancelled else 'Done'} | "
@@ -271,6 +295,15 @@ def render_with_engine(engine, depsgraph):
             engine.end_result(state["result"])
 
 
+def write_components(result, components):
+    """Write the image's parts ``components`` (by the core's names, rows top-down) into the
+    render ``result``'s passes (:data:`COMPONENT_PASSES`)."""
+    passes = result.layers[0].passes
+    for part, name, channels, _ in COMPONENT_PASSES:
+        image = np.asarray(components[part], np.float32)[::-1]           # RenderPass rows are bottom-up
+        passes[name].rect.foreach_set(np.ascontiguousarray(image.reshape(-1, channels)).ravel())
+
+
 class RAYBUNDLE_RenderEngine(bpy.types.RenderEngine):
     bl_idname = "RAYBUNDLE"
     bl_label = "Ray Bundle GI"
@@ -283,6 +316,13 @@ class RAYBUNDLE_RenderEngine(bpy.types.RenderEngine):
 
     def render(self, depsgraph):
         render_with_engine(self, depsgraph)
+
+    def update_render_passes(self, scene=None, renderlayer=None):
+        """The passes the compositor offers: Combined, and the Light Components where asked."""
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
+        if wants_components(renderlayer):
+            for _, name, channels, chan_id in COMPONENT_PASSES:
+                self.register_pass(scene, renderlayer, name, channels, chan_id, "COLOR" if channels == 3 else "VALUE")
 
 
 classes = (RAYBUNDLE_RenderEngine,)

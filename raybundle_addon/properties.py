@@ -38,15 +38,15 @@ RUN_PROPERTIES = {"method": "method", "seed": "seed", "patches": "patches",
                   "bundle_resolution": "bundle_resolution", "first_shot": "first_shot"}
 
 
-def run_options(scene):
+def run_options(scene, view_layer=None):
     """``scene.raybundle`` as the core's :class:`raybundle.app.plan.RunOptions`
     (:data:`RUN_PROPERTIES`, and the Budget: the Time Limit or the Iterations), with the
-    scene's Cycles Light Paths limits."""
+    scene's Cycles Light Paths limits and ``view_layer``'s component passes."""
     from raybundle.app.plan import RunOptions
 
     rb = getattr(scene, "raybundle", None)
     depth = dict(transmission_depth=light_path_limit(scene, "transmission_bounces"),
-                 glossy_depth=light_path_limit(scene, "glossy_bounces"))
+                 glossy_depth=light_path_limit(scene, "glossy_bounces"), components=wants_components(view_layer))
     if rb is None:
         return RunOptions(**depth)
     values = {field: getattr(rb, prop) for prop, field in RUN_PROPERTIES.items()}
@@ -55,6 +55,12 @@ def run_options(scene):
     else:
         values["time_limit"] = float(rb.time_limit)
     return RunOptions(**values, **depth)
+
+
+def wants_components(view_layer):
+    """Whether ``view_layer`` (or None) asks for the component passes."""
+    settings = getattr(view_layer, "raybundle", None)
+    return bool(settings is not None and settings.use_pass_components)
 
 
 def light_path_limit(scene, bounces):
@@ -221,16 +227,27 @@ class RAYBUNDLE_PG_settings(bpy.types.PropertyGroup):
     last_warnings: IntProperty(name="Warnings", get=_stat("n_warnings", 0))
 
 
-classes = (RAYBUNDLE_PG_settings,)
+class RAYBUNDLE_PG_view_layer(bpy.types.PropertyGroup):
+    use_pass_components: BoolProperty(
+        name="Light Components", default=False,
+        description="Render passes of the image's parts as Ray Bundle GI estimates them, which sum to Combined: "
+        "RB Emission (emitters and the world seen), RB Lamps and RB World (their direct light on the diffuse "
+        "lobe, per pixel), RB Glossy, RB Diffuse Indirect (from the patches), RB Caustics, and RB Glass (the share "
+        "of a pixel's samples seen through glass or a mirror). A pass costs a second BRDF evaluation per light sample")
+
+
+classes = (RAYBUNDLE_PG_settings, RAYBUNDLE_PG_view_layer)
 
 
 def register():
     for c in classes:
         bpy.utils.register_class(c)
     bpy.types.Scene.raybundle = bpy.props.PointerProperty(type=RAYBUNDLE_PG_settings)
+    bpy.types.ViewLayer.raybundle = bpy.props.PointerProperty(type=RAYBUNDLE_PG_view_layer)
 
 
 def unregister():
+    del bpy.types.ViewLayer.raybundle
     del bpy.types.Scene.raybundle
     for c in reversed(classes):
         bpy.utils.unregister_class(c)

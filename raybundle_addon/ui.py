@@ -118,7 +118,18 @@ class RAYBUNDLE_PT_bake(RaybundlePanel, bpy.types.Panel):
                 layout.label(text=w, icon="ERROR")
 
 
-classes = (RAYBUNDLE_PT_settings, RAYBUNDLE_PT_stats, RAYBUNDLE_PT_bake)
+class RAYBUNDLE_PT_passes(RaybundlePanel, bpy.types.Panel):
+    bl_label = "Ray Bundle GI Passes"
+    bl_context = "view_layer"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(context.view_layer.raybundle, "use_pass_components")
+
+
+classes = (RAYBUNDLE_PT_settings, RAYBUNDLE_PT_stats, RAYBUNDLE_PT_bake, RAYBUNDLE_PT_passes)
 
 
 def _stock_panels():

@@ -361,3 +361,22 @@ def test_lit_edges_converge_faster_than_independent_jitter():
     rms = np.sqrt(np.mean(np.concatenate(err) ** 2))
     independent = radiance * np.sqrt(np.mean(cover[edge] * (1 - cover[edge])) / passes)
     assert rms < 0.7 * independent, rms / independent
+
+
+def test_the_image_parts_sum_to_the_image_and_leave_it_unchanged():
+    """``RenderSettings.components`` keeps the image's parts apart
+    (:mod:`raybundle.imaging.components`): they sum to the image, which is the same bit for bit
+    as without them (same seed: the parts take no random numbers of their own); on the
+    diffuse box the glossy part is black, on the glossy one it is not."""
+    from raybundle.scene.builtin import cornell
+
+    for glossy in (False, True):
+        prep = pipeline.prepare(cornell(glossy, resolution=(24, 24)), 100)
+        plain, parted = (pipeline.make_renderer(prep, RenderSettings(seed=3, components=c)).run(iterations=6)
+                         for c in (False, True))
+        assert plain.components is None and np.array_equal(plain.image, parted.image)
+        parts = parted.components
+        total = sum(v for k, v in parts.items() if k != "glass")
+        np.testing.assert_allclose(total, parted.image, atol=1e-5 * parted.image.max())
+        assert (parts["glossy"].max() > 0) == glossy and not parts["glass"].any()
+        assert parts["lamps"].mean() > 0.1 * parted.image.mean() and parts["diffuse indirect"].mean() > 0

@@ -53,7 +53,7 @@ from raybundle.app.bench_page import add_page_argument, checked_page, command_li
 
 #: what every render of a run does right after opening the file: ``clay`` (the Material
 #: Override) and ``resolution`` (W, H or None), set by ``main``
-OPEN_SETTINGS = {"clay": False, "resolution": None}
+OPEN_SETTINGS = {"clay": False, "resolution": None, "components": False}
 
 
 def _open(path):
@@ -72,6 +72,17 @@ def _open(path):
     if OPEN_SETTINGS["clay"]:
         bpy.context.view_layer.material_override = clay_material()
     return scene
+
+
+def _passes(engine):
+    """With ``OPEN_SETTINGS["components"]``, the opened file's view layer writes the passes
+    of the error's breakdown (:mod:`breakdown`) into a multilayer EXR."""
+    import bpy
+    from breakdown import enable_passes, multilayer_output
+
+    if OPEN_SETTINGS["components"]:
+        enable_passes(bpy.context.view_layer, engine)
+        multilayer_output(bpy.context.scene)
 
 
 def clay_material():
@@ -135,6 +146,7 @@ def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None
         if patches:
             rb.patches = patches
     exr_output(path)
+    _passes(engine)
     bpy.ops.render.render(write_still=True)
     wall = time.perf_counter() - t0
     if engine != "CYCLES":
@@ -144,7 +156,9 @@ def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None
         LAST_RUN_FIGURES.clear()
         stats = run.get("stats", {})
         LAST_RUN_FIGURES.update(setup_seconds=stats.get("setup_seconds"), warnings=run.get("warnings", []),
-                                run=" ".join(f"{k} {stats[k]}" for k in RUN_FIGURES if k in stats))
+                                run=" ".join(f"{k} {stats[k]}" for k in RUN_FIGURES if k in stats),
+                                **{k: stats.get(k) for k in ("part_seconds", "phases", "world_samples",
+                                                             "first_shot_lights", "iterations", "image_passes")})
     return read_exr(path), wall
 
 
@@ -155,19 +169,22 @@ RUN_FIGURES = ("export_seconds", "prepare_seconds", "patches", "iterations", "im
                "first_shot_lights", "world_samples")
 
 
-def light_mask(blend):
-    """Pixels within 2 px of a directly seen light, from the exported (or built-in) scene."""
+def light_mask(blend, info=None):
+    """Pixels within 2 px of a directly seen light, from the exported (or built-in) scene;
+    ``info`` (a dict), if given, is told ``world_emits``."""
     import bpy
 
     from raybundle.app.metrics import light_source_mask
     from raybundle.scene.builtin import load_scene
     from raybundle_addon.translation.export import export_scene
 
-    if not is_blend(blend):
-        return light_source_mask(load_scene(blend))
-    _open(blend)
-    ex = export_scene(bpy.context.evaluated_depsgraph_get())
-    return light_source_mask(ex.scene, ex.scene.camera)
+    scene = load_scene(blend) if not is_blend(blend) else None
+    if scene is None:
+        _open(blend)
+        scene = export_scene(bpy.context.evaluated_depsgraph_get()).scene
+    if info is not None:
+        info["world_emits"] = bool(scene.world.emits)
+    return light_source_mask(scene, scene.camera)
 
 
 def reference_paths(blend, folder, clay):
@@ -260,6 +277,10 @@ def main(argv=None):
                    "(rendered there when missing)")
     p.add_argument("--twin", action="store_true", help="render each RAYBUNDLE time again with another seed, and "
                    "split its error into bias and noise (raybundle.app.metrics.bias_and_noise)")
+    p.add_argument("--breakdown", action="store_true", help="split the last RAYBUNDLE time's error by component "
+                   "against Cycles' light passes (tools/breakdown.py), beside Cycles' at the same time")
+    p.add_argument("--breakdown-samples", type=int, default=256,
+                   help="samples of each half of the Cycles pass references (kept beside the references)")
     add_page_argument(p, "blender-<file>[-clay]")
     a = p.parse_args(argv)
     checked_page(a.page, "bench_blender")
@@ -277,7 +298,8 @@ def main(argv=None):
     reference_samples = min(int(read_exr_header(path).get("cycles.ViewLayer.samples", a.reference_samples))
                   for path in paths)
     reference = 0.5 * (halves[0] + halves[1])
-    mask = light_mask(a.blend)
+    info = {}
+    mask = light_mask(a.blend, info)
 
     def row(engine, setting, img, wall):
         e = image_error(img, reference, reference_halves=halves, exclude=mask)
@@ -296,6 +318,7 @@ def main(argv=None):
     print(f"reference: noise {noise['reference_noise']:.4f} per pixel (relative RMSE), its own p99.9 "
           f"{noise['reference_p99_9']:.3f}", flush=True)
     rows = []
+    OPEN_SETTINGS["components"] = a.breakdown        # RAYBUNDLE's runs keep their parts apart
     for t in a.times:
         img, wall = render(a.blend, os.path.join(a.out, f"raybundle-{t:g}s.exr"), "RAYBUNDLE", seconds=t,
                            seed=3, patches=a.patches)
@@ -310,6 +333,8 @@ def main(argv=None):
             split = bias_and_noise(img, twin, reference, halves, mask)
             rows[-1].update(bias=split["bias"], noise=split["noise"])
             print(f"  split: bias {split['bias']:.4f}, noise {split['noise']:.4f}", flush=True)
+    OPEN_SETTINGS["components"] = False
+    last_run = dict(LAST_RUN_FIGURES)
     warnings = list(LAST_RUN_FIGURES.get("warnings", []))
     for w in warnings:
         print(f"raybundle warning: {w}")
@@ -328,6 +353,7 @@ def main(argv=None):
         samples *= 2
     summary = side_by_side(rows)
     targets = time_to_errors(rows, goals=(0.05, 0.02, 0.015, 0.01))
+    split = component_breakdown(a, rows, mask, info, last_run) if a.breakdown else None
     with open(os.path.join(a.out, "bench.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=[k for k in rows[0] if k != "regions"], extrasaction="ignore")
         w.writeheader()
@@ -337,7 +363,8 @@ def main(argv=None):
                        peak_memory_gb=peak_memory_gb(), reference_samples_per_half=reference_samples,
                        reference_noise=noise["reference_noise"], reference_p99_9=noise["reference_p99_9"],
                        rows=rows, summary=summary,
-                       time_to_error=targets),
+                       time_to_error=targets, breakdown=split, part_seconds=last_run.get("part_seconds"),
+                       phases=last_run.get("phases")),
                   f, indent=1)
     chart(os.path.join(a.out, "bench.png"), rows, os.path.basename(a.blend) + (" (clay)" if a.clay else ""))
     print(f"peak memory of the run {peak_memory_gb():.2f} GB")
@@ -345,15 +372,96 @@ def main(argv=None):
     if a.page:
         title = os.path.basename(a.blend) + (" in clay" if a.clay else "") + ": raybundle against Cycles"
         write_section(a.page, section, title, page_body(a, reference, reference_samples, noise, rows, summary,
-                                                          targets, warnings),
+                                                          targets, warnings, split, last_run),
                       [os.path.join(a.out, "bench.png")], command=command_line("tools/bench_blender.py", argv))
         print(f"wrote its section {section!r} of {a.page}")
     return 0
 
 
-def page_body(a, reference, reference_samples, noise, rows, summary, targets, warnings):
-    """The bench's section of the benchmark page: the set-up, then :func:`comparison_tables`
-    and the run's warnings."""
+def component_breakdown(a, rows, mask, info, run):
+    """The last RAYBUNDLE time's error by component (:mod:`breakdown`,
+    :func:`raybundle.app.metrics.component_errors`; with ``--twin`` split into bias and noise),
+    beside that of Cycles at the ladder's sample count nearest that time, rendered again with
+    its light passes; against two halves of ``--breakdown-samples`` with Cycles' light
+    passes, kept in ``--references`` (or ``--out``) as ``<file>-<clay|full>-passes-<seed>.exr``.
+    Pixels next to lights and where glass or a mirror turned RAYBUNDLE's eye rays are left
+    out.  Printed and returned as a dict."""
+    from breakdown import cycles_components, glass_pixels, merged_diffuse, raybundle_components
+
+    from raybundle.app.metrics import component_errors, image_error
+    from raybundle.util.io import read_exr_passes
+
+    stem = os.path.splitext(os.path.basename(a.blend))[0]
+    folder = a.references or a.out
+    OPEN_SETTINGS["components"] = True
+    paths = [os.path.join(folder, f"{stem}-{'clay' if a.clay else 'full'}-passes-{seed}.exr") for seed in (1, 2)]
+    for seed, path in enumerate(paths, 1):
+        if not os.path.exists(path):
+            print(f"Cycles pass reference half {seed} ({path}): {a.breakdown_samples} samples ...", flush=True)
+            render(a.blend, path, "CYCLES", samples=a.breakdown_samples, seed=seed)
+    t = max(a.times)
+    cyc = min((r for r in rows if r["engine"] == "cycles"), key=lambda r: abs(np.log(r["seconds"] / t)))
+    cycles_path = os.path.join(a.out, f"cycles-{cyc['setting']:g}spp-passes.exr")
+    render(a.blend, cycles_path, "CYCLES", samples=int(cyc["setting"]), seed=7)
+    OPEN_SETTINGS["components"] = False
+    ours_path = os.path.join(a.out, f"raybundle-{t:g}s.exr")
+    twin_path = os.path.join(a.out, f"raybundle-{t:g}s-twin.exr")
+    ours_passes = read_exr_passes(ours_path)
+    exclude = mask | glass_pixels(ours_passes)
+    # where the patches carry the world's direct light beside lamps, the diffuse lobe is compared whole
+    whole = info.get("world_emits") and not run.get("world_samples") and run.get("first_shot_lights")
+    form = (lambda c: merged_diffuse(c)) if whole else (lambda c: c)
+    halves = [form(cycles_components(read_exr_passes(p))) for p in paths]
+    pairs = {k: (halves[0][k], halves[1][k]) for k in halves[0]}
+    twins = form(raybundle_components(read_exr_passes(twin_path))) if a.twin and os.path.exists(twin_path) else None
+    ours = component_errors(form(raybundle_components(ours_passes)), pairs, exclude, twins)
+    theirs = component_errors(form(cycles_components(read_exr_passes(cycles_path))), pairs, exclude)
+    whole_ref = [sum(h.values()) for h in halves]
+    total = image_error(sum(form(raybundle_components(ours_passes)).values()), 0.5 * (whole_ref[0] + whole_ref[1]),
+                        whole_ref, exclude)
+    out = dict(seconds=t, cycles_samples=int(cyc["setting"]), cycles_seconds=cyc["seconds"],
+               reference_samples=a.breakdown_samples, excluded_pixels=float(exclude.mean()),
+               glass_pixels=float(glass_pixels(ours_passes).mean()), diffuse_whole=bool(whole),
+               error=total["error"], components={k: dict(ours[k], cycles_error=theirs[k]["error"]) for k in ours})
+    print(f"breakdown at {t:g} s (Cycles {out['cycles_samples']} spp in {out['cycles_seconds']:.1f} s; "
+          f"{100 * out['excluded_pixels']:.1f}% of the pixels left out, {100 * out['glass_pixels']:.1f}% "
+          f"through glass): error {total['error']:.4f}", flush=True)
+    for k, d in out["components"].items():
+        split = f", bias {d['bias']:.4f}, noise {d['noise']:.4f}" if "bias" in d else ""
+        mean = "" if d["mean_ratio"] is None else f", mean x{d['mean_ratio']:.3f}"
+        print(f"  {k}: share {100 * d['share']:.1f}%, raybundle {d['error']:.4f}{split}{mean}; "
+              f"Cycles {d['cycles_error']:.4f}", flush=True)
+    return out
+
+
+def breakdown_table(split, run):
+    """Markdown: the breakdown (:func:`component_breakdown`) and the run's seconds per part and phase."""
+    rows = []
+    for k, d in split["components"].items():
+        rows.append([k, f"{100 * d['share']:.1f}%", percent(d["error"]), percent(d.get("bias")),
+                     percent(d.get("noise")), "–" if d["mean_ratio"] is None else f"×{d['mean_ratio']:.3f}",
+                     percent(d["cycles_error"])])
+    text = [f"raybundle at {split['seconds']:g} s by component, against Cycles' light passes (2 × "
+            f"{split['reference_samples']} spp, their noise subtracted), beside Cycles at {split['cycles_samples']} spp "
+            f"({split['cycles_seconds']:.0f} s). Errors relative to the whole reference's mean; "
+            f"{100 * split['excluded_pixels']:.1f}% of the pixels left out (next to lights, or seen through glass "
+            f"or a mirror: {100 * split['glass_pixels']:.1f}%); the image's error over the rest "
+            f"{percent(split['error'])}."
+            + (" The patches carry the world's direct light here, so the diffuse lobe is compared whole."
+               if split["diffuse_whole"] else ""), "",
+            table(["component", "share", "raybundle", "its bias", "its noise", "its mean", "Cycles"], rows)]
+    if run.get("part_seconds"):
+        text += ["", "raybundle's seconds by part: " + ", ".join(f"{k} {v:.1f}" for k, v in run["part_seconds"].items())
+                 + (f" ({run['iterations']} iterations, {run['image_passes']} image passes)"
+                    if run.get("iterations") is not None else "")]
+    if run.get("phases"):
+        text.append("Phases: " + ", ".join(f"{p['name']} {p['seconds']:.1f} s" for p in run["phases"]))
+    return "\n".join(text)
+
+
+def page_body(a, reference, reference_samples, noise, rows, summary, targets, warnings, split=None, run=None):
+    """The bench's section of the benchmark page: the set-up, then :func:`comparison_tables`,
+    the breakdown (:func:`breakdown_table`) and the run's warnings."""
     h, w = reference.shape[:2]
     text = [f"`{a.blend}`{' in clay (a white diffuse Material Override)' if a.clay else ', its own materials'}, "
             f"{w} × {h} px. Every render is timed from opening the scene to the EXR written. Reference: Cycles "
@@ -368,6 +476,8 @@ def page_body(a, reference, reference_samples, noise, rows, summary, targets, wa
                  table(["", "left", "middle", "right"],
                        [[["top", "middle", "bottom"][i]] + [f"×{c['mean_ratio']:.3f}, {100 * c['share']:.0f}%"
                                                            for c in g[3 * i:3 * i + 3]] for i in range(3)])]
+    if split is not None:
+        text += ["", breakdown_table(split, run or {})]
     if warnings:
         text.append("raybundle's warnings: " + "; ".join(warnings))
     return "\n".join(text)

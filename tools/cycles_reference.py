@@ -152,6 +152,8 @@ def exr_output(path):
     """The current scene saves 32-bit float EXR (linear radiance) to ``path``
     (None: keep the output path)."""
     sc = _bpy().context.scene
+    if hasattr(sc.render.image_settings, "media_type"):    # Blender 5: a single image, not a multilayer one
+        sc.render.image_settings.media_type = "IMAGE"
     sc.render.image_settings.file_format = "OPEN_EXR"
     sc.render.image_settings.color_depth = "32"
     sc.render.image_settings.exr_codec = "ZIP"

@@ -156,3 +156,35 @@ def region_errors(image, reference, reference_halves=None, exclude=None, grid=(3
     for g in out:
         g["share"] = g.pop("s2") / total if total > 0 else 0.0
     return out
+
+
+def component_errors(parts, reference_halves, exclude=None, twins=None):
+    """The error by component: for each name of ``reference_halves`` ({name: (A_c, B_c)}, the
+    components of two independent halves, which sum to each half's image), ``parts[name]``
+    against the halves' mean r_c over the kept pixels, both relative to the mean of the whole
+    reference r (so that the components' squared errors add up to the image's, their cross
+    terms aside)::
+
+        error_c = sqrt(max(0, mean((x_c - r_c)^2) - mean((A_c - B_c)^2) / 4)) / mean(r)
+
+    Returns {name: dict} with ``error``, ``share`` (the component's part of the reference's
+    mean) and ``mean_ratio`` (its mean against r_c's, None where that is 0), and with
+    ``twins`` ({name: the same component of a render with another seed}) ``noise`` and
+    ``bias`` as in :func:`bias_and_noise`."""
+    keep = None if exclude is None else ~np.asarray(exclude, bool)
+    pick = (lambda a: np.asarray(a, float)) if keep is None else (lambda a: np.asarray(a, float)[keep])
+    halves = {name: [pick(h) for h in pair] for name, pair in reference_halves.items()}
+    total = sum(0.5 * (a + b) for a, b in halves.values()).mean()
+    if not total > 0:
+        raise ValueError("the reference is black over the compared pixels")
+    out = {}
+    for name, (a, b) in halves.items():
+        x, r = pick(parts[name]), 0.5 * (a + b)
+        e2 = max(0.0, ((x - r) ** 2).mean() - ((a - b) ** 2).mean() / 4.0) / total ** 2
+        d = {"error": float(np.sqrt(e2)), "share": float(r.mean() / total),
+             "mean_ratio": float(x.mean() / r.mean()) if r.mean() > 0 else None}
+        if twins is not None:
+            n2 = ((x - pick(twins[name])) ** 2).mean() / 2.0 / total ** 2
+            d.update(noise=float(np.sqrt(n2)), bias=float(np.sqrt(max(0.0, e2 - n2))))
+        out[name] = d
+    return out

@@ -47,7 +47,8 @@ class RunOptions:
     ``transmission_depth`` and ``glossy_depth``: the refractions and the reflections on glass after
     which an eye path ends (None: the defaults of
     :class:`~raybundle.imaging.settings.RenderSettings`; the add-on passes the file's own Light
-    Paths limits)."""
+    Paths limits); ``components``: keep the image's parts apart
+    (:mod:`~raybundle.imaging.components`; not over chains)."""
 
     method: str = StochasticIterationSolver.name
     iterations: int | None = None
@@ -61,6 +62,7 @@ class RunOptions:
     threads: int | None = None
     transmission_depth: int | None = None
     glossy_depth: int | None = None
+    components: bool = False
 
 
 @dataclass
@@ -102,6 +104,8 @@ def check(options: RunOptions, bake=False, chains=False):
         raise ValueError("the patch count must be non-negative (0: one patch per triangle)")
     if o.method != "auto":
         _check_method(o.method, bake, chains)
+    if chains and o.components:
+        raise ValueError("the image's components are not pooled over chains; render them in one process")
     _settings(o, o.sequence).validate()
 
 
@@ -125,7 +129,8 @@ def _settings(o, sequence):
     depth = {k: int(getattr(o, k)) for k in ("transmission_depth", "glossy_depth") if getattr(o, k) is not None}
     return RenderSettings(seed=int(o.seed), sequence=sequence or DEFAULT_SEQUENCE,
                           bundle_resolution=int(o.bundle_resolution), threads=o.threads,
-                          first_shot="auto" if o.first_shot else "none", gather_rays=int(o.gather_rays), **depth)
+                          first_shot="auto" if o.first_shot else "none", gather_rays=int(o.gather_rays),
+                          components=bool(o.components), **depth)
 
 
 def plan(scene, options: RunOptions, bake=False, chains=False) -> Plan:

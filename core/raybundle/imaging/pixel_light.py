@@ -63,11 +63,12 @@ class PixelLight:
         out[:, :-1] |= pen[:, 1:]
         return out.ravel()
 
-    def lamps(self, g, hf, pixels, u_light, passes, mis):
+    def lamps(self, g, hf, pixels, u_light, passes, mis, glossy_part=None):
         """(len(hf), 3) the first-shot lights' light reflected at the front-facing points ``hf``
         of G-buffer ``g``, seen in ``pixels``; ``u_light`` a Generator for the light samples, or
         None for a pass's own (the module docstring's sequences, ``passes`` so far); ``mis``
-        (len(hf),) bool the points whose glossy lobe's MIS counts these light samples, or None."""
+        (len(hf),) bool the points whose glossy lobe's MIS counts these light samples, or None;
+        ``glossy_part`` (len(hf), 3) or None: the glossy lobe's share is added to it."""
         direct = self.direct
         before = direct.rays
         flags = self.shadow_flags[pixels[hf]]
@@ -95,7 +96,7 @@ class PixelLight:
             mis=mis, diffuse_scale=self.scene.albedo_at(g.triangle[hf], g.point[hf]), shadow_flags=f,
             analytic=np.full(len(hf), ALL_LIGHTS) if start else flags[:, 0],
             penumbra=(pen_lights, share) + sequence, select=self.rng.random(len(hf)),
-            receivers=self.scene.link_groups(g.triangle[hf]))
+            receivers=self.scene.link_groups(g.triangle[hf]), glossy_part=glossy_part)
         np.bitwise_or.at(self.shadow_flags, pixels[hf], f)
         self.rays += direct.rays - before
         return value

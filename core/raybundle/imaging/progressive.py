@@ -21,6 +21,9 @@ class RenderResult:
     image: np.ndarray              # (H, W, 3) float32 linear radiance, row 0 at the top
     stats: dict = field(default_factory=dict)
     cancelled: bool = False
+    #: the image's parts by name, (H, W, 3) each, and ``glass`` (H, W)
+    #: (:mod:`~raybundle.imaging.components`), or None (``RenderSettings.components`` off)
+    components: dict | None = None
 
 
 @dataclass
@@ -91,7 +94,12 @@ class ProgressiveImage:
         note = loop.budget_note(t_end - loop.started)
         if note:
             stats["budget_note"] = note
-        return RenderResult(img, stats, loop.cancelled)
+        return RenderResult(img, stats, loop.cancelled, self.components())
+
+    def components(self):
+        """The final image's parts (:mod:`~raybundle.imaging.components`), or None: this
+        method does not keep them apart."""
+        return None
 
     def final_share(self):
         """The final image's share of a time-limited run's iteration seconds (none here)."""

@@ -29,6 +29,7 @@ import numpy as np
 from ..lights.world_light import WorldLight
 from ..tracing.sampling import ShiftedKronecker, Stream, stream
 from .caustic_splats import CausticSplats
+from .components import ImageComponents
 from .emission_seen import EmissionSeen
 from .eye_rays import EyeRays
 from .gather import EdgeGather
@@ -69,6 +70,13 @@ class Renderer(ProgressiveImage):
         self._restarted = False
         self.glossy_iterations = 0
         self.image_rays = 0
+        #: the image's parts apart (``settings.components``; :mod:`~raybundle.imaging.components`)
+        self.parts = ImageComponents(n) if settings.components else None
+        self._diffuse = None                 # the diffuse indirect part of the last image
+        #: seconds per estimator: the eye rays (and the emission seen), the lamps', the world's and
+        #: the glossy paths' samples, the iterations, the caustic splats, the diffuse indirect light
+        self.part_seconds = dict.fromkeys(("eye rays", "lamps", "world", "glossy paths", "iterations",
+                                           "caustic splats", "diffuse indirect"), 0.0)
         self.schedule = PassSchedule(solver, settings)
         self.gbuffer = None
         self._glossy_pixels = np.zeros(0, np.int64)   # pixels for accumulate_glossy
@@ -155,6 +163,7 @@ class Renderer(ProgressiveImage):
         if self.passes == 0:                          # find most edges at once, a sample per pixel at a time
             for _ in range(max(4, min(self.FIRST_EDGE_SAMPLES, self.FIRST_EDGE_RAYS // max(n, 1)))):
                 self._emission_samples(np.arange(n), 1)
+        self._clocked("eye rays", t0)
         # pixels whose earlier samples disagree (the edge of a visible light, which is
         # also where a lamp lights a narrow rim) get extra samples (one R_2 sequence per pixel)
         # for both the emission average and this pass's estimate, the mean of 1 + k
@@ -164,32 +173,39 @@ class Renderer(ProgressiveImage):
         extra_pix = np.union1d(self.emission.edges(), noisy)
         self.emission.add(np.arange(n), emitted)
         self._restart_solver_parts()
-        value, gathered, gl = self._shade(g, u, None, np.arange(n))
+        value, gathered, gl, parts = self._shade(g, u, None, np.arange(n))
         k = np.full(len(extra_pix), int(self.settings.emission_edge_samples))
         k[np.searchsorted(extra_pix, noisy)] *= factor
         count = np.ones(n)                 # the samples this pass takes in each pixel
         if len(extra_pix) and k[0] > 0:
             count[extra_pix] += k
+            t1 = time.perf_counter()
             pix, jitter = self.eye.subpixel_sequence(extra_pix, k)
             gx = self.trace_gbuffer(jitter, pixels=pix)
             le, _ = self.emission.radiance(gx)
             self.emission.add(pix, le)
-            extra, extra_g, _ = self._shade(gx, self.rng.random((len(pix), 2)), self.rng, pix)
+            self._clocked("eye rays", t1)
+            extra, extra_g, _, extra_parts = self._shade(gx, self.rng.random((len(pix), 2)), self.rng, pix)
             row = np.repeat(np.arange(len(extra_pix)), k)
-            for total, more in ((value, extra), (gathered, extra_g)):
+            pairs = [(value, extra), (gathered, extra_g)] + ([] if parts is None else
+                                                             [(parts[p], extra_parts[p]) for p in parts])
+            for total, more in pairs:
                 summed = np.stack([np.bincount(row, more[:, c], minlength=len(extra_pix)) for c in range(3)], axis=1)
                 total[extra_pix] = (total[extra_pix] + summed) / (k + 1)[:, None]
         self.pass_sum += value * count[:, None]
         self.pass_samples += count
+        if parts is not None:
+            self.parts.add_pass(parts, count, g.bounced)
         self.gather_sum += gathered
         self.gather_passes += 1
         y = (value + gathered).sum(axis=1)
         self.pass_sq_sum += count * y * y
         if self.caustic_splats is not None:
             cs = self.caustic_splats
-            before = cs.rays
+            before, t1 = cs.rays, time.perf_counter()
             cs.splat(int(np.ceil(self.settings.caustic_splats * n)))
             self.image_rays += cs.rays - before
+            self.part_seconds["caustic splats"] += time.perf_counter() - t1
         if self.passes == 0:
             self.schedule.setup_rays = self.image_rays - before_pass
         self.passes += 1
@@ -218,19 +234,30 @@ class Renderer(ProgressiveImage):
         """Per-pass radiance (N, 3) of the samples in G-buffer ``g`` taken in ``pixels`` (N,):
         the direct light of the first-shot lights and the world (:class:`~raybundle.imaging.
         pixel_light.PixelLight`) and, with ``glossy_gather``, the glossy lobe; what the lobe
-        read from the solver (N, 3), apart; and the pixels left for :meth:`accumulate_glossy`.
-        ``u_lobe`` (N, 2) uniforms; ``u_light`` a Generator for the light samples, or None for
-        a pass's own (one per pixel)."""
+        read from the solver (N, 3), apart; the pixels left for :meth:`accumulate_glossy`; and
+        with ``components`` the radiance's parts (:meth:`~raybundle.imaging.components.
+        ImageComponents.split`), else None.  ``u_lobe`` (N, 2) uniforms; ``u_light`` a
+        Generator for the light samples, or None for a pass's own (one per pixel)."""
         out = np.zeros((len(g.triangle), 3))
+        lamps, world = (None, None) if self.parts is None else (np.zeros_like(out), np.zeros_like(out))
+        clock = time.perf_counter()
         h = np.nonzero(g.hit)[0]
         hf = h[np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]) > 0]
         light = self.light
         before = light.rays
         if self.direct.n_lights and len(hf):
             mis = self.glossy_material[g.material[hf]] if self.glossy_paths.light_mis else None
-            out[hf] += light.lamps(g, hf, pixels, u_light, self.passes, mis)
+            lobe = None if lamps is None else np.zeros((len(hf), 3))
+            lit = light.lamps(g, hf, pixels, u_light, self.passes, mis, glossy_part=lobe)
+            out[hf] += lit
+            if lamps is not None:
+                lamps[hf] += lit - lobe
         if self.direct.n_lights:          # the first-shot lights on a translucent surface's far side
-            out[hf] += light.far_side(g, hf)
+            far = light.far_side(g, hf)
+            out[hf] += far
+            if lamps is not None:
+                lamps[hf] += far
+        clock = self._clocked("lamps", clock)
         gl = hf[self.glossy_material[g.material[hf]]]
         lobe_world = 0          # world samples the glossy lobes share with the diffuse one
         lobe_guide = None       # ... and the guide they were drawn by, for the lobes' MIS
@@ -241,6 +268,9 @@ class Renderer(ProgressiveImage):
                 out[gl] += sky
                 lobe_world, lobe_guide = self.world_samples, guide
             out[hf] += diffuse
+            if world is not None:
+                world[hf] += diffuse
+        clock = self._clocked("world", clock)
         self.image_rays += light.rays - before
         gathered = np.zeros_like(out)
         if self.settings.glossy_gather:
@@ -252,7 +282,15 @@ class Renderer(ProgressiveImage):
             out[gl] += lamp_light
             self.image_rays += self.glossy_paths.rays - before
             gl = gl[:0]
-        return g.weighted(out), g.weighted(gathered), gl
+        self._clocked("glossy paths", clock)
+        parts = None if lamps is None else {k: g.weighted(v) for k, v in ImageComponents.split(out, lamps, world).items()}
+        return g.weighted(out), g.weighted(gathered), gl, parts
+
+    def _clocked(self, part, since):
+        """Add the seconds from ``since`` to ``part``'s (:attr:`part_seconds`); returns now."""
+        now = time.perf_counter()
+        self.part_seconds[part] += now - since
+        return now
 
     def _emission_samples(self, pixels, k):
         """``k`` more primary rays in each of ``pixels`` (their sub-pixel sequences), added to
@@ -320,10 +358,27 @@ class Renderer(ProgressiveImage):
         if self.glossy_iterations:
             img = img + self.glossy_sum / self.glossy_iterations
         if diffuse is None:
+            t0 = time.perf_counter()
             diffuse = self.diffuse_indirect(samples=1 if preview else None, gather=not preview,
                                             final_time=final_time)
+            self.part_seconds["diffuse indirect"] += time.perf_counter() - t0
+        self._diffuse = diffuse
         img = img + diffuse
         return img.reshape(self.camera.height, self.camera.width, 3).astype(np.float32)
+
+    def components(self):
+        """The last :meth:`image`'s parts, by name, and the pixels' share of glass-turned passes
+        (:meth:`~raybundle.imaging.components.ImageComponents.images`), or None without
+        ``settings.components``."""
+        if self.parts is None or self._diffuse is None:
+            return None
+        glossy = self.gather_sum / max(self.gather_passes, 1)
+        if self.glossy_iterations:
+            glossy = glossy + self.glossy_sum / self.glossy_iterations
+        caustics = self.caustic_splats.image() if self.caustic_splats is not None and self.caustic_splats.samples \
+            else None
+        return self.parts.images(self.pass_samples, self.emission.mean(), glossy, self._diffuse, caustics,
+                                 (self.camera.height, self.camera.width))
 
     def step(self):
         """One solver iteration, this iterate's glossy lobe per pixel, and an image pass when
@@ -338,6 +393,7 @@ class Renderer(ProgressiveImage):
         if not solver.diffuse_only:
             self.accumulate_glossy()
         schedule.iteration_seconds += time.perf_counter() - t0
+        self.part_seconds["iterations"] += time.perf_counter() - t0
         schedule.since += 1
         if schedule.due(schedule.since, self.passes, self.image_rays):
             self.image_pass()
@@ -390,4 +446,5 @@ class Renderer(ProgressiveImage):
                 "bundle_resolution": solver.bundle_resolution, "sequence": self.settings.sequence,
                 "seed": self.settings.seed, "diffuse_only": bool(solver.diffuse_only),
                 "first_shot_lights": self.direct.n_lights, "light_tree": self.direct.tree is not None,
+                "part_seconds": {k: round(v, 4) for k, v in self.part_seconds.items()},
                 "cancelled": cancelled, **solver.report()}

@@ -86,6 +86,9 @@ class RenderSettings:
     glossy_depth: int = 4
     #: the ray tracer's threads (None: all cores)
     threads: int | None = None
+    #: keep the image's parts apart (:mod:`~raybundle.imaging.components`): a pass costs a
+    #: second BRDF evaluation per light sample and three more arrays per pixel
+    components: bool = False
 
 
     def validate(self):

@@ -73,6 +73,8 @@ class _Points:
     mis: np.ndarray | None
     shadow_flags: np.ndarray | None
     receivers: np.ndarray | None
+    #: (N, 3) or None: where the glossy lobe's part of the light is added (``glossy_part``)
+    glossy: np.ndarray | None = None
 
 
 @dataclass
@@ -96,7 +98,8 @@ class _Samples:
 
 
 def reflected_radiance(direct, points, normals, mats, w_out, u, samples_per_light=1, mis=None, diffuse_scale=None,
-                       shadow_flags=None, analytic=False, penumbra=None, select=None, receivers=None):
+                       shadow_flags=None, analytic=False, penumbra=None, select=None, receivers=None,
+                       glossy_part=None):
     """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
 
     Unbiased estimate with ``samples_per_light`` shadow rays per area light (one per point light
@@ -132,7 +135,9 @@ def reflected_radiance(direct, points, normals, mats, w_out, u, samples_per_ligh
 
     ``receivers`` (N,) or None: the points' link groups; a linked light lights only those it
     reaches (:mod:`raybundle.scene.linking`).  ``analytic`` (bool, (N,) bool, or (N,) uint64
-    mask of lights): where the control variate applies (module docstring).
+    mask of lights): where the control variate applies (module docstring).  ``glossy_part``
+    (N, 3) or None: the glossy lobe's share of the result is added to it (the rest is the
+    diffuse lobe's, the control variate's whole part included).
     """
     n = len(points)
     out = np.zeros((n, 3))
@@ -140,7 +145,7 @@ def reflected_radiance(direct, points, normals, mats, w_out, u, samples_per_ligh
         u = u.random((n, direct.samples_per_pass(samples_per_light), 3))
     lights = direct.light_list()
     at = _Points(lights, light_bits(len(lights)), points, normals, mats, w_out, diffuse_scale, mis, shadow_flags,
-                 receivers)
+                 receivers, glossy_part)
     an = np.asarray(analytic)
     an = np.where(np.broadcast_to(an, n), ALL_LIGHTS, np.uint64(0)) if an.dtype == bool else an.astype(np.uint64)
     f_d_all = _diffuse_part(direct, at, an)
@@ -157,14 +162,8 @@ def reflected_radiance(direct, points, normals, mats, w_out, u, samples_per_ligh
         if chance is not None:                 # the lamps chosen by their contribution
             base, picked = _chosen(li, base, chance[li], select, mis if polygonal else None)
         s = _light_samples(direct, at, li, base, picked, n_s, penumbra, chance is not None)
-        acc = np.zeros((len(s.pt), 3))
-        f_d = None
-        if li != TREE and exact[li] is not None:       # the control variate's exact part
-            here, irr, ok = exact[li]
-            out[here] += f_d_all[here] * (ok * irr)[:, None] * np.asarray(light.radiance, float)
-            taken = np.zeros(n, bool)
-            taken[here[ok]] = True
-            f_d = f_d_all[s.pt] * taken[s.pt, None]
+        acc = np.zeros((len(s.pt), 3 if glossy_part is None else 6))      # the glossy part beside
+        f_d = _control_variate(exact[li], light, f_d_all, s.pt, out) if li != TREE else None
         shading = s.at(at)
         for j in range(n_s):
             uk = u[s.pt, k] if u is not None else np.empty((len(s.pt), 3))
@@ -172,8 +171,8 @@ def reflected_radiance(direct, points, normals, mats, w_out, u, samples_per_ligh
                 uk[s.kron] = (s.shift + (s.start + j)[:, None] * _ALPHA) % 1.0
             _one_sample(direct, at, s, shading, uk, f_d, n_s, polygonal, acc)
             k += 1
-        for c in range(3):
-            out[:, c] += np.bincount(s.pt, acc[:, c], minlength=n)
+        for c in range(acc.shape[1]):
+            (out if c < 3 else glossy_part)[:, c % 3] += np.bincount(s.pt, acc[:, c], minlength=n)
     return out
 
 
@@ -188,6 +187,19 @@ def _diffuse_part(direct, at, an):
     f_d[cv] = direct.scene.materials.brdf(at.mats[cv], at.normals[cv], -at.normals[cv], at.w_out[cv], glossy=False,
                                           diffuse_scale=None if at.diffuse_scale is None else at.diffuse_scale[cv])
     return f_d
+
+
+def _control_variate(exact, light, f_d_all, pt, out):
+    """Add the control variate's exact part of ``light`` (``exact``: ``(here, irradiance, ok)``
+    or None) to ``out``; returns the diffuse BRDF (len(pt), 3) its samples at points ``pt``
+    subtract (zero where it does not apply), or None where it applies nowhere."""
+    if exact is None:
+        return None
+    here, irr, ok = exact
+    out[here] += f_d_all[here] * (ok * irr)[:, None] * np.asarray(light.radiance, float)
+    taken = np.zeros(len(out), bool)
+    taken[here[ok]] = True
+    return f_d_all[pt] * taken[pt, None]
 
 
 def _lights_reaching(direct, at, an, own):
@@ -268,7 +280,8 @@ def _light_samples(direct, at, li, base, picked, n_s, penumbra, by_chance):
 
 def _one_sample(direct, at, s, shading, uk, f_d, n_s, polygonal, acc):
     """One shadow-ray sample of :class:`_Samples` ``s`` at uniforms ``uk``, added to ``acc``
-    (its rows), the control variate's correction with it; the shadow flags updated."""
+    (its rows; with ``at.glossy``, the glossy lobe's part also in its columns 3-5), the control
+    variate's correction with it; the shadow flags updated."""
     mt = direct.scene.materials
     p, nrm, m, wo, scale = shading
     em = None
@@ -293,14 +306,20 @@ def _one_sample(direct, at, s, shading, uk, f_d, n_s, polygonal, acc):
             at.shadow_flags[s.pt[live], 0] |= s.bit      # repeated points all write the same value
             at.shadow_flags[s.pt[blocked], 1] |= s.bit
         if f_d is not None:
-            acc -= s.weight * f_d * (free - e)
+            acc[:, :3] -= s.weight * f_d * (free - e)
     if live.any():
         f = mt.brdf(m[live], nrm[live], travel[live], wo[live], diffuse_scale=None if scale is None else scale[live])
         if f_d is not None:                # the control variate took the diffuse part
             f -= f_d[live]
+        glossy = None if at.glossy is None else mt.brdf(m[live], nrm[live], travel[live], wo[live], diffuse=False)
         if at.mis is not None and polygonal:
+            before = None if glossy is None else f.copy()
             _lobe_share(direct, at, s, shading, em, live, e, travel, cos_x, n_s, f)
-        acc[live] += s.weight[live] * e[live] * f
+            if glossy is not None:         # the lobe's ray takes its share of the glossy part only
+                glossy -= before - f
+        acc[live, :3] += s.weight[live] * e[live] * f
+        if glossy is not None:
+            acc[live, 3:] += s.weight[live] * e[live] * glossy
 
 
 def _lobe_share(direct, at, s, shading, em, live, e, travel, cos_x, n_s, f):

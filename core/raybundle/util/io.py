@@ -155,6 +155,31 @@ def read_exr(path, layer=None):
         return np.array(ch[key].pixels[..., :3], dtype=np.float32)
 
 
+def read_exr_passes(path, layer=None):
+    """The passes of a multilayer EXR's view layer ``layer`` (may be left out when the file has
+    one), by pass name: (H, W, 3) float32 for colour passes (RGB of RGBA), (H, W) for one
+    channel (``X``, ``Z``...); row 0 at the top."""
+    import OpenEXR
+
+    with OpenEXR.File(os.fspath(path)) as f:          # its channels live while the file is open
+        ch = _exr_channels(f)
+        layers = sorted({k.split(".", 1)[0] for k in ch if "." in k})
+        if layer is None:
+            if len(layers) != 1:
+                raise ValueError(f"{path}: {len(layers)} view layers ({', '.join(layers)}): say which")
+            layer = layers[0]
+        out = {}
+        for key, c in ch.items():
+            if key.startswith(layer + "."):
+                name, px = key[len(layer) + 1:], np.array(c.pixels, np.float32)
+                if px.ndim == 3:
+                    px = px[..., :3]
+                out[name.rsplit(".", 1)[0] if px.ndim == 2 and "." in name else name] = px
+        if not out:
+            raise ValueError(f"{path}: no view layer {layer!r} (it has {layers})")
+        return out
+
+
 def read_exr_header(path):
     import OpenEXR
 
