@@ -318,7 +318,6 @@ def main(argv=None):
     print(f"reference: noise {noise['reference_noise']:.4f} per pixel (relative RMSE), its own p99.9 "
           f"{noise['reference_p99_9']:.3f}", flush=True)
     rows = []
-    OPEN_SETTINGS["components"] = a.breakdown        # RAYBUNDLE's runs keep their parts apart
     for t in a.times:
         img, wall = render(a.blend, os.path.join(a.out, f"raybundle-{t:g}s.exr"), "RAYBUNDLE", seconds=t,
                            seed=3, patches=a.patches)
@@ -327,13 +326,14 @@ def main(argv=None):
         print("  by region (mean ratio, share of the squared error), top row first: " + "; ".join(
             " ".join(f"x{g['mean_ratio']:.2f} {100 * g['share']:.0f}%" for g in rows[-1]["regions"][i:i + 3])
             for i in (0, 3, 6)), flush=True)
-        if a.twin:
+        if a.twin:          # with --breakdown the twin keeps its parts apart (the headline run does not)
+            OPEN_SETTINGS["components"] = a.breakdown and t == max(a.times)
             twin, _ = render(a.blend, os.path.join(a.out, f"raybundle-{t:g}s-twin.exr"), "RAYBUNDLE", seconds=t,
                              seed=4, patches=a.patches)
+            OPEN_SETTINGS["components"] = False
             split = bias_and_noise(img, twin, reference, halves, mask)
             rows[-1].update(bias=split["bias"], noise=split["noise"])
             print(f"  split: bias {split['bias']:.4f}, noise {split['noise']:.4f}", flush=True)
-    OPEN_SETTINGS["components"] = False
     last_run = dict(LAST_RUN_FIGURES)
     warnings = list(LAST_RUN_FIGURES.get("warnings", []))
     for w in warnings:
@@ -353,7 +353,7 @@ def main(argv=None):
         samples *= 2
     summary = side_by_side(rows)
     targets = time_to_errors(rows, goals=(0.05, 0.02, 0.015, 0.01))
-    split = component_breakdown(a, rows, mask, info, last_run) if a.breakdown else None
+    split = component_breakdown(a, rows, mask, info) if a.breakdown else None
     with open(os.path.join(a.out, "bench.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=[k for k in rows[0] if k != "regions"], extrasaction="ignore")
         w.writeheader()
@@ -363,8 +363,7 @@ def main(argv=None):
                        peak_memory_gb=peak_memory_gb(), reference_samples_per_half=reference_samples,
                        reference_noise=noise["reference_noise"], reference_p99_9=noise["reference_p99_9"],
                        rows=rows, summary=summary,
-                       time_to_error=targets, breakdown=split, part_seconds=last_run.get("part_seconds"),
-                       phases=last_run.get("phases")),
+                       time_to_error=targets, breakdown=split),
                   f, indent=1)
     chart(os.path.join(a.out, "bench.png"), rows, os.path.basename(a.blend) + (" (clay)" if a.clay else ""))
     print(f"peak memory of the run {peak_memory_gb():.2f} GB")
@@ -372,20 +371,22 @@ def main(argv=None):
     if a.page:
         title = os.path.basename(a.blend) + (" in clay" if a.clay else "") + ": raybundle against Cycles"
         write_section(a.page, section, title, page_body(a, reference, reference_samples, noise, rows, summary,
-                                                          targets, warnings, split, last_run),
+                                                          targets, warnings, split),
                       [os.path.join(a.out, "bench.png")], command=command_line("tools/bench_blender.py", argv))
         print(f"wrote its section {section!r} of {a.page}")
     return 0
 
 
-def component_breakdown(a, rows, mask, info, run):
-    """The last RAYBUNDLE time's error by component (:mod:`breakdown`,
-    :func:`raybundle.app.metrics.component_errors`; with ``--twin`` split into bias and noise),
+def component_breakdown(a, rows, mask, info):
+    """The error by component (:mod:`breakdown`, :func:`raybundle.app.metrics.component_errors`)
+    of a RAYBUNDLE run of the longest time with its Light Components (seed 5: the Light
+    Components cost a second BRDF evaluation per light sample, which the headline runs do not
+    pay; with ``--twin``, whose run of that time keeps them too, split into bias and noise),
     beside that of Cycles at the ladder's sample count nearest that time, rendered again with
     its light passes; against two halves of ``--breakdown-samples`` with Cycles' light
     passes, kept in ``--references`` (or ``--out``) as ``<file>-<clay|full>-passes-<seed>.exr``.
     Pixels next to lights and where glass or a mirror turned RAYBUNDLE's eye rays are left
-    out.  Printed and returned as a dict."""
+    out.  Printed and returned as a dict, with the run's seconds per part and phase."""
     from breakdown import cycles_components, glass_pixels, merged_diffuse, raybundle_components
 
     from raybundle.app.metrics import component_errors, image_error
@@ -403,8 +404,10 @@ def component_breakdown(a, rows, mask, info, run):
     cyc = min((r for r in rows if r["engine"] == "cycles"), key=lambda r: abs(np.log(r["seconds"] / t)))
     cycles_path = os.path.join(a.out, f"cycles-{cyc['setting']:g}spp-passes.exr")
     render(a.blend, cycles_path, "CYCLES", samples=int(cyc["setting"]), seed=7)
+    ours_path = os.path.join(a.out, f"raybundle-{t:g}s-parts.exr")
+    _, wall = render(a.blend, ours_path, "RAYBUNDLE", seconds=t, seed=5, patches=a.patches)
+    run = dict(LAST_RUN_FIGURES)
     OPEN_SETTINGS["components"] = False
-    ours_path = os.path.join(a.out, f"raybundle-{t:g}s.exr")
     twin_path = os.path.join(a.out, f"raybundle-{t:g}s-twin.exr")
     ours_passes = read_exr_passes(ours_path)
     exclude = mask | glass_pixels(ours_passes)
@@ -419,7 +422,8 @@ def component_breakdown(a, rows, mask, info, run):
     whole_ref = [sum(h.values()) for h in halves]
     total = image_error(sum(form(raybundle_components(ours_passes)).values()), 0.5 * (whole_ref[0] + whole_ref[1]),
                         whole_ref, exclude)
-    out = dict(seconds=t, cycles_samples=int(cyc["setting"]), cycles_seconds=cyc["seconds"],
+    out = dict(seconds=t, wall_seconds=wall, part_seconds=run.get("part_seconds"), phases=run.get("phases"),
+               iterations=run.get("iterations"), image_passes=run.get("image_passes"), cycles_samples=int(cyc["setting"]), cycles_seconds=cyc["seconds"],
                reference_samples=a.breakdown_samples, excluded_pixels=float(exclude.mean()),
                glass_pixels=float(glass_pixels(ours_passes).mean()), diffuse_whole=bool(whole),
                error=total["error"], components={k: dict(ours[k], cycles_error=theirs[k]["error"]) for k in ours})
@@ -434,8 +438,8 @@ def component_breakdown(a, rows, mask, info, run):
     return out
 
 
-def breakdown_table(split, run):
-    """Markdown: the breakdown (:func:`component_breakdown`) and the run's seconds per part and phase."""
+def breakdown_table(split):
+    """Markdown: the breakdown (:func:`component_breakdown`) and its run's seconds per part and phase."""
     rows = []
     for k, d in split["components"].items():
         rows.append([k, f"{100 * d['share']:.1f}%", percent(d["error"]), percent(d.get("bias")),
@@ -450,16 +454,15 @@ def breakdown_table(split, run):
             + (" The patches carry the world's direct light here, so the diffuse lobe is compared whole."
                if split["diffuse_whole"] else ""), "",
             table(["component", "share", "raybundle", "its bias", "its noise", "its mean", "Cycles"], rows)]
-    if run.get("part_seconds"):
-        text += ["", "raybundle's seconds by part: " + ", ".join(f"{k} {v:.1f}" for k, v in run["part_seconds"].items())
-                 + (f" ({run['iterations']} iterations, {run['image_passes']} image passes)"
-                    if run.get("iterations") is not None else "")]
-    if run.get("phases"):
-        text.append("Phases: " + ", ".join(f"{p['name']} {p['seconds']:.1f} s" for p in run["phases"]))
+    if split.get("part_seconds"):
+        text += ["", f"That run's seconds by part ({split['iterations']} iterations, {split['image_passes']} image "
+                 "passes): " + ", ".join(f"{k} {v:.1f}" for k, v in split["part_seconds"].items()) + "."]
+    if split.get("phases"):
+        text += ["", "Its phases: " + ", ".join(f"{p['name']} {p['seconds']:.1f} s" for p in split["phases"]) + "."]
     return "\n".join(text)
 
 
-def page_body(a, reference, reference_samples, noise, rows, summary, targets, warnings, split=None, run=None):
+def page_body(a, reference, reference_samples, noise, rows, summary, targets, warnings, split=None):
     """The bench's section of the benchmark page: the set-up, then :func:`comparison_tables`,
     the breakdown (:func:`breakdown_table`) and the run's warnings."""
     h, w = reference.shape[:2]
@@ -477,7 +480,7 @@ def page_body(a, reference, reference_samples, noise, rows, summary, targets, wa
                        [[["top", "middle", "bottom"][i]] + [f"×{c['mean_ratio']:.3f}, {100 * c['share']:.0f}%"
                                                            for c in g[3 * i:3 * i + 3]] for i in range(3)])]
     if split is not None:
-        text += ["", breakdown_table(split, run or {})]
+        text += ["", breakdown_table(split)]
     if warnings:
         text.append("raybundle's warnings: " + "; ".join(warnings))
     return "\n".join(text)
