@@ -275,7 +275,7 @@ def test_frosted_glass_blurs_what_the_eye_sees_through_it_as_in_cycles(fresh, tm
 
 
 def test_a_glass_of_water_refracts_what_is_behind_it_as_in_cycles(fresh, tmp_path):
-    """A glass (a smooth cylinder, walls and base 3 cm thick from a Solidify modifier, Glass BSDF
+    """A glass (a smooth closed cylinder, its shell 3 cm thick from a Solidify modifier, Glass BSDF
     IOR 1.5) with water in it (a smooth cylinder of Glass BSDF IOR 1.33 that fills it to two thirds,
     overlapping its inner wall by 2 mm as modellers do) on a table before a striped wall: what
     the eye sees through glass, water and glass again, region by region against Cycles.  The
@@ -284,7 +284,10 @@ def test_a_glass_of_water_refracts_what_is_behind_it_as_in_cycles(fresh, tmp_pat
     'Glass').  Cycles limits refractions (transmission bounces, 12) and reflections (glossy
     bounces, 64 in these tests' settings) apart; counting all of a path's interfaces against the
     12, as the code before did, cut the paths caught in the base and the water's walls: the
-    water 3-4% dark."""
+    water 3-4% dark.  The glass has its lid: the code that meant to delete it selected the face
+    through a MeshPolygon held across a mode switch, which wrote into freed memory (the lid
+    stayed, and once in CI the test crashed); an open glass reads the water about 20% darker
+    than Cycles (CHANGELOG, 2026-12-02)."""
     lit = node_material("table", "emission", color=(0.8, 0.8, 0.8), strength=1.0)
     add_object("table", [(-3, -3, 0), (3, -3, 0), (3, 3, 0), (-3, 3, 0)], [(0, 1, 2, 3)], [lit])
     wall = node_material("wall", "emission", color=(1.0, 1.0, 1.0), strength=1.0)
@@ -297,14 +300,6 @@ def test_a_glass_of_water_refracts_what_is_behind_it_as_in_cycles(fresh, tmp_pat
     bpy.ops.mesh.primitive_cylinder_add(vertices=64, radius=0.3, depth=0.9, location=(0, 0, 0.45))
     cup = bpy.context.active_object
     bpy.ops.object.shade_smooth()
-    top = max(cup.data.polygons, key=lambda p: p.center.z)
-    bpy.ops.object.mode_set(mode="EDIT")
-    bpy.ops.mesh.select_all(action="DESELECT")
-    bpy.ops.object.mode_set(mode="OBJECT")
-    top.select = True
-    bpy.ops.object.mode_set(mode="EDIT")
-    bpy.ops.mesh.delete(type="FACE")
-    bpy.ops.object.mode_set(mode="OBJECT")
     solid = cup.modifiers.new("solidify", "SOLIDIFY")
     solid.thickness, solid.offset = 0.03, -1.0
     cup.data.materials.append(node_material("glass", "glass", color=(1, 1, 1), roughness=0.0, ior=1.5))
@@ -320,6 +315,6 @@ def test_a_glass_of_water_refracts_what_is_behind_it_as_in_cycles(fresh, tmp_pat
     # measured: the water and what is seen through it (rows 2-4) within 0.7%, RMS 2.3% over all,
     # mean x1.001; still off: the row of the rim and the water's surface +5%, the base's left edge
     # -11% (near the rims' smooth normals); the code before: rows 2-4 down to -4%
-    assert np.abs(rel[2:5]).max() < 0.025, rel
+    print(np.round(rel.mean(axis=2), 3)); assert np.abs(rel[2:5]).max() < 0.025, rel
     assert np.sqrt((rel ** 2).mean()) < 0.035 and np.abs(rel).max() < 0.2, rel
     assert mean == pytest.approx(1.0, abs=0.015)
