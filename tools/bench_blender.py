@@ -387,7 +387,8 @@ def component_breakdown(a, rows, mask, info):
     passes, kept in ``--references`` (or ``--out``) as ``<file>-<clay|full>-passes-<seed>.exr``.
     Pixels next to lights and where glass or a mirror turned RAYBUNDLE's eye rays are left
     out.  Printed and returned as a dict, with the run's seconds per part and phase."""
-    from breakdown import cycles_components, glass_pixels, merged_diffuse, raybundle_components
+    from breakdown import (COMPONENTS, cycles_components, glass_pixels, load_components, merged_diffuse,
+                           raybundle_components, save_components)
 
     from raybundle.app.metrics import component_errors, image_error
     from raybundle.util.io import read_exr_passes
@@ -397,9 +398,11 @@ def component_breakdown(a, rows, mask, info):
     OPEN_SETTINGS["components"] = True
     paths = [os.path.join(folder, f"{stem}-{'clay' if a.clay else 'full'}-passes-{seed}.exr") for seed in (1, 2)]
     for seed, path in enumerate(paths, 1):
-        if not os.path.exists(path):
+        if not os.path.exists(path):           # kept as its components (breakdown.save_components)
             print(f"Cycles pass reference half {seed} ({path}): {a.breakdown_samples} samples ...", flush=True)
-            render(a.blend, path, "CYCLES", samples=a.breakdown_samples, seed=seed)
+            full = os.path.join(a.out, f"cycles-passes-{seed}.exr")
+            render(a.blend, full, "CYCLES", samples=a.breakdown_samples, seed=seed)
+            save_components(path, cycles_components(read_exr_passes(full)))
     t = max(a.times)
     cyc = min((r for r in rows if r["engine"] == "cycles"), key=lambda r: abs(np.log(r["seconds"] / t)))
     cycles_path = os.path.join(a.out, f"cycles-{cyc['setting']:g}spp-passes.exr")
@@ -414,7 +417,8 @@ def component_breakdown(a, rows, mask, info):
     # where the patches carry the world's direct light beside lamps, the diffuse lobe is compared whole
     whole = info.get("world_emits") and not run.get("world_samples") and run.get("first_shot_lights")
     form = (lambda c: merged_diffuse(c)) if whole else (lambda c: c)
-    halves = [form(cycles_components(read_exr_passes(p))) for p in paths]
+    halves = [form(load_components(p)) for p in paths]
+    halves = [{k: h[k] for k in ("diffuse", *COMPONENTS) if k in h} for h in halves]      # in the components' order
     pairs = {k: (halves[0][k], halves[1][k]) for k in halves[0]}
     twins = form(raybundle_components(read_exr_passes(twin_path))) if a.twin and os.path.exists(twin_path) else None
     ours = component_errors(form(raybundle_components(ours_passes)), pairs, exclude, twins)
