@@ -123,6 +123,7 @@ bench-interiors: $(STAMP)
 	      --max-cycles-seconds 120 --out out/bench-interiors/$$room-$$mode --page $(PAGE) || exit 1; \
 	  done; \
 	done
+	$(PY) tools/interiors_table.py out/bench-interiors --page $(PAGE)
 
 bench-interiors-quick:
 	@$(MAKE) --no-print-directory bench-interiors INTERIORS=bathroom2

@@ -41,13 +41,22 @@ def charts(page_dir, section, n):
 def test_the_blender_bench_writes_its_section(tmp_path):
     _, _, body = run_tool(tmp_path, "bench_blender", "blender-cornell_box", "demo_scenes/cornell_box.blend",
                           "--resolution", 24, 16, "--reference-samples", 4, "--times", 0.5,
-                          "--max-cycles-seconds", 1, "--twin")
+                          "--max-cycles-seconds", 1, "--twin", "--breakdown", "--breakdown-samples", 4)
     assert "`demo_scenes/cornell_box.blend`, its own materials, 24 × 16 px" in body
     # set-up, mean, bias, noise, error
     assert re.search(r"\| 0\.5 s \| [\d.]+ \| [\d.]+ s \| ×[\d.]+ \| [\d.]+% \| [\d.]+% \| [\d.]+% \|", body), body
     assert re.search(r"\| bottom \| ×[\d.]+, \d+% \| ×[\d.]+, \d+% \| ×[\d.]+, \d+% \|", body), body
     assert "| Cycles spp | 1 | 2 |" in body and "| time to an error of | 5% |" in body
+    # the error by component: raybundle's, its bias and noise and mean, Cycles'
+    assert re.search(r"\| direct \| [\d.]+% \| [\d.]+% \| [\d.]+% \| [\d.]+% \| ×[\d.]+ \| [\d.]+% \|", body), body
+    assert "That run's seconds by part" in body and "Its phases: exporting the scene" in body
     charts(tmp_path / "docs", "blender-cornell_box", 1)
+    # the rooms side by side, from the bench's summary.json
+    p = subprocess.run([sys.executable, str(TOOLS / "interiors_table.py"), str(tmp_path)], capture_output=True,
+                       text=True, cwd=ROOT)
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert re.search(r"\| cornell_box \| own materials \| [\d.]+ s \| [\d.]+ s \| \d+ \|", p.stdout), p.stdout
+    assert re.search(r"\| cornell_box \| own materials \| [\d.]+% / [\d.]+% \(\d+%\) \|", p.stdout), p.stdout
 
 
 def test_the_bake_bench_writes_its_section(tmp_path):

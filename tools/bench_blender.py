@@ -312,7 +312,8 @@ def main(argv=None):
         if engine == "raybundle" and LAST_RUN_FIGURES.get("run"):
             print(f"  run: {LAST_RUN_FIGURES['run']}", flush=True)
         return dict(engine=engine, setting=setting, seconds=wall, error=e["error"], error_all_pixels=full["error"],
-                    mean_ratio=e["mean_ratio"], p99_9=e["p99_9"], setup_seconds=setup)
+                    mean_ratio=e["mean_ratio"], p99_9=e["p99_9"], setup_seconds=setup,
+                    iterations=LAST_RUN_FIGURES.get("iterations") if engine == "raybundle" else None)
 
     noise = image_error(reference, reference, reference_halves=halves, exclude=mask)
     print(f"reference: noise {noise['reference_noise']:.4f} per pixel (relative RMSE), its own p99.9 "
@@ -415,10 +416,13 @@ def component_breakdown(a, rows, mask, info):
     ours_passes = read_exr_passes(ours_path)
     exclude = mask | glass_pixels(ours_passes)
     # where the patches carry the world's direct light beside lamps, the diffuse lobe is compared whole
+    # only; elsewhere also whole, beside its split (light through a pane is direct to raybundle's
+    # lamp samples, indirect to Cycles')
     whole = info.get("world_emits") and not run.get("world_samples") and run.get("first_shot_lights")
-    form = (lambda c: merged_diffuse(c)) if whole else (lambda c: c)
+    form = (lambda c: merged_diffuse(c)) if whole else (lambda c: {**merged_diffuse(c), **c})
     halves = [form(load_components(p)) for p in paths]
-    halves = [{k: h[k] for k in ("diffuse", *COMPONENTS) if k in h} for h in halves]      # in the components' order
+    order = (COMPONENTS[0], "diffuse", *COMPONENTS[1:])
+    halves = [{k: h[k] for k in order if k in h} for h in halves]      # in the components' order
     pairs = {k: (halves[0][k], halves[1][k]) for k in halves[0]}
     twins = form(raybundle_components(read_exr_passes(twin_path))) if a.twin and os.path.exists(twin_path) else None
     ours = component_errors(form(raybundle_components(ours_passes)), pairs, exclude, twins)
@@ -455,8 +459,9 @@ def breakdown_table(split):
             f"{100 * split['excluded_pixels']:.1f}% of the pixels left out (next to lights, or seen through glass "
             f"or a mirror: {100 * split['glass_pixels']:.1f}%); the image's error over the rest "
             f"{percent(split['error'])}."
-            + (" The patches carry the world's direct light here, so the diffuse lobe is compared whole."
-               if split["diffuse_whole"] else ""), "",
+            + (" The patches carry the world's direct light here, so the diffuse lobe is compared whole only."
+               if split["diffuse_whole"] else " `diffuse` is the diffuse lobe whole: the lamps' light through a "
+               "glass pane is direct to raybundle's lamp samples and indirect to Cycles'."), "",
             table(["component", "share", "raybundle", "its bias", "its noise", "its mean", "Cycles"], rows)]
     if split.get("part_seconds"):
         text += ["", f"That run's seconds by part ({split['iterations']} iterations, {split['image_passes']} image "

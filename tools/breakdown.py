@@ -18,7 +18,10 @@ Indirect and Color).  Each side's parts are summed into the components compared
   comparison: :func:`glass_pixels`).
 
 Where RAYBUNDLE's patches carry the world's direct light (``world_samples`` 0 beside lamps), its
-``direct`` holds the lamps' alone: :func:`merged_diffuse` compares the diffuse lobe whole.
+``direct`` holds the lamps' alone: :func:`merged_diffuse` compares the diffuse lobe whole.  The
+split is not the same on both sides where lamps shine through glass panes either: RAYBUNDLE's
+lamp samples pass a pane (direct), Cycles' shadow rays do not (its light through glass is
+indirect); the bench therefore also compares the diffuse lobe whole.
 """
 from __future__ import annotations
 
