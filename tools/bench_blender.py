@@ -335,7 +335,6 @@ def main(argv=None):
             split = bias_and_noise(img, twin, reference, halves, mask)
             rows[-1].update(bias=split["bias"], noise=split["noise"])
             print(f"  split: bias {split['bias']:.4f}, noise {split['noise']:.4f}", flush=True)
-    last_run = dict(LAST_RUN_FIGURES)
     warnings = list(LAST_RUN_FIGURES.get("warnings", []))
     for w in warnings:
         print(f"raybundle warning: {w}")
@@ -419,17 +418,22 @@ def component_breakdown(a, rows, mask, info):
     # only; elsewhere also whole, beside its split (light through a pane is direct to raybundle's
     # lamp samples, indirect to Cycles')
     whole = info.get("world_emits") and not run.get("world_samples") and run.get("first_shot_lights")
-    form = (lambda c: merged_diffuse(c)) if whole else (lambda c: {**merged_diffuse(c), **c})
-    halves = [form(load_components(p)) for p in paths]
+    # each set of parts sums to the image (the errors are relative to its mean): the split one, and
+    # the diffuse lobe whole beside it
+    forms = [merged_diffuse] if whole else [lambda c: c, merged_diffuse]
+    refs = [load_components(p) for p in paths]
+    ours_c = raybundle_components(ours_passes)
+    twin_c = raybundle_components(read_exr_passes(twin_path)) if a.twin and os.path.exists(twin_path) else None
+    cycles_c = cycles_components(read_exr_passes(cycles_path))
+    ours, theirs = {}, {}
+    for form in forms:
+        pairs = {k: (form(refs[0])[k], form(refs[1])[k]) for k in form(refs[0])}
+        ours.update(component_errors(form(ours_c), pairs, exclude, None if twin_c is None else form(twin_c)))
+        theirs.update(component_errors(form(cycles_c), pairs, exclude))
     order = (COMPONENTS[0], "diffuse", *COMPONENTS[1:])
-    halves = [{k: h[k] for k in order if k in h} for h in halves]      # in the components' order
-    pairs = {k: (halves[0][k], halves[1][k]) for k in halves[0]}
-    twins = form(raybundle_components(read_exr_passes(twin_path))) if a.twin and os.path.exists(twin_path) else None
-    ours = component_errors(form(raybundle_components(ours_passes)), pairs, exclude, twins)
-    theirs = component_errors(form(cycles_components(read_exr_passes(cycles_path))), pairs, exclude)
-    whole_ref = [sum(h.values()) for h in halves]
-    total = image_error(sum(form(raybundle_components(ours_passes)).values()), 0.5 * (whole_ref[0] + whole_ref[1]),
-                        whole_ref, exclude)
+    ours = {k: ours[k] for k in order if k in ours}
+    whole_ref = [sum(r.values()) for r in refs]
+    total = image_error(sum(ours_c.values()), 0.5 * (whole_ref[0] + whole_ref[1]), whole_ref, exclude)
     out = dict(seconds=t, wall_seconds=wall, part_seconds=run.get("part_seconds"), phases=run.get("phases"),
                iterations=run.get("iterations"), image_passes=run.get("image_passes"), cycles_samples=int(cyc["setting"]), cycles_seconds=cyc["seconds"],
                reference_samples=a.breakdown_samples, excluded_pixels=float(exclude.mean()),
