@@ -194,6 +194,7 @@ VIEW_LAYER = {
     **_many("active_layer_collection has_export_collections", ("I", UI)),
     **_many("use_freestyle freestyle_settings", ("W", "Freestyle lines are not drawn")),
     "cycles": ("I", "a group: walked on its own (ViewLayer.cycles)"),
+    "raybundle": ("M", "test_addon_components.py::test_light_components_sum_to_the_image_and_match_cycles_passes"),
 }
 
 VIEW_LAYER_CYCLES = {
