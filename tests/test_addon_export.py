@@ -411,8 +411,8 @@ def test_particle_and_geometry_node_instances(fresh):
 
 def test_what_cycles_renders_and_the_export_leaves_out_is_warned(fresh):
     """A world volume, hair strands, Geometry Nodes points, a displacement, a Principled
-    base color above 1 and Cycles' film exposure each get one warning (they were dropped or
-    clipped silently)."""
+    base color above 1, Cycles' film exposure and a material's Bump Map Correction turned off
+    each get one warning (they were dropped or clipped silently)."""
     v, f = box((-1, -1, -1), (1, 1, 1))
     mat = node_material("p", kind="principled", color=(1.5, 0.5, 0.5))
     out = mat.node_tree.nodes["Material Output"]
@@ -434,10 +434,12 @@ def test_what_cycles_renders_and_the_export_leaves_out_is_warned(fresh):
     g.links.new(m2p.outputs[0], o.inputs[0])
     mod.node_group = g
     bpy.context.scene.cycles.film_exposure = 2.0
+    mat.cycles.use_bump_map_correction = False
     text = "\n".join(export().warnings)
     for expected in ("world 'world': its volume", "hair particles ('hair') are not rendered",
                      "object 'pts': point clouds", "material 'p': its displacement is not modeled",
-                     "base color (1.5, 0.5, 0.5) is above 1", "film exposure 2 is not applied"):
+                     "base color (1.5, 0.5, 0.5) is above 1", "film exposure 2 is not applied",
+                     "material 'p': Bump Map Correction off is not modeled"):
         assert text.count(expected) == 1, (expected, text)
 
 

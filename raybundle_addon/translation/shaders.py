@@ -206,6 +206,9 @@ class MaterialConverter:
         elif len(found) > 1:
             notes.append(f"{len(found)} different textures or color attributes on its albedo: images are replaced "
                          "by their mean color, attributes by white")
+        if not getattr(getattr(mat, "cycles", None), "use_bump_map_correction", True):
+            notes.append("Bump Map Correction off is not modeled: its glossy and glass lobes keep normals whose "
+                         "mirror direction clears the surface")
         for n in dict.fromkeys(notes):        # once each, in order
             self.warn(f"material {name!r}: {n}")
         return flatten(name, acc, self.warn)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lights.sources import ShapeLight
-from ..scene.shading import seen_normals
+from ..scene.shading import seen_normals, specular_normals, valid_specular_normals
 from ..scene.transmission import scatter
 from ..tracing.sampling import Stream, kronecker_alpha, stream
 from ..util.arrays import ranges
@@ -95,15 +95,31 @@ class EyeRays:
         ts = sc.seen_tside(np.where(hit, tri, 0), dirs)
         point = org + np.where(hit, t, 0.0)[:, None] * dirs
         normal = sc.tside_normal[ts]
-        if sc.shading is not None:               # smooth-shaded faces: Blender's shading normal
+        if sc.shading is not None or (sc.texture is not None and sc.texture.has_normal_maps):
             h = np.nonzero(hit)[0]
-            normal[h] = seen_normals(sc.shading, sc.triangle_source[tri[h]], point[h], normal[h], -dirs[h])
-        if sc.texture is not None and sc.texture.has_normal_maps:     # normal and bump maps
-            h = np.nonzero(hit)[0]
-            normal[h] = sc.texture.shading_normals(sc.triangle_source[tri[h]], point[h], normal[h], -dirs[h])
+            normal[h] = self._shading_normals(tri[h], point[h], normal[h], -dirs[h])
         return GBuffer(tri, ts, point, normal,
                        sc.triangle_material[sc.tside_triangle[ts]], -dirs, np.stack([1 - u - v, u, v], axis=1),
                        np.arange(len(self.pixel)) if pixels is None else np.asarray(pixels), weight, bounced, lamps)
+
+    def _shading_normals(self, tri, point, flat, w_eye):
+        """The normals (N, 3) the points ``point`` seen on triangles ``tri`` are shaded with, from
+        their ``flat`` normals (N, 3, facing the eye ``w_eye``): Blender's shading normal
+        (:func:`~raybundle.scene.shading.seen_normals`), then the faces' normal and bump maps;
+        on materials with a glossy lobe, made valid for the eye as Cycles' Bump Map Correction
+        makes the normal of a specular closure (:func:`~raybundle.scene.shading.valid_specular_normals`),
+        so the mirror direction stays above the surface; the diffuse lobe of such a material is
+        shaded about the same normal."""
+        sc = self.scene
+        src = sc.triangle_source[tri]
+        glossy = np.nonzero(sc.materials.is_glossy[sc.triangle_material[tri]])[0]
+        n = seen_normals(sc.shading, src, point, flat, w_eye)
+        if sc.shading is not None and len(glossy):
+            n[glossy] = specular_normals(sc.shading, src[glossy], point[glossy], flat[glossy], w_eye[glossy])
+        if sc.texture is not None and sc.texture.has_normal_maps:
+            n = sc.texture.shading_normals(src, point, n, w_eye)
+            n[glossy] = valid_specular_normals(flat[glossy], w_eye[glossy], n[glossy])
+        return n
 
     def through_interfaces(self, org, dirs, tri, t, u, v, choice=None):
         """Eye rays ``org``, ``dirs`` (N, 3) with first hits ``(tri, t, u, v)`` followed through
@@ -144,10 +160,8 @@ class EyeRays:
             d = dirs[live]
             p = org[live] + t[live, None] * d
             geo = sc.triangle_normal[tri[live]]
-            shade = geo
-            if sc.shading is not None:
-                shade = seen_normals(sc.shading, sc.triangle_source[tri[live]], p,
-                                     np.where((np.einsum("ij,ij->i", geo, d) < 0)[:, None], geo, -geo), -d)
+            facing = np.where((np.einsum("ij,ij->i", geo, d) < 0)[:, None], geo, -geo)
+            shade = specular_normals(sc.shading, sc.triangle_source[tri[live]], p, facing, -d)
             uniforms = self.rng.random((len(live), columns))
             if depth == 0 and choice is not None:
                 uniforms[:, 1] = choice[live]

@@ -81,3 +81,51 @@ def seen_normals(shading, faces, points, flat, w_eye):
     n *= np.where(np.einsum("ij,ij->i", n, flat) < 0, -1.0, 1.0)[:, None]
     ok = np.einsum("ij,ij->i", n, w_eye) > 1e-3
     return np.where(ok[:, None], n, flat)
+
+
+def valid_specular_normals(geometric, w_in, normals):
+    """The normals (N, 3) a specular closure (glossy, metal, glass) is evaluated about, as Cycles
+    does with a material's Bump Map Correction (on by default): each of ``normals`` (N, 3) (unit,
+    on the side of ``geometric``) is kept where the mirror direction of ``w_in`` (N, 3, towards
+    the viewer) about it lies at least ``t = min(0.9 cos_g, 0.01)`` above the surface
+    (``cos_g = w_in . geometric``, ``geometric`` (N, 3) the unit flat normal facing ``w_in``);
+    elsewhere it is turned towards ``geometric`` in their common plane just until the mirror
+    direction is ``t`` above it: with ``x`` the unit tangent of the normal and ``(i_x, i_z)``
+    the components of ``w_in`` on ``(x, geometric)``, the turned normal's ``n_z`` solves
+    ``4 a n_z^4 - 2 b n_z^2 + c = 0`` (``a = i_x^2 + i_z^2``, ``b = 2 (a + i_z t)``,
+    ``c = (t + i_z)^2``, the root that solves it unsquared) and is ``sqrt(1 - n_z^2) x + n_z
+    geometric``.  On a smooth-shaded silhouette or a Shade Smooth cylinder's bevelled rim the
+    glossy lobe then stays above the surface instead of reflecting into it."""
+    ng = np.asarray(geometric, float)
+    wi = np.asarray(w_in, float)
+    n = np.asarray(normals, float)
+    dot = lambda p, q: np.einsum("ij,ij->i", p, q)  # noqa: E731
+    i_z = np.maximum(dot(wi, ng), 0.0)
+    t = np.minimum(0.9 * i_z, 0.01)
+    cos_n = dot(n, wi)
+    bad = np.nonzero(dot(ng, 2.0 * cos_n[:, None] * n - wi) < t)[0]
+    out = n.copy()
+    if len(bad) == 0:
+        return out
+    ng, wi, n, i_z, t = ng[bad], wi[bad], n[bad], i_z[bad], t[bad]
+    x = n - dot(n, ng)[:, None] * ng
+    size = np.linalg.norm(x, axis=1, keepdims=True)
+    x = np.where(size > 1e-12, x / np.maximum(size, 1e-300), n)
+    i_x = dot(wi, x)
+    a = np.maximum(i_x * i_x + i_z * i_z, 1e-300)
+    b = 2.0 * (a + i_z * t)
+    root = np.sqrt(np.maximum(b * b - 4.0 * a * (t + i_z) ** 2, 0.0))
+    n_z2 = 0.25 * np.where(i_x < 0, b + root, b - root) / a
+    out[bad] = np.sqrt(np.maximum(1.0 - n_z2, 0.0))[:, None] * x + np.sqrt(np.maximum(n_z2, 0.0))[:, None] * ng
+    return out
+
+
+def specular_normals(shading, faces, points, flat, w_in):
+    """The normals (N, 3) a specular closure is evaluated about at ``points`` on input ``faces``:
+    the shading normal turned to the side of the ``flat`` normals (N, 3, facing ``w_in``), made
+    valid for ``w_in`` (:func:`valid_specular_normals`); ``flat`` where no face is smooth."""
+    if shading is None or len(faces) == 0:
+        return flat
+    n = shading.at(faces, points)
+    n *= np.where(np.einsum("ij,ij->i", n, flat) < 0, -1.0, 1.0)[:, None]
+    return valid_specular_normals(flat, w_in, n)
