@@ -67,6 +67,9 @@ DEFAULT_PATCHES = 4000
 #: cube-map cells per face edge for the normal direction of a cluster (150 directions; odd, so
 #: that axis-aligned normals lie mid-cell, never on a border rounding could flip)
 NORMAL_CELLS = 5
+#: the patch size is at most this times the size that tiles the reflecting area with the target
+#: count (:func:`patch_size`): the large surfaces keep at least a quarter of the count
+SURFACE_SHARE = 2.0
 #: triangles with an area under h^2 / SMALL are grouped (h = the patch size)
 SMALL = 2.0
 #: clusters under h^2 / DETAIL are merged by the cube face of their normals (:meth:`_Grouping.clusters`)
@@ -199,9 +202,14 @@ class _Grouping:
 
 def patch_size(scene: PatchScene, patches, grouping=None, steps=12):
     """The patch size h [m] whose patch count is closest to ``patches`` (within ~10% where
-    the count allows).  The count falls with h, but in jumps: where triangles stop being
-    grouped, each is cut into k^2 instead, so h is bracketed and bisected in log h, each
-    step a secant guess inside the bracket, and the best count seen wins."""
+    the count allows), but at most :data:`SURFACE_SHARE` times ``sqrt(A / patches)``, ``A``
+    the reflecting area (:func:`surface_size`): the clusters of a furnished room's details
+    (a cluster per material, normal cell and slab of each chair, cup and plant) may outnumber
+    the target several times over at the size that tiles its walls and floor, and a size
+    chosen for the count alone cuts those into patches as large as walls.  The count falls with
+    h, but in jumps: where triangles stop being grouped, each is cut into k^2 instead, so h
+    is bracketed and bisected in log h, each step a secant guess inside the bracket, and the
+    best count seen wins."""
     grouping = grouping or _Grouping(scene)
     h = np.sqrt(scene.triangle_area.sum() / patches)
     best = (np.inf, h)
@@ -223,7 +231,16 @@ def patch_size(scene: PatchScene, patches, grouping=None, steps=12):
             if hi - lo < 1e-3:
                 break
         h = float(np.exp(guess))
-    return best[1]
+    return min(best[1], surface_size(scene, patches, grouping))
+
+
+def surface_size(scene: PatchScene, patches, grouping):
+    """:data:`SURFACE_SHARE` x ``sqrt(A / patches)`` [m], ``A`` the reflecting area of
+    ``grouping``'s triangles (inf where nothing reflects): the coarsest patch size
+    :func:`patch_size` takes."""
+    reflects = scene.materials.reflects[scene.triangle_material[grouping.rows]]
+    surfaces = float(grouping.area[reflects].sum())
+    return SURFACE_SHARE * np.sqrt(surfaces / patches) if surfaces > 0 else np.inf
 
 
 def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stage=None) -> PatchScene:
@@ -251,9 +268,11 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
     probe = RayTracer(scene) if pieces.any() else None
     try:
         small, fine, row, split, crowded = _cut(scene, grouping, h, probe)
-        if crowded and patches is not None:
+        coarser = min(h * np.sqrt((patches + 3 * crowded) / patches), surface_size(scene, patches, grouping)) \
+            if crowded and patches is not None else h
+        if coarser > h:
             # the crowded pieces cut in four: a coarser h (more triangles small) keeps about ``patches``
-            h *= np.sqrt((patches + 3 * crowded) / patches)
+            h = coarser
             small, fine, row, split, _ = _cut(scene, grouping, h, probe)
     finally:
         if probe is not None:
