@@ -1,9 +1,11 @@
-"""The eye's rays: primary rays through the pixels' sample positions, followed through glass.
+"""The eye's rays: primary rays through the pixels' sample positions, followed through glass
+and mirrors.
 
 :class:`EyeRays` traces the camera's rays at the sub-pixel positions of each pixel's own
 randomly shifted R_2 sequence (:meth:`EyeRays.subpixel_sequence`) and follows them through
-the interfaces of glass and other transmissive surfaces as Cycles does
-(:meth:`EyeRays.through_interfaces`), into a :class:`GBuffer` of the surfaces they see.
+the interfaces of glass and other transmissive surfaces as Cycles does, and off sharp mirrors
+(:meth:`EyeRays.through_interfaces`), into a :class:`GBuffer` of the surfaces they see: what
+a mirror shows is shaded per pixel as what the camera sees, not read from the patches.
 """
 from __future__ import annotations
 
@@ -42,6 +44,9 @@ class GBuffer:
     #: (N, 3) the area lamps the eye path met after it was turned, times :attr:`weight` there
     #: (None: none)
     lamps: np.ndarray | None = None
+    #: (N,) bool: the eye path was reflected on its way (by a mirror or glass; None: none was):
+    #: light-traced caustics, splatted straight to the camera, miss what it sees
+    reflected: np.ndarray | None = None
 
     @property
     def hit(self):
@@ -72,6 +77,10 @@ class EyeRays:
         self._choice_shift = stream(settings.seed, Stream.CHOICE_SHIFT).random(n)
         #: the area lamps an eye path turned by glass may meet (not geometry: tested by shape)
         self.shapes = [light for light in direct.area_lights if isinstance(light, ShapeLight)]
+        mats = scene.materials
+        #: (T,) bool: the triangles that turn the eye's paths, glass and sharp mirrors (None: none)
+        turning = (mats.transmits | mats.is_mirror)[scene.triangle_material] if len(scene.triangles) else None
+        self.turning = turning if turning is not None and turning.any() else None
         self.rays = 0
 
     def trace(self, jitter, pixels=None):
@@ -86,9 +95,9 @@ class EyeRays:
         org, dirs = cam.rays(pos[:, 0], pos[:, 1])
         tri, t, u, v = self.tracer.first_hit(org, dirs, glass=False)
         self.rays += len(dirs)
-        weight = bounced = lamps = None
-        if self.tracer.glass is not None:
-            org, dirs, tri, t, u, v, weight, bounced, lamps = self.through_interfaces(
+        weight = bounced = lamps = reflected = None
+        if self.turning is not None:
+            org, dirs, tri, t, u, v, weight, bounced, lamps, reflected = self.through_interfaces(
                 org, dirs, tri, t, u, v, jitter[:, 2] if jitter.shape[1] > 2 else None)
         hit = tri >= 0
         sc = self.scene
@@ -100,7 +109,8 @@ class EyeRays:
             normal[h] = self._shading_normals(tri[h], point[h], normal[h], -dirs[h])
         return GBuffer(tri, ts, point, normal,
                        sc.triangle_material[sc.tside_triangle[ts]], -dirs, np.stack([1 - u - v, u, v], axis=1),
-                       np.arange(len(self.pixel)) if pixels is None else np.asarray(pixels), weight, bounced, lamps)
+                       np.arange(len(self.pixel)) if pixels is None else np.asarray(pixels), weight, bounced, lamps,
+                       reflected)
 
     def _shading_normals(self, tri, point, flat, w_eye):
         """The normals (N, 3) the points ``point`` seen on triangles ``tri`` are shaded with, from
@@ -125,11 +135,12 @@ class EyeRays:
         """Eye rays ``org``, ``dirs`` (N, 3) with first hits ``(tri, t, u, v)`` followed through
         the transmissive surfaces they meet (:func:`~raybundle.scene.transmission.scatter`: by
         Fresnel, reflected or refracted, at the first by the uniforms ``choice`` (N,) where
-        given): as Cycles' transmission and glossy bounces, a path that has been refracted
+        given) and off the sharp mirrors (:meth:`_turn`): as Cycles' transmission and glossy bounces, a path that has been refracted
         ``transmission_depth`` times or reflected ``glossy_depth`` times ends at the next
         interface it meets, black.  Returns the last segments' ``(org, dirs, tri, t, u, v)``, each ray's weight
-        (N, 3), (N,) bool, whether it was turned, and the area lamps (N, 3) its turned segments
-        met before the surface they end on, weighted (or None where the scene has no area lamps).
+        (N, 3), (N,) bool, whether it was turned, the area lamps (N, 3) its turned segments
+        met before the surface they end on, weighted (or None where the scene has no area lamps),
+        and (N,) bool, whether it was reflected.
 
         Blender's area lamps are not visible to the camera's own rays by default, but are to the
         glossy and transmission rays a turned path continues as: a lamp reflected in a pane or
@@ -147,7 +158,7 @@ class EyeRays:
         most_t, most_g = int(self.settings.transmission_depth), int(self.settings.glossy_depth)
         columns = 4 if np.any(sc.materials.transmission_roughness > 0) else 2     # rough ones draw microfacets
         for depth in range(most_t + most_g + 1):
-            live = live[tracer.glass[tri[live]]]
+            live = live[self.turning[tri[live]]]
             if len(live) == 0:
                 break
             # as Cycles, a path that has spent its transmission or glossy bounces ends at the next
@@ -165,7 +176,7 @@ class EyeRays:
             uniforms = self.rng.random((len(live), columns))
             if depth == 0 and choice is not None:
                 uniforms[:, 1] = choice[live]
-            on, new, w = scatter(sc.materials, sc.triangle_material[tri[live]], d, geo, shade, uniforms)
+            on, new, w = self._turn(sc.triangle_material[tri[live]], d, geo, shade, uniforms)
             weight[live] *= w
             turned = np.einsum("ij,ij->i", d, geo) * np.einsum("ij,ij->i", new, geo) < 0
             reflections[live] += on & turned
@@ -182,7 +193,27 @@ class EyeRays:
                     met, _ = light.hit(org[live], dirs[live], reach)
                     lamps[live[met]] += weight[live[met]] * light.radiance
             live = live[tri[live] >= 0]
-        return org, dirs, tri, t, u, v, weight, bounced, lamps
+        return org, dirs, tri, t, u, v, weight, bounced, lamps, reflections > 0
+
+    def _turn(self, mat, travel, geometric, shading, u):
+        """One event of eye paths that meet turning materials ``mat`` (N,): at glass
+        :func:`~raybundle.scene.transmission.scatter` (its arguments); at a sharp mirror
+        (:attr:`~raybundle.scene.materials.MaterialTable.is_mirror`) the mirror direction about
+        ``shading`` (facing the path), weighted by its reflectance there, so the surface
+        seen in the mirror is shaded as one the camera sees.  Returns ``(on, direction,
+        weight)`` as ``scatter`` does."""
+        mats = self.scene.materials
+        mirror = mats.is_mirror[mat]
+        if not mirror.any():
+            return scatter(mats, mat, travel, geometric, shading, u)
+        on, out, weight = np.ones(len(mat), bool), np.empty((len(mat), 3)), np.empty((len(mat), 3))
+        g = np.nonzero(~mirror)[0]
+        if len(g):
+            on[g], out[g], weight[g] = scatter(mats, mat[g], travel[g], geometric[g], shading[g], u[g])
+        m = np.nonzero(mirror)[0]
+        out[m], weight[m] = mats.mirror_reflection(mat[m], shading[m], -travel[m])
+        on[m] = np.any(weight[m] > 0, axis=1)
+        return on, out, weight
 
     def subpixel_sequence(self, pixels, k):
         """``k`` (or (N,) counts) sub-pixel positions in each of ``pixels``, continuing one

@@ -85,6 +85,7 @@ class DiffuseIndirect:
         out = np.zeros((n, 3))
         k = max(1, int(samples or self.settings.resolve_samples))
         final, per_sample, rays = None, 0, self.settings.gather_rays
+        own, cache = e_bar is None, {}
         if e_bar is None:
             planned, self._planned = self._planned, None
             if planned is not None and planned[0] == (final_time, k):
@@ -124,6 +125,8 @@ class DiffuseIndirect:
                                             at=(g.tside[h[f]], g.bary[h[f]]))
                     self.edge_gather.points += len(f)
                 self.gather_rays_used += rays_j
+            if own:
+                e = self._reflected_caustic(e, g, h, cache)
             m = g.material[h]
             w_d = sc.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]))
             scale = sc.albedo_at(g.triangle[h], g.point[h])
@@ -132,6 +135,23 @@ class DiffuseIndirect:
                 value += surface_values(sc, self.solver, through, through_vert, g.tside[h], g.bary[h])
             out[h] += g.weighted(value, h)
         return out / k
+
+    def _reflected_caustic(self, e, g, h, cache):
+        """The incoming light ``e`` (N, 3) at the hits ``h`` of G-buffer ``g``, plus the caustic
+        first shot at those the eye saw in a mirror or reflected by glass, where the caustic is
+        light-traced into the pixels (:mod:`~raybundle.imaging.caustic_splats`: its splats go
+        straight to the camera and miss them); ``cache`` (a dict) keeps its vertex values for
+        the rest of the image."""
+        caustic = self.solver.caustic
+        if caustic is None or not self.caustic_splatted or g.reflected is None:
+            return e
+        r = np.nonzero(g.reflected[h])[0]
+        if len(r) == 0:
+            return e
+        if "vert" not in cache:
+            cache["vert"] = self.solver.reconstruction.averaged(caustic.E) if self.settings.smooth else None
+        e[r] += surface_values(self.scene, self.solver, caustic.E, cache["vert"], g.tside[h[r]], g.bary[h[r]])
+        return e
 
     def _indirect_plan(self, gather, final_time, k):
         """What :meth:`image` reads from the solver: ``(e_bar, vert, final,

@@ -186,6 +186,17 @@ class MaterialTable:
         return lobe | (self.has_layer & (self.glossy_weight < 1))
 
     @property
+    def is_mirror(self) -> np.ndarray:
+        """(M,) bool: the surface is a sharp mirror and nothing else: a glossy lobe of weight 1
+        (a Glossy BSDF, or a Principled BSDF's metal) at the smallest roughness (alpha at
+        :data:`MIN_ALPHA`), nothing diffuse, translucent, transmissive or emitting.  The eye's
+        paths are reflected there as at glass
+        (:meth:`~raybundle.imaging.eye_rays.EyeRays.through_interfaces`)."""
+        plain = (self.glossy_weight >= 1.0) & (self.alpha <= MIN_ALPHA)
+        rest = np.any(self.diffuse_reflectance > 0, axis=1) | np.any(self.translucent > 0, axis=1)
+        return plain & self.is_glossy & ~rest & ~self.transmits & ~self.is_emitter
+
+    @property
     def transmits(self) -> np.ndarray:
         """(M,) bool: part of the surface is a dielectric interface light passes
         (:mod:`raybundle.scene.transmission`)."""
@@ -382,6 +393,24 @@ class MaterialTable:
             cos_o = np.einsum("ij,ij->i", normal[lay], w_out[lay])
             weight[lay] = w[lay][:, None] * self._glossy_factor(mat[lay], c, cos_o)
         return w_i, weight
+
+    def mirror_reflection(self, mat, normal, w_out):
+        """The exact reflection of sharp mirrors ``mat`` (N,) (:attr:`is_mirror`) about unit
+        ``normal`` (N, 3) towards ``w_out`` (N, 3): ``(w_i (N, 3), weight (N, 3))`` as
+        :meth:`sample_glossy` returns them for the lobe's limit of zero roughness (the mirror
+        direction, weighted by the tint and Fresnel there; 0 where ``w_out`` is below the
+        surface), as Cycles treats a roughness of 0: its lobe at :data:`MIN_ALPHA` would spread
+        a lamp seen in a bathroom mirror over its neighbouring pixels by its long tails."""
+        mat = np.asarray(mat)
+        normal = np.asarray(normal, float)
+        w_out = np.asarray(w_out, float)
+        cos_o = np.einsum("ij,ij->i", normal, w_out)
+        w_i = 2.0 * cos_o[:, None] * normal - w_out
+        weight = self.glossy_weight[mat][:, None] * self.glossy[mat]
+        lay = np.nonzero(self.is_layered[mat])[0]
+        if len(lay):
+            weight[lay] = self._glossy_factor(mat[lay], cos_o[lay], cos_o[lay])
+        return w_i, np.where((cos_o > 0)[:, None], weight, 0.0)
 
     def glossy_pdf(self, mat, normal, w_in, w_out):
         """Density [1/sr] with which :meth:`sample_glossy` draws ``w_in`` (N, 3), towards
