@@ -135,9 +135,9 @@ class EyeRays:
         """Eye rays ``org``, ``dirs`` (N, 3) with first hits ``(tri, t, u, v)`` followed through
         the transmissive surfaces they meet (:func:`~raybundle.scene.transmission.scatter`: by
         Fresnel, reflected or refracted, at the first by the uniforms ``choice`` (N,) where
-        given) and off the sharp mirrors (:meth:`_turn`): as Cycles' transmission and glossy bounces, a path that has been refracted
-        ``transmission_depth`` times or reflected ``glossy_depth`` times ends at the next
-        interface it meets, black.  Returns the last segments' ``(org, dirs, tri, t, u, v)``, each ray's weight
+        given) and off the sharp mirrors (:meth:`_turn`): as Cycles' transmission and glossy
+        bounces, a path that has been refracted ``transmission_depth`` times or reflected
+        ``glossy_depth`` times ends at the next interface it meets, black.  Returns the last segments' ``(org, dirs, tri, t, u, v)``, each ray's weight
         (N, 3), (N,) bool, whether it was turned, the area lamps (N, 3) its turned segments
         met before the surface they end on, weighted (or None where the scene has no area lamps),
         and (N,) bool, whether it was reflected.
