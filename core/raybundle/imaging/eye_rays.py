@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lights.sources import ShapeLight
-from ..scene.shading import seen_normals, specular_normals, valid_specular_normals
+from ..scene.shading import facing_eye, sided_normals, specular_normals, valid_specular_normals
 from ..scene.transmission import scatter
 from ..tracing.sampling import Stream, kronecker_alpha, stream
 from ..util.arrays import ranges
@@ -123,9 +123,11 @@ class EyeRays:
         sc = self.scene
         src = sc.triangle_source[tri]
         glossy = np.nonzero(sc.materials.is_glossy[sc.triangle_material[tri]])[0]
-        n = seen_normals(sc.shading, src, point, flat, w_eye)
-        if sc.shading is not None and len(glossy):
-            n[glossy] = specular_normals(sc.shading, src[glossy], point[glossy], flat[glossy], w_eye[glossy])
+        n = flat
+        if sc.shading is not None:
+            sided = sided_normals(sc.shading, src, point, flat)
+            n = facing_eye(sided, flat, w_eye)
+            n[glossy] = valid_specular_normals(flat[glossy], w_eye[glossy], sided[glossy])
         if sc.texture is not None and sc.texture.has_normal_maps:
             n = sc.texture.shading_normals(src, point, n, w_eye)
             n[glossy] = valid_specular_normals(flat[glossy], w_eye[glossy], n[glossy])

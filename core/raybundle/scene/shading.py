@@ -77,10 +77,21 @@ def seen_normals(shading, faces, points, flat, w_eye):
     turned away from the camera, which Cycles bends back towards it)."""
     if shading is None or len(faces) == 0:
         return flat
+    return facing_eye(sided_normals(shading, faces, points, flat), flat, w_eye)
+
+
+def sided_normals(shading, faces, points, flat):
+    """The shading normals (N, 3) at ``points`` on input ``faces``, turned to the side of the
+    ``flat`` normals (N, 3)."""
     n = shading.at(faces, points)
-    n *= np.where(np.einsum("ij,ij->i", n, flat) < 0, -1.0, 1.0)[:, None]
-    ok = np.einsum("ij,ij->i", n, w_eye) > 1e-3
-    return np.where(ok[:, None], n, flat)
+    return n * np.where(np.einsum("ij,ij->i", n, flat) < 0, -1.0, 1.0)[:, None]
+
+
+def facing_eye(normals, flat, w_eye):
+    """``normals`` (N, 3) where they face the eye ``w_eye`` (N, 3), else the ``flat`` normals
+    (:func:`seen_normals`)."""
+    ok = np.einsum("ij,ij->i", normals, w_eye) > 1e-3
+    return np.where(ok[:, None], normals, flat)
 
 
 def valid_specular_normals(geometric, w_in, normals):
@@ -126,6 +137,4 @@ def specular_normals(shading, faces, points, flat, w_in):
     valid for ``w_in`` (:func:`valid_specular_normals`); ``flat`` where no face is smooth."""
     if shading is None or len(faces) == 0:
         return flat
-    n = shading.at(faces, points)
-    n *= np.where(np.einsum("ij,ij->i", n, flat) < 0, -1.0, 1.0)[:, None]
-    return valid_specular_normals(flat, w_in, n)
+    return valid_specular_normals(flat, w_in, sided_normals(shading, faces, points, flat))
