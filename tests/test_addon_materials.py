@@ -378,11 +378,64 @@ def test_a_bake_blender_cannot_finish_falls_back_to_the_sockets_value_with_a_war
     _between(nt, nt.nodes.new("ShaderNodeValToRGB"), nt.nodes["Image Texture"].outputs["Color"],
              nt.nodes["Diffuse BSDF"].inputs["Color"])
     monkeypatch.setattr(node_graphs, "BAKE_TIMEOUT", 0.01)
-    monkeypatch.setattr(node_graphs, "_cache", {})
+    monkeypatch.setattr(node_graphs, "cache_folder", lambda: None)         # no bake kept from other tests
     ex = _export()
     assert any("'Color' is driven by a Color Ramp node (Blender could not bake it (it did not finish" in w
                for w in ex.warnings), ex.warnings
     assert ex.scene.texture is None and np.allclose(ex.scene.materials.diffuse[0], 0.6)
+
+
+def test_graph_bakes_are_kept_on_disk_and_baked_again_when_what_they_read_changes(fresh, tmp_path, monkeypatch):
+    """A graph Blender baked is kept on disk, keyed by its material, its images' pixels, the
+    object it is baked on and the task: the same scene exported again starts no bake and reads
+    the same values; an edited image (a graph over the UV map) and an edited UV map (a graph
+    baked on the object) are baked again, the unchanged graph is not; a changed ramp color too."""
+    from raybundle_addon.translation import node_graphs
+    from raybundle_addon.translation.blender_process import BlenderProcess
+
+    monkeypatch.setattr(node_graphs, "cache_folder", lambda: str(tmp_path))
+    starts = []
+
+    class Counted(BlenderProcess):
+        def __init__(self, *args):
+            starts.append(args)
+            super().__init__(*args)
+
+    monkeypatch.setattr(node_graphs, "BlenderProcess", Counted)
+    plane, _ = textured_plane()                                 # image -> Color Ramp: over the UV map
+    nt = plane.data.materials[0].node_tree
+    ramp = _between(nt, nt.nodes.new("ShaderNodeValToRGB"), nt.nodes["Image Texture"].outputs["Color"],
+                    nt.nodes["Diffuse BSDF"].inputs["Color"])
+    other = plane_with_uvs(size=1.0)                            # noise -> Color Ramp: on the object
+    other.location.x = 1.6
+    nt2 = other.data.materials[0].node_tree
+    _between(nt2, nt2.nodes.new("ShaderNodeValToRGB"), nt2.nodes.new("ShaderNodeTexNoise").outputs["Fac"],
+             nt2.nodes["Diffuse BSDF"].inputs["Color"])
+
+    def baked():
+        ex = _export()
+        assert not any("Color" in w for w in ex.warnings), ex.warnings
+        return [im.copy() for im in ex.scene.texture.images], sorted(p.name for p in tmp_path.glob("*.npy"))
+
+    first, files = baked()
+    assert len(starts) == 1 and len(files) == 2 and len(first) == 2
+    again, same = baked()
+    assert len(starts) == 1 and same == files and all(np.array_equal(a, b) for a, b in zip(first, again))
+    img = nt.nodes["Image Texture"].image
+    px = np.array(img.pixels[:], np.float32).reshape(-1, 4)
+    px[:, :3] = 1 - px[:, :3]
+    img.pixels.foreach_set(px.ravel())
+    uv = other.data.uv_layers[0].uv
+    co = np.empty(2 * len(uv), np.float32)
+    uv.foreach_get("vector", co)
+    uv.foreach_set("vector", 0.5 * co)
+    edited, files2 = baked()
+    assert len(starts) == 2 and len(files2) == 4 and len(edited) == 2
+    assert not any(np.array_equal(a, b) for a, b in zip(first, edited))
+    ramp.color_ramp.elements[1].color = (0.05, 0.2, 0.8, 1)
+    recolored, files3 = baked()
+    changed = [not np.array_equal(a, b) for a, b in zip(edited, recolored)]
+    assert len(starts) == 3 and len(files3) == 5 and sorted(changed) == [False, True]
 
 
 def _shaded_plane(kind):

@@ -238,7 +238,7 @@ def test_hdri_with_a_sun_lights_a_plate_and_a_box_as_in_cycles(fresh, tmp_path):
     assert not bad, report
 
 
-def test_the_world_renders_while_the_patches_are_laid_out(fresh, tmp_path):
+def test_the_world_renders_while_the_patches_are_laid_out(fresh, tmp_path, monkeypatch):
     """``export_scene(defer_world=True)`` (the F12 engine's) leaves Blender's render of the
     world running in its process: the scene has a stand-in world, which lights it as far as
     the layout's choices go and which no solver may read (``make_renderer`` refuses it);
@@ -249,15 +249,21 @@ def test_the_world_renders_while_the_patches_are_laid_out(fresh, tmp_path):
     from raybundle.app import pipeline
     from raybundle.app.plan import RunOptions, plan
     from raybundle_addon.translation.export import export_scene
-    from raybundle_addon.translation.world import forget_rendered_worlds
+    from raybundle_addon.translation import bake_cache
 
     sky_world(tmp_path, sun=((0.5, 0.3, 0.81), 3000.0))
     add_object("plate", [(-1.5, -1.5, 0), (1.5, -1.5, 0), (1.5, 1.5, 0), (-1.5, 1.5, 0)], [(0, 1, 2, 3)],
                [node_material("white", color=(0.8, 0.8, 0.8))])
     add_camera((0, -3.0, 3.0), (math.radians(45), 0, 0), resolution=(40, 40), lens=35)
     dg = bpy.context.evaluated_depsgraph_get()
+    monkeypatch.setattr(bake_cache, "cache_folder", lambda: str(tmp_path))
     plain = export_scene(dg)
-    forget_rendered_worlds()
+    kept = export_scene(dg, defer_world=True)                      # kept on disk: no process, the same images
+    assert kept.world_render is None and not kept.scene.world.stand_in
+    assert np.array_equal(kept.scene.world.image, plain.scene.world.image)
+    assert np.array_equal(kept.scene.world.view, plain.scene.world.view)
+    monkeypatch.undo()
+    monkeypatch.setattr(bake_cache, "KEEP", False)                 # rendered again, not read from the disk
     ex = export_scene(dg, defer_world=True)
     assert ex.scene.world.stand_in and ex.scene.world.emits and len(ex.scene.sun_lights) == 0
     laid = pipeline.lay_out(ex.scene, plan(ex.scene, RunOptions(method="stochastic-iteration", patches=50)))
@@ -271,7 +277,6 @@ def test_the_world_renders_while_the_patches_are_laid_out(fresh, tmp_path):
         assert np.allclose(sc.world.image, plain.scene.world.image, rtol=1e-5, atol=1e-7)
         assert np.allclose(sc.world.view, plain.scene.world.view, rtol=1e-5, atol=1e-7)
     pipeline.make_renderer(laid).tracer.close()
-    forget_rendered_worlds()
     ex = export_scene(dg, defer_world=True)
     proc = ex.world_render._job._proc
     ex.cancel_world()

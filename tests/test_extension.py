@@ -218,6 +218,8 @@ DRIVER = textwrap.dedent(r'''
                          "emitting_triangles": int((ex.scene.materials.emission[ex.scene.triangle_material]
                                                     .max(axis=1) > 0).sum()),
                          "warnings": list(ex.warnings)}
+        folder = importlib.import_module(mod + ".translation.bake_cache").cache_folder()
+        res["bake_cache"] = [folder, bool(folder) and os.path.isdir(folder)]
         dump()
         sys.path.insert(0, tools)
         from cycles_reference import cycles_settings, exr_output
@@ -308,6 +310,8 @@ def test_installed_add_on_exports_the_demo_blend(installed):
     ex = installed.get("export")
     assert ex, f"no export: {installed.get('render_error')}\n{installed['_log']}"
     assert ex == DEMO_EXPORT, ex
+    cache, made = installed.get("bake_cache") or ("", False)     # the extension's user folder keeps the bakes
+    assert made and cache.replace(os.sep, "/").endswith("extensions/.user/user_default/raybundle/graph-bakes"), cache
 
 
 @needs_bpy

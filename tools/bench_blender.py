@@ -60,9 +60,11 @@ def _open(path):
     import bpy
 
     import raybundle_addon
+    from raybundle_addon.translation import bake_cache
 
     if not hasattr(bpy.types.Scene, "raybundle"):
         raybundle_addon.register()
+    bake_cache.KEEP = False             # timed as a session's first run: Blender's world and graph bakes included
     bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path))
     scene = bpy.context.scene
     if OPEN_SETTINGS["resolution"]:
@@ -137,9 +139,6 @@ def render(blend, path, engine, seconds=None, samples=None, seed=0, patches=None
     if engine == "CYCLES":
         cycles_settings(samples, seed, world_strength=None)
     else:
-        from raybundle_addon.translation.world import forget_rendered_worlds
-
-        forget_rendered_worlds()          # timed as from a fresh session: the world's render included
         scene.render.engine = "RAYBUNDLE"
         rb = scene.raybundle
         rb.time_limit, rb.iterations, rb.seed = float(seconds), 0, seed

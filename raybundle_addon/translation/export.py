@@ -388,7 +388,7 @@ def export_scene(depsgraph, camera_object=None, use_border=True, name=None, requ
     except BaseException:
         pending.cancel()
         raise
-    if defer_world:
+    if defer_world and pending.running:
         result.world_render = pending
     return result
 

@@ -38,18 +38,18 @@ between :data:`OBJECT_BAKE_MIN` and :data:`OBJECT_BAKE_SIZE` a side).  Graphs
 reading the view or the light (Fresnel, Layer Weight, Light Path, Geometry, Texture
 Coordinate's Camera, Window or Reflection), attributes or node groups are not evaluated: the
 socket's own value is used, with a warning naming the node.  One process bakes every graph of
-a scene; the results are kept for the session (the same material, images and graphs are not
-baked again).
+a scene; the results are kept on disk (:mod:`.bake_cache`): the same material, object and task
+are not baked again.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from .bake_cache import BakeCache, cache_folder, image_digest, library_digest, task_key
 from .blender_process import BlenderProcess, BlenderProcessError, temporary_folder
 
 #: node types whose output is a function of their inputs alone (no position, view, light or attribute)
@@ -81,9 +81,6 @@ MAX_BAKE_SCALE = 8
 MAX_BAKE_SIDE = 4096
 #: seconds before the bake is given up
 BAKE_TIMEOUT = 300.0
-
-_cache: dict = {}
-
 
 @dataclass
 class GraphInput:
@@ -214,9 +211,11 @@ class GraphBake:
     """The graphs of a scene's materials baked by Blender (:func:`start_graph_bake`);
     :meth:`get` waits for the bake the first time."""
 
-    def __init__(self, inputs, reasons, job=None, key=None, results=None, objects=None, uv_of=None):
-        self._inputs, self._reasons, self._job, self._key = inputs, reasons, job, key
+    def __init__(self, inputs, reasons, job=None, results=None, objects=None, uv_of=None, kept=None):
+        self._inputs, self._reasons, self._job = inputs, reasons, job
         self._results = results
+        #: (bakes read from the disk, each input's cache key, the :class:`.bake_cache.BakeCache`)
+        self._kept = kept
         #: per-object inputs' key -> the keys of its objects' bakes (key + object name)
         self._objects = objects or {}
         self._uv_of = uv_of or {}
@@ -250,9 +249,10 @@ class GraphBake:
         job, paths = self._job
         try:
             job.wait(list(paths.values()))
-            self._results = {k: np.load(p) for k, p in paths.items()}
-            _cache.clear()                    # one scene's graphs at a time are enough
-            _cache[self._key] = self._results
+            baked = {k: np.load(p) for k, p in paths.items()}
+            kept, keys, cache = self._kept
+            cache.store({keys[k]: v for k, v in baked.items()})
+            self._results = {**kept, **baked}
         except (BlenderProcessError, OSError, ValueError) as e:
             self.failed = str(e)
             self._results = {}
@@ -389,57 +389,30 @@ def start_graph_bake(materials, users=None, threads=0, camera=None):
     Materials, None skipped) in one process on ``threads`` CPU threads (0: all): a
     :class:`GraphBake`.  ``users``: material name -> the objects that use it (their originals),
     for graphs baked on each object, as finely as ``camera`` (the exported
-    :class:`~raybundle.scene.camera.Camera`, or None) sees them.  Graphs baked before in this
-    session are not baked again."""
-    import bpy
-
-    from .images import image_rgba
-
+    :class:`~raybundle.scene.camera.Camera`, or None) sees them.  Graphs baked before from the
+    same material, object and task are read from the disk (:mod:`.bake_cache`)."""
     inputs, reasons, originals, objects, uv_of, size_of, bake_objects = _graph_inputs(materials, users or {},
                                                                                      camera)
     if not inputs:
         return GraphBake(inputs, reasons, results={})
     folder = temporary_folder("raybundle-graphs-")
     try:
-        library = os.path.join(folder.name, "materials.blend")
-        bpy.data.libraries.write(library, set(originals.values()) | set(bake_objects.values()),
-                                 path_remap="ABSOLUTE", fake_user=True)
-        digest = hashlib.sha1(open(library, "rb").read())
-        files, tasks, paths = {}, [], {}
-        for n, g in enumerate(inputs.values()):
-            task_images = {}
-            for node, im in g.images.items():
-                if im.name_full not in files:
-                    px = image_rgba(im)
-                    if px is None:
-                        reasons[g.key] = f"the image {im.name!r} has no pixel data"
-                        break
-                    files[im.name_full] = os.path.join(folder.name, f"image{len(files)}.npy")
-                    np.save(files[im.name_full], px)
-                    digest.update(px.tobytes())
-                task_images[node] = files[im.name_full]
-            else:
-                task = dict(material=originals[g.material].name, node=g.node, socket=g.socket, size=list(g.size),
-                            uv_maps=[g.uv], images=task_images)
-                for key in objects.get(g.key, [g.key]) if g.per_object else [g.key]:
-                    if key in reasons:
-                        continue
-                    paths[key] = os.path.join(folder.name, f"bake{len(paths)}.npy")
-                    tasks.append(dict(task, out=paths[key], **(
-                        dict(object=bake_objects[key[3]].name, uv_maps=[uv_of[key]], size=[size_of[key]] * 2,
-                             margin=OBJECT_BAKE_MARGIN) if g.per_object else {})))
+        cache = BakeCache(cache_folder())
+        results, tasks, paths, keys = _kept_and_tasks(inputs, reasons, originals, objects, uv_of, size_of,
+                                                      bake_objects, folder.name, cache)
         for k in [k for k in inputs if k in reasons]:
             del inputs[k]
         if not tasks:
             folder.cleanup()
-            return GraphBake(inputs, reasons, results={}, objects=objects, uv_of=uv_of)
-        key = (digest.hexdigest(), json.dumps([[t["material"], t["node"], t["socket"], t["size"], t.get("object")]
-                                               for t in tasks]))
-        if key in _cache:
-            folder.cleanup()
-            return GraphBake(inputs, reasons, results=_cache[key], objects=objects, uv_of=uv_of)
+            return GraphBake(inputs, reasons, results=results, objects=objects, uv_of=uv_of)
+        import bpy
+
+        library = os.path.join(folder.name, "materials.blend")
+        bpy.data.libraries.write(library, {originals[t["key"][0]] for t in tasks}
+                                 | {bake_objects[t["key"][3]] for t in tasks if len(t["key"]) > 3},
+                                 path_remap="ABSOLUTE", fake_user=True)
         with open(os.path.join(folder.name, "job.json"), "w") as f:
-            json.dump(dict(tasks=tasks), f)
+            json.dump(dict(tasks=[{k: v for k, v in t.items() if k != "key"} for t in tasks]), f)
         job = BlenderProcess("material_bake.py", [library, os.path.join(folder.name, "job.json"), str(int(threads))],
                              folder, BAKE_TIMEOUT)
     except (RuntimeError, OSError, BlenderProcessError) as e:
@@ -447,4 +420,56 @@ def start_graph_bake(materials, users=None, threads=0, camera=None):
         bake = GraphBake(inputs, reasons, results={}, objects=objects)
         bake.failed = str(e)
         return bake
-    return GraphBake(inputs, reasons, job=(job, paths), key=key, objects=objects, uv_of=uv_of)
+    return GraphBake(inputs, reasons, job=(job, paths), objects=objects, uv_of=uv_of, kept=(results, keys, cache))
+
+
+def _kept_and_tasks(inputs, reasons, originals, objects, uv_of, size_of, bake_objects, folder, cache):
+    """``(kept, tasks, paths, keys)``: the bakes of :func:`start_graph_bake`'s ``inputs`` read
+    from ``cache`` (key -> values), the bake script's tasks for the others (each with its
+    ``key``), their output paths and cache keys (key -> each); an image without pixels adds
+    its input's reason to ``reasons``."""
+    from .images import image_rgba
+
+    kept, tasks, paths, keys, files, digests = {}, [], {}, {}, {}, {}
+
+    def digest(what, make):
+        if what not in digests:
+            digests[what] = make()
+        return digests[what]
+
+    for g in inputs.values():
+        mat = originals[g.material]
+        images = {node: digest(("image", im.name_full), lambda im=im: image_digest(im)) for node, im in g.images.items()}
+        task = dict(material=mat.name, node=g.node, socket=g.socket, size=list(g.size), uv_maps=[g.uv])
+        pending = []
+        for key in objects.get(g.key, []) if g.per_object else [g.key]:
+            if key in reasons:
+                continue
+            own = task if not g.per_object else dict(task, object=bake_objects[key[3]].name, uv_maps=[uv_of[key]],
+                                                      size=[size_of[key]] * 2, margin=OBJECT_BAKE_MARGIN)
+            ids = (mat,) if not g.per_object else (bake_objects[key[3]],)
+            lib = digest(ids, lambda ids=ids: library_digest(ids, os.path.join(folder, "digest.blend")))
+            keys[key] = task_key(own, [lib, sorted(images.items(), key=str)])
+            got = cache.load(keys[key], own["size"][::-1])
+            if got is not None:
+                kept[key] = got
+            else:
+                pending.append((key, own))
+        if not pending:
+            continue
+        task_images = {}
+        for node, im in g.images.items():
+            if im.name_full not in files:
+                px = image_rgba(im)
+                if px is None:
+                    break
+                files[im.name_full] = os.path.join(folder, f"image{len(files)}.npy")
+                np.save(files[im.name_full], px)
+            task_images[node] = files[im.name_full]
+        else:
+            for key, own in pending:
+                paths[key] = os.path.join(folder, f"bake{len(paths)}.npy")
+                tasks.append(dict(own, images=task_images, out=paths[key], key=key))
+            continue
+        reasons[g.key] = f"the image {im.name!r} has no pixel data"
+    return kept, tasks, paths, keys

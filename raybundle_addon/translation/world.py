@@ -9,8 +9,8 @@ cannot start another render in the same process), so nothing of the node tree is
 reimplemented here.  Through a perspective camera the same process renders the world once
 more through that camera, at the render's size, each pixel the mean over its area as
 raybundle's own pixels are (:attr:`raybundle.scene.world.World.view`): what the camera sees of the world through a
-window is then Blender's own pixel, not a panorama's blur.  The images are kept per world,
-node tree and view for the session.  The render can run while the caller goes on
+window is then Blender's own pixel, not a panorama's blur.  The images are kept on disk per
+world, node tree and view (:mod:`.bake_cache`).  The render can run while the caller goes on
 (:func:`start_world_export`: the F12 engine and bakes lay out their patches meanwhile).
 
 What is not modelled, warned: the world's volume; a Light Path node (the world lights the
@@ -18,12 +18,12 @@ scene as the camera sees it); a failed evaluation falls back to the Background's
 """
 from __future__ import annotations
 
-import hashlib
 import os
 import time
 
 import numpy as np
 
+from .bake_cache import BakeCache, cache_folder, library_digest, task_key
 from .blender_process import BlenderProcess, BlenderProcessError, temporary_folder
 
 #: width of the equirectangular image a node-tree world is rendered into (pixels; height half of it)
@@ -42,9 +42,6 @@ VIEW_SAMPLE_BUDGET = 30_000_000
 #: the bar, not the mean of the sky behind it too (:meth:`raybundle.scene.world.World.view_radiance`)
 VIEW_SUPERSAMPLE = 4
 VIEW_MAX_PIXELS = 4_000_000
-
-_cache: dict = {}
-
 
 class WorldRenderError(RuntimeError):
     """Blender could not render the world (one-line reason)."""
@@ -69,7 +66,10 @@ def start_world_export(world, warn, view=None, threads=0):
         job = start_world_render(world, view=None if view is None else view[0], threads=threads)
     except WorldRenderError as e:
         return PendingWorld(_fallen_back(world, fallback, e, warn))
-    return PendingWorld(None, job, world.name, fallback, view, warn)
+    pending = PendingWorld(None, job, world.name, fallback, view, warn)
+    if job.done:                                      # read from the disk: final at once
+        pending.now = pending.finish()
+    return pending
 
 
 class PendingWorld:
@@ -107,6 +107,11 @@ class PendingWorld:
             self._job = None
             self.waited = time.perf_counter() - t0
         return self._world
+
+    @property
+    def running(self):
+        """Whether Blender's render is still to be waited for."""
+        return self._job is not None
 
     def cancel(self):
         if self._job is not None:
@@ -186,12 +191,6 @@ def camera_view(cam_ob, render, size, camera, border):
     return params, camera, border or (0, 0, w, h), s
 
 
-def forget_rendered_worlds():
-    """Drop the cached renders of worlds (:func:`render_world`): the next export renders its
-    world again, as a fresh Blender session would (a benchmark's timed runs)."""
-    _cache.clear()
-
-
 def render_world(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, view=None):
     """``(image, seen)``: (width / 2, width, 3) float32 equirectangular radiance of the bpy World
     ``world`` (:mod:`raybundle.scene.world`'s layout), rendered by Cycles in a separate process,
@@ -202,24 +201,24 @@ def render_world(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, view=Non
 
 def start_world_render(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, view=None, threads=0):
     """:func:`render_world` begun in its own process, on ``threads`` CPU threads (0: all): a
-    :class:`WorldRender` (its ``result()`` waits).  A world rendered before in this session
-    (the same node tree and view) is not rendered again."""
+    :class:`WorldRender` (its ``result()`` waits).  A world rendered before (the same node tree
+    and view) is read from the disk (:mod:`.bake_cache`)."""
     import json
-
-    import bpy
 
     tmp = temporary_folder("raybundle-world-")
     library = os.path.join(tmp.name, "world.blend")
+    cache = BakeCache(cache_folder())
     try:
-        bpy.data.libraries.write(library, {world}, path_remap="ABSOLUTE", fake_user=True)
+        key = task_key(dict(world=world.name_full, width=int(width), samples=int(samples), view=view),
+                       [library_digest([world], library)])
     except (RuntimeError, OSError) as e:
         tmp.cleanup()
         raise WorldRenderError(f"writing it failed: {e}") from None
-    with open(library, "rb") as f:
-        key = (world.name_full, width, samples, hashlib.sha1(f.read()).hexdigest(), json.dumps(view))
-    if key in _cache:
+    kept = cache.load(key + "-world", (int(width) // 2, int(width)))
+    seen = cache.load(key + "-view", view["size"][::-1]) if view is not None else None
+    if kept is not None and (view is None or seen is not None):
         tmp.cleanup()
-        return WorldRender(key, result=_cache[key])
+        return WorldRender(key, result=(kept, seen))
     out = os.path.join(tmp.name, "world.exr")
     args = [library, world.name, out, str(int(width)), str(int(samples)), str(int(threads))]
     seen = None
@@ -235,14 +234,20 @@ def start_world_render(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, vi
         proc = BlenderProcess("world_render.py", args, tmp, RENDER_TIMEOUT)
     except BlenderProcessError as e:
         raise WorldRenderError(str(e)) from None
-    return WorldRender(key, proc, out, seen)
+    return WorldRender(key, proc, out, seen, cache=cache)
 
 
 class WorldRender:
     """A render of a world under way (:func:`start_world_render`), or one already known."""
 
-    def __init__(self, key, proc=None, out=None, seen=None, result=None):
+    def __init__(self, key, proc=None, out=None, seen=None, result=None, cache=None):
         self.key, self._proc, self._out, self._seen, self._result = key, proc, out, seen, result
+        self._cache = cache
+
+    @property
+    def done(self):
+        """Whether :meth:`result` has its images without waiting."""
+        return self._result is not None
 
     def result(self):
         """``(image, seen)`` as :func:`render_world` returns them, once the render is done
@@ -260,8 +265,7 @@ class WorldRender:
         finally:
             self._proc.close()
         self._result = (images[0], images[1] if self._seen is not None else None)
-        _cache.clear()                                # one world at a time is enough
-        _cache[self.key] = self._result
+        self._cache.store({self.key + "-world": images[0], **({self.key + "-view": images[1]} if len(images) > 1 else {})})
         return self._result
 
     def cancel(self):
