@@ -21,6 +21,11 @@ def _modules():
 
 
 def register():
+    from raybundle.util import compiled
+
+    from .translation.bake_cache import user_folder
+
+    compiled.CACHE_FOLDER = user_folder("kernels")     # the compiled kernels in the add-on's user folder
     for m in _modules():
         m.register()
 

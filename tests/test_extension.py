@@ -86,7 +86,7 @@ def test_zip_holds_the_wheels_of_both_blender_pythons(linux_zip):
     with zipfile.ZipFile(linux_zip) as z:
         wheels = [n.split("/")[-1] for n in z.namelist() if n.endswith(".whl")]
         manifest = tomllib.loads(z.read("blender_manifest.toml").decode())
-    for dist in ("embreex", "openexr"):
+    for dist in ("embreex", "openexr", "numba", "llvmlite"):
         assert sorted(w.split("-")[2] for w in wheels if w.lower().startswith(dist)) == ["cp311", "cp313"], wheels
     assert (manifest["blender_version_min"], manifest["blender_version_max"]) == ("4.2.0", "5.4.0")
 
@@ -117,7 +117,7 @@ def _clean_env(**extra):
 
 def _imports_ours(python) -> list[str]:
     code = ("import importlib.util as u, json; "
-            "print(json.dumps([m for m in ('raybundle', 'embreex', 'OpenEXR') if u.find_spec(m)]))")
+            "print(json.dumps([m for m in ('raybundle', 'embreex', 'OpenEXR', 'numba') if u.find_spec(m)]))")
     r = subprocess.run([str(python), "-c", code], capture_output=True, text=True, env=_clean_env(), check=True)
     return json.loads(r.stdout)
 
@@ -176,7 +176,7 @@ DRIVER = textwrap.dedent(r'''
     import bpy, addon_utils
     import numpy as np
     res["imports_before"] = {}
-    for m in ("raybundle", "embreex", "OpenEXR"):
+    for m in ("raybundle", "embreex", "OpenEXR", "numba"):
         try:
             __import__(m)
             res["imports_before"][m] = True
@@ -194,7 +194,7 @@ DRIVER = textwrap.dedent(r'''
     res["enabled"] = mod in bpy.context.preferences.addons and addon_utils.check(mod)[1]
     user = os.environ["BLENDER_USER_RESOURCES"]
     res["imports_after"] = {}
-    for m in ("raybundle", "embreex", "OpenEXR"):
+    for m in ("raybundle", "embreex", "OpenEXR", "numba"):
         try:
             f = __import__(m).__file__
             res["imports_after"][m] = {"ok": True, "file": f, "from_user_dir": os.path.realpath(f).startswith(
@@ -250,6 +250,11 @@ DRIVER = textwrap.dedent(r'''
         quad = {k: im.reshape(2, 32, 2, 32, 3).mean(axis=(1, 3)).reshape(4, 3) for k, im in images.items()}
         full = {k: im.reshape(-1, 3).mean(axis=0) for k, im in images.items()}
         res["means"] = {k: np.vstack([full[k], quad[k]]).tolist() for k in images}
+        from raybundle.util import compiled               # the render compiled its kernels into the user folder
+        kernels = compiled.cache_folder()
+        res["kernels"] = dict(enabled=compiled.ENABLED, reason=compiled.REASON, folder=kernels,
+                              pending=compiled.pending(),
+                              cached=sorted(n for _, _, fs in os.walk(kernels) for n in fs if n.endswith(".nbi")))
         res["render_ok"] = True
     except Exception as e:
         res["render_ok"] = False
@@ -288,7 +293,8 @@ def installed(linux_zip, bpy_only_python, tmp_path_factory):
 
 @needs_bpy
 def test_zip_installs_and_enables_in_a_bpy_only_env(installed):
-    assert installed.get("imports_before") == {"raybundle": False, "embreex": False, "OpenEXR": False}, \
+    assert installed.get("imports_before") == {"raybundle": False, "embreex": False, "OpenEXR": False,
+                                               "numba": False}, \
         installed["_log"]
     r = installed.get("install_result")
     hint = ("\nraybundle_addon/__init__.py must define register() and unregister(); Blender removes an "
@@ -300,7 +306,7 @@ def test_zip_installs_and_enables_in_a_bpy_only_env(installed):
 @needs_bpy
 def test_bundled_wheels_import_from_the_installed_extension(installed):
     after = installed.get("imports_after", {})
-    for m in ("raybundle", "embreex", "OpenEXR"):
+    for m in ("raybundle", "embreex", "OpenEXR", "numba"):
         assert after.get(m, {}).get("ok"), f"import {m} failed after install: {after.get(m)}\n{installed['_log']}"
         assert after[m]["from_user_dir"], f"{m} was imported from {after[m]['file']}, not the extension's wheels"
 
@@ -312,6 +318,17 @@ def test_installed_add_on_exports_the_demo_blend(installed):
     assert ex == DEMO_EXPORT, ex
     cache, made = installed.get("bake_cache") or ("", False)     # the extension's user folder keeps the bakes
     assert made and cache.replace(os.sep, "/").endswith("extensions/.user/user_default/raybundle/graph-bakes"), cache
+
+
+@needs_bpy
+def test_installed_engine_renders_with_its_compiled_kernels(installed):
+    """Numba from the zip's wheels compiles the kernels in this Blender (4.2's Python 3.11 and
+    NumPy 1.26, 5.3's 3.13 and 2.x), cached in the extension's user folder."""
+    k = installed.get("kernels")
+    assert k, f"no render: {installed.get('render_error')}\n{installed['_log']}"
+    assert k["enabled"] and not k["pending"], k
+    assert k["folder"].replace(os.sep, "/").endswith("extensions/.user/user_default/raybundle/kernels"), k
+    assert k["cached"], k
 
 
 @needs_bpy

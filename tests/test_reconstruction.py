@@ -7,6 +7,7 @@ Deterministic: the patch values fed in are exact patch means (quadrature), so th
 measure the reconstruction alone, not the solver's noise.
 """
 import numpy as np
+import pytest
 
 from raybundle.app import pipeline
 from raybundle.imaging.settings import RenderSettings
@@ -115,3 +116,32 @@ def test_projection_follows_the_corner_profile():
     err_above = np.abs(proj[above] / wall_irradiance(pos[above]) - 1)
     assert err_above.max() < 0.02, err_above
 
+
+
+def test_the_compiled_kernels_give_the_numpy_paths_values(monkeypatch):
+    """The reconstruction's kernels (:mod:`raybundle.util.compiled`) against its NumPy path on a
+    room with a tessellated sphere (clusters, read through their fits) and plain walls (the
+    projection), some triangle sides without receiving area: the same sums in another order."""
+    from test_clusters import furnace_with_sphere
+
+    from raybundle.patches.clusters import make_patches
+    from raybundle.patches.reconstruction import LinearReconstruction
+    from raybundle.util import compiled
+
+    sc = make_patches(furnace_with_sphere(), patches=300)
+    rng = np.random.default_rng(3)
+    area = sc.triangle_area[sc.tside_triangle] * rng.uniform(0.5, 1.0, len(sc.tside_side))
+    area[rng.random(len(area)) < 0.05] = 0.0
+    rec = LinearReconstruction(sc, area)
+    assert rec._fit is not None and len(rec._p_vertices) and len(rec._fallback_tsides)
+    values = rng.random((sc.n_sides, 4))
+    assert compiled.ENABLED
+    got = [rec.averaged(values), rec.projected(values), rec.smooth_and_sharp(values, 0.3 * values)]
+    monkeypatch.setattr(compiled, "ENABLED", False)                  # as where Numba cannot be imported
+    monkeypatch.setattr(compiled, "REASON", "ImportError: No module named 'numba'")
+    monkeypatch.setattr(compiled, "_warned", False)
+    with pytest.warns(RuntimeWarning, match="Numba is not available .*No module named 'numba'.*NumPy path"):
+        want = [rec.averaged(values)]
+    want += [rec.projected(values), rec.smooth_and_sharp(values, 0.3 * values)]   # said once
+    for g, w in zip(got, want):
+        assert g.shape == w.shape and np.allclose(g, w, rtol=1e-12, atol=1e-13 * np.abs(w).max())

@@ -101,10 +101,11 @@ def one(triangles, seconds, patches, mode, reference=REFERENCE, resolution=None)
 
 #: the benches' columns: each phase the progress display shows, by the start of its text
 PHASES = {"exporting": "export", "laying out": "layout", "cutting faces": "layout", "cutting patches": "contacts",
-          "grouping": "layout", "welding": "welding", "waiting for Blender": "world", "building the ray tracer": "tracer",
+          "grouping": "layout", "welding": "welding", "waiting for Blender": "world", "compiling": "kernels",
+          "building the ray tracer": "tracer",
           "first shot": "first shot", "warming up": "warm-up", "iterating": "iterating", "forming": "final image"}
 #: the set-up's phases, in order
-SETUP = ("export", "layout", "contacts", "welding", "world", "tracer", "first shot", "warm-up")
+SETUP = ("export", "layout", "contacts", "welding", "world", "kernels", "tracer", "first shot", "warm-up")
 
 
 def phase_seconds(phases):

@@ -47,7 +47,12 @@ CORE = ROOT / "core"
 # together with bpy 4.2.23 - 5.3.0, which ship their own libembree4 and libOpenEXR). numpy is
 # NOT bundled: Blender ships it. Adding a runtime dependency to core/pyproject.toml
 # means adding its pin here.
-PINS = {"embreex": "4.4.0.post1", "OpenEXR": "3.5.3"}
+PINS = {"embreex": "4.4.0.post1", "OpenEXR": "3.5.3", "numba": "0.68.1", "llvmlite": "0.50.0"}
+# Numba's compiler, needed by numba and not imported by the core itself
+TRANSITIVE = {"llvmlite"}
+# Numba 0.68 has no Intel macOS wheels: 0.62.1 (with llvmlite 0.45.1) is the last that has them;
+# it supports NumPy 1.22 - 2.3 (0.68.1: 1.22 - 2.5), both cover Blender's NumPy 1.26 and 2.x
+PLATFORM_PINS = {"macos-x64": {"numba": "0.62.1", "llvmlite": "0.45.1"}}
 PROVIDED_BY_BLENDER = {"numpy"}
 # Blender's Pythons: 3.11 in Blender 4.2 - 5.0, 3.13 in 5.1 - 5.3 (blender_version_max is 5.4.0)
 PYTHON_VERSIONS = ("3.11", "3.13")
@@ -200,7 +205,7 @@ def check_core_dependencies(manifest: dict) -> None:
     core = tomllib.loads((CORE / "pyproject.toml").read_text())["project"]
     deps = {norm(re.match(r"\s*([A-Za-z0-9._-]+)", d).group(1)) for d in core.get("dependencies", [])
             if "extra ==" not in d}
-    want = {norm(n) for n in PINS} | {norm(n) for n in PROVIDED_BY_BLENDER}
+    want = {norm(n) for n in set(PINS) - TRANSITIVE} | {norm(n) for n in PROVIDED_BY_BLENDER}
     if deps != want:
         raise BuildError(f"core/pyproject.toml runtime dependencies {sorted(deps)} differ from what the extension "
                          f"bundles {sorted(norm(n) for n in PINS)} plus {sorted(PROVIDED_BY_BLENDER)} from Blender; "
@@ -328,7 +333,8 @@ def build(platforms: list[str] | None, out_dir: pathlib.Path, cache: pathlib.Pat
     wheel_dir = stage / "wheels"
     wheel_dir.mkdir()
     core_wheel = build_core_wheel(wheel_dir, cache, offline)
-    per_platform = {pf: [fetch_wheel(dist, ver, pf, py, cache, offline) for dist, ver in PINS.items()
+    per_platform = {pf: [fetch_wheel(dist, ver, pf, py, cache, offline)
+                         for dist, ver in {**PINS, **PLATFORM_PINS.get(pf, {})}.items()
                          for py in PYTHON_VERSIONS] for pf in platforms}
     check_runtime_imports([core_wheel] + per_platform[platforms[0]], blender_ext, allow_imports, addon)
     for src in {w for ws in per_platform.values() for w in ws}:

@@ -36,19 +36,23 @@ FORMAT = 1
 def cache_folder():
     """The folder the bakes are kept in (made if needed), or None when there is none or
     :data:`KEEP` is off."""
+    return user_folder("graph-bakes") if KEEP else None
+
+
+def user_folder(name):
+    """The add-on's user folder ``name`` (made if needed): Blender's ``extension_path_user`` for
+    the extension, its user data files when the add-on runs from source; None when it cannot
+    be made (a note on the console)."""
     import bpy
 
-    if not KEEP:
-        return None
     root = (__package__ or "").rpartition(".translation")[0]
     try:
         try:
-            return bpy.utils.extension_path_user(root, path="graph-bakes", create=True)
+            return bpy.utils.extension_path_user(root, path=name, create=True)
         except (ValueError, KeyError):        # the add-on loaded from source, not as an extension
-            return bpy.utils.user_resource("DATAFILES", path=os.path.join("raybundle", "graph-bakes"),
-                                           create=True)
+            return bpy.utils.user_resource("DATAFILES", path=os.path.join("raybundle", name), create=True)
     except (OSError, RuntimeError) as e:
-        print(f"raybundle: graph bakes are not kept on disk ({e})", file=sys.stderr)
+        print(f"raybundle: no user folder {name!r} ({e})", file=sys.stderr)
         return None
 
 

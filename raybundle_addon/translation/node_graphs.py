@@ -251,7 +251,8 @@ class GraphBake:
             job.wait(list(paths.values()))
             baked = {k: np.load(p) for k, p in paths.items()}
             kept, keys, cache = self._kept
-            cache.store({keys[k]: v for k, v in baked.items()})
+            if cache.folder is not None:
+                cache.store({keys[k]: v for k, v in baked.items()})
             self._results = {**kept, **baked}
         except (BlenderProcessError, OSError, ValueError) as e:
             self.failed = str(e)
@@ -439,7 +440,8 @@ def _kept_and_tasks(inputs, reasons, originals, objects, uv_of, size_of, bake_ob
 
     for g in inputs.values():
         mat = originals[g.material]
-        images = {node: digest(("image", im.name_full), lambda im=im: image_digest(im)) for node, im in g.images.items()}
+        images = {node: digest(("image", im.name_full), lambda im=im: image_digest(im))
+                  for node, im in g.images.items()} if cache.folder is not None else {}
         task = dict(material=mat.name, node=g.node, socket=g.socket, size=list(g.size), uv_maps=[g.uv])
         pending = []
         for key in objects.get(g.key, []) if g.per_object else [g.key]:
@@ -447,10 +449,12 @@ def _kept_and_tasks(inputs, reasons, originals, objects, uv_of, size_of, bake_ob
                 continue
             own = task if not g.per_object else dict(task, object=bake_objects[key[3]].name, uv_maps=[uv_of[key]],
                                                       size=[size_of[key]] * 2, margin=OBJECT_BAKE_MARGIN)
-            ids = (mat,) if not g.per_object else (bake_objects[key[3]],)
-            lib = digest(ids, lambda ids=ids: library_digest(ids, os.path.join(folder, "digest.blend")))
-            keys[key] = task_key(own, [lib, sorted(images.items(), key=str)])
-            got = cache.load(keys[key], own["size"][::-1])
+            got = None
+            if cache.folder is not None:                      # no digests where nothing is kept
+                ids = (mat,) if not g.per_object else (bake_objects[key[3]],)
+                lib = digest(ids, lambda ids=ids: library_digest(ids, os.path.join(folder, "digest.blend")))
+                keys[key] = task_key(own, [lib, sorted(images.items(), key=str)])
+                got = cache.load(keys[key], own["size"][::-1])
             if got is not None:
                 kept[key] = got
             else:

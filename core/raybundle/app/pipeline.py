@@ -22,6 +22,7 @@ from ..patches.clusters import DEFAULT_PATCHES, make_patches, triangle_patches
 from ..patches.layout import subdivide
 from ..tracing.sampling import NOT_CUD
 from ..tracing.visibility import RayTracer
+from ..util import compiled
 
 
 class Cancelled(Exception):
@@ -114,6 +115,9 @@ def make_solver(scene, settings: RenderSettings | None = None, solver=Stochastic
         warnings.warn(f"first shot is off: the small emitters {names} light the scene only through the bundle "
                       "lines that happen to hit them, so the image is far noisier (thesis 3.4); keep "
                       "first_shot='auto'", stacklevel=3)
+    if compiled.pending():
+        _step(stage, stop, "compiling the kernels")
+        compiled.compile_all()
     _step(stage, stop, f"building the ray tracer over {len(scene.triangles):,} triangles")
     tracer = RayTracer(scene, threads=settings.threads)
     try:
@@ -152,6 +156,9 @@ def _make_image_method(scene, settings, camera, name, stage, stop):
     """An image-only method (:class:`~raybundle.methods.path_tracing.PathTracer`): tracer and lights, no patches."""
     settings.validate()
     check_resources(scene if camera is None else replace(scene, camera=camera))
+    if compiled.pending():
+        _step(stage, stop, "compiling the kernels")
+        compiled.compile_all()
     _step(stage, stop, f"building the ray tracer over {len(scene.triangles):,} triangles")
     tracer = RayTracer(scene, threads=settings.threads)
     try:

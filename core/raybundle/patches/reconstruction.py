@@ -36,8 +36,11 @@ patch mean.
 """
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 
+from ..util import compiled
 from ..util.arrays import group_ids
 
 #: sides of at least this many triangles are clusters, read through their linear fits
@@ -62,43 +65,70 @@ class LinearReconstruction:
         self.empty = self.lumped <= 0                          # vertices without receiving area
         many = np.bincount(scene.tside_side, minlength=scene.n_sides) >= CLUSTER_TRIANGLES
         self._fit = ClusterFit(scene, self.area, self.ids, many) if many.any() else None
-        # the projection's mesh: the tsides of sides that are not clusters (all without any)
-        self._p = np.nonzero(~many[scene.tside_side])[0] if self._fit is not None else slice(None)
-        self._p_ids, self._p_area = self.ids[self._p], self.area[self._p]
+        # the projection's mesh: the tsides of sides that are not clusters (all without any), those
+        # with receiving area, on their own vertices (numbered 0 .. Vp - 1: the fits' vertices of the
+        # clusters, most of a furnished room's, take no part in its solve)
+        p = np.nonzero(~many[scene.tside_side])[0] if self._fit is not None else np.arange(len(self.ids))
+        p = p[self.area[p] > 0]
+        self._p_side, self._p_area = scene.tside_side[p], self.area[p]
+        self._p_vertices, local = np.unique(self.ids[p], return_inverse=True)
+        self._p_ids = local.reshape(-1, 3)
         self._p_flat = self._p_ids.ravel()
-        self._p_lumped = np.bincount(self._p_flat, np.repeat(self._p_area, 3) / 3, minlength=self.n_vertices)
-        self._p_empty = self._p_lumped <= 0
+        self._p_lumped = np.bincount(self._p_flat, np.repeat(self._p_area, 3) / 3, minlength=len(self._p_vertices))
         # vertices neither the projection nor a fit gives a value: the sides' mean around them
-        self._fallback = self._p_empty.copy()
+        self._fallback = np.ones(self.n_vertices, bool)
+        self._fallback[self._p_vertices] = False
         if self._fit is not None:
             self._fallback[self._fit.vertices] = False
+        self._fallback_tsides = np.nonzero(self._fallback[self.ids].any(axis=1))[0]
 
-    def _gather(self, per_corner, flat=None):
-        """Sum (V, C) of per-corner values (TS, 3, C) onto the welded vertices (``flat``:
-        the corners' vertex ids, default all tsides')."""
+    def _gather(self, per_corner, flat=None, n=None):
+        """Sum (n, C) of per-corner values (TS, 3, C) onto the welded vertices (``flat``:
+        the corners' vertex ids, default all tsides'; ``n`` default all vertices)."""
         flat = self._flat if flat is None else flat
-        return np.stack([np.bincount(flat, per_corner[..., c].ravel(), minlength=self.n_vertices)
+        n = self.n_vertices if n is None else n
+        return np.stack([np.bincount(flat, per_corner[..., c].ravel(), minlength=n)
                          for c in range(per_corner.shape[-1])], axis=1)
 
-    def averaged(self, side_values):
+    @cached_property
+    def _average_weights(self):
+        """(weights (TS, 3), their sums (V,)) of :meth:`averaged` over all tsides."""
+        w = np.where(self.empty[self.ids], 1.0, self.area[:, None])
+        return w, np.bincount(self._flat, w.ravel(), minlength=self.n_vertices)
+
+    def averaged(self, side_values, tsides=None):
         """Side values (S, C) -> (V, C): the mean of the sides around each vertex,
-        weighted by their receiving area (vertices without any: unweighted)."""
-        tri = np.asarray(side_values, float)[self.scene.tside_side]            # (TS, C)
-        w = np.where(self.empty[self.ids], 1.0, self.area[:, None])[..., None]   # (TS, 3, 1)
-        num = self._gather(w * tri[:, None, :])
-        den = self._gather(w)
-        return num / np.maximum(den, 1e-300)
+        weighted by their receiving area (vertices without any: unweighted); with
+        ``tsides`` (indices) over those alone (right at the vertices all of whose tsides they hold)."""
+        if tsides is None:
+            ids, side, (w, den) = self.ids, self.scene.tside_side, self._average_weights
+        else:
+            ids, side = self.ids[tsides], self.scene.tside_side[tsides]
+            w = np.where(self.empty[ids], 1.0, self.area[tsides][:, None])
+            den = np.bincount(ids.ravel(), w.ravel(), minlength=self.n_vertices)
+        if compiled.use():
+            num = _scatter_sides(ids, w, side, np.ascontiguousarray(side_values, float), self.n_vertices)
+        else:
+            tri = np.asarray(side_values, float)[side]                              # (TS, C)
+            num = self._gather(w[..., None] * tri[:, None, :], ids.ravel())
+        return num / np.maximum(den, 1e-300)[:, None]
 
     def projected(self, side_values):
         """Side values (S, C) -> (V, C): the L2 projection onto the hat functions,
         clamped at zero (the fit may overshoot below zero next to a jump, and the
         values are radiances).  Vertices without receiving area take :meth:`averaged`."""
-        side_values = np.asarray(side_values, float)
-        tri = side_values[self.scene.tside_side[self._p]]
-        b = self._gather((self._p_area[:, None] * tri / 3)[:, None, :].repeat(3, axis=1), self._p_flat)
-        x = np.maximum(self._solve_mass(b), 0.0)
-        if self._fallback.any():
-            x[self._fallback] = self.averaged(side_values)[self._fallback]
+        side_values = np.ascontiguousarray(side_values, float)
+        nv = len(self._p_vertices)
+        if compiled.use():
+            b = _scatter_sides(self._p_ids, np.repeat(self._p_area[:, None] / 3, 3, axis=1), self._p_side,
+                               side_values, nv)
+        else:
+            tri = side_values[self._p_side]
+            b = self._gather((self._p_area[:, None] * tri / 3)[:, None, :].repeat(3, axis=1), self._p_flat, nv)
+        x = np.zeros((self.n_vertices, side_values.shape[1]))
+        x[self._p_vertices] = np.maximum(self._solve_mass(b), 0.0)
+        if len(self._fallback_tsides):
+            x[self._fallback] = self.averaged(side_values, self._fallback_tsides)[self._fallback]
         if self._fit is not None:
             x[self._fit.vertices] = np.maximum(self._fit.vertex_values(np.asarray(side_values, float)), 0.0)
         return x
@@ -133,22 +163,20 @@ class LinearReconstruction:
         return np.einsum("nk,nkc->nc", bary, vertex_values[self.ids[tside]])
 
     def _mass(self, v):
-        """M v for v (V, C): ``M_uv = sum_T A_T (1 + [u = v]) / 12`` over the triangles
-        holding u and v; rows of vertices without area are the identity."""
+        """M v for v (Vp, C) on the projection's vertices: ``M_uv = sum_T A_T (1 + [u = v]) / 12``
+        over the triangles holding u and v."""
+        if compiled.use():
+            return _mass_product(self._p_ids, self._p_area, np.ascontiguousarray(v), len(v))
         vi = v[self._p_ids]                                       # (TS, 3, C)
         s = vi.sum(axis=1)
         # (A/12) (2 v_a + v_b + v_c) = (A/12) (v_a + sum)
-        r = self._gather((self._p_area[:, None, None] / 12) * (vi + s[:, None, :]), self._p_flat)
-        r[self._p_empty] = v[self._p_empty]
-        return r
+        return self._gather((self._p_area[:, None, None] / 12) * (vi + s[:, None, :]), self._p_flat, len(v))
 
     def _solve_mass(self, b, iterations=100, tol=1e-10):
         """x (V, C) with M x = b by Jacobi-preconditioned conjugate gradients (the lumped
         mass as preconditioner keeps the condition number below 4 on any mesh: a few
         tens of iterations; ``tol`` on the preconditioned residual, relative to b's)."""
-        diag = np.where(self._p_empty, 1.0, self._p_lumped)[:, None]
-        b = b.copy()
-        b[self._p_empty] = 0.0
+        diag = self._p_lumped[:, None]
         x = b / diag
         r = b - self._mass(x)
         z = r / diag
@@ -248,6 +276,10 @@ class ClusterFit:
             most = np.maximum.reduceat(np.abs(dv[self._by_cluster]), self._cluster_start[has], axis=0)
             reach[has] = most
         sc, nv, n_c = self._scene, len(self.vertices), v.shape[1]
+        if compiled.use():
+            return _fit_corners(self._corner, self._corner_vertex, sc.tside_side, sc.tside_triangle,
+                                sc.triangle_corners, self.centroid, self.row, np.ascontiguousarray(g), reach,
+                                np.ascontiguousarray(v, float), self._weight, nv)
         num, den = np.zeros((nv, n_c)), np.zeros(nv)
         step = 1 << 18                          # corners per chunk: bounded temporaries on big scenes
         for lo in range(0, len(self._corner), step):
@@ -264,3 +296,66 @@ class ClusterFit:
                 num[:, ch] += np.bincount(vert, w * pred, minlength=nv)
             den += np.bincount(vert, w, minlength=nv)
         return num / np.maximum(den, 1e-300)[:, None]
+
+
+def _kernel_sample():
+    return np.array([[0, 1, 2]]), np.ones((1, 3)), np.zeros(1, np.int64), np.ones((1, 2)), 3
+
+
+@compiled.kernel(_kernel_sample)
+def _scatter_sides(ids, weight, side, side_values, n_vertices):
+    """(V, C): the sum over tsides t and their corners k of ``weight[t, k] side_values[side[t]]``
+    at vertex ``ids[t, k]`` (``ids`` (TS, 3) int, ``weight`` (TS, 3), ``side`` (TS,) int,
+    ``side_values`` (S, C))."""
+    out = np.zeros((n_vertices, side_values.shape[1]))
+    for t in range(ids.shape[0]):
+        s = side[t]
+        for k in range(3):
+            v, w = ids[t, k], weight[t, k]
+            for c in range(side_values.shape[1]):
+                out[v, c] += w * side_values[s, c]
+    return out
+
+
+@compiled.kernel(lambda: (np.array([[0, 1, 2]]), np.ones(1), np.ones((3, 2)), 3))
+def _mass_product(ids, area, v, n_vertices):
+    """(V, C) ``M v`` over tsides ``ids`` (TS, 3) of ``area`` (TS,): each triangle adds
+    ``A / 12 (2 v_a + v_b + v_c) = A / 12 (v_a + v_a + v_b + v_c)`` at its corner a."""
+    out = np.zeros((n_vertices, v.shape[1]))
+    for t in range(ids.shape[0]):
+        a, b, c3, w = ids[t, 0], ids[t, 1], ids[t, 2], area[t] / 12
+        for c in range(v.shape[1]):
+            s = v[a, c] + v[b, c] + v[c3, c]
+            out[a, c] += w * (v[a, c] + s)
+            out[b, c] += w * (v[b, c] + s)
+            out[c3, c] += w * (v[c3, c] + s)
+    return out
+
+
+@compiled.kernel(lambda: (np.array([0, 1, 2]), np.array([0, 1, 2]), np.zeros(1, np.int64), np.zeros(1, np.int64),
+                          np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros(1, np.int64), np.zeros((1, 3, 2)),
+                          np.zeros((1, 2)), np.ones((1, 2)), np.ones(1), 3))
+def _fit_corners(corner, corner_vertex, tside_side, tside_triangle, triangle_corners, centroid, row, g, reach,
+                 v, weight, n_vertices):
+    """:meth:`ClusterFit.vertex_values` at its corners: each flat tside corner ``corner`` (3 t + k)
+    reads its side's fit ``v_s + clip(g_s . (x - c_s), -reach_s, reach_s)`` (``g`` (Sc, 3, C), ``reach``
+    (Sc, C) by cluster row ``row[s]``), weighted by ``weight[t]`` into its vertex ``corner_vertex``."""
+    n_c = v.shape[1]
+    num, den = np.zeros((n_vertices, n_c)), np.zeros(n_vertices)
+    for i in range(corner.shape[0]):
+        t = corner[i] // 3
+        k = corner[i] - 3 * t
+        side, tri, w, vert = tside_side[t], tside_triangle[t], weight[t], corner_vertex[i]
+        r = row[side]
+        x0 = triangle_corners[tri, k, 0] - centroid[side, 0]
+        x1 = triangle_corners[tri, k, 1] - centroid[side, 1]
+        x2 = triangle_corners[tri, k, 2] - centroid[side, 2]
+        for ch in range(n_c):
+            d = x0 * g[r, 0, ch] + x1 * g[r, 1, ch] + x2 * g[r, 2, ch]
+            d = min(max(d, -reach[r, ch]), reach[r, ch])
+            num[vert, ch] += w * (v[side, ch] + d)
+        den[vert] += w
+    for j in range(n_vertices):
+        for ch in range(n_c):
+            num[j, ch] /= max(den[j], 1e-300)
+    return num
