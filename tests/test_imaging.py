@@ -380,3 +380,30 @@ def test_the_image_parts_sum_to_the_image_and_leave_it_unchanged():
         np.testing.assert_allclose(total, parted.image, atol=1e-5 * parted.image.max())
         assert (parts["glossy"].max() > 0) == glossy and not parts["glass"].any()
         assert parts["lamps"].mean() > 0.1 * parted.image.mean() and parts["diffuse indirect"].mean() > 0
+
+
+def test_a_time_limited_run_bounds_its_first_pass_and_final_image_by_the_pace_of_a_trace():
+    """In a run limited by time the first pass's extra emission samples take at most their share
+    of the iteration time, and the final image's sub-pixel samples at most its final time, at the
+    pace of the last trace of every pixel (a path through a chain of glass panes can take a
+    second): none, and one, where a trace takes longer.  Without a limit they stay as set (a run
+    of given iterations is reproducible).  The old code took 16 traces of every pixel in both
+    (a 2 s Time Limit on ten glass panes ran 32 s)."""
+    from raybundle.imaging.progressive import FIRST_EDGE_SHARE
+
+    sc = pipeline.prepare(scenes.cornell(), patches=100)
+    n = 32 * 32
+    sc.camera = sc.camera.with_resolution(32, 32)
+    rays = []
+    for bound in (None, 0.0):
+        r = pipeline.make_renderer(sc, RenderSettings(seed=1))
+        r.first_edge_seconds = bound
+        r.image_pass()
+        rays.append(r.eye.rays)
+        assert r.full_trace_seconds > 0
+        r.tracer.close()
+    assert rays[0] >= 5 * n and rays[1] < 2 * n, rays
+    pace = r.full_trace_seconds
+    assert r.indirect.samples(None, None) == r.settings.resolve_samples == 16
+    assert r.indirect.samples(None, 3.5 * pace) == 3 and r.indirect.samples(None, 0.01 * pace) == 1
+    assert r.indirect.samples(None, 100 * pace) == 16 and 0 < FIRST_EDGE_SHARE < 0.5

@@ -15,6 +15,10 @@ import numpy as np
 
 from .run import RunLoop
 
+#: the share of a time-limited run's iteration time the first pass's extra emission samples may
+#: take (:attr:`~raybundle.imaging.renderer.Renderer.first_edge_seconds`)
+FIRST_EDGE_SHARE = 0.1
+
 
 @dataclass
 class RenderResult:
@@ -61,6 +65,8 @@ class ProgressiveImage:
         pending = sorted(snapshots) if on_snapshot is not None else []
         if stage is not None:
             stage("iterating")
+        if loop.iteration_time is not None and hasattr(self, "first_edge_seconds"):
+            self.first_edge_seconds = FIRST_EDGE_SHARE * loop.iteration_time
         try:
             if self.passes == 0:
                 self.image_pass()

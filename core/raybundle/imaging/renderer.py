@@ -104,9 +104,11 @@ class Renderer(ProgressiveImage):
         if solver.caustic is not None and settings.caustic_splats > 0:
             self.caustic_splats = CausticSplats(scene, camera, self.tracer, direct, solver.caustic, settings.seed,
                                                 self.eye.pixel, lambda: self.trace_gbuffer(np.full((n, 2), 0.5)))
+        #: seconds the last trace of every pixel took (None before the first)
+        self.full_trace_seconds = None
         self.indirect = DiffuseIndirect(scene, solver, settings, self.trace_gbuffer, n, self.edge_gather,
                                         self._probe_gbuffer, self.world_light is not None,
-                                        self.caustic_splats is not None)
+                                        self.caustic_splats is not None, lambda: self.full_trace_seconds)
 
     #: world samples per visible point and pass where the world alone lights the scene
     #: (``world_samples`` = -1, :meth:`automatic_world_samples`)
@@ -128,9 +130,11 @@ class Renderer(ProgressiveImage):
     def trace_gbuffer(self, jitter, pixels=None):
         """The eye's rays for sub-pixel uniforms ``jitter`` in all pixels or in ``pixels``
         (:meth:`~raybundle.imaging.eye_rays.EyeRays.trace`), counted in :attr:`image_rays`."""
-        before = self.eye.rays
+        before, t0 = self.eye.rays, time.perf_counter()
         g = self.eye.trace(jitter, pixels)
         self.image_rays += self.eye.rays - before
+        if pixels is None:
+            self.full_trace_seconds = time.perf_counter() - t0
         return g
 
     def surface_values(self, side_values, vert, tside, bary):
@@ -143,6 +147,10 @@ class Renderer(ProgressiveImage):
     #: only once a pixel is known to hold one)
     FIRST_EDGE_SAMPLES = 16
     FIRST_EDGE_RAYS = 4_000_000
+    #: in a run limited by time, the seconds the first pass's extra emission samples may take
+    #: (set by :meth:`~raybundle.imaging.progressive.ProgressiveImage.run`; None: no bound): as many
+    #: as a trace of every pixel fits, none where one trace takes longer
+    first_edge_seconds = None
 
     def image_pass(self):
         """One jittered sample per pixel of the per-pass part: emission seen, direct light of
@@ -161,7 +169,10 @@ class Renderer(ProgressiveImage):
         emitted, _ = self.emission.radiance(g)
         before_pass = self.image_rays - len(g.triangle)
         if self.passes == 0:                          # find most edges at once, a sample per pixel at a time
-            for _ in range(max(4, min(self.FIRST_EDGE_SAMPLES, self.FIRST_EDGE_RAYS // max(n, 1)))):
+            edges = max(4, min(self.FIRST_EDGE_SAMPLES, self.FIRST_EDGE_RAYS // max(n, 1)))
+            if self.first_edge_seconds is not None:   # a trace through deep glass can take a second
+                edges = min(edges, int(self.first_edge_seconds / max(time.perf_counter() - t0, 1e-9)))
+            for _ in range(edges):
                 self._emission_samples(np.arange(n), 1)
         self._clocked("eye rays", t0)
         # pixels whose earlier samples disagree (the edge of a visible light, which is

@@ -41,10 +41,13 @@ class DiffuseIndirect:
     pixels.  ``edge_gather`` (:class:`~raybundle.imaging.gather.EdgeGather`) flags the sides
     that gather; ``probe()`` gives the G-buffer the automatic gather measures its cost on.
     ``world_sampled``: the world's direct light is sampled per pixel (not read from the
-    patches); ``caustic_splatted``: the caustic shot is light-traced into the pixels."""
+    patches); ``caustic_splatted``: the caustic shot is light-traced into the pixels;
+    ``trace_seconds()``: what a trace of every pixel took last (None: not known)."""
 
-    def __init__(self, scene, solver, settings, trace, pixels, edge_gather, probe, world_sampled, caustic_splatted):
+    def __init__(self, scene, solver, settings, trace, pixels, edge_gather, probe, world_sampled, caustic_splatted,
+                 trace_seconds=lambda: None):
         self.scene, self.solver, self.settings, self.trace, self.pixels = scene, solver, settings, trace, pixels
+        self.trace_seconds = trace_seconds
         self.edge_gather, self.probe = edge_gather, probe
         self.world_sampled, self.caustic_splatted = world_sampled, caustic_splatted
         self.rng = stream(settings.seed, Stream.RESOLVE)
@@ -83,7 +86,7 @@ class DiffuseIndirect:
         sc = self.scene
         n = self.pixels
         out = np.zeros((n, 3))
-        k = max(1, int(samples or self.settings.resolve_samples))
+        k = self.samples(samples, final_time)
         final, per_sample, rays = None, 0, self.settings.gather_rays
         own, cache = e_bar is None, {}
         if e_bar is None:
@@ -135,6 +138,17 @@ class DiffuseIndirect:
                 value += surface_values(sc, self.solver, through, through_vert, g.tside[h], g.bary[h])
             out[h] += g.weighted(value, h)
         return out / k
+
+    def samples(self, samples, final_time):
+        """The sub-pixel samples of an :meth:`image`: ``samples`` (default ``resolve_samples``),
+        in a run limited by time no more traces of every pixel than ``final_time`` holds at the
+        pace of the last one (at least one): a path through a chain of glass panes can take a
+        second."""
+        k = max(1, int(samples or self.settings.resolve_samples))
+        seconds = self.trace_seconds()
+        if final_time is not None and seconds:
+            k = min(k, max(1, int(final_time / seconds)))
+        return k
 
     def _reflected_caustic(self, e, g, h, cache):
         """The incoming light ``e`` (N, 3) at the hits ``h`` of G-buffer ``g``, plus the caustic
@@ -196,7 +210,7 @@ class DiffuseIndirect:
         if self.settings.gather_rays != -1 or not final_time or not self.scene.n_patches or \
                 not self.edge_gather.affordable(self.probe(), final_time):
             return False
-        k = max(1, int(self.settings.resolve_samples))
+        k = self.samples(None, final_time)
         plan = self._indirect_plan(True, final_time, k)
         self._planned = ((final_time, k), plan, time.perf_counter() - t0) if plan[2] is not None else None
         return plan[2] is not None
