@@ -233,11 +233,10 @@ class GraphBake:
             return "it was not evaluated"
         if self._results is None:
             self._finish()
-        if self.failed is not None:
-            return f"Blender could not bake it ({self.failed})"
-        if self._inputs[key].per_object:
-            return {k[3]: self._results.get(k, self._reasons.get(k)) for k in self._objects.get(key, [])}
-        return self._results[key]
+        failed = None if self.failed is None else f"Blender could not bake it ({self.failed})"
+        if self._inputs[key].per_object:       # a failed bake leaves those read from the disk
+            return {k[3]: self._results.get(k, self._reasons.get(k, failed)) for k in self._objects.get(key, [])}
+        return self._results.get(key, failed)
 
     def uv(self, mat, sock, obj=None):
         """The UV map the graph of ``sock`` is baked over ("" the active render one); on object
@@ -256,7 +255,7 @@ class GraphBake:
             self._results = {**kept, **baked}
         except (BlenderProcessError, OSError, ValueError) as e:
             self.failed = str(e)
-            self._results = {}
+            self._results = dict(self._kept[0])
         finally:
             job.close()
             self._job = None

@@ -16,7 +16,7 @@ import numpy as np
 from .run import RunLoop
 
 #: the share of a time-limited run's iteration time the first pass's extra emission samples may
-#: take (:attr:`~raybundle.imaging.renderer.Renderer.first_edge_seconds`)
+#: take (:attr:`ProgressiveImage.first_edge_seconds`)
 FIRST_EDGE_SHARE = 0.1
 
 
@@ -49,6 +49,11 @@ class ProgressiveImage:
     (:class:`~raybundle.imaging.run.RunLoop`): they provide ``solver.stats.iterations``, ``passes``,
     ``image_pass()``, ``step()``, ``image()`` and ``stats(...)``."""
 
+    #: in a run limited by time, the seconds the first pass's extra emission samples may take
+    #: (:attr:`FIRST_EDGE_SHARE` of the iteration time; None: no bound; read by
+    #: :meth:`~raybundle.imaging.renderer.Renderer.image_pass`)
+    first_edge_seconds = None
+
     def run(self, iterations=None, time_limit=None, progress=None, stop=None, snapshots=(), on_snapshot=None,
             started=None, stage=None, between=None):
         """Iterate (:class:`~raybundle.imaging.run.RunLoop`: ``iterations``, or the whole run's
@@ -65,7 +70,7 @@ class ProgressiveImage:
         pending = sorted(snapshots) if on_snapshot is not None else []
         if stage is not None:
             stage("iterating")
-        if loop.iteration_time is not None and hasattr(self, "first_edge_seconds"):
+        if loop.iteration_time is not None:
             self.first_edge_seconds = FIRST_EDGE_SHARE * loop.iteration_time
         try:
             if self.passes == 0:

@@ -147,10 +147,6 @@ class Renderer(ProgressiveImage):
     #: only once a pixel is known to hold one)
     FIRST_EDGE_SAMPLES = 16
     FIRST_EDGE_RAYS = 4_000_000
-    #: in a run limited by time, the seconds the first pass's extra emission samples may take
-    #: (set by :meth:`~raybundle.imaging.progressive.ProgressiveImage.run`; None: no bound): as many
-    #: as a trace of every pixel fits, none where one trace takes longer
-    first_edge_seconds = None
 
     def image_pass(self):
         """One jittered sample per pixel of the per-pass part: emission seen, direct light of

@@ -100,12 +100,10 @@ class LinearReconstruction:
         """Side values (S, C) -> (V, C): the mean of the sides around each vertex,
         weighted by their receiving area (vertices without any: unweighted); with
         ``tsides`` (indices) over those alone (right at the vertices all of whose tsides they hold)."""
-        if tsides is None:
-            ids, side, (w, den) = self.ids, self.scene.tside_side, self._average_weights
-        else:
-            ids, side = self.ids[tsides], self.scene.tside_side[tsides]
-            w = np.where(self.empty[ids], 1.0, self.area[tsides][:, None])
-            den = np.bincount(ids.ravel(), w.ravel(), minlength=self.n_vertices)
+        w, den = self._average_weights
+        ids, side = self.ids, self.scene.tside_side
+        if tsides is not None:
+            ids, side, w = ids[tsides], side[tsides], w[tsides]
         if compiled.use():
             num = _scatter_sides(ids, w, side, np.ascontiguousarray(side_values, float), self.n_vertices)
         else:

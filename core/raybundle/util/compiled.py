@@ -29,6 +29,8 @@ import warnings
 CACHE_FOLDER = None
 #: kernels marked by :func:`kernel`, with their sample arguments, in the order they were defined
 _KERNELS: list = []
+#: whether :func:`use` has said that the NumPy path runs
+_warned = False
 
 try:
     if os.environ.get("RAYBUNDLE_KERNELS", "").lower() == "numpy":
@@ -95,21 +97,21 @@ def use():
     return ENABLED
 
 
-_warned = False
-
-
 def compile_all():
     """Compile (or load from the cache) every kernel not yet compiled in this process; returns
     the seconds it took (0 without Numba)."""
     if not ENABLED:
         return 0.0
     t0 = time.perf_counter()
-    for k in _KERNELS:
-        if k._compiled is None or not k._compiled.signatures:
-            k(*k.sample())
+    for k in _uncompiled():
+        k(*k.sample())
     return time.perf_counter() - t0
 
 
 def pending():
     """Whether :func:`compile_all` has work left in this process."""
-    return ENABLED and any(k._compiled is None or not k._compiled.signatures for k in _KERNELS)
+    return ENABLED and bool(_uncompiled())
+
+
+def _uncompiled():
+    return [k for k in _KERNELS if k._compiled is None or not k._compiled.signatures]
