@@ -411,3 +411,23 @@ def test_details_that_outnumber_the_patch_count_leave_the_floor_its_patches():
     floor = np.unique(p.triangle_patch[p.triangle_material == 0])
     assert len(floor) >= 100 / SURFACE_SHARE ** 2, len(floor)
 
+
+
+def test_details_of_one_material_are_grouped_at_the_size_the_count_allows():
+    """2,000 tiny facets of one material over a 4 m x 4 m floor: at the floor's capped patch size
+    (:func:`~raybundle.patches.clusters.surface_size`) their clusters (grid cell, cube face, slab)
+    alone outnumber a target of 100 several times.  Details are grouped at the size whose count
+    comes nearest the target instead, so the layout keeps about the target, and the floor its
+    share of it."""
+    from raybundle.patches.clusters import SURFACE_SHARE
+
+    v, t = quad(0, 4, 0, 4, 0.0)
+    rng = np.random.default_rng(5)
+    centre = np.column_stack([rng.uniform(0.5, 3.5, (2000, 2)), rng.uniform(0.2, 1.0, 2000)])
+    corners = centre[:, None, :] + rng.normal(0.0, 0.01, (2000, 3, 3))
+    detail = (corners.reshape(-1, 3), np.arange(6000).reshape(-1, 3))
+    sc = scene_of([(v, t)], detail=detail)
+    p = make_patches(sc, patches=100)
+    floor = np.unique(p.triangle_patch[np.abs(p.triangle_corners[:, :, 2]).max(axis=1) < 1e-12])
+    assert len(floor) >= 100 / SURFACE_SHARE ** 2, len(floor)
+    assert p.n_patches < 2.5 * 100, p.n_patches

@@ -38,8 +38,10 @@ a piece lies behind a surface its triangle pierces (:func:`~raybundle.patches.pi
 the rest stay patches of their own.
 Clusters smaller than h^2 / :data:`DETAIL` (the facets of a plant or a chair's legs in a cell:
 in a furnished room they outnumbered the patches of walls and floor ten to one) are then
-grouped again, diffuse ones by the cube face of their normal instead of its cell, in half-h
-slabs along that face's axis.  It is a sort over the triangles: O(T log T), no per-triangle Python.
+grouped again, diffuse ones by the cube face of their normal instead of its cell, in the grid
+cells and half-size slabs (along that face's axis) of the detail size: the size whose count
+comes nearest the target, of which h is a capped copy (:func:`patch_sizes`).  It is a sort over
+the triangles: O(T log T), no per-triangle Python.
 
 :func:`tessellate` makes the stand-in for a finely meshed Blender scene the tests and
 the scale bench use: every reflecting face cut into many small triangles, each its
@@ -68,7 +70,7 @@ DEFAULT_PATCHES = 4000
 #: that axis-aligned normals lie mid-cell, never on a border rounding could flip)
 NORMAL_CELLS = 5
 #: the patch size is at most this times the size that tiles the reflecting area with the target
-#: count (:func:`patch_size`): the large surfaces keep at least a quarter of the count
+#: count (:func:`patch_sizes`): the large surfaces keep at least a quarter of the count
 SURFACE_SHARE = 2.0
 #: triangles with an area under h^2 / SMALL are grouped (h = the patch size)
 SMALL = 2.0
@@ -137,8 +139,10 @@ class _Grouping:
         similar pieces would turn into k^2 slivers; they are halved along their length instead)."""
         return self.area < np.maximum(h * h / SMALL, SLIVER * self.edge ** 2)
 
-    def clusters(self, h, small, gap=None, spread=False, world_view=None, part=None, small_rows=None):
-        """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``;
+    def clusters(self, h, small, gap=None, spread=False, world_view=None, part=None, small_rows=None,
+                 detail_h=None):
+        """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``, their details
+        grouped at ``detail_h`` >= ``h`` (default ``h``: :func:`patch_sizes`);
         ``gap`` (S, 2) bool: the triangle lies in a gap on its front / back
         (:func:`~raybundle.patches.gaps.gap_sides`), which a cluster does not straddle;
         ``world_view`` (S, 2) int: the classes of how much of the world its front / back
@@ -173,12 +177,16 @@ class _Grouping:
         if detail.any():
             # diffuse ones by the cube face (the image evaluates lobes per triangle, the iteration a
             # glossy one about the cluster's normal: glossy clusters keep their 15-degree normal cell),
-            # in half-h slabs along the face's axis (a shelf keeps off the floor under it)
+            # in the cells of the detail size, in half-size slabs along the face's axis (a shelf keeps
+            # off the floor under it)
+            dh = h if detail_h is None else max(float(detail_h), h)
             glossy = sc.materials.is_glossy[sc.triangle_material[rows]]
             axis = self.face[idx] // 2
             height = np.take_along_axis(centroid - self.lo, axis[:, None], 1)[:, 0]
+            if dh > h:
+                keys[0:3] = list(np.floor((centroid - self.lo) / dh).astype(np.int64).T)
             keys[3:5] = [np.where(glossy, self.cell[idx], -1 - self.face[idx]),
-                         np.floor(height / (0.5 * h)).astype(np.int64)]
+                         np.floor(height / (0.5 * dh)).astype(np.int64)]
             merged = group_ids([k[detail] for k in keys])
             kept = np.unique(ids[~detail], return_inverse=True)[1].reshape(-1)
             ids[detail] = merged
@@ -200,13 +208,16 @@ class _Grouping:
         return int((k[~small] ** 2).sum()) + n_clusters
 
 
-def patch_size(scene: PatchScene, patches, grouping=None, steps=12):
-    """The patch size h [m] whose patch count is closest to ``patches`` (within ~10% where
-    the count allows), but at most :data:`SURFACE_SHARE` times ``sqrt(A / patches)``, ``A``
-    the reflecting area (:func:`surface_size`): the clusters of a furnished room's details
-    (a cluster per material, normal cell and slab of each chair, cup and plant) may outnumber
-    the target several times over at the size that tiles its walls and floor, and a size
-    chosen for the count alone cuts those into patches as large as walls.  The count falls with
+def patch_sizes(scene: PatchScene, patches, grouping=None, steps=12):
+    """``(h, detail_h)`` [m]: ``detail_h`` is the patch size whose patch count is closest to
+    ``patches`` (within ~10% where the count allows); ``h``, the size surfaces are cut and grouped
+    at, is the same but at most :data:`SURFACE_SHARE` times ``sqrt(A / patches)``, ``A`` the
+    reflecting area (:func:`surface_size`).  The clusters of a furnished room's details (a cluster
+    per material, normal cell and slab of each chair, cup and plant) may outnumber the target
+    several times over at the size that tiles its walls and floor: a size chosen for the count
+    alone cuts the walls into patches as large as walls, and one capped for the walls alone
+    splits the details into more patches than the whole target.  So the details (clusters under
+    h^2 / :data:`DETAIL`) are grouped at ``detail_h``, the rest at ``h``.  The count falls with
     h, but in jumps: where triangles stop being grouped, each is cut into k^2 instead, so h
     is bracketed and bisected in log h, each step a secant guess inside the bracket, and the
     best count seen wins."""
@@ -231,13 +242,13 @@ def patch_size(scene: PatchScene, patches, grouping=None, steps=12):
             if hi - lo < 1e-3:
                 break
         h = float(np.exp(guess))
-    return min(best[1], surface_size(scene, patches, grouping))
+    return min(best[1], surface_size(scene, patches, grouping)), best[1]
 
 
 def surface_size(scene: PatchScene, patches, grouping):
     """:data:`SURFACE_SHARE` x ``sqrt(A / patches)`` [m], ``A`` the reflecting area of
     ``grouping``'s triangles (inf where nothing reflects): the coarsest patch size
-    :func:`patch_size` takes."""
+    :func:`patch_sizes` takes."""
     reflects = scene.materials.reflects[scene.triangle_material[grouping.rows]]
     surfaces = float(grouping.area[reflects].sum())
     return SURFACE_SHARE * np.sqrt(surfaces / patches) if surfaces > 0 else np.inf
@@ -256,7 +267,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
     grouping = _Grouping(scene)
     if patches is not None and patches >= len(scene.triangles) and not grouping.small(0.0).any():
         return subdivide(scene, patches=patches, contacts=contacts)     # fewer triangles than patches, no slivers
-    h = float(size) if size is not None else patch_size(scene, patches, grouping)
+    h, detail_h = (float(size),) * 2 if size is not None else patch_sizes(scene, patches, grouping)
     if not h > 0:
         raise ValueError("the patch size must be positive")
     small = grouping.small(h)
@@ -272,7 +283,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
             if crowded and patches is not None else h
         if coarser > h:
             # the crowded pieces cut in four: a coarser h (more triangles small) keeps about ``patches``
-            h = coarser
+            h, detail_h = coarser, max(detail_h, coarser)
             small, fine, row, split, _ = _cut(scene, grouping, h, probe)
     finally:
         if probe is not None:
@@ -298,7 +309,8 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
             tracer.close()
     part = pierced_parts(fine)
     ids = grouped.clusters(h, np.ones(int(fine_small.sum()), bool), gap, world_view=view,
-                           part=None if part is None else (part[0][fine_small], part[1]), small_rows=fine_small)
+                           part=None if part is None else (part[0][fine_small], part[1]), small_rows=fine_small,
+                           detail_h=detail_h)
     n_clusters = int(ids.max()) + 1
     patch = np.empty(len(fine.triangles), np.int64)
     patch[fine_small] = ids
