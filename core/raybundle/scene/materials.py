@@ -35,6 +35,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..util import compiled
+from . import compiled_bsdf
 from .microfacet import (dielectric_layer_fresnel, fresnel_f82, ggx_albedo, ggx_distribution, ggx_lobe,
                          sample_ggx_reflection, smith_lambda)
 from .principled import MU_TABLE, interp_mu, layer_tables
@@ -282,6 +284,8 @@ class MaterialTable:
         normal = np.asarray(normal, float)
         w_i = -np.broadcast_to(np.asarray(w_in, float), normal.shape)
         w_o = np.broadcast_to(np.asarray(w_out, float), normal.shape)
+        if compiled.use():
+            return compiled_bsdf.brdf(self, mat, normal, w_i, w_o, diffuse, glossy, diffuse_scale)
         cos_i = np.einsum("ij,ij->i", normal, w_i)
         cos_o = np.einsum("ij,ij->i", normal, w_o)
         front = (cos_i > 0) & (cos_o > 0)
@@ -417,6 +421,8 @@ class MaterialTable:
         the light, for the viewer direction ``w_out`` (N, 3): ``G1(w_out) D(h) / (4 cos_out)``
         (visible normals, density ``G1 (h.w_out) D(h) / cos_out``, mirrored: Jacobian
         1 / (4 h.w_out)); 0 where either direction is below the surface."""
+        if compiled.use():
+            return compiled_bsdf.glossy_pdf(self, np.asarray(mat), normal, w_in, w_out)
         alpha = self.alpha[np.asarray(mat)]
         h, _, d = ggx_distribution(alpha, normal, w_in, w_out)
         h_o = np.einsum("ij,ij->i", h, w_out)

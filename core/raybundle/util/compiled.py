@@ -85,6 +85,12 @@ def kernel(sample):
     return mark
 
 
+def helper(fn):
+    """Mark a function that kernels call: compiled into each kernel that calls it (so it is
+    cached with them, never on its own); the plain function where Numba is not enabled."""
+    return numba.njit(nogil=True)(fn) if ENABLED else fn
+
+
 def use():
     """Whether callers take the kernels (Numba enabled), else their NumPy path: on the first
     NumPy-path call a warning says why."""

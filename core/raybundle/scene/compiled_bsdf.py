@@ -1,0 +1,261 @@
+"""The BSDF of :class:`~raybundle.scene.materials.MaterialTable` evaluated per point, compiled.
+
+:meth:`~raybundle.scene.materials.MaterialTable.brdf` and
+:meth:`~raybundle.scene.materials.MaterialTable.glossy_pdf` run here where the kernels are on
+(:mod:`raybundle.util.compiled`): one loop over the points, each evaluating its own material's
+lobes in registers, where the NumPy path makes a dozen whole-array temporaries per lobe and a
+pass per layered material.  The arithmetic is the NumPy path's, operation for operation and
+in the same order (the GGX lobe and Smith terms of :mod:`~raybundle.scene.microfacet`, the
+layer tables of :mod:`~raybundle.scene.principled` read by ``np.interp``'s formula), so both
+give the same values (``tests/test_compiled_bsdf.py``).
+
+:class:`Packed` holds what the kernels read of a material table, one row per material: the
+parameters and each layered material's tables on the :data:`~raybundle.scene.principled.MU_TABLE`
+grid (zeros for the others), made once per set of parameters (:func:`packed`).
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..util.compiled import helper, kernel
+from .principled import MU_TABLE
+
+
+@dataclass
+class Packed:
+    """A material table's parameters as kernel arguments (M materials, K = MU_TABLE)."""
+    kdr: np.ndarray              # (M, 3) the diffuse lobe's albedo (1 - g) kd
+    g: np.ndarray                # (M,) glossy weight
+    ks: np.ndarray               # (M, 3) glossy tint
+    alpha: np.ndarray            # (M,) GGX alpha
+    layered: np.ndarray          # (M,) bool: any Principled feature
+    has_layer: np.ndarray        # (M,) bool: a dielectric layer
+    fresnel: np.ndarray          # (M,) bool: F82-tint conductor Fresnel
+    eta: np.ndarray              # (M,) the layer's IOR
+    f82_f0: np.ndarray           # (M, 3)
+    f82_b: np.ndarray            # (M, 3)
+    layer_f0: np.ndarray         # (M, 3)
+    glossy_scale: np.ndarray     # (M, K, 3)
+    layer_scale: np.ndarray      # (M, K, 3)
+    diffuse_weight: np.ndarray   # (M, K)
+
+    def arrays(self):
+        return (self.kdr, self.g, self.ks, self.alpha, self.layered, self.has_layer, self.fresnel, self.eta,
+                self.f82_f0, self.f82_b, self.layer_f0, self.glossy_scale, self.layer_scale, self.diffuse_weight)
+
+
+_FIELDS = ("diffuse", "glossy", "roughness", "glossy_weight", "specular_ior", "specular_tint", "glossy_fresnel",
+           "multiscatter")
+
+
+def packed(mt) -> Packed:
+    """The :class:`Packed` arrays of material table ``mt``, kept on it while the parameters
+    they are made of stay the same (a digest of them is compared on every call)."""
+    h = hashlib.sha1()
+    for k in _FIELDS:
+        h.update(np.ascontiguousarray(getattr(mt, k)).tobytes())
+    key = ("packed", h.hexdigest())
+    got = mt._albedo_tables.get(key)
+    if got is None:
+        got = mt._albedo_tables[key] = _pack(mt)
+    return got
+
+
+def _pack(mt) -> Packed:
+    m = len(mt)
+    layered, has_layer = np.asarray(mt.is_layered, bool), np.asarray(mt.has_layer, bool)
+    zeros3 = np.zeros((m, 3))
+    f82_f0, f82_b, layer_f0 = zeros3.copy(), zeros3.copy(), zeros3.copy()
+    glossy_scale, layer_scale = np.zeros((m, MU_TABLE, 3)), np.zeros((m, MU_TABLE, 3))
+    diffuse_weight = np.ones((m, MU_TABLE))
+    for i in np.nonzero(layered)[0]:
+        t = mt._layer_table(i)
+        f82_f0[i], f82_b[i], layer_f0[i] = t["f82_f0"], t["f82_b"], t["layer_f0"]
+        glossy_scale[i], layer_scale[i] = t["glossy_scale"], t["layer_scale"]
+        if has_layer[i]:
+            diffuse_weight[i] = t["diffuse_weight"]
+    f = np.ascontiguousarray
+    return Packed(f(mt.diffuse_reflectance, float), f(mt.glossy_weight, float), f(mt.glossy, float),
+                  f(mt.alpha, float), layered, has_layer, f(np.asarray(mt.glossy_fresnel) != 0),
+                  f(mt.specular_ior, float), f82_f0, f82_b, layer_f0, glossy_scale, layer_scale, diffuse_weight)
+
+
+def brdf(mt, mat, normal, w_i, w_o, diffuse, glossy, diffuse_scale):
+    """(N, 3) :meth:`~raybundle.scene.materials.MaterialTable.brdf` with ``w_i`` (N, 3) towards
+    the light and ``w_o`` (N, 3) towards the viewer, by the kernel."""
+    n = len(mat)
+    scale = np.zeros((0, 3)) if diffuse_scale is None else np.ascontiguousarray(diffuse_scale, float)
+    out = np.empty((n, 3))
+    _brdf(np.ascontiguousarray(mat, np.int64), _rows(normal, n), _rows(w_i, n), _rows(w_o, n), bool(diffuse),
+          bool(glossy), scale, *packed(mt).arrays(), out)
+    return out
+
+
+def glossy_pdf(mt, mat, normal, w_in, w_out):
+    """(N,) :meth:`~raybundle.scene.materials.MaterialTable.glossy_pdf`, by the kernel."""
+    n = len(mat)
+    out = np.empty(n)
+    _glossy_pdf(np.ascontiguousarray(mat, np.int64), _rows(normal, n), _rows(w_in, n), _rows(w_out, n),
+                packed(mt).alpha, out)
+    return out
+
+
+def _rows(a, n):
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(a, float), (n, 3)))
+
+
+# ------------------------------------------------------------------------------------- kernels
+def _sample_brdf():
+    m = np.zeros(2, np.int64)
+    v = np.tile([[0.0, 0.0, 1.0]], (2, 1))
+    p = _pack_sample()
+    return (m, v, v, v, True, True, np.zeros((0, 3)), *p, np.empty((2, 3)))
+
+
+def _pack_sample():
+    z3, z = np.zeros((1, 3)), np.zeros(1)
+    b = np.zeros(1, bool)
+    return (z3, z, z3, z + 0.25, b, b, b, z, z3, z3, z3, np.zeros((1, MU_TABLE, 3)), np.zeros((1, MU_TABLE, 3)),
+            np.ones((1, MU_TABLE)))
+
+
+@helper
+def _dot(a0, a1, a2, b0, b1, b2):
+    """a.b summed as ``np.einsum("ij,ij->i", a, b)`` sums three terms (two SIMD lanes: the
+    first and third, then the second), so that both paths give the same bits."""
+    return (a0 * b0 + a2 * b2) + a1 * b1
+
+
+@helper
+def _interp(table, mu):
+    """``np.interp(mu, linspace(0, 1, K), table)`` for ``mu`` in [0, 1], by its formula."""
+    k = table.shape[0]
+    step = 1.0 / (k - 1)
+    j = int(mu * (k - 1))
+    if j >= k - 1:
+        return table[k - 1]
+    x0 = j * step
+    if mu == x0:
+        return table[j]
+    slope = (table[j + 1] - table[j]) / ((j + 1) * step - x0)
+    return slope * (mu - x0) + table[j]
+
+
+@helper
+def _smith_lambda(alpha, c):
+    c = min(max(c, 1e-12), 1.0)
+    c2 = c * c
+    tan2 = (1.0 - c2) / c2
+    return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
+
+
+@helper
+def _fresnel_dielectric_cos(c, eta):
+    c = abs(c)
+    g2 = eta * eta - 1.0 + c * c
+    if not g2 > 0:
+        return 1.0
+    g = np.sqrt(g2)
+    a = (g - c) / (g + c)
+    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    return 0.5 * a * a * (1.0 + b * b)
+
+
+@kernel(_sample_brdf)
+def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, layered, has_layer, fresnel, eta,
+          f82_f0, f82_b, layer_f0, glossy_scale, layer_scale, diffuse_weight, out):
+    """``out`` (N, 3) = f(w_i, w_o) of ``MaterialTable.brdf`` (``scale`` (N, 3), or (0, 3) for none)."""
+    scaled = scale.shape[0] > 0
+    r = np.empty(3)
+    for p in range(len(mat)):
+        m = mat[p]
+        n0, n1, n2 = normal[p, 0], normal[p, 1], normal[p, 2]
+        i0, i1, i2 = w_i[p, 0], w_i[p, 1], w_i[p, 2]
+        o0, o1, o2 = w_o[p, 0], w_o[p, 1], w_o[p, 2]
+        cos_i = _dot(n0, n1, n2, i0, i1, i2)
+        cos_o = _dot(n0, n1, n2, o0, o1, o2)
+        if not (cos_i > 0 and cos_o > 0):
+            out[p, 0] = out[p, 1] = out[p, 2] = 0.0
+            continue
+        mu = min(max(cos_o, 0.0), 1.0)
+        r[0] = r[1] = r[2] = 0.0
+        if diffuse:
+            wd = _interp(diffuse_weight[m], mu) if layered[m] and has_layer[m] else 1.0
+            for c in range(3):
+                v = kdr[m, c] / np.pi
+                if scaled:
+                    v = v * scale[p, c]
+                if layered[m]:
+                    v = v * wd
+                r[c] = v
+        if glossy and (layered[m] or g[m] > 0):
+            a = alpha[m]
+            h0, h1, h2 = i0 + o0, i1 + o1, i2 + o2
+            norm = np.sqrt(h0 * h0 + h1 * h1 + h2 * h2) + 1e-300
+            h0, h1, h2 = h0 / norm, h1 / norm, h2 / norm
+            cos_h = _dot(n0, n1, n2, h0, h1, h2)
+            a2 = a * a
+            denom = cos_h * cos_h * (a2 - 1.0) + 1.0
+            d = a2 / (np.pi * denom * denom)
+            g2 = 1.0 / (1.0 + _smith_lambda(a, cos_i) + _smith_lambda(a, cos_o))
+            lobe = d * g2 / (4.0 * cos_i * cos_o)
+            if not layered[m]:
+                gl = g[m] * lobe
+                for c in range(3):
+                    r[c] = r[c] + gl * ks[m, c]
+            else:
+                hc = _dot(h0, h1, h2, o0, o1, o2)
+                gm = g[m]
+                fl = 0.0
+                if has_layer[m] and gm < 1:
+                    f_real = ((eta[m] - 1.0) / (eta[m] + 1.0)) ** 2
+                    fl = min(max((_fresnel_dielectric_cos(hc, eta[m]) - f_real) / (1.0 - f_real), 0.0), 1.0)
+                s = min(max(1.0 - hc, 0.0), 1.0)
+                s5 = s ** 5.0
+                for c in range(3):
+                    factor = 0.0
+                    if gm > 0:
+                        if fresnel[m]:
+                            f = f82_f0[m, c] + (1.0 - f82_f0[m, c]) * s5 - f82_b[m, c] * (1.0 - s) * s5 * s
+                            f = min(max(f, 0.0), 1.0)
+                        else:
+                            f = ks[m, c]
+                        factor = factor + gm * f * _interp(glossy_scale[m, :, c], mu)
+                    if has_layer[m] and gm < 1:
+                        f = layer_f0[m, c] + (1.0 - layer_f0[m, c]) * fl
+                        factor = factor + (1.0 - gm) * f * _interp(layer_scale[m, :, c], mu)
+                    r[c] = r[c] + lobe * factor
+        out[p, 0], out[p, 1], out[p, 2] = r[0], r[1], r[2]
+
+
+def _sample_pdf():
+    m = np.zeros(2, np.int64)
+    v = np.tile([[0.0, 0.0, 1.0]], (2, 1))
+    return m, v, v, v, np.full(1, 0.25), np.empty(2)
+
+
+@kernel(_sample_pdf)
+def _glossy_pdf(mat, normal, w_in, w_out, alpha, out):
+    """``out`` (N,) = ``MaterialTable.glossy_pdf``: G1(w_out) D(h) / (4 cos_out), 0 below either side."""
+    for p in range(len(mat)):
+        a = alpha[mat[p]]
+        n0, n1, n2 = normal[p, 0], normal[p, 1], normal[p, 2]
+        h0, h1, h2 = w_in[p, 0] + w_out[p, 0], w_in[p, 1] + w_out[p, 1], w_in[p, 2] + w_out[p, 2]
+        norm = np.sqrt(h0 * h0 + h1 * h1 + h2 * h2) + 1e-300
+        h0, h1, h2 = h0 / norm, h1 / norm, h2 / norm
+        cos_h = _dot(n0, n1, n2, h0, h1, h2)
+        a2 = a * a
+        denom = cos_h * cos_h * (a2 - 1.0) + 1.0
+        d = a2 / (np.pi * denom * denom)
+        o0, o1, o2 = w_out[p, 0], w_out[p, 1], w_out[p, 2]
+        h_o = _dot(h0, h1, h2, o0, o1, o2)
+        cos_o = _dot(n0, n1, n2, o0, o1, o2)
+        cos_i = _dot(n0, n1, n2, w_in[p, 0], w_in[p, 1], w_in[p, 2])
+        if cos_i > 0 and cos_o > 0 and h_o > 0:
+            g1 = 1.0 / (1.0 + _smith_lambda(a, cos_o))
+            out[p] = g1 * d / (4.0 * cos_o)
+        else:
+            out[p] = 0.0
