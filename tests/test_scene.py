@@ -205,13 +205,14 @@ def test_shading_normals_interpolate_the_corner_normals():
     assert ShadingNormals.of_faces(corners, np.tile([0, 0, 1.0], (1, 3, 1))) is None
 
 
-def test_connected_components_match_a_graph_search():
-    """The welding's connected components (hooking and pointer jumping) against a breadth-first
-    search, on random graphs from sparse (many singletons) to dense, with long chains (a
-    tessellated sphere's corners link in rings); ids dense, in the order of each component's
-    smallest node."""
+def test_connected_components_match_a_graph_search(monkeypatch):
+    """The welding's connected components (the compiled union-find, and the NumPy path's hooking
+    and pointer jumping) against a breadth-first search, on random graphs from sparse (many
+    singletons) to dense, with long chains (a tessellated sphere's corners link in rings); ids
+    dense, in the order of each component's smallest node."""
     from collections import deque
 
+    from raybundle.util import compiled
     from raybundle.util.arrays import connected_components
     rng = np.random.default_rng(5)
     cases = [(1, np.zeros((0, 2), np.int64)), (6, np.zeros((0, 2), np.int64)),
@@ -232,7 +233,11 @@ def test_connected_components_match_a_graph_search():
                             want[v] = c
                             todo.append(v)
                 c += 1
-        assert np.array_equal(connected_components(n, links), want), n
+        assert compiled.ENABLED and np.array_equal(connected_components(n, links), want), n
+        with monkeypatch.context() as m:
+            m.setattr(compiled, "ENABLED", False)
+            m.setattr(compiled, "_warned", True)
+            assert np.array_equal(connected_components(n, links), want), n
 
 
 def test_unique_rows_and_group_ids_match_numpy():
