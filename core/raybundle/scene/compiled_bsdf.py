@@ -153,6 +153,19 @@ def _smith_lambda(alpha, c):
 
 
 @helper
+def _ggx_distribution(a, n0, n1, n2, i0, i1, i2, o0, o1, o2):
+    """The unit half vector of ``w_i`` and ``w_o`` and the GGX ``D(h)`` about normal ``n``
+    (:func:`~raybundle.scene.microfacet.ggx_distribution`, per point)."""
+    h0, h1, h2 = i0 + o0, i1 + o1, i2 + o2
+    norm = np.sqrt(h0 * h0 + h1 * h1 + h2 * h2) + 1e-300
+    h0, h1, h2 = h0 / norm, h1 / norm, h2 / norm
+    cos_h = _dot(n0, n1, n2, h0, h1, h2)
+    a2 = a * a
+    denom = cos_h * cos_h * (a2 - 1.0) + 1.0
+    return h0, h1, h2, a2 / (np.pi * denom * denom)
+
+
+@helper
 def _fresnel_dielectric_cos(c, eta):
     c = abs(c)
     g2 = eta * eta - 1.0 + c * c
@@ -193,13 +206,7 @@ def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, laye
                 r[c] = v
         if glossy and (layered[m] or g[m] > 0):
             a = alpha[m]
-            h0, h1, h2 = i0 + o0, i1 + o1, i2 + o2
-            norm = np.sqrt(h0 * h0 + h1 * h1 + h2 * h2) + 1e-300
-            h0, h1, h2 = h0 / norm, h1 / norm, h2 / norm
-            cos_h = _dot(n0, n1, n2, h0, h1, h2)
-            a2 = a * a
-            denom = cos_h * cos_h * (a2 - 1.0) + 1.0
-            d = a2 / (np.pi * denom * denom)
+            h0, h1, h2, d = _ggx_distribution(a, n0, n1, n2, i0, i1, i2, o0, o1, o2)
             g2 = 1.0 / (1.0 + _smith_lambda(a, cos_i) + _smith_lambda(a, cos_o))
             lobe = d * g2 / (4.0 * cos_i * cos_o)
             if not layered[m]:
@@ -243,17 +250,12 @@ def _glossy_pdf(mat, normal, w_in, w_out, alpha, out):
     for p in range(len(mat)):
         a = alpha[mat[p]]
         n0, n1, n2 = normal[p, 0], normal[p, 1], normal[p, 2]
-        h0, h1, h2 = w_in[p, 0] + w_out[p, 0], w_in[p, 1] + w_out[p, 1], w_in[p, 2] + w_out[p, 2]
-        norm = np.sqrt(h0 * h0 + h1 * h1 + h2 * h2) + 1e-300
-        h0, h1, h2 = h0 / norm, h1 / norm, h2 / norm
-        cos_h = _dot(n0, n1, n2, h0, h1, h2)
-        a2 = a * a
-        denom = cos_h * cos_h * (a2 - 1.0) + 1.0
-        d = a2 / (np.pi * denom * denom)
+        i0, i1, i2 = w_in[p, 0], w_in[p, 1], w_in[p, 2]
         o0, o1, o2 = w_out[p, 0], w_out[p, 1], w_out[p, 2]
+        h0, h1, h2, d = _ggx_distribution(a, n0, n1, n2, i0, i1, i2, o0, o1, o2)
         h_o = _dot(h0, h1, h2, o0, o1, o2)
         cos_o = _dot(n0, n1, n2, o0, o1, o2)
-        cos_i = _dot(n0, n1, n2, w_in[p, 0], w_in[p, 1], w_in[p, 2])
+        cos_i = _dot(n0, n1, n2, i0, i1, i2)
         if cos_i > 0 and cos_o > 0 and h_o > 0:
             g1 = 1.0 / (1.0 + _smith_lambda(a, cos_o))
             out[p] = g1 * d / (4.0 * cos_o)
