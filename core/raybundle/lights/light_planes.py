@@ -98,7 +98,8 @@ def plane_fans(light):
     """Sampling tables of a mesh light whose planar parts (``light.planes``) each
     have one convex outline: per part its area, probability ``A_g / A`` and CDF, normal,
     sidedness, bounding sphere, and the fan triangles of its outline (``fan`` (F, 3, 3),
-    ``fan_group``, ``fan_key`` = group + area CDF within it); ``tri_group`` maps the
+    ``fan_group``, ``fan_key`` = group + area CDF within it, each part's ``fan_start`` and
+    ``fan_count`` in ``fan``); ``tri_group`` maps the
     light's triangles to parts.  None when a part's outline is not one convex loop (or
     there are more than :data:`MAX_PLANES` parts): the light is then sampled triangle by triangle."""
     planes = light.planes
@@ -139,6 +140,8 @@ def plane_fans(light):
         sel = fan_group == gi
         within[sel] = np.cumsum(fa[sel]) / fa[sel].sum()
     p = areas / areas.sum()
+    count = np.bincount(fan_group, minlength=len(areas))
     return {"area": areas, "p": p, "cdf": np.cumsum(p), "normal": np.array(normals), "two_sided": np.array(two),
             "centroid": np.array(cents), "radius": np.array(radii), "fan": fan, "fan_group": fan_group,
-            "fan_key": fan_group + within, "tri_group": tri_group}
+            "fan_key": fan_group + within, "tri_group": tri_group,
+            "fan_start": np.cumsum(count) - count, "fan_count": count}

@@ -124,13 +124,11 @@ class MeshLight(_Light):
         r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
         cos_l = -np.einsum("ij,ij->i", normal, v) / np.sqrt(r2)
         e = cos_l * f["area"][g] / r2
-        near = self._part_near(g, points)
-        for gi in np.unique(g[near]):
-            idx = np.nonzero(near & (g == gi))[0]
-            rel, omega = self._fan_solid_angles(gi, points[idx])
+        for idx in self._fan_chunks(g, self._part_near(g, points)):
+            rel, omega, count = self._fan_solid_angles(g[idx], points[idx])
             total = omega.sum(axis=1)
             cdf = np.cumsum(omega, axis=1) / np.maximum(total, 1e-300)[:, None]
-            k = np.minimum((cdf <= u0[idx, None]).sum(axis=1), omega.shape[1] - 1)
+            k = np.minimum((cdf <= u0[idx, None]).sum(axis=1), count - 1)
             lo_k = np.where(k > 0, cdf[np.arange(len(idx)), np.maximum(k - 1, 0)], 0.0)
             w_k = np.maximum(cdf[np.arange(len(idx)), k] - lo_k, 1e-300)
             u1 = np.clip((u0[idx] - lo_k) / w_k, 0.0, 1.0)
@@ -206,11 +204,29 @@ class MeshLight(_Light):
         gap = np.maximum(np.linalg.norm(f["centroid"][g] - points, axis=1) - f["radius"][g], 0.0)
         return f["area"][g] >= self.MIN_SOLID_ANGLE * gap * gap
 
-    def _fan_solid_angles(self, gi, points):
-        """Part ``gi``'s fan triangles relative to ``points`` (n, F, 3, 3) and their solid angles (n, F)."""
+    #: fan triangles (points times the most fan triangles of their parts) measured at once
+    FAN_CHUNK = 1 << 16
+
+    def _fan_chunks(self, g, near):
+        """The indices of the ``near`` points (N,) bool, in chunks of at most :data:`FAN_CHUNK`
+        fan triangles of their parts ``g`` (N,)."""
+        idx = np.nonzero(near)[0]
+        if len(idx) == 0:
+            return []
+        step = max(1, self.FAN_CHUNK // int(self._fans["fan_count"][g[idx]].max()))
+        return [idx[lo:lo + step] for lo in range(0, len(idx), step)]
+
+    def _fan_solid_angles(self, g, points):
+        """The fan triangles of parts ``g`` (n,) relative to ``points`` (n, 3), padded to the most
+        any of them has, ``(n, F, 3, 3)``, their solid angles (n, F) (0 where padded) and each
+        part's count of them (n,)."""
         f = self._fans
-        rel = f["fan"][f["fan_group"] == gi][None] - points[:, None, None, :]
-        return rel, triangle_solid_angle(rel[..., 0, :], rel[..., 1, :], rel[..., 2, :])
+        count = f["fan_count"][g]
+        j = np.arange(int(count.max()))
+        real = j[None, :] < count[:, None]
+        rel = f["fan"][f["fan_start"][g][:, None] + np.where(real, j[None, :], 0)] - points[:, None, None, :]
+        omega = triangle_solid_angle(rel[..., 0, :], rel[..., 1, :], rel[..., 2, :])
+        return rel, np.where(real, omega, 0.0), count
 
     def _sample_triangles(self, points, u):
         """:meth:`sample` triangle by triangle: triangle k picked with probability
@@ -297,10 +313,9 @@ class MeshLight(_Light):
             r2 = np.maximum(np.einsum("ij,ij->i", v, v), 1e-300)
             cos_l = np.abs(np.einsum("ij,ij->i", f["normal"][g], v)) / np.sqrt(r2)
             pdf = r2 / (np.maximum(cos_l, 1e-300) * self.area)
-            near = self._part_near(g, points)
-            for gi in np.unique(g[near]):
-                idx = np.nonzero(near & (g == gi))[0]
-                pdf[idx] = f["p"][gi] / np.maximum(self._fan_solid_angles(gi, points[idx])[1].sum(axis=1), 1e-300)
+            for idx in self._fan_chunks(g, self._part_near(g, points)):
+                omega = self._fan_solid_angles(g[idx], points[idx])[1]
+                pdf[idx] = f["p"][g[idx]] / np.maximum(omega.sum(axis=1), 1e-300)
             return pdf
         return self.triangle_pdf(points, k, y) * (sc.triangle_area[self.triangles[k]] / self.area)
 
