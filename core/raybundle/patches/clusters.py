@@ -29,7 +29,7 @@ window), first halved along their length to pieces no longer than h
 (:func:`~raybundle.patches.layout.bisect_long`: a sliver grouped whole made a cluster metres long).
 They are grouped into the cells of a grid h wide, split by normal direction (the cube-map cell),
 by offset along the normal (half-h slabs: a shelf does not share a patch with the floor under it),
-by material, by sidedness, by whether they lie in a gap narrower than 5% of h (the
+by material, by sidedness, by whether they lie in a gap narrower than a quarter of h (the
 ceiling over a lamp hanging just under it: :func:`~raybundle.patches.gaps.gap_sides`), after the
 triangles that straddle such a gap are cut along the contact, and, under a world that lights
 the scene, by how much of the world each side sees (:func:`world_view_classes`: the facets of a
@@ -259,7 +259,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
     large triangles cut, small ones grouped (module docstring).  A scene without triangles
     smaller than a patch gets exactly :func:`~raybundle.patches.layout.subdivide`'s layout.  With
     ``contacts``, patches follow contact lines (:func:`~raybundle.patches.layout.cut_at_contacts`)
-    and no cluster holds triangles both in and out of a gap narrower than 5% of a patch
+    and no cluster holds triangles both in and out of a gap narrower than a quarter of a patch
     (:func:`~raybundle.patches.gaps.gap_sides`).  ``stage(text)`` is told each step as it starts."""
     stage = stage or (lambda text: None)
     if (patches is None) == (size is None):
@@ -427,7 +427,7 @@ def world_view_classes(tracer, points, normals, rays=WORLD_VIEW_RAYS, seed=0):
 
 def triangle_patches(scene: PatchScene) -> PatchScene:
     """One patch per triangle (``--patches 0``), but cut along contact lines as
-    :func:`make_patches` cuts them (gaps under 5% of the median edge count as contact):
+    :func:`make_patches` cuts them (gaps under a quarter of the median edge count as contact):
     a triangle reaching from under a lamp into the room would leak the light trapped there."""
     edge = longest_edges(scene.triangle_corners)
     one = replace(scene, triangle_patch=np.arange(len(scene.triangles)))

@@ -36,7 +36,7 @@ def subdivide(scene: PatchScene, max_edge=None, patches=None, contacts=True) -> 
     whole: their outgoing radiance is known, and a light made of few triangles
     is sampled with less variance.  With ``contacts``, the patches of subdivided faces (of
     every reflecting face, up to :data:`CONTACT_ALL_MAX` triangles) are then cut along the
-    lines where other surfaces touch or cross them, gaps narrower than 5% of
+    lines where other surfaces touch or cross them, gaps narrower than a quarter of
     ``max_edge`` counting as contact (:mod:`raybundle.patches.contacts`).
     (:func:`raybundle.patches.clusters.make_patches` also groups triangles much smaller than a patch.)
     """
@@ -170,7 +170,7 @@ def _rebuilt(scene: PatchScene, vertices, triangles, row) -> PatchScene:
 
 def cut_at_contacts(scene: PatchScene, cut, max_edge, tracer=None) -> PatchScene:
     """The patches of triangles ``cut`` (the pieces of subdivided faces) cut along contact
-    lines (:mod:`raybundle.patches.contacts`, gaps under 5% of ``max_edge`` count as contact); so is
+    lines (:mod:`raybundle.patches.contacts`, gaps under a quarter of ``max_edge`` count as contact); so is
     every reflecting triangle when there are at most :data:`CONTACT_ALL_MAX` of them, and
     beyond that every one that straddles such a gap (:func:`~raybundle.patches.gaps.straddling`,
     probed with ``tracer``, a :class:`~raybundle.tracing.visibility.RayTracer` over ``scene``, or
