@@ -455,3 +455,27 @@ def test_a_tiled_floor_under_a_low_cabinet_is_not_one_patch_with_the_floor_besid
     patch = p.triangle_patch[on_floor]
     mixed = np.intersect1d(patch[under], patch[~under])
     assert len(mixed) == 0, (len(mixed), h)
+
+
+def test_the_floor_either_side_of_a_bar_just_over_it_is_not_one_patch():
+    """A bar lying 2 mm over a finely meshed floor, across a cell of the grouping's grid: the
+    floor under the bar is in a gap and groups apart, and the floor on either side of it is in
+    two pieces that share no corner.  One lit through a window and one in the room's shade
+    (the interior bench's bathroom, a wall behind a window's frame), one cluster for both gave
+    the shaded side the mean of both.  No floor patch holds triangles on both sides of the bar
+    (a triangle's centre decides); before the pieces were kept apart, 8 did."""
+    from raybundle.patches.clusters import patch_sizes
+
+    floor = tessellate(scene_of([quad(0, 1, 0, 1, 0.0)]), 8000)
+    x0, x1, z0, z1 = 0.44, 0.48, 0.002, 0.04
+    v = [[x0, 0, z0], [x1, 0, z0], [x1, 1, z0], [x0, 1, z0], [x0, 0, z1], [x1, 0, z1], [x1, 1, z1], [x0, 1, z1]]
+    t = [[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4], [1, 2, 6], [1, 6, 5], [2, 3, 7],
+         [2, 7, 6], [3, 0, 4], [3, 4, 7]]
+    sc = scene_of([(floor.vertices, floor.triangles), (v, t)])
+    h = patch_sizes(sc, 100)[0]
+    assert int(x0 / h) == int(x1 / h)              # the bar lies inside a column of cells
+    p = make_patches(sc, patches=100)
+    on_floor = np.abs(p.triangle_corners[:, :, 2]).max(axis=1) < 1e-12
+    x = p.triangle_corners[on_floor].mean(axis=1)[:, 0]
+    patch = p.triangle_patch[on_floor]
+    assert len(np.intersect1d(patch[x < x0], patch[x > x1])) == 0

@@ -514,7 +514,9 @@ def _corner_tags(points, polygon, centroid, pairs, seg, lines, seg_base, eps, ta
     return out
 
 
-def welded_vertices(scene):
-    """(V,) int: vertex ids welded where positions agree to 1e-7 of the scene's radius."""
+def welded_vertices(scene, vertices=None):
+    """(V,) int: ids of the scene's vertices (or of ``vertices`` (V, 3), points in it) welded
+    where positions agree to 1e-7 of the scene's radius."""
     _, r = scene.bounding_sphere
-    return unique_rows(np.round(scene.vertices / max(r * 1e-7, 1e-12)).astype(np.int64))[1]
+    v = scene.vertices if vertices is None else vertices
+    return unique_rows(np.round(v / max(r * 1e-7, 1e-12)).astype(np.int64))[1]
