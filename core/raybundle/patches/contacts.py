@@ -42,9 +42,10 @@ from ..util.arrays import ranges, unique_rows
 from .convex_cuts import cut_triangles, worth_cutting
 
 
-def _plane_groups(scene, faces):
-    """Group triangle ids ``faces`` by their plane: list of (ids, normal, offset).
-    Planes closer than 1e-6 of the scene radius are one plane."""
+def _plane_groups(scene, faces, min_area=0.0):
+    """Group triangle ids ``faces`` by their plane: list of (ids, normal, offset) of the planes
+    whose triangles add up to at least ``min_area`` [m^2].  Planes closer than 1e-6 of the scene
+    radius are one plane."""
     n = scene.triangle_normal[faces]
     p0 = scene.triangle_corners[faces, 0]
     # canonical orientation: two-sided faces with flipped normals share a plane
@@ -54,11 +55,12 @@ def _plane_groups(scene, faces):
     off = np.einsum("ij,ij->i", n, p0)
     _, r = scene.bounding_sphere
     key = np.concatenate([np.round(n * 1e4), np.round(off / max(r * 1e-6, 1e-12))[:, None]], axis=1).astype(np.int64)
-    _, label = np.unique(key, axis=0, return_inverse=True)
-    label = label.reshape(-1)
+    label = unique_rows(key)[1]
+    big = np.bincount(label, scene.triangle_area[faces]) >= min_area
     order = np.argsort(label, kind="stable")
+    order = order[big[label[order]]]
     cuts = np.nonzero(np.diff(label[order]))[0] + 1
-    return [(faces[g], n[g[0]], float(off[g[0]])) for g in np.split(order, cuts)]
+    return [(faces[g], n[g[0]], float(off[g[0]])) for g in np.split(order, cuts) if len(g)]
 
 
 class _BoxQuery:
@@ -69,7 +71,8 @@ class _BoxQuery:
     the window of low ends ``[a - longest, b]``; the longer ones (1%) are always tested."""
 
     def __init__(self, lo, hi, axis=None):
-        self.lo, self.hi = lo, hi
+        # per axis, contiguous: :meth:`pairs` tests one axis at a time, the sweep's first
+        self.lo, self.hi = np.ascontiguousarray(lo.T), np.ascontiguousarray(hi.T)
         if axis is None:
             axis = int(np.argmax(hi.max(axis=0) - lo.min(axis=0))) if len(lo) else 0
         self.axis = axis
@@ -96,8 +99,10 @@ class _BoxQuery:
         if len(self.long):
             query = np.concatenate([query, np.repeat(np.arange(len(lo)), len(self.long))])
             box = np.concatenate([box, np.tile(self.long, len(lo))])
-        ok = np.all((self.hi[box] >= lo[query]) & (self.lo[box] <= hi[query]), axis=1)
-        return query[ok], box[ok]
+        for i in [k] + [i for i in range(lo.shape[1]) if i != k]:
+            ok = (self.hi[i][box] >= lo[query, i]) & (self.lo[i][box] <= hi[query, i])
+            query, box = query[ok], box[ok]
+        return query, box
 
 
 def contact_segments(scene, faces, tol, min_plane_area=0.0):
@@ -119,15 +124,17 @@ def contact_segments(scene, faces, tol, min_plane_area=0.0):
     vid = welded_vertices(scene)
     # a plane's box is thin along its normal: sweep along the axis where it is thinnest
     overlapping = {}
-    for group, n, off in _plane_groups(scene, faces):
-        if min_plane_area > 0 and scene.triangle_area[group].sum() < min_plane_area:
-            continue
+    mine = np.zeros(len(scene.triangles), bool)              # the plane's own triangles
+    for group, n, off in _plane_groups(scene, faces, min_plane_area):
         c = corners[group]
         lo, hi = c.reshape(-1, 3).min(axis=0) - tol, c.reshape(-1, 3).max(axis=0) + tol
         axis = int(np.argmin(hi - lo))
         if axis not in overlapping:
             overlapping[axis] = _BoxQuery(lo_all, hi_all, axis)
-        cand = np.setdiff1d(overlapping[axis](lo, hi), group)
+        cand = overlapping[axis](lo, hi)
+        mine[group] = True
+        cand = cand[~mine[cand]]
+        mine[group] = False
         d = corners[cand] @ n - off                                   # (C, 3) signed distances
         cand_mask = (d.min(axis=1) <= tol) & (d.max(axis=1) >= -tol)
         cand, d = cand[cand_mask], d[cand_mask]
@@ -157,10 +164,11 @@ def _edges_in_plane(p, d, tv, tol):
         segs.append((sel, p[:, i], p[:, j], key, all_near))
     keys = np.concatenate([s[3][s[0]] for s in segs])
     flat = np.concatenate([s[4][s[0]] for s in segs])
-    kk, inv, cnt = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-    inner_count = np.bincount(inv.reshape(-1), flat, minlength=len(kk))
+    first, inv = unique_rows(keys)
+    cnt = np.bincount(inv, minlength=len(first))
+    inner_count = np.bincount(inv, flat, minlength=len(first))
     drop = (cnt >= 2) & (inner_count >= 2)
-    keep = ~drop[inv.reshape(-1)]
+    keep = ~drop[inv]
     a3 = np.concatenate([s[1][s[0]] for s in segs])[keep]
     b3 = np.concatenate([s[2][s[0]] for s in segs])[keep]
     # crossings: triangles with corners on both sides beyond tol
@@ -201,7 +209,7 @@ def _in_plane_frame(a3, b3, origin, e1, e2, r):
     seg = seg[length > 1e-9 * max(r, 1e-12)]
     q = np.round(np.sort(seg.reshape(len(seg), 4).reshape(-1, 2, 2), axis=1).reshape(len(seg), 4)
                  / max(r * 1e-7, 1e-12)).astype(np.int64)
-    return seg[np.unique(q, axis=0, return_index=True)[1]]
+    return seg[unique_rows(q)[0]]
 
 
 def _crosses(tri, segs, eps):

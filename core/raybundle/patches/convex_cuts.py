@@ -10,6 +10,8 @@ import math
 
 import numpy as np
 
+from ..util.arrays import unique_rows
+
 
 def split_polygon(poly, a, b, eps):
     """Split the convex polygon ``poly`` (M corners [x, y], a list) by the line through the
@@ -79,11 +81,11 @@ def worth_cutting(tri2d, f, k, crosses, seg, key):
     sel = np.nonzero(crosses)[0]
     if len(sel) == 0:
         return out
-    _, line = np.unique(key, axis=0, return_inverse=True)
-    line = line.ravel()
+    line = unique_rows(key)[1]
     length = np.bincount(line, np.linalg.norm(seg[:, 1] - seg[:, 0], axis=1))            # each line's
-    pair, inverse = np.unique(np.stack([f[sel], line[k[sel]]], axis=1), axis=0, return_inverse=True)
-    inverse = inverse.ravel()
+    pairs = np.stack([f[sel], line[k[sel]]], axis=1)
+    first, inverse = unique_rows(pairs)
+    pair = pairs[first]
     total = length[pair[:, 1]]
     edges = np.linalg.norm(tri2d - np.roll(tri2d, 1, axis=1), axis=2).max(axis=1)           # (F,)
     long_enough = total >= CUT_SHARE * edges[pair[:, 0]]
