@@ -41,7 +41,6 @@ from functools import cached_property
 import numpy as np
 
 from ..util import compiled
-from ..util.arrays import group_ids
 
 #: sides of at least this many triangles are clusters, read through their linear fits
 #: (module docstring)
@@ -206,15 +205,18 @@ class ClusterFit:
         n_sides = scene.n_sides
         a = np.where(np.bincount(side, tside_area, minlength=n_sides)[side] > 0, tside_area,
                      scene.triangle_area[scene.tside_triangle])
-        corners = scene.triangle_corners[scene.tside_triangle]
+        centre = scene.triangle_corners.mean(axis=1)[scene.tside_triangle]
         side_area = np.bincount(side, a, minlength=n_sides)
-        self.centroid = np.stack([np.bincount(side, a * corners[:, :, k].mean(axis=1), minlength=n_sides)
+        self.centroid = np.stack([np.bincount(side, a * centre[:, k], minlength=n_sides)
                                   for k in range(3)], axis=1) / np.maximum(side_area, 1e-300)[:, None]
+        del centre
         # sides that share a welded vertex: distinct (vertex, side) pairs, neighbours within a vertex
+        # (pairs as one integer key each: one sort, no dense ids first)
         cv, cs = ids.ravel(), np.repeat(side, 3)
-        _, first = np.unique(group_ids([cv, cs]), return_index=True)
+        _, first = np.unique(cv.astype(np.int64) * n_sides + cs, return_index=True)
         order = first[np.argsort(cv[first], kind="stable")]
         v, s = cv[order], cs[order]
+        del first, order
         start = np.flatnonzero(np.r_[True, v[1:] != v[:-1]])
         size = np.diff(np.r_[start, len(v)])
         left = np.repeat(size, size) - (np.arange(len(v)) - np.repeat(start, size)) - 1
@@ -223,11 +225,14 @@ class ClusterFit:
             i = np.nonzero(left >= off)[0]
             s1 += [s[i], s[i + off]]
             s2 += [s[i + off], s[i]]
+        del v, s, start, size, left
         s1 = np.concatenate(s1) if s1 else np.zeros(0, np.int64)
         s2 = np.concatenate(s2) if s2 else np.zeros(0, np.int64)
-        pair = np.unique(group_ids([s1, s2]) if len(s1) else np.zeros(0, np.int64), return_index=True)[1]
-        keep = pair[cluster[s1[pair]]]
+        at = cluster[s1]                                  # pairs from a cluster side, each once
+        s1, s2 = s1[at], s2[at]
+        keep = np.unique(s1 * n_sides + s2, return_index=True)[1]
         self.s1, self.s2 = s1[keep], s2[keep]
+        del s1, s2, keep
         d = self.centroid[self.s2] - self.centroid[self.s1]
         self.wd = d / np.maximum(np.einsum("ij,ij->i", d, d), 1e-300)[:, None]            # w d, w = 1 / |d|^2
         self.sides = np.nonzero(cluster)[0]
