@@ -303,6 +303,8 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
     finally:
         if probe is not None:
             probe.close()
+    lo, probe = grouping.lo, None
+    del grouping                    # the cuts done, only its origin is needed: memory grows with the scene
     lit_by_world = scene.world.emits
     tracer = RayTracer(fine) if contacts or lit_by_world else None
     try:
@@ -314,14 +316,16 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
             cut = cut_at_contacts(rows, np.nonzero(split & ~small[row])[0], h, tracer=tracer)
             row = row[cut.triangle_source]
             fine = replace(cut, triangle_source=fine.triangle_source[cut.triangle_source])
+            del rows, cut               # the uncut copy and the arrays the cut cached on it
         fine_small = small[row]
         stage(f"grouping {int(fine_small.sum()):,} small triangles into patches")
-        grouped = _Grouping(fine, lo=grouping.lo, rows=np.nonzero(fine_small)[0])
+        grouped = _Grouping(fine, lo=lo, rows=np.nonzero(fine_small)[0])
         gap = gap_sides(tracer, grouped.centroid, grouped.normal, CONTACT_SHARE * h) if contacts else None
         view = world_view_classes(tracer, grouped.centroid, grouped.normal) if lit_by_world else None
     finally:
         if tracer is not None:
             tracer.close()
+    tracer = None                   # and with it the uncut scene
     part = pierced_parts(fine)
     ids = grouped.clusters(h, np.ones(int(fine_small.sum()), bool), gap, world_view=view,
                            part=None if part is None else (part[0][fine_small], part[1]), small_rows=fine_small,
