@@ -314,3 +314,28 @@ def test_the_warm_up_stops_when_asked():
     with pytest.raises(pipeline.Cancelled, match="warming up"):
         pipeline.make_solver(sc, RenderSettings(seed=1), stage=stage, stop=stop)
     assert stages[-1].startswith("warming up the iteration (")
+
+
+def test_a_gather_ray_reads_a_near_mirror_within_the_scene_s_own_light():
+    """A gather ray that meets a sharp glossy side along the mirror of the side's iterate direction
+    t_j reads at most the brightest radiance any side sends: the lobe is followed by one more ray
+    (weight at most its albedo), not read as the iterate's ``E_j f_g(t_j, -w)``, which is there
+    about ``E_j / alpha^2`` (a spike the bundles then carry on into the running average)."""
+    sc = pipeline.prepare(scenes.cornell(resolution=(32, 32), mirror_roughness=0.03), patches=300)
+    s = pipeline.make_solver(sc, RenderSettings(seed=1))
+    for _ in range(2):
+        s.step()
+    sides = s.glossy_patches[s.traced_lobe]
+    sides = sides[s.glossy_incoming[sides].max(axis=1) > 0]
+    assert len(sides)
+    j = sides[np.argmax(s.glossy_incoming[sides].max(axis=1))]
+    t, n = s.receive_direction[j], s.normal[j]
+    mirror = t - 2 * (t @ n) * n
+    x = sc.triangle_corners[sc.tside_triangle[sc.tside_side == j][0]].mean(axis=0)
+    rays = 256
+    got, sky = s._gather(np.tile(x + 0.05 * mirror, (rays, 1)), np.tile(mirror, (rays, 1)),
+                         np.tile(-mirror, (rays, 1)))
+    brightest = s.radiance(s._all_patches, s.normal, diffuse_incoming=s.received(), first_shot_emission=False,
+                           glossy_as_diffuse=True).max()
+    assert not sky.any() and got.max() > 0
+    assert got.max() <= brightest, (got.max(), brightest, s.glossy_incoming[j])

@@ -112,9 +112,11 @@ class PatchSolution(Method, abc.ABC):
         #: per glossy side: its lobe's light is sent by gather rays (a sharp or strong lobe)
         #: rather than from the iterate (:meth:`glossy_sent_radiance`)
         self.traced_lobe = self.sharp_lobes(mats, pm[self.glossy_patches])
-        traced_mask = np.zeros(self.scene.n_sides, bool)
-        traced_mask[self.glossy_patches[self.traced_lobe]] = True
-        self._glossy_points = SidePoints(self.scene, traced_mask)    # for glossy_sent_radiance
+        #: (S,) bool: the sides whose glossy lobe is traced: sent by gather rays, and followed by
+        #: one more ray where a gather ray meets it (:meth:`_gather`)
+        self.traced_side = np.zeros(self.scene.n_sides, bool)
+        self.traced_side[self.glossy_patches[self.traced_lobe]] = True
+        self._glossy_points = SidePoints(self.scene, self.traced_side)    # for glossy_sent_radiance
         gpm = pm[self.glossy_patches]
         rho_g = mats.albedo(gpm, np.full(len(gpm), 0.7), diffuse=False).max(axis=1)
         rho_d = np.pi * self.kd_over_pi[self.glossy_patches].max(axis=1)
@@ -261,12 +263,26 @@ class PatchSolution(Method, abc.ABC):
     def _gather(self, points, normals, w):
         """The radiance (N, 3) that reaches ``points`` (N, 3) on surfaces of (triangle) normals
         ``normals`` from ``w`` (N, 3, unit, leaving the surface), and which of the rays left the
-        scene (N,): what the surface each ray meets sends back along it, its diffuse lobe from
-        the running average (:meth:`received`) and its glossy lobe from the iterate, without the
-        first-shot lights' emission (the first shot carries it); the world's radiance for a
-        ray that leaves."""
+        scene (N,): what the surface each ray meets sends back along it, without the first-shot
+        lights' emission (the first shot carries it); the world's radiance for a ray that leaves.
+
+        The hit's diffuse lobe comes from the running average (:meth:`received`).  Its glossy
+        lobe comes from the iterate, ``E_j f_g(t_j, -w)``, where that lobe is rough
+        (:meth:`sharp_lobes`); a traced (sharp) lobe is followed instead (``follow``) by one
+        ray drawn from it, ``weight L(y, -w')`` with the weight at most the lobe's albedo, whose
+        own hit reads its glossy lobe as if it spread its light evenly (``glossy_as_diffuse``, as
+        an eye path does once it has followed a lobe).  The iterate's ``E_j f_g`` of a sharp lobe
+        is unbiased but heavy-tailed, about ``E_j / alpha^2`` where ``-w`` meets the lobe around
+        ``t_j``, and the bundles carry such a reading on into the running average of the sides
+        it is sent to.  The as-if-diffuse end reads a lobe's incoming light spread over it: exact
+        where that light is uniform (a furnace), a bias only along two sharp lobes in a row."""
+        return self._trace_gather(points, normals, w, follow=True)
+
+    def _trace_gather(self, points, normals, w, follow):
+        """:meth:`_gather`, its hits' traced lobes followed or (not ``follow``) read as if diffuse."""
         sc = self.scene
-        tri, _, _, _ = self.tracer.first_hit(points + normals * self.tracer.eps, w)
+        origin = points + normals * self.tracer.eps
+        tri, dist, _, _ = self.tracer.first_hit(origin, w)
         self.stats.rays += len(points)
         hit = tri >= 0
         got = np.zeros((len(points), 3))
@@ -274,12 +290,32 @@ class PatchSolution(Method, abc.ABC):
             back = -w[hit]
             xs = sc.side_facing(tri[hit], back)
             ok = xs >= 0
-            rows = np.nonzero(hit)[0][ok]
-            got[rows] = self.radiance(xs[ok], back[ok], diffuse_incoming=self.received()[xs[ok]],
-                                      first_shot_emission=False, sharp_interfaces=True)
+            rows, xs, back = np.nonzero(hit)[0][ok], xs[ok], back[ok]
+            lobe = self.traced_side[xs] & follow
+            received = self.received()
+            for part, traced in ((~lobe, False), (lobe, True)):
+                if part.any():
+                    got[rows[part]] = self.radiance(xs[part], back[part], diffuse_incoming=received[xs[part]],
+                                                    first_shot_emission=False, sharp_interfaces=True,
+                                                    glossy_iterate=not traced, glossy_as_diffuse=not follow)
+            if lobe.any():
+                r = rows[lobe]
+                got[r] += self._follow_lobe(origin[r] + dist[r, None] * w[r], tri[r], xs[lobe], back[lobe])
         if self.world.emits:
             got[~hit] = self.world.radiance(w[~hit])
         return got, ~hit
+
+    def _follow_lobe(self, points, tri, sides, w_out):
+        """The glossy radiance (N, 3) that ``sides`` (N,) send from ``points`` (N, 3) on triangles
+        ``tri`` towards ``w_out`` (N, 3), by one ray each drawn from their lobe (:meth:`_gather`)."""
+        n = self.scene.triangle_normal[tri]
+        n = n * np.where(np.einsum("ij,ij->i", n, w_out) < 0, -1.0, 1.0)[:, None]     # the side that w_out leaves
+        w_i, weight = self.scene.materials.sample_glossy(self.patch_material[sides], n, w_out,
+                                                          self.grid_rng.random((len(sides), 2)))
+        live = np.nonzero(np.any(weight > 0, axis=1))[0]
+        out = np.zeros((len(sides), 3))
+        out[live] = weight[live] * self._trace_gather(points[live], n[live], w_i[live], follow=False)[0]
+        return out
 
     def _gather_tiny(self, E, e_glossy, t_glossy):
         """Put a gathered estimate in place of the bundles' one for the sides much smaller than a
