@@ -24,6 +24,7 @@ from ..patches.side_points import SidePoints
 from ..scene.transmission import solver_share
 from ..tracing.sampling import (Stream, cosine_directions, frames_from_normals, make_sequence, stream,
                                 uniform_sphere, uniform_sphere_pdf)
+from . import gather_rays
 from .base import Method, SolverStats
 
 
@@ -263,59 +264,8 @@ class PatchSolution(Method, abc.ABC):
     def _gather(self, points, normals, w):
         """The radiance (N, 3) that reaches ``points`` (N, 3) on surfaces of (triangle) normals
         ``normals`` from ``w`` (N, 3, unit, leaving the surface), and which of the rays left the
-        scene (N,): what the surface each ray meets sends back along it, without the first-shot
-        lights' emission (the first shot carries it); the world's radiance for a ray that leaves.
-
-        The hit's diffuse lobe comes from the running average (:meth:`received`).  Its glossy
-        lobe comes from the iterate, ``E_j f_g(t_j, -w)``, where that lobe is rough
-        (:meth:`sharp_lobes`); a traced (sharp) lobe is followed instead (``follow``) by one
-        ray drawn from it, ``weight L(y, -w')`` with the weight at most the lobe's albedo, whose
-        own hit reads its glossy lobe as if it spread its light evenly (``glossy_as_diffuse``, as
-        an eye path does once it has followed a lobe).  The iterate's ``E_j f_g`` of a sharp lobe
-        is unbiased but heavy-tailed, about ``E_j / alpha^2`` where ``-w`` meets the lobe around
-        ``t_j``, and the bundles carry such a reading on into the running average of the sides
-        it is sent to.  The as-if-diffuse end reads a lobe's incoming light spread over it: exact
-        where that light is uniform (a furnace), a bias only along two sharp lobes in a row."""
-        return self._trace_gather(points, normals, w, follow=True)
-
-    def _trace_gather(self, points, normals, w, follow):
-        """:meth:`_gather`, its hits' traced lobes followed or (not ``follow``) read as if diffuse."""
-        sc = self.scene
-        origin = points + normals * self.tracer.eps
-        tri, dist, _, _ = self.tracer.first_hit(origin, w)
-        self.stats.rays += len(points)
-        hit = tri >= 0
-        got = np.zeros((len(points), 3))
-        if np.any(hit):
-            back = -w[hit]
-            xs = sc.side_facing(tri[hit], back)
-            ok = xs >= 0
-            rows, xs, back = np.nonzero(hit)[0][ok], xs[ok], back[ok]
-            lobe = self.traced_side[xs] & follow
-            received = self.received()
-            for part, traced in ((~lobe, False), (lobe, True)):
-                if part.any():
-                    got[rows[part]] = self.radiance(xs[part], back[part], diffuse_incoming=received[xs[part]],
-                                                    first_shot_emission=False, sharp_interfaces=True,
-                                                    glossy_iterate=not traced, glossy_as_diffuse=not follow)
-            if lobe.any():
-                r = rows[lobe]
-                got[r] += self._follow_lobe(origin[r] + dist[r, None] * w[r], tri[r], xs[lobe], back[lobe])
-        if self.world.emits:
-            got[~hit] = self.world.radiance(w[~hit])
-        return got, ~hit
-
-    def _follow_lobe(self, points, tri, sides, w_out):
-        """The glossy radiance (N, 3) that ``sides`` (N,) send from ``points`` (N, 3) on triangles
-        ``tri`` towards ``w_out`` (N, 3), by one ray each drawn from their lobe (:meth:`_gather`)."""
-        n = self.scene.triangle_normal[tri]
-        n = n * np.where(np.einsum("ij,ij->i", n, w_out) < 0, -1.0, 1.0)[:, None]     # the side that w_out leaves
-        w_i, weight = self.scene.materials.sample_glossy(self.patch_material[sides], n, w_out,
-                                                          self.grid_rng.random((len(sides), 2)))
-        live = np.nonzero(np.any(weight > 0, axis=1))[0]
-        out = np.zeros((len(sides), 3))
-        out[live] = weight[live] * self._trace_gather(points[live], n[live], w_i[live], follow=False)[0]
-        return out
+        scene (N,) (:func:`~raybundle.methods.gather_rays.gather`)."""
+        return gather_rays.gather(self, points, normals, w)
 
     def _gather_tiny(self, E, e_glossy, t_glossy):
         """Put a gathered estimate in place of the bundles' one for the sides much smaller than a
