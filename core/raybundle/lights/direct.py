@@ -278,23 +278,26 @@ class DirectLighting:
         """Direct irradiance (N, 3) [W/m^2] of the first-shot lights at surface points
         with unit ``normals`` (N, 3), for bakes, where a point's value is final.
 
+        Each light's estimate has two stages.  ``samples_per_light`` shadow rays first find
+        whether a point is lit, shadowed or in a penumbra (some of them blocked, some not); the
+        estimate then takes shadow rays of its own, a quarter as many (at least one) at a lit or
+        shadowed point and ``penumbra_samples`` (default 16 times ``samples_per_light``) in a
+        penumbra, where the estimate's error dominated the bake's (docs/benchmarks.md, 'Measured
+        choices behind the defaults').  Since the first stage decides only which estimator and how
+        many rays, every estimate is unbiased; estimating from the first stage's own rays, a point
+        that a small occluder shades partly but whose few rays all passed read as wholly lit (a
+        room's ceiling panel of 96 m^2: walls 2-4% too bright).
+
         Polygonal lights (mesh lights, rectangular area lights;
-        :func:`light_polygon_irradiance`) use the ratio estimator of analytic
-        direct light and stochastic shadows (Heitz, Hill & McGuire 2018):
-        ``E = Le I(x) sum_s e_s V_s / sum_s e_s``, ``I(x)`` the exact unoccluded
-        cosine-weighted solid angle of the light (:func:`polygon_irradiance`) and
-        ``e_s`` the unshadowed sample estimates: exact where no sample is blocked,
-        0 where all are, and consistent in between (its bias in a penumbra falls as
-        1 / samples).  Other lights: the mean of the samples.  ``samples_per_light``
-        shadow rays per light with an extent, one per point light of radius 0 and
-        per sun of angle 0 (exact with one).  Points in a penumbra (some of their
-        samples blocked, some not) get ``penumbra_samples`` in all (default 16 times
-        ``samples_per_light``): there the shadow
-        ratio is a binomial proportion whose error (up to 1 / (2 sqrt(n))) dominated
-        the bake's error (docs/benchmarks.md, 'Measured choices behind the defaults'), and few points are
-        in a penumbra.  A point's samples are a randomly shifted Kronecker (R_3) set,
-        stratified over the light's triangles and their areas.  ``rng``: a Generator; ``receivers``
-        (N,) or None: the points' link groups (:meth:`light_samples_at`)."""
+        :func:`light_polygon_irradiance`) take the exact unoccluded ``Le I(x)`` (``I`` the
+        cosine-weighted solid angle, :func:`polygon_irradiance`) less the estimated blocked part,
+        ``E = Le I(x) - mean_s e_s (1 - V_s)`` (a control variate: exact where no ray is blocked),
+        where the first stage saw at least half of the light, and the mean ``mean_s e_s V_s``
+        elsewhere (exactly 0 in an umbra); an estimate below 0 is 0.  Other lights: the mean.
+        One shadow ray per point light of radius 0 and per sun of angle 0 (exact with one).
+        A point's rays are a randomly shifted Kronecker (R_3) set per stage, stratified over the
+        light's triangles and their areas.  ``rng``: a Generator; ``receivers`` (N,) or None: the
+        points' link groups (:meth:`light_samples_at`)."""
         out = np.zeros((len(points), 3))
         alpha = kronecker_alpha(3)
         for light in self.sampled_lights():
@@ -321,22 +324,34 @@ class DirectLighting:
                 return seen, total, lit & shade
 
             seen, total, penumbra = shadow_sums(points, normals, shift, 0, n_s)
-            n_pts = np.full(len(points), n_s)
-            more = np.nonzero(penumbra)[0]
             n_penumbra = 16 * n_s if penumbra_samples is None else int(penumbra_samples)
-            if len(more) and n_penumbra > n_s:
-                n_pts[more] = n_penumbra
-                s_more, t_more, _ = shadow_sums(points[more], normals[more], shift[more], n_s, n_penumbra,
+            if sharp:                 # one ray finds the light exactly, but where it passed glass or a cut-out
+                more = np.nonzero(penumbra)[0] if n_penumbra > 1 else []
+                if len(more):
+                    s_more, _, _ = shadow_sums(points[more], normals[more], shift[more], 1, n_penumbra,
+                                               None if receivers is None else receivers[more])
+                    seen[more] = (seen[more] + s_more) / n_penumbra
+                out += seen
+                continue
+            exact_i, ok = analytic if analytic is not None else (None, np.zeros(len(points), bool))
+            cv = ok & (np.sum(seen, axis=1) >= 0.5 * np.sum(total, axis=1))
+            # the estimate's own rays, independent of the decisions above: a quarter as many where
+            # the control variate is exact unless a ray is blocked, all of them where not
+            n_pts = np.where(penumbra, max(n_penumbra, 1), np.where(ok, max(1, n_s // 4), n_s))
+            shift = rng.random((len(points), 3))
+            first = int(n_pts.min())
+            seen, total, _ = shadow_sums(points, normals, shift, 0, first)
+            for n_more in np.unique(n_pts[n_pts > first]):
+                more = np.nonzero(n_pts == n_more)[0]
+                s_more, t_more, _ = shadow_sums(points[more], normals[more], shift[more], first, int(n_more),
                                                 None if receivers is None else receivers[more])
                 seen[more] += s_more
                 total[more] += t_more
-            if analytic is None:
-                out += seen / n_pts[:, None]
-            else:
-                exact_i, ok = analytic
-                ratio = np.where(total > 0, seen / np.maximum(total, 1e-300), 0.0)
-                out += np.where(ok[:, None], exact_i[:, None] * np.asarray(light.radiance, float) * ratio,
-                                seen / n_pts[:, None])
+            mean = seen / n_pts[:, None]
+            if cv.any():
+                blocked = (total[cv] - seen[cv]) / n_pts[cv, None]
+                mean[cv] = np.maximum(exact_i[cv, None] * np.asarray(light.radiance, float) - blocked, 0.0)
+            out += mean
         return out
 
     def far_side_irradiance(self, points, normals, rng, receivers=None):
