@@ -280,13 +280,14 @@ class DirectLighting:
 
         Each light's estimate has two stages.  ``samples_per_light`` shadow rays first find
         whether a point is lit, shadowed or in a penumbra (some of them blocked, some not); the
-        estimate then takes shadow rays of its own, a quarter as many (at least one) at a lit or
-        shadowed point and ``penumbra_samples`` (default 16 times ``samples_per_light``) in a
-        penumbra, where the estimate's error dominated the bake's (docs/benchmarks.md, 'Measured
-        choices behind the defaults').  Since the first stage decides only which estimator and how
-        many rays, every estimate is unbiased; estimating from the first stage's own rays, a point
-        that a small occluder shades partly but whose few rays all passed read as wholly lit (a
-        room's ceiling panel of 96 m^2: walls 2-4% too bright).
+        estimate then takes shadow rays of its own: ``penumbra_samples`` (default 16 times
+        ``samples_per_light``) in a penumbra, where the estimate's error dominated the bake's
+        (docs/benchmarks.md, 'Measured choices behind the defaults'); elsewhere a quarter as many
+        (at least one) for a polygonal light, whose estimate is exact unless a ray is blocked, and
+        as many for other lights.  Since the first stage decides only which estimator and how many
+        rays, the estimate is unbiased (but for its clamp at 0); estimated from the first stage's
+        own rays, a point that a small occluder shades partly but whose few rays all passed read
+        as wholly lit.
 
         Polygonal lights (mesh lights, rectangular area lights;
         :func:`light_polygon_irradiance`) take the exact unoccluded ``Le I(x)`` (``I`` the
@@ -294,7 +295,8 @@ class DirectLighting:
         ``E = Le I(x) - mean_s e_s (1 - V_s)`` (a control variate: exact where no ray is blocked),
         where the first stage saw at least half of the light, and the mean ``mean_s e_s V_s``
         elsewhere (exactly 0 in an umbra); an estimate below 0 is 0.  Other lights: the mean.
-        One shadow ray per point light of radius 0 and per sun of angle 0 (exact with one).
+        One shadow ray per point light of radius 0 and per sun of angle 0 (exact with one), and
+        ``penumbra_samples`` in all where it passed glass or a cut-out (whose outcome is random).
         A point's rays are a randomly shifted Kronecker (R_3) set per stage, stratified over the
         light's triangles and their areas.  ``rng``: a Generator; ``receivers`` (N,) or None: the
         points' link groups (:meth:`light_samples_at`)."""
