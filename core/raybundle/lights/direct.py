@@ -297,9 +297,8 @@ class DirectLighting:
         elsewhere (exactly 0 in an umbra); an estimate below 0 is 0.  Other lights: the mean.
         One shadow ray per point light of radius 0 and per sun of angle 0 (exact with one), and
         ``penumbra_samples`` in all where it passed glass or a cut-out (whose outcome is random).
-        A point's rays are a randomly shifted Kronecker (R_3) set per stage, stratified over the
-        light's triangles and their areas.  ``rng``: a Generator; ``receivers`` (N,) or None: the
-        points' link groups (:meth:`light_samples_at`)."""
+        A point's rays: a randomly shifted Kronecker (R_3) set per stage, stratified over the light's
+        triangles by area.  ``rng``: a Generator; ``receivers``: :meth:`light_samples_at`'s."""
         out = np.zeros((len(points), 3))
         alpha = kronecker_alpha(3)
         for light in self.sampled_lights():
