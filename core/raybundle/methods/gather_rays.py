@@ -27,11 +27,12 @@ def gather(solver, points, normals, w):
     """The radiance (N, 3) that reaches ``points`` (N, 3) on surfaces of (triangle) normals
     ``normals`` from ``w`` (N, 3, unit, leaving the surface) in ``solver``'s solution, and which of
     the rays left the scene (N,) (the module docstring)."""
-    return _trace(solver, points, normals, w, follow=True)
+    return _trace(solver, points, normals, w, solver.received(), follow=True)
 
 
-def _trace(solver, points, normals, w, follow):
-    """:func:`gather`, the hits' traced lobes followed or (not ``follow``) read as if diffuse."""
+def _trace(solver, points, normals, w, received, follow):
+    """:func:`gather` with the sides' ``received`` light (S, 3), the hits' traced lobes followed or
+    (not ``follow``) read as if diffuse."""
     sc = solver.scene
     origin = points + normals * solver.tracer.eps
     tri, dist, _, _ = solver.tracer.first_hit(origin, w)
@@ -44,7 +45,6 @@ def _trace(solver, points, normals, w, follow):
         ok = xs >= 0
         rows, xs, back = np.nonzero(hit)[0][ok], xs[ok], back[ok]
         lobe = solver.traced_side[xs] & follow
-        received = solver.received()
         for part, traced in ((~lobe, False), (lobe, True)):
             if part.any():
                 got[rows[part]] = solver.radiance(xs[part], back[part], diffuse_incoming=received[xs[part]],
@@ -52,13 +52,13 @@ def _trace(solver, points, normals, w, follow):
                                                   glossy_iterate=not traced, glossy_as_diffuse=not follow)
         if lobe.any():
             r = rows[lobe]
-            got[r] += _follow_lobe(solver, origin[r] + dist[r, None] * w[r], tri[r], xs[lobe], back[lobe])
+            got[r] += _follow_lobe(solver, origin[r] + dist[r, None] * w[r], tri[r], xs[lobe], back[lobe], received)
     if solver.world.emits:
         got[~hit] = solver.world.radiance(w[~hit])
     return got, ~hit
 
 
-def _follow_lobe(solver, points, tri, sides, w_out):
+def _follow_lobe(solver, points, tri, sides, w_out, received):
     """The glossy radiance (N, 3) that ``sides`` (N,) send from ``points`` (N, 3) on triangles
     ``tri`` towards ``w_out`` (N, 3), by one ray each drawn from their lobe."""
     n = solver.scene.triangle_normal[tri]
@@ -67,5 +67,5 @@ def _follow_lobe(solver, points, tri, sides, w_out):
                                                         solver.grid_rng.random((len(sides), 2)))
     live = np.nonzero(np.any(weight > 0, axis=1))[0]
     out = np.zeros((len(sides), 3))
-    out[live] = weight[live] * _trace(solver, points[live], n[live], w_i[live], follow=False)[0]
+    out[live] = weight[live] * _trace(solver, points[live], n[live], w_i[live], received, follow=False)[0]
     return out
