@@ -283,6 +283,12 @@ class EdgeGather:
             bias2 = max(((one.mean(axis=1) - patch) ** 2 - var / probe_rays).mean(), 0.0)
             needed = max(needed, self.NOISE_MARGIN * var.mean() / bias2 if bias2 > 0 else np.inf)
         self.last_needed = needed
+        return self.rays_bought(per_pixel, needed, k)
+
+    @staticmethod
+    def rays_bought(per_pixel, needed, k):
+        """Gather rays per sub-pixel sample for ``k`` samples when a budget buys ``per_pixel``
+        rays per pixel and the gather pays from ``needed`` rays on: 0 below that."""
         if per_pixel < needed:
             return 0
         return int(min(per_pixel, 65536) // k)
