@@ -55,11 +55,18 @@ def batch_means(renderer, batches, per_batch):
     return np.array(patch_b), np.array(img_b)
 
 
+#: below this share of the exact value a furnace's mean is not asked to settle: the bundles' own
+#: sampling of a side's crossings is unbiased to about 0.03% (measured over 3,200 grids a direction),
+#: and under the control variate (PatchSolution.transfer) a closed furnace's SE falls to about
+#: 0.005%, under that
+FLOOR = 1e-3
+
+
 def assert_converged(samples, exact, max_se):
     mean = samples.mean(axis=0)
     se = samples.std(axis=0, ddof=1) / np.sqrt(len(samples))
     assert np.all(se < max_se * exact), (se, exact)
-    assert np.all(np.abs(mean - exact) < 4.5 * se), (mean, exact, se)
+    assert np.all(np.abs(mean - exact) < 4.5 * se + FLOOR * exact), (mean, exact, se)
     return mean, se
 
 
@@ -80,6 +87,25 @@ def test_furnace_converges_to_analytic(glossy, sequence, batches, per_batch, dir
     patch, img = batch_means(r, batches, per_batch)
     assert_converged(patch, exact, max_se=0.02)
     assert_converged(img, exact, max_se=0.02)
+    r.tracer.close()
+
+
+def test_a_furnace_s_iterates_hold_still_under_the_control_variate():
+    """In a closed furnace every side receives the same radiance from every direction, so the
+    noise of an iterate's E is all in the cosines of its few directions and the grid's
+    aliasing: what the control variate of :meth:`PatchSolution.transfer` takes out.  The
+    iterate's light over the whole furnace (its area-weighted mean: noise at the scale of walls,
+    which the running average keeps longest) spread by 2.3% from one step to the next before,
+    at the default 16 directions a step; now by about 0.2%."""
+    r = furnace_renderer(False, "stratified", directions=16)
+    s, exact = r.solver, np.pi * r.scene.analytic_radiance
+    for _ in range(20):
+        s.step()
+    means = []
+    for _ in range(20):
+        s.step()
+        means.append(np.average(s.incoming / exact, axis=0, weights=s.area).mean())
+    assert np.std(means) < 0.006, np.std(means)
     r.tracer.close()
 
 

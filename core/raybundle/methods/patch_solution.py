@@ -95,6 +95,11 @@ class PatchSolution(Method, abc.ABC):
             #: (S,) bool: the sides whose interface reflects (``mirror_over_pi`` > 0)
             self.transmissive_side = np.any(self.mirror_over_pi > 0, axis=1)
         self.area = np.bincount(scene.tside_side, self.tside_open_area, minlength=scene.n_sides)
+        #: (S,) the sides' whole areas, and (S,) bool the sides open all over (nothing of them buried,
+        #: cut out or glass): those the control variate of :meth:`transfer` serves
+        self.full_area = np.bincount(scene.tside_side, scene.triangle_area[scene.tside_triangle],
+                                     minlength=scene.n_sides)
+        self.wholly_open = self.area >= self.full_area * (1.0 - 1e-9)
         self.reconstruction = LinearReconstruction(scene, self.tside_open_area)
         self.kd_over_pi = kd[pm] / np.pi          # (P, 3)
         if scene.texture is not None:         # a textured patch reflects with its mean albedo
@@ -317,7 +322,7 @@ class PatchSolution(Method, abc.ABC):
         (:meth:`~raybundle.scene.world.World.radiance_along`, reversed), one look-up per direction."""
         return self.world.radiance_along(direction)[::-1]
 
-    def transfer(self, d=None, resolution=None):
+    def transfer(self, d=None, resolution=None, control=None):
         """One random transport operator: ``directions_per_step`` directions d_k from the sequence
         (or the unit ``d`` (K, 3) given), one bundle each of ``bundle_resolution`` rays a side
         (or ``resolution``; traced together), every side's received ``E_i(d_k)`` from what the
@@ -325,7 +330,22 @@ class PatchSolution(Method, abc.ABC):
         :meth:`sent_environment`).  Returns ``(E, e_glossy, t_glossy, bundles)``: the diffuse
         lobe's mean over the K transfers (S, 3), each glossy side's one drawn transfer and its
         travel direction t_i (S, 3; None for diffuse-only scenes).  Counts directions and rays,
-        sets ``direction``; the caller stores the iterate."""
+        sets ``direction``; the caller stores the iterate.
+
+        ``control`` (S, 3), an estimate of E made before these directions were drawn (the running
+        average), is a control variate for the diffuse lobe's mean: the bundles also bring each
+        side ``M_i = (1/K) sum_k (2 pi / A_i) sum_j A(i, j, d_k) cos_i`` over all its crossings
+        (``A_i`` its whole area; the pairs of :class:`~raybundle.tracing.visibility.Bundle` and
+        its ``unpaired``), what a radiance of 1 from every direction (sides, black backs and the
+        world alike) would give, whose expectation is exactly ``pi``; ``E_i - control_i (M_i / pi
+        - 1)`` keeps E's expectation and removes the part of its noise that the cosines of a few
+        directions and the grid's aliasing bring to light that arrives about evenly (the same
+        factor on every side of one orientation: noise at the scale of walls).  It serves the sides
+        open all over (``wholly_open``): a ray crosses a cut-out or glass at random, and a side
+        partly buried under a solid lies on the solid's face there, where a ray's one hit
+        crosses either.  A side lying on another face (z-fighting) keeps ``m < 1`` of its
+        crossings and of its light, and comes out at its light over ``m``: lit as one surface,
+        as the tracer does (:mod:`raybundle.scene.overlaps`)."""
         if d is None:
             d = np.array([uniform_sphere(*self.sequence.next(2)) for _ in range(self.directions_per_step)])
         k_dirs = len(d)
@@ -361,6 +381,7 @@ class PatchSolution(Method, abc.ABC):
             pick = self.grid_rng.integers(k_dirs, size=len(self.glossy_patches))
             e_glossy, t_glossy = np.zeros((n, 3)), np.zeros((n, 3))
         st = self.stats
+        reached = np.zeros(n) if control is not None else None
         for k, bundle in enumerate(bundles):
             side = np.sign(self.normal @ d[k])
             # the last two rows are the world's radiance along -d and +d: sender ENVIRONMENT (-1)
@@ -377,6 +398,9 @@ class PatchSolution(Method, abc.ABC):
             e_k = np.stack([np.bincount(bundle.receiver, S[sender, c], minlength=n) for c in range(3)],
                            axis=1) * (w / self.area[:, None])
             E += e_k
+            if reached is not None:
+                reached += (np.bincount(bundle.receiver, minlength=n)
+                            + np.bincount(bundle.unpaired, minlength=n)) * (w / self.full_area)
             if self.separates_world:
                 sky = np.nonzero(sender < 0)[0]
                 world_e = np.stack([np.bincount(bundle.receiver[sky], S[sender[sky], c], minlength=n)
@@ -390,6 +414,8 @@ class PatchSolution(Method, abc.ABC):
             st.rays += bundle.n_casts
             st.bundle_rays += bundle.n_rays
         E /= k_dirs
+        if reached is not None:
+            E -= control * np.where(self.wholly_open, reached / (k_dirs * np.pi) - 1.0, 0.0)[:, None]
         if self.separates_world:
             self.world_incoming = self.world_incoming / k_dirs
         if self._tiny is not None and len(self._tiny) and self.TINY_GATHER_RAYS:

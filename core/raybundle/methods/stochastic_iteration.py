@@ -135,7 +135,7 @@ class StochasticIterationSolver(PatchSolution):
         t0 = time.perf_counter()
         before = self.direct.rays
         self.refine_first_shot()
-        E, e_glossy, t_glossy, bundles = self.transfer()
+        E, e_glossy, t_glossy, bundles = self.transfer(control=self.mean_incoming if self.averaged else None)
         self._store(E, e_glossy, t_glossy)
         st = self.stats
         st.iterations += 1
