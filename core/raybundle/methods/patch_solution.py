@@ -26,6 +26,7 @@ from ..tracing.sampling import (Stream, cosine_directions, frames_from_normals, 
                                 uniform_sphere, uniform_sphere_pdf)
 from . import gather_rays
 from .base import Method, SolverStats
+from .control_variate import controlled
 
 
 class PatchSolution(Method, abc.ABC):
@@ -96,7 +97,7 @@ class PatchSolution(Method, abc.ABC):
             self.transmissive_side = np.any(self.mirror_over_pi > 0, axis=1)
         self.area = np.bincount(scene.tside_side, self.tside_open_area, minlength=scene.n_sides)
         #: (S,) the sides' whole areas, and (S,) bool the sides open all over (nothing of them buried,
-        #: cut out or glass): those the control variate of :meth:`transfer` serves
+        #: cut out or glass): those the control variate serves (:mod:`.control_variate`)
         self.full_area = np.bincount(scene.tside_side, scene.triangle_area[scene.tside_triangle],
                                      minlength=scene.n_sides)
         self.wholly_open = self.area >= self.full_area * (1.0 - 1e-9)
@@ -330,22 +331,9 @@ class PatchSolution(Method, abc.ABC):
         :meth:`sent_environment`).  Returns ``(E, e_glossy, t_glossy, bundles)``: the diffuse
         lobe's mean over the K transfers (S, 3), each glossy side's one drawn transfer and its
         travel direction t_i (S, 3; None for diffuse-only scenes).  Counts directions and rays,
-        sets ``direction``; the caller stores the iterate.
-
-        ``control`` (S, 3), an estimate of E made before these directions were drawn (the running
-        average), is a control variate for the diffuse lobe's mean: the bundles also bring each
-        side ``M_i = (1/K) sum_k (2 pi / A_i) sum_j A(i, j, d_k) cos_i`` over all its crossings
-        (``A_i`` its whole area; the pairs of :class:`~raybundle.tracing.visibility.Bundle` and
-        its ``unpaired``), what a radiance of 1 from every direction (sides, black backs and the
-        world alike) would give, whose expectation is exactly ``pi``; ``E_i - control_i (M_i / pi
-        - 1)`` keeps E's expectation and removes the part of its noise that the cosines of a few
-        directions and the grid's aliasing bring to light that arrives about evenly (the same
-        factor on every side of one orientation: noise at the scale of walls).  It serves the sides
-        open all over (``wholly_open``): a ray crosses a cut-out or glass at random, and a side
-        partly buried under a solid lies on the solid's face there, where a ray's one hit
-        crosses either.  A side lying on another face (z-fighting) keeps ``m < 1`` of its
-        crossings and of its light, and comes out at its light over ``m``: lit as one surface,
-        as the tracer does (:mod:`raybundle.scene.overlaps`)."""
+        sets ``direction``; the caller stores the iterate.  With ``control`` (S, 3), an estimate
+        of E made before the directions were drawn, E is taken less its control variate
+        (:mod:`~raybundle.methods.control_variate`)."""
         if d is None:
             d = np.array([uniform_sphere(*self.sequence.next(2)) for _ in range(self.directions_per_step)])
         k_dirs = len(d)
@@ -362,26 +350,13 @@ class PatchSolution(Method, abc.ABC):
         directional = not self.world.is_constant
         gp = self.glossy_patches
         if len(gp):
-            # what the glossy sides send along each direction, for those a bundle line leaves
-            # from (most small sides send along none of an iteration's few directions), in batches
-            place = np.full(n, -1)
-            place[gp] = np.arange(len(gp))
-            used = [place[np.unique(b.sender[b.sender >= 0])] for b in bundles]
-            used = [u[u >= 0] for u in used]
-            start = np.concatenate([[0], np.cumsum([len(u) for u in used])])
-            gi = np.concatenate(used)
-            dk = d[np.repeat(np.arange(k_dirs), np.diff(start))]
-            toward = np.sign(np.einsum("ij,ij->i", self.normal[gp[gi]], dk))[:, None] * dk
-            per = max(1, self.GLOSSY_SEND_BATCH // self.glossy_send_rays)
-            s_glossy = np.concatenate([self.glossy_sent_radiance(gi[i:i + per], toward[i:i + per])
-                                       for i in range(0, len(gi), per)] + [np.zeros((0, 3))])
+            used, start, s_glossy = self._glossy_sent(d, bundles)
         E = np.zeros((n, 3))
         e_glossy = t_glossy = None
         if not self.diffuse_only:     # the new glossy iterate (senders use the old one)
             pick = self.grid_rng.integers(k_dirs, size=len(self.glossy_patches))
             e_glossy, t_glossy = np.zeros((n, 3)), np.zeros((n, 3))
         st = self.stats
-        reached = np.zeros(n) if control is not None else None
         for k, bundle in enumerate(bundles):
             side = np.sign(self.normal @ d[k])
             # the last two rows are the world's radiance along -d and +d: sender ENVIRONMENT (-1)
@@ -398,9 +373,6 @@ class PatchSolution(Method, abc.ABC):
             e_k = np.stack([np.bincount(bundle.receiver, S[sender, c], minlength=n) for c in range(3)],
                            axis=1) * (w / self.area[:, None])
             E += e_k
-            if reached is not None:
-                reached += (np.bincount(bundle.receiver, minlength=n)
-                            + np.bincount(bundle.unpaired, minlength=n)) * (w / self.full_area)
             if self.separates_world:
                 sky = np.nonzero(sender < 0)[0]
                 world_e = np.stack([np.bincount(bundle.receiver[sky], S[sender[sky], c], minlength=n)
@@ -414,8 +386,8 @@ class PatchSolution(Method, abc.ABC):
             st.rays += bundle.n_casts
             st.bundle_rays += bundle.n_rays
         E /= k_dirs
-        if reached is not None:
-            E -= control * np.where(self.wholly_open, reached / (k_dirs * np.pi) - 1.0, 0.0)[:, None]
+        if control is not None:
+            E = controlled(self, E, bundles, control)
         if self.separates_world:
             self.world_incoming = self.world_incoming / k_dirs
         if self._tiny is not None and len(self._tiny) and self.TINY_GATHER_RAYS:
@@ -423,6 +395,25 @@ class PatchSolution(Method, abc.ABC):
         self.direction = d[-1]
         st.directions += k_dirs
         return E, e_glossy, t_glossy, bundles
+
+    def _glossy_sent(self, d, bundles):
+        """What the glossy sides send along each of the directions ``d`` (K, 3), for those a line
+        of its bundle leaves from (most small sides send along none of an iteration's few
+        directions), in batches: ``(used, start, sent)``, per direction the glossy sides' indices
+        and where their rows of ``sent`` (U, 3) start."""
+        gp = self.glossy_patches
+        place = np.full(len(self.area), -1)
+        place[gp] = np.arange(len(gp))
+        used = [place[np.unique(b.sender[b.sender >= 0])] for b in bundles]
+        used = [u[u >= 0] for u in used]
+        start = np.concatenate([[0], np.cumsum([len(u) for u in used])])
+        gi = np.concatenate(used)
+        dk = d[np.repeat(np.arange(len(d)), np.diff(start))]
+        toward = np.sign(np.einsum("ij,ij->i", self.normal[gp[gi]], dk))[:, None] * dk
+        per = max(1, self.GLOSSY_SEND_BATCH // self.glossy_send_rays)
+        sent = np.concatenate([self.glossy_sent_radiance(gi[i:i + per], toward[i:i + per])
+                               for i in range(0, len(gi), per)] + [np.zeros((0, 3))])
+        return used, start, sent
 
     def _find_tiny(self, cell_area):
         """The sides smaller than a cell (``cell_area``) of the iterations' bundles over
