@@ -6,9 +6,9 @@ also::
 
     M_i = (1/K) sum_k (2 pi / A_i) sum_j A(i, j, d_k) cos_i
 
-over all its crossings (``A_i`` its whole area; the pairs of a
-:class:`~raybundle.tracing.visibility.Bundle` and its ``unpaired`` crossings, from a black back
-or a black world), what a radiance of 1 arriving from every direction would give: its
+over all the rays that cross it (``A_i`` its whole area; the crossings of its triangles,
+:meth:`~raybundle.tracing.visibility.RayTracer.bundles`, whatever lies beyond: a side, a black
+back or a black world), what a radiance of 1 arriving from every direction would give: its
 expectation is exactly ``pi``.  With ``c_i`` any estimate of ``E_i`` made before the
 directions were drawn (the running average), ``E_i - c_i (M_i / pi - 1)`` keeps E's
 expectation and takes out the noise that the cosines of a few directions and the grid's
@@ -26,13 +26,11 @@ from __future__ import annotations
 import numpy as np
 
 
-def controlled(solver, E, bundles, control):
-    """``E`` (S, 3), the mean of the transfers along ``bundles``, less ``control`` (S, 3) times
-    ``M_i / pi - 1`` on ``solver``'s sides open all over (``solver.wholly_open``)."""
-    n = len(E)
-    reached = np.zeros(n)
-    for b in bundles:
-        hits = np.bincount(b.receiver, minlength=n) + np.bincount(b.unpaired, minlength=n)
-        reached += hits * (b.cell_area * 2.0 * np.pi)
-    m = reached / (solver.full_area * len(bundles) * np.pi)
+def controlled(solver, E, bundles, crossed, control):
+    """``E`` (S, 3), the mean of the transfers along ``bundles`` (K of one resolution), less
+    ``control`` (S, 3) times ``M_i / pi - 1`` on ``solver``'s sides open all over
+    (``solver.wholly_open``); ``crossed`` (T,): the bundles' crossings of each triangle."""
+    sc = solver.scene
+    per_side = np.bincount(sc.tside_side, crossed[sc.tside_triangle], minlength=len(E))
+    m = per_side * (bundles[0].cell_area * 2.0) / (solver.full_area * len(bundles)) if len(bundles) else 1.0
     return E - control * np.where(solver.wholly_open, m - 1.0, 0.0)[:, None]

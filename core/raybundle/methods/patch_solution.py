@@ -339,7 +339,9 @@ class PatchSolution(Method, abc.ABC):
         k_dirs = len(d)
         g = self.grid_rng.random((k_dirs, 3))
         res = resolution or self.bundle_resolution
-        bundles = self.tracer.bundles(d, res, offsets=g[:, :2], rotations=g[:, 2])
+        bundles = self.tracer.bundles(d, res, offsets=g[:, :2], rotations=g[:, 2], crossings=control is not None)
+        if control is not None:
+            bundles, crossed = bundles
         n = len(self.area)
         if self._tiny is None and len(bundles):
             self._find_tiny(bundles[0].cell_area * (res / self.bundle_resolution) ** 2)
@@ -387,7 +389,7 @@ class PatchSolution(Method, abc.ABC):
             st.bundle_rays += bundle.n_rays
         E /= k_dirs
         if control is not None:
-            E = controlled(self, E, bundles, control)
+            E = controlled(self, E, bundles, crossed, control)
         if self.separates_world:
             self.world_incoming = self.world_incoming / k_dirs
         if self._tiny is not None and len(self._tiny) and self.TINY_GATHER_RAYS:

@@ -34,7 +34,7 @@ from __future__ import annotations
 import os
 import warnings
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -63,10 +63,6 @@ class Bundle:
     n_rays : int  rays in the grid (inside the bounding disc)
     n_casts : int  Embree first-hit queries used (all layers; bundles traced together
         share their total in proportion to their grid rays)
-    unpaired : (U,) int  side ids a ray reaches from no sender: from the black back of a
-        one-sided triangle, or from a world that sends nothing.  With ``receiver`` they count
-        every side a ray crosses once (the bundle's sampling of the projected areas, whatever
-        lies beyond)
     """
 
     direction: np.ndarray
@@ -76,7 +72,6 @@ class Bundle:
     travel_sign: np.ndarray
     n_rays: int
     n_casts: int
-    unpaired: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     def aggregated(self):
         """Unique (receiver, sender, travel_sign) with weight = count * delta^2 [m^2]."""
@@ -464,18 +459,21 @@ class RayTracer:
         """Global visibility in one direction: all light-carrying segments (see module doc)."""
         return self.bundles(np.asarray(direction, float)[None], resolution, [offset], [rotation])[0]
 
-    def bundles(self, directions, resolution, offsets, rotations) -> list[Bundle]:
+    def bundles(self, directions, resolution, offsets, rotations, crossings=False):
         """:meth:`bundle` in each of ``directions`` (K, 3) with grid ``offsets`` (K, 2) and
         ``rotations`` (K,), traced as one query: the rays of all K grids go to Embree
         together, layer by layer, split over the threads (one small grid alone, a few
-        thousand rays, is not worth splitting)."""
+        thousand rays, is not worth splitting).  With ``crossings`` also (T,) int, how many of
+        the K grids' rays cross each triangle (each hit, whatever lies beyond: a one-sided
+        triangle's front side takes one transfer a crossing, a two-sided triangle's sides one
+        each, or none where it faces a black back or a black world)."""
         dirs = np.asarray(directions, float)
         dirs = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
         origins, counts, delta = self.grid_origins(dirs, resolution, offsets, rotations)
         bounds = np.concatenate([[0], np.cumsum(counts)])
         world = self.scene.world.emits
         up, down, ray, casts, first, first_ray, last, last_ray = self._hit_layers(
-            origins, np.repeat(dirs, counts, axis=0), ends=True)
+            origins, np.repeat(dirs, counts, axis=0), ends=world or crossings)
         k_dirs = len(dirs)
 
         def per_grid(rays, *arrays):
@@ -485,13 +483,17 @@ class RayTracer:
             cuts = np.cumsum(np.bincount(grid, minlength=k_dirs))[:-1]
             return [np.split(x[order], cuts) for x in arrays]
         ups, downs = per_grid(ray, up, down)
-        (firsts,), (lasts,) = per_grid(first_ray, first), per_grid(last_ray, last)
+        if world:
+            (firsts,), (lasts,) = per_grid(first_ray, first), per_grid(last_ray, last)
         out = []
         for k in range(k_dirs):
+            ends = (firsts[k], lasts[k]) if world else ()
             # Embree queries are shared out in proportion to the rays of each grid
             out.append(bundle_from_hits(self.scene, dirs[k], delta, ups[k], downs[k],
                                         int(counts[k]), int(round(casts * counts[k] / max(bounds[-1], 1))),
-                                        firsts[k], lasts[k], world))
+                                        *ends))
+        if crossings:          # every hit is a pair's downstream one but each ray's first
+            return out, np.bincount(np.concatenate([down, first]), minlength=len(self.scene.triangles))
         return out
 
 
@@ -521,15 +523,13 @@ def near_surface(tracer, corners, normals, reach, rng, points=None):
     return tracer.occluded(p + normals * tracer.eps, w, np.broadcast_to(np.asarray(reach, float), len(p)))
 
 
-def bundle_from_hits(scene, d, delta, up, down, n_rays, casts, first=None, last=None, world=True):
+def bundle_from_hits(scene, d, delta, up, down, n_rays, casts, first=None, last=None):
     """The :class:`Bundle` of consecutive hit pairs ``up`` -> ``down`` (triangle ids)
     along ``d``: the side of ``up`` facing +d and the side of ``down`` facing -d
     exchange light both ways; with ``first``/``last`` (the first and last triangle
-    of each ray) the world sends to their sides facing -d and +d (``world``), or they are
-    reached from no sender (``Bundle.unpaired``), as the sides facing a black back are."""
+    of each ray) the world sends to their sides facing -d and +d."""
     s_up, s_down = scene.side_facing(up, d), scene.side_facing(down, -d)
     ok = (s_up >= 0) & (s_down >= 0)
-    unpaired = [s_down[~ok & (s_down >= 0)], s_up[~ok & (s_up >= 0)]]
     s_up, s_down = s_up[ok], s_down[ok]
     k = len(s_up)
     receiver, sender = [s_down, s_up], [s_up, s_down]
@@ -538,15 +538,11 @@ def bundle_from_hits(scene, d, delta, up, down, n_rays, casts, first=None, last=
         for tris, s in ((first, 1), (last, -1)):
             side = scene.side_facing(tris, -s * d)
             side = side[side >= 0]
-            if not world:
-                unpaired.append(side)
-                continue
             receiver.append(side)
             sender.append(np.full(len(side), ENVIRONMENT))
             sign.append(np.full(len(side), s, np.int8))
     return Bundle(d, delta * delta, receiver=np.concatenate(receiver), sender=np.concatenate(sender),
-                  travel_sign=np.concatenate(sign), n_rays=n_rays, n_casts=casts,
-                  unpaired=np.concatenate(unpaired))
+                  travel_sign=np.concatenate(sign), n_rays=n_rays, n_casts=casts)
 
 
 # ------------------------------------------------------------ brute force twin
@@ -596,5 +592,6 @@ def brute_force_bundle(scene, origins, direction, delta, eps):
         if seq:
             first.append(seq[0][1])
             last.append(seq[-1][1])
+    ends = [np.array(first, np.int64), np.array(last, np.int64)] if scene.world.emits else []
     return bundle_from_hits(scene, d, delta, np.array(up, np.int64), np.array(down, np.int64),
-                            len(origins), 0, np.array(first, np.int64), np.array(last, np.int64), scene.world.emits)
+                            len(origins), 0, *ends)
