@@ -32,5 +32,5 @@ def controlled(solver, E, bundles, crossed, control):
     (``solver.wholly_open``); ``crossed`` (T,): the bundles' crossings of each triangle."""
     sc = solver.scene
     per_side = np.bincount(sc.tside_side, crossed[sc.tside_triangle], minlength=len(E))
-    m = per_side * (bundles[0].cell_area * 2.0) / (solver.full_area * len(bundles)) if len(bundles) else 1.0
+    m = per_side * (bundles[0].cell_area * 2.0) / (solver.full_area * len(bundles))
     return E - control * np.where(solver.wholly_open, m - 1.0, 0.0)[:, None]

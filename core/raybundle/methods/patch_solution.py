@@ -98,8 +98,7 @@ class PatchSolution(Method, abc.ABC):
         self.area = np.bincount(scene.tside_side, self.tside_open_area, minlength=scene.n_sides)
         #: (S,) the sides' whole areas, and (S,) bool the sides open all over (nothing of them buried,
         #: cut out or glass): those the control variate serves (:mod:`.control_variate`)
-        self.full_area = np.bincount(scene.tside_side, scene.triangle_area[scene.tside_triangle],
-                                     minlength=scene.n_sides)
+        self.full_area = scene.patch_area[scene.side_patch]
         self.wholly_open = self.area >= self.full_area * (1.0 - 1e-9)
         self.reconstruction = LinearReconstruction(scene, self.tside_open_area)
         self.kd_over_pi = kd[pm] / np.pi          # (P, 3)
