@@ -73,6 +73,22 @@ def test_tessellated_box_is_grouped_to_the_target():
         assert np.all(np.einsum("ij,ij->i", p.triangle_normal, p.patch_normal[p.triangle_patch]) > np.cos(0.01))
 
 
+@pytest.mark.parametrize("target", [1400, 1800])
+def test_a_floor_of_equal_triangles_is_laid_out_to_the_target(target):
+    """A floor subdivided 32 x 32 (2,048 equal triangles, as Blender's Subdivide makes them): its
+    count jumps at once from about 1,000 (the triangles grouped in cells a quad wide) to 8,192
+    (each cut into four); a target between gets about its count (grouped in finer cells).  The
+    layout before gave about 1,000 or 8,192 patches, whatever the target between."""
+    n = 32
+    x = np.linspace(0.0, 1.0, n + 1)
+    v = np.stack(np.meshgrid(x, x, indexing="ij"), axis=-1).reshape(-1, 2)
+    v = np.hstack([v, np.zeros((len(v), 1))])
+    i = (np.arange(n)[:, None] * (n + 1) + np.arange(n)[None, :]).reshape(-1)
+    t = np.vstack([np.stack([i, i + n + 1, i + n + 2], 1), np.stack([i, i + n + 2, i + 1], 1)])
+    p = make_patches(scene_of([(v, t)]), patches=target)
+    assert 0.85 * target < p.n_patches < 1.15 * target, p.n_patches
+
+
 @pytest.mark.parametrize("glossy", [True, False], ids=["glossy", "diffuse"])
 def test_a_sphere_is_grouped_within_one_normal_cell_per_cluster(glossy):
     """A glossy lobe is evaluated about its cluster's normal in the iteration: a glossy sphere's

@@ -169,7 +169,7 @@ def test_a_furnace_with_a_glass_box_inside_stays_exact():
     r = pipeline.make_renderer(pipeline.prepare(sc, patches=600),
                                RenderSettings(sequence="stratified", seed=0, resolve_samples=4, glossy_depth=12))
     assert r.tracer.glass is not None
-    patch, img = batch_means(r, 12, 90)
+    patch, img = batch_means(r, 12, 30)
     assert_converged(patch, sc.analytic_radiance, max_se=0.02)
     assert_converged(img, sc.analytic_radiance, max_se=0.02)
     r.tracer.close()
@@ -272,7 +272,7 @@ def test_a_furnace_with_a_two_sided_emitting_sheet_inside_stays_exact(through):
                                RenderSettings(sequence="stratified", seed=0, resolve_samples=4))
     assert len(r.solver.translucent_sides) == (0 if through == 0 else 2 * (r.scene.n_sides - r.scene.n_patches))
     assert r.direct.first_shot_material[2]
-    patch, img = batch_means(r, 12, 90)
+    patch, img = batch_means(r, 12, 30)
     assert_converged(patch, sc.analytic_radiance, max_se=0.02)
     assert_converged(img, sc.analytic_radiance, max_se=0.02)
     r.tracer.close()

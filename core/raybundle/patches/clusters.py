@@ -143,9 +143,10 @@ class _Grouping:
         return self.area < np.maximum(h * h / SMALL, SLIVER * self.edge ** 2)
 
     def clusters(self, h, small, gap=None, spread=False, world_view=None, part=None, small_rows=None,
-                 detail_h=None):
-        """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``, their details
-        grouped at ``detail_h`` >= ``h`` (default ``h``: :func:`patch_sizes`);
+                 detail_h=None, cell_h=None):
+        """Cluster ids (S,) of the triangles ``small`` (T,) bool at patch size ``h``: in grid cells
+        ``cell_h`` <= ``h`` wide (default ``h``), their details grouped at ``detail_h`` >= ``h``
+        (default ``h``; both: :func:`patch_sizes`);
         ``gap`` (S, 2) bool: the triangle lies in a gap on its front / back
         (:func:`~raybundle.patches.gaps.gap_sides`), which a cluster does not straddle;
         ``world_view`` (S, 2) int: the classes of how much of the world its front / back
@@ -165,8 +166,9 @@ class _Grouping:
             centroid = self.centroid[idx] + t[:, None] * self.long[idx]
             area = self.area[idx] / np.repeat(n, n)
         rows = self.rows[idx]
-        cell = np.floor((centroid - self.lo) / h).astype(np.int64)
-        slab = np.floor(self.offset[idx] / (0.5 * h)).astype(np.int64)
+        ch = h if cell_h is None else min(float(cell_h), h)
+        cell = np.floor((centroid - self.lo) / ch).astype(np.int64)
+        slab = np.floor(self.offset[idx] / (0.5 * ch)).astype(np.int64)
         keys = [cell[:, 0], cell[:, 1], cell[:, 2], self.cell[idx], slab,
                 sc.triangle_material[rows], sc.triangle_two_sided[rows]]
         if world_view is not None:
@@ -182,9 +184,9 @@ class _Grouping:
             carved = lo[base] != hi[base]
             keys.append(code)
         ids = group_ids(keys)
-        # detail: clusters under h^2 / DETAIL (the facets of a plant, a lamp, a chair's legs in one
-        # cell) join by the cube face of their normal instead
-        detail = np.bincount(ids, area)[ids] < h * h / DETAIL
+        # detail: clusters under cell_h^2 / DETAIL (the facets of a plant, a lamp, a chair's legs in
+        # one cell) join by the cube face of their normal instead
+        detail = np.bincount(ids, area)[ids] < ch * ch / DETAIL
         if detail.any():
             # diffuse ones by the cube face (the image evaluates lobes per triangle, the iteration a
             # glossy one about the cluster's normal: glossy clusters keep their 15-degree normal cell),
@@ -194,7 +196,7 @@ class _Grouping:
             glossy = sc.materials.is_glossy[sc.triangle_material[rows]]
             axis = self.face[idx] // 2
             height = np.take_along_axis(centroid - self.lo, axis[:, None], 1)[:, 0]
-            if dh > h:
+            if dh > ch:
                 keys[0:3] = list(np.floor((centroid - self.lo) / dh).astype(np.int64).T)
             keys[3:5] = [np.where(glossy, self.cell[idx], -1 - self.face[idx]),
                          np.floor(height / (0.5 * dh)).astype(np.int64)]
@@ -213,42 +215,70 @@ class _Grouping:
             ids = _sides_apart(ids, own[idx], rank[corners[:, 0]], corners[:, 1], corners[:, 2])
         return ids
 
-    def count(self, h):
-        """Patches at size ``h``: k^2 per triangle cut, one per cluster (a sliver's pieces
-        spread along it), one per other triangle."""
+    def count(self, h, cell_h=None):
+        """Patches at size ``h``, grouped in cells ``cell_h`` wide (default ``h``): k^2 per
+        triangle cut, one per cluster (a sliver's pieces spread along it), one per other triangle."""
         small = self.small(h)
         reflects = self.scene.materials.reflects[self.scene.triangle_material[self.rows]]
         k = np.where(reflects & ~small, np.maximum(1, np.ceil(self.edge / h - 1e-9)), 1.0)
-        n_clusters = int(self.clusters(h, small, spread=True).max()) + 1 if small.any() else 0
+        n_clusters = int(self.clusters(h, small, spread=True, cell_h=cell_h).max()) + 1 if small.any() else 0
         return int((k[~small] ** 2).sum()) + n_clusters
 
 
 def patch_sizes(scene: PatchScene, patches, grouping=None, steps=12):
-    """``(h, detail_h)`` [m]: ``detail_h`` is the patch size whose patch count is closest to
-    ``patches`` (within ~10% where the count allows); ``h``, the size surfaces are cut and grouped
-    at, is the same but at most :data:`SURFACE_SHARE` times ``sqrt(A / patches)``, ``A`` the
-    reflecting area (:func:`surface_size`).  The clusters of a furnished room's details (a cluster
-    per material, normal cell and slab of each chair, cup and plant) may outnumber the target
-    several times over at the size that tiles its walls and floor: a size chosen for the count
-    alone cuts the walls into patches as large as walls, and one capped for the walls alone
+    """``(h, detail_h, cell_h)`` [m]: ``detail_h`` is the patch size whose patch count is closest
+    to ``patches`` (within ~10% where the count allows); ``h``, the size surfaces are cut and
+    grouped at, is the same but at most :data:`SURFACE_SHARE` times ``sqrt(A / patches)``, ``A``
+    the reflecting area (:func:`surface_size`).  The clusters of a furnished room's details (a
+    cluster per material, normal cell and slab of each chair, cup and plant) may outnumber the
+    target several times over at the size that tiles its walls and floor: a size chosen for the
+    count alone cuts the walls into patches as large as walls, and one capped for the walls alone
     splits the details into more patches than the whole target.  So the details (clusters under
-    h^2 / :data:`DETAIL`) are grouped at ``detail_h``, the rest at ``h``.  The count falls with
-    h, but in jumps: where triangles stop being grouped, each is cut into k^2 instead, so h
-    is bracketed and bisected in log h, each step a secant guess inside the bracket, and the
-    best count seen wins."""
+    cell_h^2 / :data:`DETAIL`) are grouped at ``detail_h``, the rest at ``h``.  The count falls
+    with h, but in jumps: where triangles stop being grouped, each is cut into k^2 instead, so h
+    is bracketed and bisected in log h, each step a secant guess inside the bracket, and the best
+    count seen wins.  A mesh of equal triangles (a floor subdivided n x n) jumps across the target
+    at once: just above the size where its triangles become small they are grouped into cells h
+    wide, h^2 each, just below it each is cut into four pieces an eighth of h^2 or less.  The
+    coarse side is then taken and its small triangles grouped in cells ``cell_h`` < ``h`` wide,
+    bisected the same way (:func:`cell_size`), so that the count follows the target; elsewhere
+    ``cell_h`` = ``h``."""
     grouping = grouping or _Grouping(scene)
-    h = np.sqrt(scene.triangle_area.sum() / patches)
-    best = (np.inf, h)
-    fine, coarse = None, None          # (log h, log count) with count above / below the target
+    best, coarse = _bisected(grouping.count, np.sqrt(scene.triangle_area.sum() / patches), patches, steps)
+    if best[0] <= np.log(1.1) or coarse is None:
+        h = min(best[1], surface_size(scene, patches, grouping))
+        return h, best[1], h
+    h = min(coarse[2], surface_size(scene, patches, grouping))
+    return h, coarse[2], cell_size(grouping, h, patches, steps, coarse[1] if h == coarse[2] else None)
+
+
+def cell_size(grouping, h, patches, steps=12, count=None):
+    """The width <= ``h`` [m] of the grid cells that group the small triangles of patch size ``h``
+    into about ``patches`` patches in all (``h`` where that count is ``patches`` or more, or
+    within 10% of it; ``count``: the count at ``h`` where known): :func:`patch_sizes`."""
+    count = grouping.count(h) if count is None else count
+    if count >= patches / 1.1:
+        return h
+    return _bisected(lambda c: grouping.count(h, cell_h=c), h * np.sqrt(count / patches), patches, steps, top=h)[0][1]
+
+
+def _bisected(count, h, patches, steps, top=np.inf):
+    """The size (<= ``top``) whose ``count`` (falling with it, in jumps) comes nearest
+    ``patches``: ``((|log(count / patches)|, size), coarse)``, ``coarse`` = (log size, count, size)
+    of the finest size seen whose count is under the target (None if none was)."""
+    best, fine, coarse = (np.inf, h), None, None
+    h = min(h, top)
     for _ in range(steps):
-        n = max(grouping.count(h), 1)
+        n = max(count(h), 1)
         best = min(best, (abs(np.log(n / patches)), h))
         if abs(n - patches) <= 0.1 * patches:
             break
         if n > patches:
             fine = (np.log(h), np.log(n))
         else:
-            coarse = (np.log(h), np.log(n))
+            coarse = (np.log(h), n, h)
+            if h >= top:
+                break
         guess = np.log(h) + 0.5 * np.log(n / patches)          # a count falls as 1 / h^2
         if fine is not None and coarse is not None:
             lo, hi = fine[0], coarse[0]
@@ -256,8 +286,8 @@ def patch_sizes(scene: PatchScene, patches, grouping=None, steps=12):
                 guess = 0.5 * (lo + hi)
             if hi - lo < 1e-3:
                 break
-        h = float(np.exp(guess))
-    return min(best[1], surface_size(scene, patches, grouping)), best[1]
+        h = float(min(np.exp(guess), top))
+    return best, coarse
 
 
 def surface_size(scene: PatchScene, patches, grouping):
@@ -282,7 +312,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
     grouping = _Grouping(scene)
     if patches is not None and patches >= len(scene.triangles) and not grouping.small(0.0).any():
         return subdivide(scene, patches=patches, contacts=contacts)     # fewer triangles than patches, no slivers
-    h, detail_h = (float(size),) * 2 if size is not None else patch_sizes(scene, patches, grouping)
+    h, detail_h, cell_h = (float(size),) * 3 if size is not None else patch_sizes(scene, patches, grouping)
     if not h > 0:
         raise ValueError("the patch size must be positive")
     small = grouping.small(h)
@@ -297,7 +327,10 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
         coarser = min(h * np.sqrt((patches + 3 * crowded) / patches), surface_size(scene, patches, grouping)) \
             if crowded and patches is not None else h
         if coarser > h:
-            # the crowded pieces cut in four: a coarser h (more triangles small) keeps about ``patches``
+            # the crowded pieces cut in four: a coarser h (more triangles small) keeps about
+            # ``patches``, in finer cells where it crosses the size at which a mesh of equal
+            # triangles stops being cut
+            cell_h = cell_size(grouping, coarser, patches ** 2 / (patches + 3 * crowded))
             h, detail_h = coarser, max(detail_h, coarser)
             small, fine, row, split, _ = _cut(scene, grouping, h, probe)
     finally:
@@ -329,7 +362,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
     part = pierced_parts(fine)
     ids = grouped.clusters(h, np.ones(int(fine_small.sum()), bool), gap, world_view=view,
                            part=None if part is None else (part[0][fine_small], part[1]), small_rows=fine_small,
-                           detail_h=detail_h)
+                           detail_h=detail_h, cell_h=cell_h)
     n_clusters = int(ids.max()) + 1
     patch = np.empty(len(fine.triangles), np.int64)
     patch[fine_small] = ids
