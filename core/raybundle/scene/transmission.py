@@ -78,6 +78,9 @@ def scatter(materials, mat, travel, geometric, shading, u):
     With probability ``w_t`` the path meets the interface and goes on, reflected with
     probability ``F`` (weight the reflection tint) or refracted (weight the refraction tint;
     a Refraction BSDF always refracts, weight 0 under total internal reflection); otherwise it stops on the opaque rest, weighted ``1 / (1 - w_t)``.
+    As in Cycles, a direction on the wrong side of the face (``geometric``) or of the shading
+    normal ends the path (weight 0): a reflection that does not stay, a refraction that does not
+    cross.
     Returns ``(on, direction, weight)``: (N,) bool, the new directions (N, 3) where ``on``
     and the weights (N, 3) the path's throughput is multiplied by."""
     m = np.asarray(mat)
@@ -109,12 +112,16 @@ def scatter(materials, mat, travel, geometric, shading, u):
     out = np.where(reflect[:, None], out, refr)
     out /= np.linalg.norm(out, axis=1, keepdims=True)
     tint = np.where(reflect[:, None], materials.transmission_reflection[m], materials.transmission_color[m])
-    absorbed = ~fresnel & reflect                                          # a Refraction BSDF's TIR
+    # a Refraction BSDF's TIR; and, as Cycles samples, a direction on the wrong side of the face or
+    # of the shading normal (a refraction about a normal turned far from the face's that stays on
+    # its side, a reflection that goes into it): reflected stays, refracted crosses, or the path ends
+    g = np.asarray(geometric, float)
+    cos_g, cos_n = np.einsum("ij,ij->i", g, out) * np.where(entering, 1.0, -1.0), np.einsum("ij,ij->i", surface, out)
+    absorbed = (~fresnel & reflect) | np.where(reflect, (cos_g <= 0) | (cos_n <= 0), (cos_g >= 0) | (cos_n >= 0))
     tint = np.where(absorbed[:, None], 0.0, tint)
     if len(rough):
-        cos_o, cos_n = np.einsum("ij,ij->i", surface[rough], -d[rough]), np.einsum("ij,ij->i", surface[rough], out[rough])
-        side = np.where(reflect[rough], cos_n > 0, cos_n < 0)               # reflected stays, refracted crosses
-        tint[rough] *= np.where(side, smith_g2_over_g1(alpha[rough], cos_o, cos_n), 0.0)[:, None]
+        cos_o = np.einsum("ij,ij->i", surface[rough], -d[rough])
+        tint[rough] *= smith_g2_over_g1(alpha[rough], cos_o, cos_n[rough])[:, None]
     weight[on] *= tint[on]
     return on, out, weight
 
