@@ -248,8 +248,8 @@ def patch_sizes(scene: PatchScene, patches, grouping=None, steps=12):
     if best[0] <= np.log(1.1) or coarse is None:
         h = min(best[1], surface_size(scene, patches, grouping))
         return h, best[1], h
-    h = min(coarse[2], surface_size(scene, patches, grouping))
-    return h, coarse[2], cell_size(grouping, h, patches, steps, coarse[1] if h == coarse[2] else None)
+    h = min(coarse[0], surface_size(scene, patches, grouping))
+    return h, coarse[0], cell_size(grouping, h, patches, steps, coarse[1] if h == coarse[0] else None)
 
 
 def cell_size(grouping, h, patches, steps=12, count=None):
@@ -264,8 +264,8 @@ def cell_size(grouping, h, patches, steps=12, count=None):
 
 def _bisected(count, h, patches, steps, top=np.inf):
     """The size (<= ``top``) whose ``count`` (falling with it, in jumps) comes nearest
-    ``patches``: ``((|log(count / patches)|, size), coarse)``, ``coarse`` = (log size, count, size)
-    of the finest size seen whose count is under the target (None if none was)."""
+    ``patches``: ``((|log(count / patches)|, size), coarse)``, ``coarse`` = (size, count) of the
+    finest size seen whose count is under the target (None if none was)."""
     best, fine, coarse = (np.inf, h), None, None
     h = min(h, top)
     for _ in range(steps):
@@ -274,14 +274,14 @@ def _bisected(count, h, patches, steps, top=np.inf):
         if abs(n - patches) <= 0.1 * patches:
             break
         if n > patches:
-            fine = (np.log(h), np.log(n))
+            fine = h
         else:
-            coarse = (np.log(h), n, h)
+            coarse = (h, n)
             if h >= top:
                 break
         guess = np.log(h) + 0.5 * np.log(n / patches)          # a count falls as 1 / h^2
         if fine is not None and coarse is not None:
-            lo, hi = fine[0], coarse[0]
+            lo, hi = np.log(fine), np.log(coarse[0])
             if not lo + 0.05 * (hi - lo) < guess < hi - 0.05 * (hi - lo):
                 guess = 0.5 * (lo + hi)
             if hi - lo < 1e-3:

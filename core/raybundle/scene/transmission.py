@@ -92,7 +92,8 @@ def scatter(materials, mat, travel, geometric, shading, u):
     d = np.asarray(travel, float)
     n = np.asarray(shading, float)
     n = np.where((np.einsum("ij,ij->i", n, d) < 0)[:, None], n, -n)          # facing the path
-    entering = np.einsum("ij,ij->i", np.asarray(geometric, float), d) < 0
+    g = np.asarray(geometric, float)
+    entering = np.einsum("ij,ij->i", g, d) < 0
     eta = np.asarray(materials.transmission_ior, float)[m]
     eta = np.where(entering, eta, 1.0 / eta)
     alpha = np.asarray(materials.transmission_roughness, float)[m] ** 2
@@ -115,7 +116,6 @@ def scatter(materials, mat, travel, geometric, shading, u):
     # a Refraction BSDF's TIR; and, as Cycles samples, a direction on the wrong side of the face or
     # of the shading normal (a refraction about a normal turned far from the face's that stays on
     # its side, a reflection that goes into it): reflected stays, refracted crosses, or the path ends
-    g = np.asarray(geometric, float)
     cos_g, cos_n = np.einsum("ij,ij->i", g, out) * np.where(entering, 1.0, -1.0), np.einsum("ij,ij->i", surface, out)
     absorbed = (~fresnel & reflect) | np.where(reflect, (cos_g <= 0) | (cos_n <= 0), (cos_g >= 0) | (cos_n >= 0))
     tint = np.where(absorbed[:, None], 0.0, tint)
