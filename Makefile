@@ -66,11 +66,12 @@ test: test-suite
 
 test-newest: test-suite test-chains
 
-# two processes, a file each at a time (the machines have 2 cores); a process that crashes ends the
-# run at once, naming its test: xdist's replacement worker can wait forever under --dist loadfile
-# (pytest-xdist#784; a CI run of 2026-12-01 hung 75 min so)
+# two processes, a file each at a time (the machines have 2 cores), the slowest files first so that both
+# end together (tests/conftest.py); a process that crashes ends the run at once, naming its test: xdist's
+# replacement worker can wait forever under --dist loadfile (pytest-xdist#784; a CI run of 2026-12-01
+# hung 75 min so)
 test-suite: $(STAMP)
-	$(PY) -m pytest -q -n 2 --dist loadfile --max-worker-restart=0 --ignore=tests/test_chains.py --ignore=tests/test_golden.py tests
+	$(PY) -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder --max-worker-restart=0 --ignore=tests/test_chains.py --ignore=tests/test_golden.py tests
 
 # the chains' file apart from the suite: its Dask cluster's two workers beside a second test process
 # of the suite once lost their scattered scene (beside the oldest Blender's one process they did not);
