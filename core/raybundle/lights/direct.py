@@ -17,6 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..tracing.sampling import kronecker_alpha
+from ..util import compiled
+from . import compiled_lights
 from .light_tree import build_light_tree
 from .polygon import light_polygon_irradiance
 from .sources import MeshLight, PointLight, ShapeLight, SunLight, sample_point_lights, small_emitters
@@ -35,6 +37,8 @@ def may_light(light, points, normals):
     """(N,) bool: some sample of ``light`` may light ``points`` (N, 3) with unit ``normals``
     (N, 3): part of the light lies above their tangent planes, and a one-sided area light
     faces them.  Elsewhere every sample's ``e cos_x`` is 0."""
+    if isinstance(light, ShapeLight) and compiled.use():
+        return compiled_lights.shape_reach(light, points, normals)
     ok = light.in_front(points, normals)
     if isinstance(light, ShapeLight):
         ok &= (points - light.center) @ light.normal > 0
@@ -224,26 +228,35 @@ class DirectLighting:
                 link = self.light_link[ids]
                 if receivers is not None:
                     e *= self.linking.receives[link, receivers][:, None]
-        v = y - points
-        r = np.sqrt(np.maximum(np.einsum("ij,ij->i", v, v), 1e-300))
-        w = v / r[:, None]                      # from the point towards the light
-        cos_x = np.einsum("ij,ij->i", normals, w)
-        e *= np.maximum(cos_x, 0.0)[:, None]
-        free = e.copy() if unshadowed else None
-        live = np.any(e > 0, axis=1)
+        if compiled.use():
+            w, cos_x, live, org_all, dir_all, t_all, e = compiled_lights.shadow_geometry(points, normals, y, e,
+                                                                                       self.tracer.eps)
+            free = e.copy() if unshadowed else None
+        else:
+            v = y - points
+            r = np.sqrt(np.maximum(np.einsum("ij,ij->i", v, v), 1e-300))
+            w = v / r[:, None]                      # from the point towards the light
+            cos_x = np.einsum("ij,ij->i", normals, w)
+            e *= np.maximum(cos_x, 0.0)[:, None]
+            free = e.copy() if unshadowed else None
+            live = np.any(e > 0, axis=1)
+            org_all = None
         if unblocked is not None:
             live &= ~np.broadcast_to(unblocked, live.shape)
         if live.any():
-            eps = self.tracer.eps
-            # shadow ray from just above the surface *to the light sample itself*
-            # (a ray shifted parallel would meet a grazing light plane early)
-            org = points[live] + normals[live] * eps
-            seg = y[live] - org
-            dist = np.linalg.norm(seg, axis=1)
+            if org_all is None:
+                eps = self.tracer.eps
+                # shadow ray from just above the surface *to the light sample itself*
+                # (a ray shifted parallel would meet a grazing light plane early)
+                org = points[live] + normals[live] * eps
+                seg = y[live] - org
+                dist = np.linalg.norm(seg, axis=1)
+                direction, t_max = seg / np.maximum(dist, 1e-300)[:, None], np.maximum(dist - 2 * eps, 0.0)
+            else:
+                org, direction, t_max = org_all[live], dir_all[live], t_all[live]
             self.rays += int(live.sum())
             through = None if crossed is None else np.zeros(len(org), bool)
-            blocked = self.tracer.occluded(org, seg / np.maximum(dist, 1e-300)[:, None],
-                                           np.maximum(dist - 2 * eps, 0.0), crossed=through,
+            blocked = self.tracer.occluded(org, direction, t_max, crossed=through,
                                            link=None if link is None else np.broadcast_to(link, live.shape)[live])
             if through is not None:
                 crossed[np.nonzero(live)[0][through]] = True

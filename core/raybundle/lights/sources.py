@@ -26,6 +26,8 @@ from ..tracing.sampling import (
     sample_spherical_triangle,
     triangle_solid_angle,
 )
+from ..util import compiled
+from . import compiled_lights
 from .light_planes import light_planes, plane_fans
 
 
@@ -398,6 +400,9 @@ class ShapeLight(_Light):
     link: int = 0
 
     def sample(self, points, u):
+        if compiled.use():
+            y, e = compiled_lights.shape_sample(self, points, u, MeshLight.MIN_SOLID_ANGLE)
+            return y, e[:, None] * self.radiance
         if self.ellipse:
             r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
             y, e = self._by_area(points, r * np.cos(phi), r * np.sin(phi))
@@ -421,6 +426,8 @@ class ShapeLight(_Light):
         ``E <= Le min(pi, A m d / r^4)``.  A guess at the centre could be far below the
         truth (a point near the plane of a lamp whose centre is below its horizon, part of
         it above): picked with probability 1/16 and weighted 16, it made fireflies."""
+        if compiled.use():
+            return compiled_lights.shape_selection_estimate(self, points, normals)
         p = points - self.center
         uu, vv = self.axis_u @ self.axis_u, self.axis_v @ self.axis_v
         a = np.clip(p @ self.axis_u / uu, -1.0, 1.0)

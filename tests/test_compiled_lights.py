@@ -1,0 +1,87 @@
+"""The compiled lamp arithmetic (:mod:`raybundle.lights.compiled_lights`) against the NumPy
+paths it replaces: the same arithmetic, so the same values up to the last bits of their sums."""
+import numpy as np
+import pytest
+
+from raybundle.lights.direct import DirectLighting, may_light
+from raybundle.lights.polygon import clipped_edge_irradiance, light_polygon_irradiance
+from raybundle.lights.sources import ShapeLight
+from raybundle.util import compiled
+
+from test_compiled_bsdf import _numpy
+from test_lights import lamp_scene
+
+
+def _unit(v):
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def _lamps():
+    """A tilted rectangle, a tilted ellipse and a large rectangle close to the points."""
+    rng = np.random.default_rng(3)
+    out = []
+    for ellipse, scale in ((False, 0.6), (True, 0.4), (False, 3.0)):
+        n = _unit(rng.normal(size=(1, 3)))[0]
+        u = np.cross(n, [0.3, 0.5, 0.8])
+        u = scale * u / np.linalg.norm(u)
+        v = 0.7 * scale * np.cross(n, u) / np.linalg.norm(u)
+        area = (np.pi if ellipse else 4.0) * np.linalg.norm(u) * np.linalg.norm(v)
+        out.append(ShapeLight(rng.normal(size=3) * 0.5, u, v, n, ellipse, area, np.array([3.0, 2.0, 1.0])))
+    return out
+
+
+@pytest.fixture
+def points():
+    rng = np.random.default_rng(11)
+    return rng.normal(size=(5000, 3)) * 1.5, _unit(rng.normal(size=(5000, 3))), rng.random((5000, 3))
+
+
+def test_compiled_area_light_samples_reach_and_estimates_match_numpy(points, monkeypatch):
+    """Samples (by area and by solid angle), where each lamp may light a point, its selection
+    estimate and its analytic irradiance (Lambert's outline sum, clipped at the horizon)."""
+    p, nrm, u = points
+    assert compiled.ENABLED
+    for lamp in _lamps():
+        calls = [lambda: lamp.sample(p, u), lambda: may_light(lamp, p, nrm),
+                 lambda: lamp.selection_estimate(p, nrm), lambda: light_polygon_irradiance(lamp, p, nrm)]
+        for call in calls[:3] + ([] if lamp.ellipse else calls[3:]):
+            got, want = call(), _numpy(monkeypatch, call)
+            for g, w in zip(*(x if isinstance(x, tuple) else (x,) for x in (got, want))):
+                assert g.shape == w.shape and np.any(w != 0)
+                if g.dtype == bool:
+                    assert np.array_equal(g, w)
+                else:
+                    assert np.allclose(g, w, rtol=1e-9, atol=1e-12), np.abs(g - w).max()
+
+
+def test_compiled_outline_sum_matches_numpy_for_a_concave_outline(points, monkeypatch):
+    """An L-shaped outline in the plane z = 0.4: points above it, below it and cut by it."""
+    p, nrm, _ = points
+    ring = np.array([[0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]], float) * 0.5
+    ring = np.c_[ring, np.full(len(ring), 0.4)]
+    edges = np.stack([ring, np.roll(ring, -1, axis=0)], axis=1)
+    got = clipped_edge_irradiance(p, nrm, edges, np.array([0.0, 0.0, 1.0]))
+    want = _numpy(monkeypatch, lambda: clipped_edge_irradiance(p, nrm, edges, np.array([0.0, 0.0, 1.0])))
+    assert np.count_nonzero(want) > 1000
+    assert np.allclose(got, want, rtol=1e-9, atol=1e-12), np.abs(got - want).max()
+
+
+def test_compiled_shadow_rays_match_numpy(monkeypatch):
+    """A lamp over a box's floor (lamp_scene): the shadowed and unshadowed estimates, directions
+    and cosines of one sample per point, with the same shadow rays' outcomes."""
+    sc = lamp_scene()
+    rng = np.random.default_rng(5)
+    p = np.c_[rng.uniform(0.05, 0.95, (4000, 2)), np.zeros(4000)]
+    nrm = np.tile([0.0, 0.0, 1.0], (4000, 1))
+    u = rng.random((4000, 3))
+
+    def run():
+        from raybundle.tracing.visibility import RayTracer
+        direct = DirectLighting(sc, RayTracer(sc, threads=1))
+        light = direct.light_list()[0]
+        return direct.light_samples_at(p, nrm, light, u, unshadowed=True)
+
+    got, want = run(), _numpy(monkeypatch, run)
+    for g, w in zip(got, want):
+        assert np.allclose(g, w, rtol=1e-9, atol=1e-12), np.abs(g - w).max()
+    assert np.any(got[0] > 0)
