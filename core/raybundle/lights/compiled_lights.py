@@ -15,12 +15,18 @@ in the same order, so both give the same values up to the last bits of their sum
 * :func:`outline_irradiance`: Lambert's sum of :func:`~raybundle.lights.polygon.clipped_edge_irradiance`
   over an outline wholly above a point's horizon, and which points' horizons cut it;
 * :func:`shadow_geometry`: the direction, cosine and shadow ray of each light sample in
-  :meth:`~raybundle.lights.direct.DirectLighting.shadowed`.
+  :meth:`~raybundle.lights.direct.DirectLighting.shadowed`;
+* :func:`lamp_accumulate`: what a shadowed light sample adds to its point in
+  :func:`~raybundle.lights.reflected_direct.reflected_radiance`: the BRDF, the control variate's
+  correction and the glossy lobe's MIS share, with the BRDF's own kernels
+  (:mod:`raybundle.scene.compiled_bsdf`).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..scene import compiled_bsdf
+from ..scene.compiled_bsdf import glossy_pdf_at
 from ..util.compiled import helper, kernel
 
 _V = np.ascontiguousarray
@@ -39,9 +45,9 @@ def shape_sample(light, points, u, min_solid_angle):
     lx, ly = 2.0 * np.linalg.norm(light.axis_u), 2.0 * np.linalg.norm(light.axis_v)
     ex, ey = light.axis_u / (0.5 * lx), light.axis_v / (0.5 * ly)
     radius = max(np.linalg.norm(light.axis_u + light.axis_v), np.linalg.norm(light.axis_u - light.axis_v))
-    _shape_sample(_rows(points), _rows(u), _rows(light.center), _rows(light.axis_u), _rows(light.axis_v),
-                  _rows(light.normal), bool(light.ellipse), float(light.area), float(radius), float(min_solid_angle),
-                  float(lx), float(ly), _rows(ex), _rows(ey), _rows(np.cross(ex, ey)), y, e)
+    frame = _rows([light.center, light.axis_u, light.axis_v, light.normal, ex, ey, np.cross(ex, ey)])
+    _shape_sample(_rows(points), _rows(u), frame, bool(light.ellipse), float(light.area), float(radius),
+                  float(min_solid_angle), float(lx), float(ly), y, e)
     return y, e
 
 
@@ -61,14 +67,15 @@ def shape_selection_estimate(light, points, normals):
 
 
 # -------------------------------------------------------------------------------- polygons
-def outline_irradiance(points, normals, verts, ends):
-    """``(I (N,), cut (N,) bool)``: Lambert's ``|sum_e theta_e n . g_e| / 2`` over the outline
-    edges ``ends`` (B, 2) (indices into ``verts`` (V, 3)) where every vertex lies on or above a
-    point's horizon, 0 where none lies above it; ``cut`` marks the points whose horizon cuts the
-    outline (``I`` is left 0 there for the caller's clipped sum)."""
-    out, cut = np.empty(len(points)), np.empty(len(points), bool)
-    _outline(_rows(points), _rows(normals), _rows(verts), _V(ends, np.int64), out, cut)
-    return out, cut
+def outline_irradiance(points, normals, verts, ends, edges, plane_normal):
+    """:func:`~raybundle.lights.polygon.clipped_edge_irradiance`: Lambert's
+    ``|sum_e theta_e n . g_e| / 2`` over the outline edges ``ends`` (B, 2) (indices into
+    ``verts`` (V, 3), the edges ``edges`` (B, 2, 3) themselves) where every vertex lies on or above a
+    point's horizon, the clipped sum where the horizon cuts the outline (whose plane has the unit
+    normal ``plane_normal``), 0 where it lies wholly below."""
+    out = np.empty(len(points))
+    _outline(_rows(points), _rows(normals), _rows(verts), _V(ends, np.int64), _rows(edges), _rows(plane_normal), out)
+    return out
 
 
 # ---------------------------------------------------------------------------- shadow rays
@@ -86,6 +93,41 @@ def shadow_geometry(points, normals, y, e, eps):
     return w, cos_x, live, org, d, t, e
 
 
+# ----------------------------------------------------------------------- a sample's light
+def lamp_accumulate(mt, mats, normals, w_out, travel, e, free, cos_x, weight, f_d, scale, mis, le, n_s, acc):
+    """Add to ``acc`` (S, 3), or (S, 6) with the glossy lobe's part in columns 3-5, what each
+    light sample adds at its point (``_one_sample`` of :mod:`~raybundle.lights.reflected_direct`):
+    ``- w f_d (free - e)`` where ``f_d`` (S, 3) is given (the control variate), and where the
+    sample reached its light, ``w e (f - f_d)`` with the glossy part of ``f`` at the points
+    ``mis`` (S,) bool (or None) weighted by the power heuristic against the lobe's own ray
+    (``w_l = 1 - p_g^2 / (p_g^2 + (n_s p_l)^2)``, ``p_l = mean(le) cos_x / mean(e)``).  ``mt``
+    a material table; per sample its material, unit normal, ``w_out``, ``travel`` (towards
+    the point), shadowed ``e`` and unshadowed ``free`` (or None), ``cos_x``, weight ``weight``
+    (S, 1), texture ``scale`` (S, 3) or None and its light's radiance ``le`` (S, 3).  Returns
+    ``(live, blocked)`` (S,) bool: the samples that reached their light, and those that faced
+    it but were blocked (all False without ``free``)."""
+    k = len(mats)
+    live, blocked = np.empty(k, bool), np.empty(k, bool)
+    none3 = np.zeros((0, 3))
+    e, w_out = _rows(e), _rows(w_out)
+    w_in = -_rows(travel)                                     # towards the light
+    # the BRDF where a sample reached its light: its glossy lobe apart where MIS or the glossy part
+    # asks for it, the diffuse lobe then added (the same sum the whole BRDF makes)
+    i = np.nonzero(np.any(e > 0, axis=1))[0]
+    at = (mats[i], normals[i], w_in[i], w_out[i])
+    sc = None if scale is None else scale[i]
+    if acc.shape[1] == 3 and (mis is None or not mis[i].any()):
+        f, lobe = compiled_bsdf.brdf(mt, *at, True, True, sc), none3
+    else:
+        lobe = compiled_bsdf.brdf(mt, *at, False, True, None)
+        f = compiled_bsdf.brdf(mt, *at, True, False, sc) + lobe
+    _accumulate(_V(mats, np.int64), _rows(normals), w_out, w_in, e, none3 if free is None else _rows(free),
+                _rows(cos_x), _rows(np.broadcast_to(weight, (k, 1))[:, 0]), none3 if f_d is None else _rows(f_d), f,
+                lobe, np.zeros(0, bool) if mis is None else _V(mis, bool), _rows(np.broadcast_to(le, (k, 3))),
+                float(n_s), compiled_bsdf.packed(mt).alpha, acc, live, blocked)
+    return live, blocked
+
+
 # --------------------------------------------------------------------------------- kernels
 @helper
 def _dot(a0, a1, a2, b0, b1, b2):
@@ -99,19 +141,18 @@ def _clip(x, lo, hi):
 
 
 @helper
-def _by_area(p0, p1, p2, a, b, c, au, av, nl, area, y, e, i):
-    """``y[i] = c + a au + b av`` and ``e[i] = cos_l A / r^2`` (ShapeLight._by_area)."""
+def _by_area(p0, p1, p2, a, b, c, au, av, nl, area):
+    """``(y = c + a au + b av, cos_l A / r^2)`` (ShapeLight._by_area; vectors as 3-tuples)."""
     y0, y1, y2 = c[0] + a * au[0] + b * av[0], c[1] + a * au[1] + b * av[1], c[2] + a * au[2] + b * av[2]
     v0, v1, v2 = y0 - p0, y1 - p1, y2 - p2
     r2 = max(_dot(v0, v1, v2, v0, v1, v2), 1e-300)
-    e[i] = max(-(v0 * nl[0] + v1 * nl[1] + v2 * nl[2]) / np.sqrt(r2), 0.0) * area / r2
-    y[i, 0], y[i, 1], y[i, 2] = y0, y1, y2
+    return y0, y1, y2, max(-(v0 * nl[0] + v1 * nl[1] + v2 * nl[2]) / np.sqrt(r2), 0.0) * area / r2
 
 
 @helper
-def _solid_angle(p0, p1, p2, u0, u1, c, au, av, lx, ly, ex, ey, ez, y, e, i):
+def _solid_angle(p0, p1, p2, u0, u1, c, au, av, lx, ly, ex, ey, ez):
     """A point on the rectangle along a direction uniform in its solid angle O from p, and O
-    (Urena, Fajardo and King 2013; ShapeLight._sample_solid_angle)."""
+    (Urena, Fajardo and King 2013; ShapeLight._sample_solid_angle; vectors as 3-tuples)."""
     d0, d1, d2 = (c[0] - au[0] - av[0]) - p0, (c[1] - au[1] - av[1]) - p1, (c[2] - au[2] - av[2]) - p2
     x0 = d0 * ex[0] + d1 * ex[1] + d2 * ex[2]
     y0 = d0 * ey[0] + d1 * ey[1] + d2 * ey[2]
@@ -137,33 +178,40 @@ def _solid_angle(p0, p1, p2, u0, u1, c, au, av, lx, ly, ex, ey, ez, y, e, i):
     hv = h0 + u1 * (h1 - h0)
     yv = hv * dd / np.sqrt(max(1.0 - hv * hv, 1e-300)) if hv * hv < 1.0 - 1e-12 else y1
     zs = -z0 if flip else z0
-    y[i, 0] = p0 + xu * ex[0] + yv * ey[0] + zs * ez[0]
-    y[i, 1] = p1 + xu * ex[1] + yv * ey[1] + zs * ez[1]
-    y[i, 2] = p2 + xu * ex[2] + yv * ey[2] + zs * ez[2]
-    e[i] = omega
+    return (p0 + xu * ex[0] + yv * ey[0] + zs * ez[0], p1 + xu * ex[1] + yv * ey[1] + zs * ez[1],
+            p2 + xu * ex[2] + yv * ey[2] + zs * ez[2], omega)
 
 
 def _sample_shape():
-    v, p = np.array([0.0, 0.0, 1.0]), np.array([[0.1, 0.2, 0.0], [0.0, 0.0, -3.0]])
-    a, b = np.array([0.5, 0.0, 0.0]), np.array([0.0, 0.5, 0.0])
-    return (p, np.full((2, 2), 0.5), v, a, b, -v, False, 1.0, 0.8, 0.5, 1.0, 1.0, a * 2, b * 2,
-            np.array([0.0, 0.0, 1.0]), np.empty((2, 3)), np.empty(2))
+    frame = np.array([[0.0, 0.0, 1.0], [0.5, 0.0, 0.0], [0.0, 0.5, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0],
+                      [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    return (np.array([[0.1, 0.2, 0.0], [0.0, 0.0, -3.0]]), np.full((2, 2), 0.5), frame, False, 1.0, 0.8, 0.5, 1.0,
+            1.0, np.empty((2, 3)), np.empty(2))
+
+
+@helper
+def _row(a, k):
+    return a[k, 0], a[k, 1], a[k, 2]
 
 
 @kernel(_sample_shape)
-def _shape_sample(points, u, c, au, av, nl, ellipse, area, radius, min_sa, lx, ly, ex, ey, ez, y, e):
+def _shape_sample(points, u, frame, ellipse, area, radius, min_sa, lx, ly, y, e):
+    """``frame`` (7, 3): the lamp's centre, axes u and v, normal, and the unit frame ex, ey, ez."""
+    c, au, av, nl = _row(frame, 0), _row(frame, 1), _row(frame, 2), _row(frame, 3)
+    ex, ey, ez = _row(frame, 4), _row(frame, 5), _row(frame, 6)
     for i in range(len(points)):
         p0, p1, p2 = points[i, 0], points[i, 1], points[i, 2]
         if ellipse:
             r, phi = np.sqrt(u[i, 0]), 2 * np.pi * u[i, 1]
-            _by_area(p0, p1, p2, r * np.cos(phi), r * np.sin(phi), c, au, av, nl, area, y, e, i)
-            continue
-        q0, q1, q2 = p0 - c[0], p1 - c[1], p2 - c[2]
-        gap = max(np.sqrt(q0 * q0 + q1 * q1 + q2 * q2) - radius, 0.0)
-        if area >= min_sa * gap * gap and q0 * nl[0] + q1 * nl[1] + q2 * nl[2] > 0:
-            _solid_angle(p0, p1, p2, u[i, 0], u[i, 1], c, au, av, lx, ly, ex, ey, ez, y, e, i)
+            y0, y1, y2, ei = _by_area(p0, p1, p2, r * np.cos(phi), r * np.sin(phi), c, au, av, nl, area)
         else:
-            _by_area(p0, p1, p2, 2 * u[i, 0] - 1, 2 * u[i, 1] - 1, c, au, av, nl, area, y, e, i)
+            q0, q1, q2 = p0 - c[0], p1 - c[1], p2 - c[2]
+            gap = max(np.sqrt(q0 * q0 + q1 * q1 + q2 * q2) - radius, 0.0)
+            if area >= min_sa * gap * gap and q0 * nl[0] + q1 * nl[1] + q2 * nl[2] > 0:
+                y0, y1, y2, ei = _solid_angle(p0, p1, p2, u[i, 0], u[i, 1], c, au, av, lx, ly, ex, ey, ez)
+            else:
+                y0, y1, y2, ei = _by_area(p0, p1, p2, 2 * u[i, 0] - 1, 2 * u[i, 1] - 1, c, au, av, nl, area)
+        y[i, 0], y[i, 1], y[i, 2], e[i] = y0, y1, y2, ei
 
 
 def _sample_reach():
@@ -209,12 +257,27 @@ def _shape_selection(points, normals, c, au, av, nl, le, out):
 def _sample_outline():
     v = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]])
     p = np.zeros((2, 3))
-    return (p, p + np.array([0.0, 0.0, 1.0]), v, np.array([[0, 1], [1, 2], [2, 0]], np.int64), np.empty(2),
-            np.empty(2, bool))
+    ends = np.array([[0, 1], [1, 2], [2, 0]], np.int64)
+    return p, p + np.array([0.0, 0.0, 1.0]), v, ends, v[ends], np.array([0.0, 0.0, 1.0]), np.empty(2)
+
+
+@helper
+def _edge_term(v0, v1, v2, w0, w1, w2, n0, n1, n2):
+    """Lambert's ``theta n . g`` of the edge between unit directions v and w (polygon._edge_terms)."""
+    c0, c1, c2 = v1 * w2 - v2 * w1, v2 * w0 - v0 * w2, v0 * w1 - v1 * w0
+    sin = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+    theta = np.arctan2(sin, v0 * w0 + v1 * w1 + v2 * w2)
+    return theta * (c0 * n0 + c1 * n1 + c2 * n2) / max(sin, 1e-300)
+
+
+@helper
+def _unit3(x0, x1, x2):
+    r = max(np.sqrt(_dot(x0, x1, x2, x0, x1, x2)), 1e-300)
+    return x0 / r, x1 / r, x2 / r
 
 
 @kernel(_sample_outline)
-def _outline(points, normals, verts, ends, out, cut):
+def _outline(points, normals, verts, ends, edges, m, out):
     nv = verts.shape[0]
     dirs = np.empty((nv, 3))
     for i in range(len(points)):
@@ -226,24 +289,46 @@ def _outline(points, normals, verts, ends, out, cut):
             h = (n0 * verts[j, 0] + n1 * verts[j, 1] + n2 * verts[j, 2]) - base
             below = below or not h >= 0
             above = above or h > 0
-        out[i] = 0.0
-        cut[i] = below and above
         if below:
+            out[i] = _cut_outline(p0, p1, p2, n0, n1, n2, edges, m) if above else 0.0
             continue
         for j in range(nv):
-            x0, x1, x2 = verts[j, 0] - p0, verts[j, 1] - p1, verts[j, 2] - p2
-            r = max(np.sqrt(_dot(x0, x1, x2, x0, x1, x2)), 1e-300)
-            dirs[j, 0], dirs[j, 1], dirs[j, 2] = x0 / r, x1 / r, x2 / r
+            dirs[j, 0], dirs[j, 1], dirs[j, 2] = _unit3(verts[j, 0] - p0, verts[j, 1] - p1, verts[j, 2] - p2)
         total = 0.0
         for k in range(ends.shape[0]):
             a, b = ends[k, 0], ends[k, 1]
-            v0, v1, v2 = dirs[a, 0], dirs[a, 1], dirs[a, 2]
-            w0, w1, w2 = dirs[b, 0], dirs[b, 1], dirs[b, 2]
-            c0, c1, c2 = v1 * w2 - v2 * w1, v2 * w0 - v0 * w2, v0 * w1 - v1 * w0
-            sin = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
-            theta = np.arctan2(sin, v0 * w0 + v1 * w1 + v2 * w2)
-            total += theta * (c0 * n0 + c1 * n1 + c2 * n2) / max(sin, 1e-300)
+            total += _edge_term(dirs[a, 0], dirs[a, 1], dirs[a, 2], dirs[b, 0], dirs[b, 1], dirs[b, 2], n0, n1, n2)
         out[i] = abs(total) / 2
+
+
+@helper
+def _cut_outline(p0, p1, p2, n0, n1, n2, edges, m):
+    """polygon._cut_outline_irradiance at one point: the edges clipped to its upper half-space,
+    and the horizon's pieces by their angles psi about n."""
+    l0, l1, l2 = _unit3(n1 * m[2] - n2 * m[1], n2 * m[0] - n0 * m[2], n0 * m[1] - n1 * m[0])
+    r0, r1, r2 = l1 * n2 - l2 * n1, l2 * n0 - l0 * n2, l0 * n1 - l1 * n0
+    if ((edges[0, 0, 0] - p0) * m[0] + (edges[0, 0, 1] - p1) * m[1] + (edges[0, 0, 2] - p2) * m[2]) * \
+            (r0 * m[0] + r1 * m[1] + r2 * m[2]) < 0:
+        r0, r1, r2 = -r0, -r1, -r2
+    terms = entered = left = 0.0
+    for k in range(edges.shape[0]):
+        a0, a1, a2 = edges[k, 0, 0] - p0, edges[k, 0, 1] - p1, edges[k, 0, 2] - p2
+        b0, b1, b2 = edges[k, 1, 0] - p0, edges[k, 1, 1] - p1, edges[k, 1, 2] - p2
+        da, db = _dot(a0, a1, a2, n0, n1, n2), _dot(b0, b1, b2, n0, n1, n2)
+        t = da / (da - db) if da != db else 0.0
+        x0, x1, x2 = a0 + t * (b0 - a0), a1 + t * (b1 - a1), a2 + t * (b2 - a2)
+        exits, entries = da >= 0 and db < 0, da < 0 and db >= 0
+        v0, v1, v2 = _unit3(x0, x1, x2) if entries else _unit3(a0, a1, a2)
+        w0, w1, w2 = _unit3(x0, x1, x2) if exits else _unit3(b0, b1, b2)
+        if da >= 0 or db >= 0:
+            terms += _edge_term(v0, v1, v2, w0, w1, w2, n0, n1, n2)
+        c0, c1, c2 = r1 * x2 - r2 * x1, r2 * x0 - r0 * x2, r0 * x1 - r1 * x0
+        psi = np.arctan2(_dot(c0, c1, c2, n0, n1, n2), _dot(x0, x1, x2, r0, r1, r2))
+        if entries:
+            entered += psi
+        if exits:
+            left += psi
+    return abs(terms + (entered - left)) / 2
 
 
 def _sample_shadow():
@@ -273,3 +358,56 @@ def _shadow_geometry(points, normals, y, e, eps, w, cos_x, live, org, d, t):
         org[i, 0], org[i, 1], org[i, 2] = o0, o1, o2
         d[i, 0], d[i, 1], d[i, 2] = s0 / q, s1 / q, s2 / q
         t[i] = max(dist - 2 * eps, 0.0)
+
+
+def _sample_accumulate():
+    v = np.tile([[0.0, 0.0, 1.0]], (2, 1))
+    z = np.zeros((0, 3))
+    return (np.zeros(2, np.int64), v, v, v, np.ones((2, 3)), np.ones((2, 3)), np.ones(2), np.ones(2), z,
+            np.ones((2, 3)), z, np.zeros(2, bool), np.ones((2, 3)), 1.0, np.full(1, 0.25), np.zeros((2, 6)),
+            np.empty(2, bool), np.empty(2, bool))
+
+
+@kernel(_sample_accumulate)
+def _accumulate(mats, normals, w_out, w_in, e, free, cos_x, weight, f_d, f, lobe, mis, le, n_s, alpha, acc, live,
+                blocked):
+    """``lamp_accumulate`` with the BRDF ``f`` (L, 3) and its glossy lobe ``lobe`` (L, 3, or (0, 3)
+    where neither the glossy part nor MIS is asked for) evaluated already at the L samples that
+    reached their light, in order."""
+    has_free, has_fd, has_mis = free.shape[0] > 0, f_d.shape[0] > 0, mis.shape[0] > 0
+    glossy = acc.shape[1] == 6
+    fr, gl = np.empty(3), np.empty(3)
+    j = -1                      # the row of f and lobe
+    for r in range(len(mats)):
+        w = weight[r]
+        if has_fd:
+            for c in range(3):
+                acc[r, c] -= w * f_d[r, c] * (free[r, c] - e[r, c])
+        seen = e[r, 0] > 0 or e[r, 1] > 0 or e[r, 2] > 0
+        live[r] = seen
+        blocked[r] = has_free and not seen and (free[r, 0] > 0 or free[r, 1] > 0 or free[r, 2] > 0)
+        if not seen:
+            continue
+        j += 1
+        for c in range(3):
+            fr[c] = f[j, c] - f_d[r, c] if has_fd else f[j, c]
+            if glossy:
+                gl[c] = lobe[j, c]
+        if has_mis and mis[r]:
+            n0, n1, n2 = normals[r, 0], normals[r, 1], normals[r, 2]
+            p_l = (le[r, 0] + le[r, 1] + le[r, 2]) / 3.0 * cos_x[r] / ((e[r, 0] + e[r, 1] + e[r, 2]) / 3.0)
+            p_g = glossy_pdf_at(alpha[mats[r]], n0, n1, n2, w_in[r, 0], w_in[r, 1], w_in[r, 2], w_out[r, 0],
+                                w_out[r, 1], w_out[r, 2])
+            a2, b = p_g * p_g, n_s * p_l
+            b2 = b * b
+            w_l = 1.0 - (a2 / max(a2 + b2, 1e-300) if a2 > 0 else 0.0)
+            for c in range(3):
+                before = fr[c]
+                fr[c] = fr[c] - (1.0 - w_l) * lobe[j, c]
+                if glossy:
+                    gl[c] = gl[c] - (before - fr[c])
+        for c in range(3):
+            we = w * e[r, c]
+            acc[r, c] += we * fr[c]
+            if glossy:
+                acc[r, 3 + c] += we * gl[c]

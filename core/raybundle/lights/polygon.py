@@ -82,12 +82,10 @@ def clipped_edge_irradiance(points, normals, edges, plane_normal, chunk=16384):
     verts, ends = np.unique(edges.reshape(-1, 3), axis=0, return_inverse=True)
     ends = ends.reshape(-1, 2)
     if compiled.use():
-        out, cut = compiled_lights.outline_irradiance(points, normals, verts, ends)
-        whole = np.zeros(len(points), bool)
-    else:
-        height = normals @ verts.T - np.einsum("ij,ij->i", normals, points)[:, None]     # (N, V)
-        whole = np.all(height >= 0, axis=1)
-        cut = ~whole & np.any(height > 0, axis=1)          # the rest lies wholly below the horizon
+        return compiled_lights.outline_irradiance(points, normals, verts, ends, edges, m)
+    height = normals @ verts.T - np.einsum("ij,ij->i", normals, points)[:, None]     # (N, V)
+    whole = np.all(height >= 0, axis=1)
+    cut = ~whole & np.any(height > 0, axis=1)              # the rest lies wholly below the horizon
     for idx in (np.nonzero(whole)[0], np.nonzero(cut)[0]):
         for lo in range(0, len(idx), chunk):
             i = idx[lo:lo + chunk]

@@ -36,7 +36,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..tracing.sampling import kronecker_alpha
+from ..util import compiled
 from ..util.arrays import ranges
+from . import compiled_lights
 from .direct import ALL_LIGHTS, light_bits, may_light, seen_blocked
 from .polygon import light_polygon_irradiance
 from .sources import MeshLight, ShapeLight
@@ -282,7 +284,6 @@ def _one_sample(direct, at, s, shading, uk, f_d, n_s, polygonal, acc):
     """One shadow-ray sample of :class:`_Samples` ``s`` at uniforms ``uk``, added to ``acc``
     (its rows; with ``at.glossy``, the glossy lobe's part also in its columns 3-5), the control
     variate's correction with it; the shadow flags updated."""
-    mt = direct.scene.materials
     p, nrm, m, wo, scale = shading
     em = None
     if s.li == TREE:
@@ -292,34 +293,53 @@ def _one_sample(direct, at, s, shading, uk, f_d, n_s, polygonal, acc):
         y, e = s.light.sample(p, uk)
         ids = s.li
     rec = None if at.receivers is None else at.receivers[s.pt]
+    free = None
     if at.shadow_flags is None and f_d is None:
         e, travel, cos_x = direct.shadowed(p, nrm, y, e, lights=ids, receivers=rec)
-        live = np.any(e > 0, axis=1)
     else:
         e, travel, cos_x, free = direct.shadowed(p, nrm, y, e, unshadowed=True, lights=ids, receivers=rec)
-        live, blocked = seen_blocked(e, free)
-        if at.shadow_flags is not None and s.li == TREE:     # each sample its own light's bit
-            lb = at.bits[direct.tree.light[np.maximum(em, 0)]]
-            np.bitwise_or.at(at.shadow_flags, (s.pt[live], 0), lb[live])
-            np.bitwise_or.at(at.shadow_flags, (s.pt[blocked], 1), lb[blocked])
-        elif at.shadow_flags is not None:
-            at.shadow_flags[s.pt[live], 0] |= s.bit      # repeated points all write the same value
-            at.shadow_flags[s.pt[blocked], 1] |= s.bit
+    if compiled.use():
+        mis, le = None, np.zeros(3)          # the MIS weight's light radiance, where it applies
+        if at.mis is not None and polygonal:
+            mis = at.mis[s.pt]
+            le = s.light.radiance if s.li != TREE else direct.tree_radiance[np.maximum(em, 0)]
+            if s.li == TREE:          # not the point lights, which no ray meets
+                mis = mis & np.any(le > 0, axis=1)
+        live, blocked = compiled_lights.lamp_accumulate(direct.scene.materials, m, nrm, wo, travel, e, free, cos_x,
+                                                        s.weight, f_d, scale, mis, le, n_s, acc)
+    else:
+        live, blocked = seen_blocked(e, free) if free is not None else (np.any(e > 0, axis=1), None)
         if f_d is not None:
             acc[:, :3] -= s.weight * f_d * (free - e)
-    if live.any():
-        f = mt.brdf(m[live], nrm[live], travel[live], wo[live], diffuse_scale=None if scale is None else scale[live])
-        if f_d is not None:                # the control variate took the diffuse part
-            f -= f_d[live]
-        glossy = None if at.glossy is None else mt.brdf(m[live], nrm[live], travel[live], wo[live], diffuse=False)
-        if at.mis is not None and polygonal:
-            before = None if glossy is None else f.copy()
-            _lobe_share(direct, at, s, shading, em, live, e, travel, cos_x, n_s, f)
-            if glossy is not None:         # the lobe's ray takes its share of the glossy part only
-                glossy -= before - f
-        acc[live, :3] += s.weight[live] * e[live] * f
-        if glossy is not None:
-            acc[live, 3:] += s.weight[live] * e[live] * glossy
+        if live.any():
+            _accumulate(direct, at, s, shading, em, live, e, travel, cos_x, f_d, n_s, polygonal, acc)
+    if at.shadow_flags is not None and s.li == TREE:     # each sample its own light's bit
+        lb = at.bits[direct.tree.light[np.maximum(em, 0)]]
+        np.bitwise_or.at(at.shadow_flags, (s.pt[live], 0), lb[live])
+        np.bitwise_or.at(at.shadow_flags, (s.pt[blocked], 1), lb[blocked])
+    elif at.shadow_flags is not None:
+        at.shadow_flags[s.pt[live], 0] |= s.bit      # repeated points all write the same value
+        at.shadow_flags[s.pt[blocked], 1] |= s.bit
+
+
+def _accumulate(direct, at, s, shading, em, live, e, travel, cos_x, f_d, n_s, polygonal, acc):
+    """The NumPy path of :func:`~raybundle.lights.compiled_lights.lamp_accumulate`: the BRDF
+    at the ``live`` samples, less the control variate's diffuse part, the glossy lobe's MIS
+    share taken out, times ``e`` and the samples' weights, added to ``acc``."""
+    mt = direct.scene.materials
+    _, nrm, m, wo, scale = shading
+    f = mt.brdf(m[live], nrm[live], travel[live], wo[live], diffuse_scale=None if scale is None else scale[live])
+    if f_d is not None:                # the control variate took the diffuse part
+        f -= f_d[live]
+    glossy = None if at.glossy is None else mt.brdf(m[live], nrm[live], travel[live], wo[live], diffuse=False)
+    if at.mis is not None and polygonal:
+        before = None if glossy is None else f.copy()
+        _lobe_share(direct, at, s, shading, em, live, e, travel, cos_x, n_s, f)
+        if glossy is not None:         # the lobe's ray takes its share of the glossy part only
+            glossy -= before - f
+    acc[live, :3] += s.weight[live] * e[live] * f
+    if glossy is not None:
+        acc[live, 3:] += s.weight[live] * e[live] * glossy
 
 
 def _lobe_share(direct, at, s, shading, em, live, e, travel, cos_x, n_s, f):

@@ -130,18 +130,24 @@ def _dot(a0, a1, a2, b0, b1, b2):
 
 
 @helper
-def _interp(table, mu):
-    """``np.interp(mu, linspace(0, 1, K), table)`` for ``mu`` in [0, 1], by its formula."""
-    k = table.shape[0]
+def _interp_at(mu, k):
+    """Where ``np.interp(mu, linspace(0, 1, k), table)`` reads a table, for ``mu`` in [0, 1]:
+    ``(j, dx, dmu)``, its value ``table[j]`` where ``dx < 0``, else ``_lerp(table[j],
+    table[j + 1], dx, dmu)`` (np.interp's formula).  Scalars only: a helper taking an array
+    costs a reference count of it on every call."""
     step = 1.0 / (k - 1)
     j = int(mu * (k - 1))
     if j >= k - 1:
-        return table[k - 1]
+        return k - 1, -1.0, 0.0
     x0 = j * step
     if mu == x0:
-        return table[j]
-    slope = (table[j + 1] - table[j]) / ((j + 1) * step - x0)
-    return slope * (mu - x0) + table[j]
+        return j, -1.0, 0.0
+    return j, (j + 1) * step - x0, mu - x0
+
+
+@helper
+def _lerp(t0, t1, dx, dmu):
+    return t0 if dx < 0 else (t1 - t0) / dx * dmu + t0
 
 
 @helper
@@ -183,6 +189,7 @@ def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, laye
     """``out`` (N, 3) = f(w_i, w_o) of ``MaterialTable.brdf`` (``scale`` (N, 3), or (0, 3) for none)."""
     scaled = scale.shape[0] > 0
     r = np.empty(3)
+    last = diffuse_weight.shape[1] - 1
     for p in range(len(mat)):
         m = mat[p]
         n0, n1, n2 = normal[p, 0], normal[p, 1], normal[p, 2]
@@ -196,7 +203,10 @@ def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, laye
         mu = min(max(cos_o, 0.0), 1.0)
         r[0] = r[1] = r[2] = 0.0
         if diffuse:
-            wd = _interp(diffuse_weight[m], mu) if layered[m] and has_layer[m] else 1.0
+            wd = 1.0
+            if layered[m] and has_layer[m]:
+                j, dx, dmu = _interp_at(mu, diffuse_weight.shape[1])
+                wd = _lerp(diffuse_weight[m, j], diffuse_weight[m, min(j + 1, last)], dx, dmu)
             for c in range(3):
                 v = kdr[m, c] / np.pi
                 if scaled:
@@ -222,6 +232,8 @@ def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, laye
                     fl = min(max((_fresnel_dielectric_cos(hc, eta[m]) - f_real) / (1.0 - f_real), 0.0), 1.0)
                 s = min(max(1.0 - hc, 0.0), 1.0)
                 s5 = s ** 5.0
+                j, dx, dmu = _interp_at(mu, glossy_scale.shape[1])
+                j1 = min(j + 1, last)
                 for c in range(3):
                     factor = 0.0
                     if gm > 0:
@@ -230,10 +242,10 @@ def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, laye
                             f = min(max(f, 0.0), 1.0)
                         else:
                             f = ks[m, c]
-                        factor = factor + gm * f * _interp(glossy_scale[m, :, c], mu)
+                        factor = factor + gm * f * _lerp(glossy_scale[m, j, c], glossy_scale[m, j1, c], dx, dmu)
                     if has_layer[m] and gm < 1:
                         f = layer_f0[m, c] + (1.0 - layer_f0[m, c]) * fl
-                        factor = factor + (1.0 - gm) * f * _interp(layer_scale[m, :, c], mu)
+                        factor = factor + (1.0 - gm) * f * _lerp(layer_scale[m, j, c], layer_scale[m, j1, c], dx, dmu)
                     r[c] = r[c] + lobe * factor
         out[p, 0], out[p, 1], out[p, 2] = r[0], r[1], r[2]
 
@@ -246,18 +258,22 @@ def _sample_pdf():
 
 @kernel(_sample_pdf)
 def _glossy_pdf(mat, normal, w_in, w_out, alpha, out):
-    """``out`` (N,) = ``MaterialTable.glossy_pdf``: G1(w_out) D(h) / (4 cos_out), 0 below either side."""
+    """``out`` (N,) = ``MaterialTable.glossy_pdf``."""
     for p in range(len(mat)):
-        a = alpha[mat[p]]
-        n0, n1, n2 = normal[p, 0], normal[p, 1], normal[p, 2]
-        i0, i1, i2 = w_in[p, 0], w_in[p, 1], w_in[p, 2]
-        o0, o1, o2 = w_out[p, 0], w_out[p, 1], w_out[p, 2]
-        h0, h1, h2, d = _ggx_distribution(a, n0, n1, n2, i0, i1, i2, o0, o1, o2)
-        h_o = _dot(h0, h1, h2, o0, o1, o2)
-        cos_o = _dot(n0, n1, n2, o0, o1, o2)
-        cos_i = _dot(n0, n1, n2, i0, i1, i2)
-        if cos_i > 0 and cos_o > 0 and h_o > 0:
-            g1 = 1.0 / (1.0 + _smith_lambda(a, cos_o))
-            out[p] = g1 * d / (4.0 * cos_o)
-        else:
-            out[p] = 0.0
+        out[p] = glossy_pdf_at(alpha[mat[p]], normal[p, 0], normal[p, 1], normal[p, 2], w_in[p, 0], w_in[p, 1],
+                               w_in[p, 2], w_out[p, 0], w_out[p, 1], w_out[p, 2])
+
+
+@helper
+def glossy_pdf_at(a, n0, n1, n2, i0, i1, i2, o0, o1, o2):
+    """The glossy lobe's density of ``w_in`` (towards the light) at one point of GGX alpha ``a``:
+    G1(w_out) D(h) / (4 cos_out), 0 below either side, for kernels (scalars only: a helper
+    taking arrays costs a reference count of each on every call)."""
+    h0, h1, h2, d = _ggx_distribution(a, n0, n1, n2, i0, i1, i2, o0, o1, o2)
+    h_o = _dot(h0, h1, h2, o0, o1, o2)
+    cos_o = _dot(n0, n1, n2, o0, o1, o2)
+    cos_i = _dot(n0, n1, n2, i0, i1, i2)
+    if cos_i > 0 and cos_o > 0 and h_o > 0:
+        g1 = 1.0 / (1.0 + _smith_lambda(a, cos_o))
+        return g1 * d / (4.0 * cos_o)
+    return 0.0
