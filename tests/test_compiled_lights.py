@@ -133,3 +133,30 @@ def test_compiled_lamp_samples_give_the_numpy_paths_estimate(tree, monkeypatch):
         assert np.any(w != 0)
         assert np.allclose(g, w, rtol=1e-9, atol=1e-12), np.abs(g - w).max()
     assert np.any(got[2][:, 0] & got[2][:, 1])              # some penumbrae
+
+
+def test_compiled_world_samples_match_numpy(monkeypatch):
+    """The world light's samples (:mod:`raybundle.lights.compiled_world`) by brightness alone
+    and by three sides' guides (one without sums): the same pixels, directions, densities and
+    radiance on both paths."""
+    from raybundle.lights.world_light import GUIDE_CELLS, WorldLight
+    from raybundle.scene.world import World
+    from raybundle.tracing.visibility import RayTracer
+
+    from test_world import sky_and_ground, tilted_plate
+
+    img = sky_and_ground()
+    img[10:14, 30:40] = 40.0
+    sc = tilted_plate(np.pi / 3, World(img))
+    tr = RayTracer(sc, threads=1)
+    wl = WorldLight(sc.world, tr)
+    rng = np.random.default_rng(7)
+    sums = rng.random((GUIDE_CELLS, 3)) ** 8
+    sums[:, 2] = 0.0
+    guide, at = wl.guide_of(sums.T), rng.integers(0, 3, 20000)
+    u = rng.random((20000, 3))
+    for args in ((u,), (u, guide, at)):
+        got, want = wl.sample(*args), _numpy(monkeypatch, lambda: wl.sample(*args))
+        for g, w in zip(got, want):
+            assert np.allclose(g, w, rtol=1e-12, atol=1e-15), np.abs(g - w).max()
+    tr.close()

@@ -30,6 +30,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..scene.world import World, pixel_of
+from ..util import compiled
+from . import compiled_world
 from .direct import DirectLighting
 
 #: the guide cells of the sky: bands of polar angle x sectors of azimuth, each a block of the
@@ -113,6 +115,8 @@ class WorldLight:
         by brightness alone, or with ``guide`` (:meth:`guide_of`) for points on its ``sides``
         (N,: places in the sides it was made for) by the mixture (module docstring; pdf the
         mixture's)."""
+        if compiled.use():
+            return compiled_world.world_sample(self, u, guide, sides)
         u = np.asarray(u, float)
         x = u[:, 0]
         if guide is not None:
@@ -139,6 +143,14 @@ class WorldLight:
         s = np.sqrt(np.maximum(0.0, 1.0 - z * z))
         d = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
         return d, self._density(k, row, guide, sides), self.world.image[row, col]
+
+    def tables(self):
+        """The sampling tables, integer ones first: the pixels in cell order, each cell's first
+        and last place in that order, each pixel's cell; the cumulative brightness, in cell order,
+        before each cell and in it; each pixel's probability, the rows' pixel solid angle and the
+        rows' z edges (:mod:`~raybundle.lights.compiled_world`)."""
+        return (self._order, self._cell_first, self._cell_last, self._pixel_cell, self.cdf, self._cum,
+                self._cell_before, self._cell_weight, self.p, self.omega, self.z_edges)
 
     def _density(self, k, row, guide, sides):
         """(N,) [1/sr] :meth:`sample`'s density in pixels ``k`` (N,) (flat index; ``row`` their

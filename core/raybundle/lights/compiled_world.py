@@ -1,0 +1,93 @@
+"""The world light's samples, compiled: :meth:`~raybundle.lights.world_light.WorldLight.sample`
+as one loop over the samples, where the kernels are on (:mod:`raybundle.util.compiled`).
+
+Each sample takes its pixel by inverting the cumulative brightness, or, drawn by its side's
+guide, a cell of the sky by the guide's cumulative probabilities and then a pixel inside the
+cell by the brightness cumulated cell by cell: the NumPy path's binary searches (the same
+``searchsorted(..., side="right")``) and arithmetic, so both give the same directions,
+densities and radiance (``tests/test_compiled_lights.py``).  The NumPy path searches the whole
+image's cumulative brightness for every sample, also those its guide then draws; here each
+sample searches only the table it uses.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..util.compiled import helper, kernel
+
+
+def world_sample(wl, u, guide=None, sides=None):
+    """``(directions (N, 3), pdf (N,) [1/sr], radiance (N, 3))`` of
+    :meth:`~raybundle.lights.world_light.WorldLight.sample` for world light ``wl``."""
+    n = len(u)
+    d, pdf, radiance = np.empty((n, 3)), np.empty(n), np.empty((n, 3))
+    if guide is None:
+        share, cdf_g, prob, at = np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(n, np.int64)
+    else:
+        (share, cdf_g, prob), at = guide, np.asarray(sides, np.int64)
+    f = np.ascontiguousarray
+    tables = [f(t, np.int64) for t in wl.tables()[:4]] + [f(t, float) for t in wl.tables()[4:]]
+    _world_sample(f(u, float), guide is not None, f(share, float), f(cdf_g, float), f(prob, float), f(at),
+                  *tables, f(wl.world.image, float), float(wl.total), d, pdf, radiance)
+    return d, pdf, radiance
+
+
+def _sample_world():
+    z = np.zeros(4)
+    i = np.arange(4, dtype=np.int64)
+    return (np.full((2, 3), 0.5), True, np.full(1, 0.8), np.linspace(0.25, 1.0, 4), np.full(4, 0.25),
+            np.zeros(2, np.int64), i, i, i, i, np.linspace(0.25, 1.0, 4), np.linspace(0.25, 1.0, 4), z, z + 0.25,
+            z + 0.25, np.ones(2), np.array([1.0, 0.0, -1.0]), np.ones((2, 2, 3)), 1.0, np.empty((2, 3)),
+            np.empty(2), np.empty((2, 3)))
+
+
+@helper
+def _search_right(a, v):
+    """``np.searchsorted(a, v, side="right")`` on sorted ``a``: the first index whose value is
+    above ``v`` (``len(a)`` if none)."""
+    lo, hi = 0, len(a)
+    while lo < hi:
+        mid = lo + ((hi - lo) >> 1)
+        if v < a[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
+@kernel(_sample_world)
+def _world_sample(u, guided, share, cdf_g, prob, sides, order, cell_first, cell_last, pixel_cell, cdf, cum,
+                  cell_before, cell_weight, p, omega, z_edges, image, total, d, pdf, radiance):
+    cells = len(cell_weight)
+    w = image.shape[1]
+    n_p = len(p)
+    for i in range(len(u)):
+        x = u[i, 0]
+        side = sides[i]
+        by_guide = False
+        if guided:
+            a = share[side]
+            by_guide = x < a
+            x = (x if by_guide else x - a) / (a if by_guide else 1.0 - a)
+        if by_guide:
+            j = min(max(_search_right(cdf_g, side + x), side * cells), (side + 1) * cells - 1)
+            c = j - side * cells
+            p_c = prob[j]
+            frac = min(max((side + x - (cdf_g[j] - p_c)) / max(p_c, 1e-300), 0.0), 1.0)
+            target = cell_before[c] + frac * cell_weight[c]
+            k = order[min(max(_search_right(cum, target), cell_first[c]), cell_last[c])]
+        else:
+            k = min(_search_right(cdf, x * cdf[n_p - 1]), n_p - 1)
+        row, col = k // w, k % w
+        z = z_edges[row] + (z_edges[row + 1] - z_edges[row]) * u[i, 1]
+        phi = np.pi * (1.0 - 2.0 * (col + u[i, 2]) / w)
+        s = np.sqrt(max(0.0, 1.0 - z * z))
+        d[i, 0], d[i, 1], d[i, 2] = s * np.cos(phi), s * np.sin(phi), z
+        q = p[k] / omega[row]
+        if guided:
+            cell = pixel_cell[k]
+            cw = cell_weight[cell]
+            g = prob[side * cells + cell] / (cw if cw > 0 else 1.0) * total
+            q = q * (share[side] * g + (1.0 - share[side]))
+        pdf[i] = q
+        radiance[i, 0], radiance[i, 1], radiance[i, 2] = image[row, col, 0], image[row, col, 1], image[row, col, 2]
