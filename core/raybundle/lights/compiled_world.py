@@ -7,7 +7,12 @@ cell by the brightness cumulated cell by cell: the NumPy path's binary searches 
 ``searchsorted(..., side="right")``) and arithmetic, so both give the same directions,
 densities and radiance (``tests/test_compiled_lights.py``).  The NumPy path searches the whole
 image's cumulative brightness for every sample, also those its guide then draws; here each
-sample searches only the table it uses.
+sample searches only the table it uses, and only where its answer lies: the guide's row of its
+side, the cell's pixels, and for the brightness the range a cut-point table gives (the first
+index above ``b T / M`` for each of M buckets, T the total: a key in bucket b has its answer
+between the cut points of buckets b - 1 and b + 2, a bucket of margin on either side for the
+rounding of ``x M``), where a search of the whole table over a large sky image missed the cache
+at nearly every step.
 """
 from __future__ import annotations
 
@@ -28,24 +33,36 @@ def world_sample(wl, u, guide=None, sides=None):
     f = np.ascontiguousarray
     tables = [f(t, np.int64) for t in wl.tables()[:4]] + [f(t, float) for t in wl.tables()[4:]]
     _world_sample(f(u, float), guide is not None, f(share, float), f(cdf_g, float), f(prob, float), f(at),
-                  *tables, f(wl.world.image, float), float(wl.total), d, pdf, radiance)
+                  cut_points(wl), *tables, f(wl.world.image, float), float(wl.total), d, pdf, radiance)
     return d, pdf, radiance
+
+
+#: cut-point buckets per entry of the cumulative brightness (module docstring)
+CUTS_PER_PIXEL = 1 / 16
+
+
+def cut_points(wl):
+    """(M + 2,) the first index of ``wl.cdf`` above ``b T / M`` for b = 0 .. M + 1, kept on ``wl``."""
+    cut = getattr(wl, "_cut_points", None)
+    if cut is None:
+        m = max(1, int(len(wl.cdf) * CUTS_PER_PIXEL))
+        cut = wl._cut_points = np.searchsorted(wl.cdf, np.arange(m + 2) / m * wl.cdf[-1], side="right").astype(np.int64)
+    return cut
 
 
 def _sample_world():
     z = np.zeros(4)
     i = np.arange(4, dtype=np.int64)
     return (np.full((2, 3), 0.5), True, np.full(1, 0.8), np.linspace(0.25, 1.0, 4), np.full(4, 0.25),
-            np.zeros(2, np.int64), i, i, i, i, np.linspace(0.25, 1.0, 4), np.linspace(0.25, 1.0, 4), z, z + 0.25,
+            np.zeros(2, np.int64), np.array([0, 2, 4, 4], np.int64), i, i, i, i, np.linspace(0.25, 1.0, 4), np.linspace(0.25, 1.0, 4), z, z + 0.25,
             z + 0.25, np.ones(2), np.array([1.0, 0.0, -1.0]), np.ones((2, 2, 3)), 1.0, np.empty((2, 3)),
             np.empty(2), np.empty((2, 3)))
 
 
 @helper
-def _search_right(a, v):
-    """``np.searchsorted(a, v, side="right")`` on sorted ``a``: the first index whose value is
-    above ``v`` (``len(a)`` if none)."""
-    lo, hi = 0, len(a)
+def _search_right(a, v, lo, hi):
+    """``np.searchsorted(a, v, side="right")`` on sorted ``a`` whose answer lies in [lo, hi]:
+    the first index whose value is above ``v`` (``hi`` if none below it)."""
     while lo < hi:
         mid = lo + ((hi - lo) >> 1)
         if v < a[mid]:
@@ -56,11 +73,12 @@ def _search_right(a, v):
 
 
 @kernel(_sample_world)
-def _world_sample(u, guided, share, cdf_g, prob, sides, order, cell_first, cell_last, pixel_cell, cdf, cum,
+def _world_sample(u, guided, share, cdf_g, prob, sides, cut, order, cell_first, cell_last, pixel_cell, cdf, cum,
                   cell_before, cell_weight, p, omega, z_edges, image, total, d, pdf, radiance):
     cells = len(cell_weight)
     w = image.shape[1]
     n_p = len(p)
+    m = len(cut) - 2
     for i in range(len(u)):
         x = u[i, 0]
         side = sides[i]
@@ -70,14 +88,17 @@ def _world_sample(u, guided, share, cdf_g, prob, sides, order, cell_first, cell_
             by_guide = x < a
             x = (x if by_guide else x - a) / (a if by_guide else 1.0 - a)
         if by_guide:
-            j = min(max(_search_right(cdf_g, side + x), side * cells), (side + 1) * cells - 1)
+            j = min(max(_search_right(cdf_g, side + x, side * cells, (side + 1) * cells), side * cells),
+                    (side + 1) * cells - 1)
             c = j - side * cells
             p_c = prob[j]
             frac = min(max((side + x - (cdf_g[j] - p_c)) / max(p_c, 1e-300), 0.0), 1.0)
             target = cell_before[c] + frac * cell_weight[c]
-            k = order[min(max(_search_right(cum, target), cell_first[c]), cell_last[c])]
+            q = _search_right(cum, target, cell_first[c], cell_last[c] + 1)
+            k = order[min(max(q, cell_first[c]), cell_last[c])]
         else:
-            k = min(_search_right(cdf, x * cdf[n_p - 1]), n_p - 1)
+            b = min(int(x * m), m - 1)
+            k = min(_search_right(cdf, x * cdf[n_p - 1], cut[max(b - 1, 0)], cut[b + 2]), n_p - 1)
         row, col = k // w, k % w
         z = z_edges[row] + (z_edges[row + 1] - z_edges[row]) * u[i, 1]
         phi = np.pi * (1.0 - 2.0 * (col + u[i, 2]) / w)
