@@ -160,3 +160,26 @@ def test_compiled_world_samples_match_numpy(monkeypatch):
         for g, w in zip(got, want):
             assert np.allclose(g, w, rtol=1e-12, atol=1e-15), np.abs(g - w).max()
     tr.close()
+
+
+def test_compiled_compact_light_samples_match_numpy(monkeypatch):
+    """A glowing sphere (a compact mesh light, sampled by its bounding cone from outside it and
+    triangle by triangle inside it): the same samples and selection estimates on both paths."""
+    from raybundle.tracing.visibility import RayTracer
+
+    from test_lights import glowing_sphere_over_floor
+
+    sc = glowing_sphere_over_floor()
+    tr = RayTracer(sc, threads=1)
+    light = DirectLighting(sc, tr).light_list()[0]
+    assert light._cone is not None
+    centre, radius, _ = light._cone
+    rng = np.random.default_rng(2)
+    p = centre + _unit(rng.normal(size=(4000, 3))) * radius * rng.uniform(0.5, 4.0, (4000, 1))
+    nrm, u = _unit(rng.normal(size=(4000, 3))), rng.random((4000, 3))
+    assert 0 < np.count_nonzero(light._outside(p)) < len(p)
+    for call in (lambda: light.sample(p, u), lambda: light.selection_estimate(p, nrm)):
+        got, want = call(), _numpy(monkeypatch, call)
+        for g, w in zip(*(x if isinstance(x, tuple) else (x,) for x in (got, want))):
+            assert np.any(w != 0) and np.allclose(g, w, rtol=1e-9, atol=1e-12), np.abs(g - w).max()
+    tr.close()

@@ -12,6 +12,9 @@ in the same order, so both give the same values up to the last bits of their sum
 * :func:`shape_reach`: :func:`~raybundle.lights.direct.may_light` of an area light (a corner in
   front of the point's tangent plane, the point in front of the lamp);
 * :func:`shape_selection_estimate`: :meth:`~raybundle.lights.sources.ShapeLight.selection_estimate`;
+* :func:`cone_directions`, :func:`cone_selection_estimate`: a compact mesh light's directions
+  uniform in the cone of its bounding sphere, and its selection bound
+  (:meth:`~raybundle.lights.sources.MeshLight.selection_estimate`);
 * :func:`outline_irradiance`: Lambert's sum of :func:`~raybundle.lights.polygon.clipped_edge_irradiance`
   over an outline wholly above a point's horizon, and which points' horizons cut it;
 * :func:`shadow_geometry`: the direction, cosine and shadow ray of each light sample in
@@ -63,6 +66,25 @@ def shape_selection_estimate(light, points, normals):
     out = np.empty(len(points))
     _shape_selection(_rows(points), _rows(normals), _rows(light.center), _rows(light.axis_u), _rows(light.axis_v),
                      _rows(light.normal), float(np.mean(light.radiance)), out)
+    return out
+
+
+# ----------------------------------------------------------------------- compact mesh lights
+def cone_directions(centre, radius, points, u):
+    """``(d (N, 3), O (N,))``: of :meth:`~raybundle.lights.sources.MeshLight._sample_cone`, the
+    directions uniform (by ``u[:, 1:]``) in the cone a sphere (``centre``, ``radius``) fills
+    seen from ``points`` outside it, and that cone's solid angle."""
+    n = len(points)
+    d, omega = np.empty((n, 3)), np.empty(n)
+    _cone_directions(_rows(points), _rows(u), _rows(centre), float(radius), d, omega)
+    return d, omega
+
+
+def cone_selection_estimate(centre, radius, le, points, normals):
+    """(N,) :meth:`~raybundle.lights.sources.MeshLight.selection_estimate` of a compact light
+    of mean radiance ``le`` in the sphere (``centre``, ``radius``)."""
+    out = np.empty(len(points))
+    _cone_selection(_rows(points), _rows(normals), _rows(centre), float(radius), float(le), out)
     return out
 
 
@@ -411,3 +433,58 @@ def _accumulate(mats, normals, w_out, w_in, e, free, cos_x, weight, f_d, f, lobe
             acc[r, c] += we * fr[c]
             if glossy:
                 acc[r, 3 + c] += we * gl[c]
+
+
+@helper
+def _cone(p0, p1, p2, c, radius):
+    """The unit direction to the sphere's centre, the distance to it, and the cos of the cone's
+    half-angle and its solid angle (MeshLight._cone_solid_angle)."""
+    v0, v1, v2 = c[0] - p0, c[1] - p1, c[2] - p2
+    dist = np.sqrt((v0 * v0 + v1 * v1) + v2 * v2)
+    q = radius / dist
+    cos_max = np.sqrt(max(1.0 - q * q, 0.0))
+    return v0 / dist, v1 / dist, v2 / dist, dist, cos_max, 2.0 * np.pi * (1.0 - cos_max)
+
+
+def _sample_cone():
+    p = np.zeros((2, 3))
+    return p, np.full((2, 3), 0.5), np.array([0.0, 0.0, 3.0]), 1.0, np.empty((2, 3)), np.empty(2)
+
+
+@kernel(_sample_cone)
+def _cone_directions(points, u, centre, radius, d, omega):
+    c = (centre[0], centre[1], centre[2])
+    for i in range(len(points)):
+        w0, w1, w2, _, cos_max, om = _cone(points[i, 0], points[i, 1], points[i, 2], c, radius)
+        cos_t = 1.0 - u[i, 1] * (1.0 - cos_max)
+        sin_t = np.sqrt(max(1.0 - cos_t * cos_t, 0.0))
+        phi = 2.0 * np.pi * u[i, 2]
+        sign = 1.0 if w2 >= 0 else -1.0                 # sampling.frames_from_normals
+        a = -1.0 / (sign + w2)
+        b = w0 * w1 * a
+        t0, t1, t2 = 1 + sign * (w0 * w0) * a, sign * b, -sign * w0
+        b0, b1, b2 = b, sign + (w1 * w1) * a, -w1
+        sc, ss = sin_t * np.cos(phi), sin_t * np.sin(phi)
+        d[i, 0] = cos_t * w0 + sc * t0 + ss * b0
+        d[i, 1] = cos_t * w1 + sc * t1 + ss * b1
+        d[i, 2] = cos_t * w2 + sc * t2 + ss * b2
+        omega[i] = om
+
+
+def _sample_cone_selection():
+    p = np.zeros((2, 3))
+    return p, p + np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 3.0]), 1.0, 1.0, np.empty(2)
+
+
+@kernel(_sample_cone_selection)
+def _cone_selection(points, normals, centre, radius, le, out):
+    c = (centre[0], centre[1], centre[2])
+    for i in range(len(points)):
+        w0, w1, w2, dist, cos_u, om = _cone(points[i, 0], points[i, 1], points[i, 2], c, radius)
+        if not dist > radius * (1.0 + 1e-9):         # inside: a hemisphere
+            out[i] = le * 2.0 * np.pi
+            continue
+        cos_i = _dot(normals[i, 0], normals[i, 1], normals[i, 2], w0, w1, w2)
+        sin_i, sin_u = np.sqrt(max(1 - cos_i * cos_i, 0.0)), np.sqrt(max(1 - cos_u * cos_u, 0.0))
+        cos_near = 1.0 if cos_i >= cos_u else cos_i * cos_u + sin_i * sin_u
+        out[i] = le * om * max(cos_near, 0.0)

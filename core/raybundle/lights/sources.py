@@ -108,7 +108,8 @@ class MeshLight(_Light):
             out = self._outside(points)
             if out.all():
                 return self._sample_cone(points, u)
-            y, e = self._sample_triangles(points, u)
+            y, e = np.empty((len(points), 3)), np.empty((len(points), 3))
+            y[~out], e[~out] = self._sample_triangles(points[~out], u[~out])     # inside its bounding sphere
             if out.any():
                 y[out], e[out] = self._sample_cone(points[out], u[out])
             return y, e
@@ -151,6 +152,9 @@ class MeshLight(_Light):
         ray traced."""
         if self._cone is None:
             return super().selection_estimate(points, normals)
+        if compiled.use():
+            return compiled_lights.cone_selection_estimate(self._cone[0], self._cone[1], np.mean(self.radiance),
+                                                           points, normals)
         out = self._outside(points)
         est = np.full(len(points), float(np.mean(self.radiance)) * 2.0 * np.pi)    # inside: a hemisphere
         if out.any():
@@ -181,12 +185,15 @@ class MeshLight(_Light):
         triangles; where it meets one on an emitting side, ``e = Le O``, else 0.  Unbiased for any
         shape inside the sphere; for a sphere, no sample falls on its far side (by area, half
         did, and its own front hid them), and what remains random is only ``cos_x``."""
-        w, cos_max, omega = self._cone_solid_angle(points)
-        cos_t = 1.0 - u[:, 1] * (1.0 - cos_max)
-        sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
-        phi = 2.0 * np.pi * u[:, 2]
-        a, b = frames_from_normals(w)
-        d = cos_t[:, None] * w + (sin_t * np.cos(phi))[:, None] * a + (sin_t * np.sin(phi))[:, None] * b
+        if compiled.use():
+            d, omega = compiled_lights.cone_directions(self._cone[0], self._cone[1], points, u)
+        else:
+            w, cos_max, omega = self._cone_solid_angle(points)
+            cos_t = 1.0 - u[:, 1] * (1.0 - cos_max)
+            sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
+            phi = 2.0 * np.pi * u[:, 2]
+            a, b = frames_from_normals(w)
+            d = cos_t[:, None] * w + (sin_t * np.cos(phi))[:, None] * a + (sin_t * np.sin(phi))[:, None] * b
         k, t = self._cone[2].first_hit(points, d)
         hit = k >= 0
         kk = np.maximum(k, 0)
