@@ -129,3 +129,16 @@ def test_every_section_of_the_benchmark_page_is_stamped_or_says_it_is_not_yet_re
         kept = re.search(r"\*Not yet rewritten by `make [\w-]+`: written by hand, kept from the README at commit "
                          r"[0-9a-f]{7}", body)
         assert stamped or kept, name
+
+
+def test_the_breakdown_gives_each_pass_parts_cost_per_pixel_beside_cycles_per_path():
+    """Issue 62's figure: the run's seconds per part over its passes and pixels, in µs, and
+    Cycles' seconds over its samples and pixels; nothing where the run gave no parts."""
+    import bench_blender
+
+    split = dict(part_seconds={"eye rays": 2.0, "lamps": 5.0, "iterations": 9.0}, image_passes=10, pixels=100_000,
+                 cycles_seconds=12.8, cycles_samples=32)
+    line = bench_blender.per_pixel_costs(split)
+    assert line == ("µs per pixel and image pass: eye rays 2.00, lamps 5.00; Cycles 4.00 µs per path (its whole "
+                    "path, its scene set-up included).")
+    assert bench_blender.per_pixel_costs(dict(split, part_seconds=None)) is None

@@ -435,7 +435,7 @@ def component_breakdown(a, rows, mask, info):
     total = image_error(sum(ours_c.values()), 0.5 * (whole_ref[0] + whole_ref[1]), whole_ref, exclude)
     out = dict(seconds=t, wall_seconds=wall, part_seconds=run.get("part_seconds"), phases=run.get("phases"),
                iterations=run.get("iterations"), image_passes=run.get("image_passes"), cycles_samples=int(cyc["setting"]), cycles_seconds=cyc["seconds"],
-               reference_samples=a.breakdown_samples, excluded_pixels=float(exclude.mean()),
+               reference_samples=a.breakdown_samples, excluded_pixels=float(exclude.mean()), pixels=int(exclude.size),
                glass_pixels=float(glass_pixels(ours_passes).mean()), diffuse_whole=bool(whole),
                error=total["error"], components={k: dict(ours[k], cycles_error=theirs[k]["error"]) for k in ours})
     print(f"breakdown at {t:g} s (Cycles {out['cycles_samples']} spp in {out['cycles_seconds']:.1f} s; "
@@ -447,6 +447,23 @@ def component_breakdown(a, rows, mask, info):
         print(f"  {k}: share {100 * d['share']:.1f}%, raybundle {d['error']:.4f}{split}{mean}; "
               f"Cycles {d['cycles_error']:.4f}", flush=True)
     return out
+
+
+#: the image passes' parts whose cost :func:`per_pixel_costs` gives per pixel sample
+PASS_PARTS = ("eye rays", "lamps", "world", "glossy paths")
+
+
+def per_pixel_costs(split):
+    """One sentence: the breakdown's run's µs per pixel and image pass by part (its
+    ``part_seconds`` over ``image_passes`` x ``pixels``), beside Cycles' µs per path (its
+    seconds over its samples x pixels, its scene set-up included); None without the figures."""
+    parts, passes, pixels = split.get("part_seconds"), split.get("image_passes"), split.get("pixels")
+    if not (parts and passes and pixels):
+        return None
+    per = 1e6 / (passes * pixels)
+    cycles = 1e6 * split["cycles_seconds"] / (split["cycles_samples"] * pixels)
+    return ("µs per pixel and image pass: " + ", ".join(f"{k} {parts[k] * per:.2f}" for k in PASS_PARTS if k in parts)
+            + f"; Cycles {cycles:.2f} µs per path (its whole path, its scene set-up included).")
 
 
 def breakdown_table(split):
@@ -469,6 +486,9 @@ def breakdown_table(split):
     if split.get("part_seconds"):
         text += ["", f"That run's seconds by part ({split['iterations']} iterations, {split['image_passes']} image "
                  "passes): " + ", ".join(f"{k} {v:.1f}" for k, v in split["part_seconds"].items()) + "."]
+    line = per_pixel_costs(split)
+    if line:
+        text += ["", line]
     if split.get("phases"):
         text += ["", "Its phases: " + ", ".join(f"{p['name']} {p['seconds']:.1f} s" for p in split["phases"]) + "."]
     return "\n".join(text)
