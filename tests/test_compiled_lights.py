@@ -183,3 +183,32 @@ def test_compiled_compact_light_samples_match_numpy(monkeypatch):
         for g, w in zip(*(x if isinstance(x, tuple) else (x,) for x in (got, want))):
             assert np.any(w != 0) and np.allclose(g, w, rtol=1e-9, atol=1e-12), np.abs(g - w).max()
     tr.close()
+
+
+def test_compiled_world_guides_match_numpy(monkeypatch):
+    """The sides' guides (:meth:`WorldLight.guide_at`) from the bundles' sums (one side without
+    any) and the sums learned from samples (one side without any): the same shares,
+    probabilities and cumulative probabilities on both paths, up to the order of their sums."""
+    from raybundle.lights.world_light import GUIDE_CELLS, WorldLight
+    from raybundle.scene.world import World
+    from raybundle.tracing.visibility import RayTracer
+
+    from test_world import sky_and_ground, tilted_plate
+
+    sc = tilted_plate(np.pi / 3, World(sky_and_ground()))
+    tr = RayTracer(sc, threads=1)
+    wl = WorldLight(sc.world, tr)
+    rng = np.random.default_rng(3)
+    n_s = sc.n_sides
+    assert n_s >= 2
+    bundle = (rng.random((GUIDE_CELLS, n_s)) ** 6).astype(np.float32)
+    bundle[:, 0] = 0.0
+    learned = np.arange(1, n_s)
+    wl.learn(np.repeat(learned, 50), _unit(rng.normal(size=(50 * len(learned), 3))), rng.random(50 * len(learned)))
+    sides = rng.integers(0, n_s, 500)
+    for sums in (bundle, None):
+        (got, at), (want, at_np) = wl.guide_at(sums, sides), _numpy(monkeypatch, lambda: wl.guide_at(sums, sides))
+        assert np.array_equal(at, at_np)
+        for g, w in zip(got, want):
+            assert np.allclose(g, w, rtol=1e-12, atol=1e-15), np.abs(g - w).max()
+    tr.close()

@@ -13,6 +13,10 @@ index above ``b T / M`` for each of M buckets, T the total: a key in bucket b ha
 between the cut points of buckets b - 1 and b + 2, a bucket of margin on either side for the
 rounding of ``x M``), where a search of the whole table over a large sky image missed the cache
 at nearly every step.
+
+:func:`world_guides` makes :meth:`~raybundle.lights.world_light.WorldLight.guide_at`'s guides
+side by side in one loop, where the NumPy path makes a dozen (sides, cells) arrays; its sums
+run in order, so its guides may differ from the NumPy path's (pairwise sums) in the last bits.
 """
 from __future__ import annotations
 
@@ -48,6 +52,75 @@ def cut_points(wl):
         m = max(1, int(len(wl.cdf) * CUTS_PER_PIXEL))
         cut = wl._cut_points = np.searchsorted(wl.cdf, np.arange(m + 2) / m * wl.cdf[-1], side="right").astype(np.int64)
     return cut
+
+
+def world_guides(wl, bundle_sums, seen, share, equal, most, rows, cols):
+    """``(share (U,), cdf (U cells,), prob (U cells,))``: :meth:`~raybundle.lights.world_light.WorldLight.guide_at`'s
+    guide of sides ``seen`` (U,) from the bundles' sums (cells, S) or None and ``wl``'s learned
+    sums (weighted ``min(hits, most) / equal``), blurred over the ``rows`` x ``cols`` cells;
+    ``share`` for the sides with sums."""
+    u, cells = len(seen), rows * cols
+    out = np.empty(u), np.empty(u * cells), np.empty(u * cells)
+    bundle = np.zeros((cells, 0), np.float32) if bundle_sums is None else np.ascontiguousarray(bundle_sums, np.float32)
+    _guides(bundle, np.ascontiguousarray(seen, np.int64), wl.learned_rows(), float(share), float(equal), float(most),
+            rows, cols, *out)
+    return out
+
+
+def _sample_guides():
+    return (np.ones((8, 2), np.float32), np.array([0, 1], np.int64),
+            (np.array([0, -1], np.int64), np.array([3], np.int64), np.ones((1, 8), np.float32)),
+            0.8, 4.0, 64.0, 2, 4, np.empty(2), np.empty(16), np.empty(16))
+
+
+@kernel(_sample_guides)
+def _guides(bundle, seen, learned, share, equal, most, rows, cols, share_out, cdf, prob):
+    row_of, hits, sums = learned
+    cells = rows * cols
+    g, a = np.empty(cells), np.empty(cells)
+    for u in range(len(seen)):
+        g[:] = 0.0
+        if bundle.shape[1] > 0:
+            t = 0.0
+            for c in range(cells):
+                t += float(bundle[c, seen[u]])
+            t = t if t > 0 else 1.0
+            for c in range(cells):
+                g[c] = float(bundle[c, seen[u]]) / t
+        r = row_of[seen[u]]
+        if r >= 0:
+            w = min(hits[r], most) / equal
+            t = 0.0
+            for c in range(cells):
+                t += float(sums[r, c])
+            t = t if t > 0 else 1.0
+            for c in range(cells):
+                g[c] = g[c] + float(sums[r, c]) / t * w
+        for i in range(rows):                     # azimuth wraps round, the poles do not
+            for j in range(cols):
+                k = i * cols + j
+                a[k] = (g[k] + g[i * cols + (j - 1) % cols]) + g[i * cols + (j + 1) % cols]
+        total = 0.0
+        base = u * cells
+        for i in range(rows):
+            for j in range(cols):
+                k = i * cols + j
+                v = a[k]
+                if i > 0:
+                    v = v + a[k - cols]
+                if i < rows - 1:
+                    v = v + a[k + cols]
+                prob[base + k] = v
+                total += v
+        has = total > 0
+        share_out[u] = share if has else 0.0
+        run = 0.0
+        step = (1.0 - 1.0 / cells) / (cells - 1)
+        for k in range(cells):
+            p = prob[base + k] / total if has else prob[base + k]
+            prob[base + k] = p
+            run += p
+            cdf[base + k] = (run if has else (1.0 if k == cells - 1 else k * step + 1.0 / cells)) + u
 
 
 def _sample_world():

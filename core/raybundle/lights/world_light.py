@@ -144,6 +144,11 @@ class WorldLight:
         d = np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
         return d, self._density(k, row, guide, sides), self.world.image[row, col]
 
+    def learned_rows(self):
+        """What :meth:`learn` has kept: each side's row (-1: none yet), each row's unblocked
+        samples and its sums by guide cell (rows, cells) (:mod:`~raybundle.lights.compiled_world`)."""
+        return self._row, self._hits, self._learned
+
     def tables(self):
         """The sampling tables, integer ones first: the pixels in cell order, each cell's first
         and last place in that order, each pixel's cell; the cumulative brightness, in cell order,
@@ -177,6 +182,9 @@ class WorldLight:
         (cells, S) or None: what the solver's bundles brought each side from each cell; the
         sides' learned sums (:meth:`learn`) are mixed in by their unblocked samples."""
         seen, at = np.unique(np.asarray(sides), return_inverse=True)
+        if compiled.use():
+            return compiled_world.world_guides(self, bundle_sums, seen, GUIDE_SHARE, LEARNED_EQUAL, LEARNED_MAX,
+                                               GUIDE_ROWS, GUIDE_COLS), at.reshape(-1)
         g = np.zeros((len(seen), GUIDE_CELLS))
         if bundle_sums is not None:
             g += _normalized(bundle_sums[:, seen].T.astype(float))
