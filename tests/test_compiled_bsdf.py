@@ -68,3 +68,25 @@ def test_the_compiled_bsdf_follows_a_changed_material(field):
     after = mt.brdf([3], normal, w_in, w_out)
     mt._albedo_tables.clear()
     assert np.array_equal(after, mt.brdf([3], normal, w_in, w_out)) and not np.allclose(before, after)
+
+
+def test_the_compiled_glossy_sampler_gives_the_numpy_paths_directions_and_weights(monkeypatch):
+    """:meth:`MaterialTable.sample_glossy` (visible normals, the sampler's weight times the tint or
+    the layered factor): the same directions and weights on both paths, for every kind of lobe,
+    normals of both hemispheres and views from both sides."""
+    mt = _materials()
+    rng = np.random.default_rng(11)
+    n = 20_000
+
+    def unit(v):
+        return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+    normal, w_out = unit(rng.normal(size=(n, 3))), unit(rng.normal(size=(n, 3)))
+    w_out[np.einsum("ij,ij->i", normal, w_out) < 0] *= -1.0
+    w_out[:100] *= -1.0
+    mat, u = rng.integers(0, len(mt), n), rng.random((n, 2))
+    got = mt.sample_glossy(mat, normal, w_out, u)
+    want = _numpy(monkeypatch, lambda: mt.sample_glossy(mat, normal, w_out, u))
+    for g, w in zip(got, want):
+        assert np.any(w > 0)
+        assert np.allclose(g, w, rtol=1e-10, atol=1e-13), np.abs(g - w).max()

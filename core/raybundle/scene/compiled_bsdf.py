@@ -94,6 +94,17 @@ def brdf(mt, mat, normal, w_i, w_o, diffuse, glossy, diffuse_scale):
     return out
 
 
+def sample_glossy(mt, mat, normal, w_out, u):
+    """``(w_i (N, 3), weight (N, 3))`` of :meth:`~raybundle.scene.materials.MaterialTable.sample_glossy`
+    (the visible-normal sampler of :func:`~raybundle.scene.microfacet.sample_ggx_reflection`,
+    its weight times the tint or the layered material's factor), by the kernel."""
+    n = len(mat)
+    w_i, weight = np.empty((n, 3)), np.empty((n, 3))
+    _sample_glossy(np.ascontiguousarray(mat, np.int64), _rows(normal, n), _rows(w_out, n),
+                   np.ascontiguousarray(u, float), *packed(mt).arrays(), w_i, weight)
+    return w_i, weight
+
+
 def glossy_pdf(mt, mat, normal, w_in, w_out):
     """(N,) :meth:`~raybundle.scene.materials.MaterialTable.glossy_pdf`, by the kernel."""
     n = len(mat)
@@ -183,6 +194,35 @@ def _fresnel_dielectric_cos(c, eta):
     return 0.5 * a * a * (1.0 + b * b)
 
 
+@helper
+def _layer_fl(hc, eta, on):
+    """The dielectric layer's Fresnel remapped from [F0(eta), 1] to [0, 1] at ``c = h.w_out``
+    (``microfacet.dielectric_layer_fresnel``'s ``s``); 0 where ``on`` is False."""
+    if not on:
+        return 0.0
+    f_real = ((eta - 1.0) / (eta + 1.0)) ** 2
+    return min(max((_fresnel_dielectric_cos(hc, eta) - f_real) / (1.0 - f_real), 0.0), 1.0)
+
+
+@helper
+def _layer_factor(gm, f82, f82_f0, f82_b, ks, has_layer, layer_f0, fl, s, s5, gs0, gs1, ls0, ls1, dx, dmu):
+    """One channel of ``MaterialTable._glossy_factor``: ``g F_g(c) C_g(mu) + (1 - g) F_s(c)
+    C_s(mu)``, with ``s = clip(1 - c, 0, 1)``, ``s5 = s^5``, ``fl`` of :func:`_layer_fl` and
+    the tables' neighbours ``gs0, gs1`` and ``ls0, ls1`` at :func:`_interp_at`'s ``dx, dmu``."""
+    factor = 0.0
+    if gm > 0:
+        if f82:
+            f = f82_f0 + (1.0 - f82_f0) * s5 - f82_b * (1.0 - s) * s5 * s
+            f = min(max(f, 0.0), 1.0)
+        else:
+            f = ks
+        factor = factor + gm * f * _lerp(gs0, gs1, dx, dmu)
+    if has_layer and gm < 1:
+        f = layer_f0 + (1.0 - layer_f0) * fl
+        factor = factor + (1.0 - gm) * f * _lerp(ls0, ls1, dx, dmu)
+    return factor
+
+
 @kernel(_sample_brdf)
 def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, layered, has_layer, fresnel, eta,
           f82_f0, f82_b, layer_f0, glossy_scale, layer_scale, diffuse_weight, out):
@@ -226,27 +266,16 @@ def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, laye
             else:
                 hc = _dot(h0, h1, h2, o0, o1, o2)
                 gm = g[m]
-                fl = 0.0
-                if has_layer[m] and gm < 1:
-                    f_real = ((eta[m] - 1.0) / (eta[m] + 1.0)) ** 2
-                    fl = min(max((_fresnel_dielectric_cos(hc, eta[m]) - f_real) / (1.0 - f_real), 0.0), 1.0)
+                fl = _layer_fl(hc, eta[m], has_layer[m] and gm < 1)
                 s = min(max(1.0 - hc, 0.0), 1.0)
                 s5 = s ** 5.0
                 j, dx, dmu = _interp_at(mu, glossy_scale.shape[1])
                 j1 = min(j + 1, last)
                 for c in range(3):
-                    factor = 0.0
-                    if gm > 0:
-                        if fresnel[m]:
-                            f = f82_f0[m, c] + (1.0 - f82_f0[m, c]) * s5 - f82_b[m, c] * (1.0 - s) * s5 * s
-                            f = min(max(f, 0.0), 1.0)
-                        else:
-                            f = ks[m, c]
-                        factor = factor + gm * f * _lerp(glossy_scale[m, j, c], glossy_scale[m, j1, c], dx, dmu)
-                    if has_layer[m] and gm < 1:
-                        f = layer_f0[m, c] + (1.0 - layer_f0[m, c]) * fl
-                        factor = factor + (1.0 - gm) * f * _lerp(layer_scale[m, j, c], layer_scale[m, j1, c], dx, dmu)
-                    r[c] = r[c] + lobe * factor
+                    r[c] = r[c] + lobe * _layer_factor(
+                        gm, fresnel[m], f82_f0[m, c], f82_b[m, c], ks[m, c], has_layer[m], layer_f0[m, c], fl, s, s5,
+                        glossy_scale[m, j, c], glossy_scale[m, j1, c], layer_scale[m, j, c], layer_scale[m, j1, c],
+                        dx, dmu)
         out[p, 0], out[p, 1], out[p, 2] = r[0], r[1], r[2]
 
 
@@ -277,3 +306,76 @@ def glossy_pdf_at(a, n0, n1, n2, i0, i1, i2, o0, o1, o2):
         g1 = 1.0 / (1.0 + _smith_lambda(a, cos_o))
         return g1 * d / (4.0 * cos_o)
     return 0.0
+
+
+def _sample_sampler():
+    v = np.tile([[0.0, 0.0, 1.0]], (2, 1))
+    return (np.zeros(2, np.int64), v, v, np.full((2, 2), 0.5), *_pack_sample(), np.empty((2, 3)), np.empty((2, 3)))
+
+
+@helper
+def _visible_normal(a, n0, n1, n2, o0, o1, o2, u0, u1):
+    """A GGX normal about n drawn from those visible from w_out (Heitz 2018), as
+    ``microfacet.sample_ggx_visible_normal`` computes it."""
+    sign = 1.0 if n2 >= 0 else -1.0                          # sampling.frames_from_normals
+    fa = -1.0 / (sign + n2)
+    fb = n0 * n1 * fa
+    t0, t1, t2 = 1 + sign * (n0 * n0) * fa, sign * fb, -sign * n0
+    b0, b1, b2 = fb, sign + (n1 * n1) * fa, -n1
+    v0, v1, v2 = a * _dot(o0, o1, o2, t0, t1, t2), a * _dot(o0, o1, o2, b0, b1, b2), max(_dot(n0, n1, n2, o0, o1, o2), 1e-12)
+    nv = np.sqrt((v0 * v0 + v1 * v1) + v2 * v2)
+    v0, v1, v2 = v0 / nv, v1 / nv, v2 / nv
+    lens = np.hypot(v0, v1)
+    if lens < 1e-12:
+        e0, e1, e2 = 1.0, 0.0, 0.0
+    else:
+        e0, e1, e2 = -v1 / lens, v0 / lens, 0.0 / lens
+    f0, f1, f2 = v1 * e2 - v2 * e1, v2 * e0 - v0 * e2, v0 * e1 - v1 * e0
+    r, phi = np.sqrt(u0), 2 * np.pi * u1
+    p1, p2 = r * np.cos(phi), r * np.sin(phi)
+    s = 0.5 * (1.0 + v2)
+    p2 = (1.0 - s) * np.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
+    q = np.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
+    h0, h1, h2 = p1 * e0 + p2 * f0 + q * v0, p1 * e1 + p2 * f1 + q * v1, p1 * e2 + p2 * f2 + q * v2
+    m0, m1, m2 = a * h0, a * h1, max(h2, 1e-12)
+    nm = np.sqrt((m0 * m0 + m1 * m1) + m2 * m2)
+    m0, m1, m2 = m0 / nm, m1 / nm, m2 / nm
+    return m0 * t0 + m1 * b0 + m2 * n0, m0 * t1 + m1 * b1 + m2 * n1, m0 * t2 + m1 * b2 + m2 * n2
+
+
+@kernel(_sample_sampler)
+def _sample_glossy(mat, normal, w_out, u, kdr, g, ks, alpha, layered, has_layer, fresnel, eta, f82_f0, f82_b,
+                   layer_f0, glossy_scale, layer_scale, diffuse_weight, w_i, weight):
+    last = glossy_scale.shape[1] - 1
+    for p in range(len(mat)):
+        m = mat[p]
+        a = alpha[m]
+        n0, n1, n2 = normal[p, 0], normal[p, 1], normal[p, 2]
+        o0, o1, o2 = w_out[p, 0], w_out[p, 1], w_out[p, 2]
+        h0, h1, h2 = _visible_normal(a, n0, n1, n2, o0, o1, o2, u[p, 0], u[p, 1])
+        cos_o = _dot(n0, n1, n2, o0, o1, o2)
+        h_o = _dot(h0, h1, h2, o0, o1, o2)
+        i0, i1, i2 = 2 * h_o * h0 - o0, 2 * h_o * h1 - o1, 2 * h_o * h2 - o2
+        w_i[p, 0], w_i[p, 1], w_i[p, 2] = i0, i1, i2
+        cos_i = _dot(n0, n1, n2, i0, i1, i2)
+        w = 0.0
+        if cos_i > 0 and h_o > 0 and cos_o > 0:
+            lam_o = _smith_lambda(a, abs(cos_o))
+            w = (1.0 + lam_o) / (1.0 + lam_o + _smith_lambda(a, abs(cos_i)))
+        if not (layered[m] and w > 0):
+            for c in range(3):
+                weight[p, c] = g[m] * ks[m, c] * w
+            continue
+        x0, x1, x2 = i0 + o0, i1 + o1, i2 + o2
+        nx = np.sqrt((x0 * x0 + x1 * x1) + x2 * x2) + 1e-300
+        hc = _dot(x0 / nx, x1 / nx, x2 / nx, o0, o1, o2)
+        gm = g[m]
+        fl = _layer_fl(hc, eta[m], has_layer[m] and gm < 1)
+        s = min(max(1.0 - hc, 0.0), 1.0)
+        s5 = s ** 5.0
+        j, dx, dmu = _interp_at(min(max(cos_o, 0.0), 1.0), glossy_scale.shape[1])
+        j1 = min(j + 1, last)
+        for c in range(3):
+            weight[p, c] = w * _layer_factor(
+                gm, fresnel[m], f82_f0[m, c], f82_b[m, c], ks[m, c], has_layer[m], layer_f0[m, c], fl, s, s5,
+                glossy_scale[m, j, c], glossy_scale[m, j1, c], layer_scale[m, j, c], layer_scale[m, j1, c], dx, dmu)

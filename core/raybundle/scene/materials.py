@@ -387,6 +387,8 @@ class MaterialTable:
         mat = np.asarray(mat)
         normal = np.asarray(normal, float)
         w_out = np.broadcast_to(np.asarray(w_out, float), normal.shape)
+        if compiled.use():
+            return compiled_bsdf.sample_glossy(self, mat, normal, w_out, u)
         w_i, w = sample_ggx_reflection(self.alpha[mat], normal, w_out, u)
         weight = self.glossy_weight[mat][:, None] * self.glossy[mat] * w[:, None]
         lay = self.is_layered[mat] & (w > 0)
