@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..scene import compiled_bsdf
-from ..scene.compiled_bsdf import glossy_pdf_at
+from ..scene.compiled_bsdf import dot3, glossy_pdf_at
 from ..util.compiled import helper, kernel
 
 _V = np.ascontiguousarray
@@ -152,12 +152,6 @@ def lamp_accumulate(mt, mats, normals, w_out, travel, e, free, cos_x, weight, f_
 
 # --------------------------------------------------------------------------------- kernels
 @helper
-def _dot(a0, a1, a2, b0, b1, b2):
-    """a.b summed as ``np.einsum("ij,ij->i", a, b)`` sums three terms."""
-    return (a0 * b0 + a2 * b2) + a1 * b1
-
-
-@helper
 def _clip(x, lo, hi):
     return min(max(x, lo), hi)
 
@@ -167,7 +161,7 @@ def _by_area(p0, p1, p2, a, b, c, au, av, nl, area):
     """``(y = c + a au + b av, cos_l A / r^2)`` (ShapeLight._by_area; vectors as 3-tuples)."""
     y0, y1, y2 = c[0] + a * au[0] + b * av[0], c[1] + a * au[1] + b * av[1], c[2] + a * au[2] + b * av[2]
     v0, v1, v2 = y0 - p0, y1 - p1, y2 - p2
-    r2 = max(_dot(v0, v1, v2, v0, v1, v2), 1e-300)
+    r2 = max(dot3(v0, v1, v2, v0, v1, v2), 1e-300)
     return y0, y1, y2, max(-(v0 * nl[0] + v1 * nl[1] + v2 * nl[2]) / np.sqrt(r2), 0.0) * area / r2
 
 
@@ -248,7 +242,7 @@ def _shape_reach(points, normals, corners, c, nl, out):
         n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
         front = False
         for j in range(corners.shape[0]):
-            if _dot(corners[j, 0] - p0, corners[j, 1] - p1, corners[j, 2] - p2, n0, n1, n2) > 0:
+            if dot3(corners[j, 0] - p0, corners[j, 1] - p1, corners[j, 2] - p2, n0, n1, n2) > 0:
                 front = True
         out[i] = front and (p0 - c[0]) * nl[0] + (p1 - c[1]) * nl[1] + (p2 - c[2]) * nl[2] > 0
 
@@ -269,9 +263,9 @@ def _shape_selection(points, normals, c, au, av, nl, le, out):
         a = _clip((q0 * au[0] + q1 * au[1] + q2 * au[2]) / uu, -1.0, 1.0)
         b = _clip((q0 * av[0] + q1 * av[1] + q2 * av[2]) / vv, -1.0, 1.0)
         s0, s1, s2 = q0 - a * au[0] - b * av[0], q1 - a * au[1] - b * av[1], q2 - a * au[2] - b * av[2]
-        r2 = _dot(s0, s1, s2, s0, s1, s2)
+        r2 = dot3(s0, s1, s2, s0, s1, s2)
         d = max(q0 * nl[0] + q1 * nl[1] + q2 * nl[2], 0.0)
-        m = max(-_dot(n0, n1, n2, q0, q1, q2) + abs(n0 * au[0] + n1 * au[1] + n2 * au[2])
+        m = max(-dot3(n0, n1, n2, q0, q1, q2) + abs(n0 * au[0] + n1 * au[1] + n2 * au[2])
                 + abs(n0 * av[0] + n1 * av[1] + n2 * av[2]), 0.0)
         out[i] = le * min(np.pi, area * m * d / max(r2 * r2, 1e-300))
 
@@ -294,7 +288,7 @@ def _edge_term(v0, v1, v2, w0, w1, w2, n0, n1, n2):
 
 @helper
 def _unit3(x0, x1, x2):
-    r = max(np.sqrt(_dot(x0, x1, x2, x0, x1, x2)), 1e-300)
+    r = max(np.sqrt(dot3(x0, x1, x2, x0, x1, x2)), 1e-300)
     return x0 / r, x1 / r, x2 / r
 
 
@@ -305,7 +299,7 @@ def _outline(points, normals, verts, ends, edges, m, out):
     for i in range(len(points)):
         p0, p1, p2 = points[i, 0], points[i, 1], points[i, 2]
         n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
-        base = _dot(n0, n1, n2, p0, p1, p2)
+        base = dot3(n0, n1, n2, p0, p1, p2)
         below = above = False
         for j in range(nv):
             h = (n0 * verts[j, 0] + n1 * verts[j, 1] + n2 * verts[j, 2]) - base
@@ -336,7 +330,7 @@ def _cut_outline(p0, p1, p2, n0, n1, n2, edges, m):
     for k in range(edges.shape[0]):
         a0, a1, a2 = edges[k, 0, 0] - p0, edges[k, 0, 1] - p1, edges[k, 0, 2] - p2
         b0, b1, b2 = edges[k, 1, 0] - p0, edges[k, 1, 1] - p1, edges[k, 1, 2] - p2
-        da, db = _dot(a0, a1, a2, n0, n1, n2), _dot(b0, b1, b2, n0, n1, n2)
+        da, db = dot3(a0, a1, a2, n0, n1, n2), dot3(b0, b1, b2, n0, n1, n2)
         t = da / (da - db) if da != db else 0.0
         x0, x1, x2 = a0 + t * (b0 - a0), a1 + t * (b1 - a1), a2 + t * (b2 - a2)
         exits, entries = da >= 0 and db < 0, da < 0 and db >= 0
@@ -345,7 +339,7 @@ def _cut_outline(p0, p1, p2, n0, n1, n2, edges, m):
         if da >= 0 or db >= 0:
             terms += _edge_term(v0, v1, v2, w0, w1, w2, n0, n1, n2)
         c0, c1, c2 = r1 * x2 - r2 * x1, r2 * x0 - r0 * x2, r0 * x1 - r1 * x0
-        psi = np.arctan2(_dot(c0, c1, c2, n0, n1, n2), _dot(x0, x1, x2, r0, r1, r2))
+        psi = np.arctan2(dot3(c0, c1, c2, n0, n1, n2), dot3(x0, x1, x2, r0, r1, r2))
         if entries:
             entered += psi
         if exits:
@@ -365,10 +359,10 @@ def _shadow_geometry(points, normals, y, e, eps, w, cos_x, live, org, d, t):
         p0, p1, p2 = points[i, 0], points[i, 1], points[i, 2]
         n0, n1, n2 = normals[i, 0], normals[i, 1], normals[i, 2]
         v0, v1, v2 = y[i, 0] - p0, y[i, 1] - p1, y[i, 2] - p2
-        r = np.sqrt(max(_dot(v0, v1, v2, v0, v1, v2), 1e-300))
+        r = np.sqrt(max(dot3(v0, v1, v2, v0, v1, v2), 1e-300))
         w0, w1, w2 = v0 / r, v1 / r, v2 / r
         w[i, 0], w[i, 1], w[i, 2] = w0, w1, w2
-        c = _dot(n0, n1, n2, w0, w1, w2)
+        c = dot3(n0, n1, n2, w0, w1, w2)
         cos_x[i] = c
         cp = max(c, 0.0)
         e[i, 0], e[i, 1], e[i, 2] = e[i, 0] * cp, e[i, 1] * cp, e[i, 2] * cp
@@ -484,7 +478,7 @@ def _cone_selection(points, normals, centre, radius, le, out):
         if not dist > radius * (1.0 + 1e-9):         # inside: a hemisphere
             out[i] = le * 2.0 * np.pi
             continue
-        cos_i = _dot(normals[i, 0], normals[i, 1], normals[i, 2], w0, w1, w2)
+        cos_i = dot3(normals[i, 0], normals[i, 1], normals[i, 2], w0, w1, w2)
         sin_i, sin_u = np.sqrt(max(1 - cos_i * cos_i, 0.0)), np.sqrt(max(1 - cos_u * cos_u, 0.0))
         cos_near = 1.0 if cos_i >= cos_u else cos_i * cos_u + sin_i * sin_u
         out[i] = le * om * max(cos_near, 0.0)

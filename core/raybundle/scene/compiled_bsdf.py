@@ -134,7 +134,7 @@ def _pack_sample():
 
 
 @helper
-def _dot(a0, a1, a2, b0, b1, b2):
+def dot3(a0, a1, a2, b0, b1, b2):
     """a.b summed as ``np.einsum("ij,ij->i", a, b)`` sums three terms (two SIMD lanes: the
     first and third, then the second), so that both paths give the same bits."""
     return (a0 * b0 + a2 * b2) + a1 * b1
@@ -176,7 +176,7 @@ def _ggx_distribution(a, n0, n1, n2, i0, i1, i2, o0, o1, o2):
     h0, h1, h2 = i0 + o0, i1 + o1, i2 + o2
     norm = np.sqrt(h0 * h0 + h1 * h1 + h2 * h2) + 1e-300
     h0, h1, h2 = h0 / norm, h1 / norm, h2 / norm
-    cos_h = _dot(n0, n1, n2, h0, h1, h2)
+    cos_h = dot3(n0, n1, n2, h0, h1, h2)
     a2 = a * a
     denom = cos_h * cos_h * (a2 - 1.0) + 1.0
     return h0, h1, h2, a2 / (np.pi * denom * denom)
@@ -235,8 +235,8 @@ def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, laye
         n0, n1, n2 = normal[p, 0], normal[p, 1], normal[p, 2]
         i0, i1, i2 = w_i[p, 0], w_i[p, 1], w_i[p, 2]
         o0, o1, o2 = w_o[p, 0], w_o[p, 1], w_o[p, 2]
-        cos_i = _dot(n0, n1, n2, i0, i1, i2)
-        cos_o = _dot(n0, n1, n2, o0, o1, o2)
+        cos_i = dot3(n0, n1, n2, i0, i1, i2)
+        cos_o = dot3(n0, n1, n2, o0, o1, o2)
         if not (cos_i > 0 and cos_o > 0):
             out[p, 0] = out[p, 1] = out[p, 2] = 0.0
             continue
@@ -264,7 +264,7 @@ def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, laye
                 for c in range(3):
                     r[c] = r[c] + gl * ks[m, c]
             else:
-                hc = _dot(h0, h1, h2, o0, o1, o2)
+                hc = dot3(h0, h1, h2, o0, o1, o2)
                 gm = g[m]
                 fl = _layer_fl(hc, eta[m], has_layer[m] and gm < 1)
                 s = min(max(1.0 - hc, 0.0), 1.0)
@@ -299,9 +299,9 @@ def glossy_pdf_at(a, n0, n1, n2, i0, i1, i2, o0, o1, o2):
     G1(w_out) D(h) / (4 cos_out), 0 below either side, for kernels (scalars only: a helper
     taking arrays costs a reference count of each on every call)."""
     h0, h1, h2, d = _ggx_distribution(a, n0, n1, n2, i0, i1, i2, o0, o1, o2)
-    h_o = _dot(h0, h1, h2, o0, o1, o2)
-    cos_o = _dot(n0, n1, n2, o0, o1, o2)
-    cos_i = _dot(n0, n1, n2, i0, i1, i2)
+    h_o = dot3(h0, h1, h2, o0, o1, o2)
+    cos_o = dot3(n0, n1, n2, o0, o1, o2)
+    cos_i = dot3(n0, n1, n2, i0, i1, i2)
     if cos_i > 0 and cos_o > 0 and h_o > 0:
         g1 = 1.0 / (1.0 + _smith_lambda(a, cos_o))
         return g1 * d / (4.0 * cos_o)
@@ -322,7 +322,7 @@ def _visible_normal(a, n0, n1, n2, o0, o1, o2, u0, u1):
     fb = n0 * n1 * fa
     t0, t1, t2 = 1 + sign * (n0 * n0) * fa, sign * fb, -sign * n0
     b0, b1, b2 = fb, sign + (n1 * n1) * fa, -n1
-    v0, v1, v2 = a * _dot(o0, o1, o2, t0, t1, t2), a * _dot(o0, o1, o2, b0, b1, b2), max(_dot(n0, n1, n2, o0, o1, o2), 1e-12)
+    v0, v1, v2 = a * dot3(o0, o1, o2, t0, t1, t2), a * dot3(o0, o1, o2, b0, b1, b2), max(dot3(n0, n1, n2, o0, o1, o2), 1e-12)
     nv = np.sqrt((v0 * v0 + v1 * v1) + v2 * v2)
     v0, v1, v2 = v0 / nv, v1 / nv, v2 / nv
     lens = np.hypot(v0, v1)
@@ -353,11 +353,11 @@ def _sample_glossy(mat, normal, w_out, u, kdr, g, ks, alpha, layered, has_layer,
         n0, n1, n2 = normal[p, 0], normal[p, 1], normal[p, 2]
         o0, o1, o2 = w_out[p, 0], w_out[p, 1], w_out[p, 2]
         h0, h1, h2 = _visible_normal(a, n0, n1, n2, o0, o1, o2, u[p, 0], u[p, 1])
-        cos_o = _dot(n0, n1, n2, o0, o1, o2)
-        h_o = _dot(h0, h1, h2, o0, o1, o2)
+        cos_o = dot3(n0, n1, n2, o0, o1, o2)
+        h_o = dot3(h0, h1, h2, o0, o1, o2)
         i0, i1, i2 = 2 * h_o * h0 - o0, 2 * h_o * h1 - o1, 2 * h_o * h2 - o2
         w_i[p, 0], w_i[p, 1], w_i[p, 2] = i0, i1, i2
-        cos_i = _dot(n0, n1, n2, i0, i1, i2)
+        cos_i = dot3(n0, n1, n2, i0, i1, i2)
         w = 0.0
         if cos_i > 0 and h_o > 0 and cos_o > 0:
             lam_o = _smith_lambda(a, abs(cos_o))
@@ -368,7 +368,7 @@ def _sample_glossy(mat, normal, w_out, u, kdr, g, ks, alpha, layered, has_layer,
             continue
         x0, x1, x2 = i0 + o0, i1 + o1, i2 + o2
         nx = np.sqrt((x0 * x0 + x1 * x1) + x2 * x2) + 1e-300
-        hc = _dot(x0 / nx, x1 / nx, x2 / nx, o0, o1, o2)
+        hc = dot3(x0 / nx, x1 / nx, x2 / nx, o0, o1, o2)
         gm = g[m]
         fl = _layer_fl(hc, eta[m], has_layer[m] and gm < 1)
         s = min(max(1.0 - hc, 0.0), 1.0)
