@@ -35,9 +35,9 @@ def world_sample(wl, u, guide=None, sides=None):
     else:
         (share, cdf_g, prob), at = guide, np.asarray(sides, np.int64)
     f = np.ascontiguousarray
-    tables = [f(t, np.int64) for t in wl.tables()[:4]] + [f(t, float) for t in wl.tables()[4:]]
+    tables = [f(t, np.int64) for t in wl.tables()[:5]] + [f(t, float) for t in wl.tables()[5:]]
     _world_sample(f(u, float), guide is not None, f(share, float), f(cdf_g, float), f(prob, float), f(at),
-                  cut_points(wl), *tables, f(wl.world.image, float), float(wl.total), d, pdf, radiance)
+                  *tables, f(wl.world.image, float), float(wl.total), d, pdf, radiance)
     return d, pdf, radiance
 
 
@@ -45,13 +45,11 @@ def world_sample(wl, u, guide=None, sides=None):
 CUTS_PER_PIXEL = 1 / 16
 
 
-def cut_points(wl):
-    """(M + 2,) the first index of ``wl.cdf`` above ``b T / M`` for b = 0 .. M + 1, kept on ``wl``."""
-    cut = getattr(wl, "_cut_points", None)
-    if cut is None:
-        m = max(1, int(len(wl.cdf) * CUTS_PER_PIXEL))
-        cut = wl._cut_points = np.searchsorted(wl.cdf, np.arange(m + 2) / m * wl.cdf[-1], side="right").astype(np.int64)
-    return cut
+def cut_points(cdf):
+    """(M + 2,) the first index of the cumulative brightness ``cdf`` above ``b T / M`` for
+    b = 0 .. M + 1 (module docstring)."""
+    m = max(1, int(len(cdf) * CUTS_PER_PIXEL))
+    return np.searchsorted(cdf, np.arange(m + 2) / m * cdf[-1], side="right").astype(np.int64)
 
 
 def world_guides(wl, bundle_sums, seen, share, equal, most, rows, cols):

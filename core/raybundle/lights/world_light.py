@@ -101,6 +101,7 @@ class WorldLight:
         self._cell_last = self._cell_first + np.maximum(counts, 1) - 1
         self._cell_weight = np.bincount(self._pixel_cell, weight, minlength=GUIDE_CELLS)
         self._cell_before = np.cumsum(self._cell_weight) - self._cell_weight
+        self._cut = compiled_world.cut_points(self.cdf)      # where the compiled search starts
         _, radius = tracer.scene.bounding_sphere
         self.far = 4.0 * radius + 1.0
         self.rays = 0
@@ -150,11 +151,12 @@ class WorldLight:
         return self._row, self._hits, self._learned
 
     def tables(self):
-        """The sampling tables, integer ones first: the pixels in cell order, each cell's first
+        """The sampling tables, integer ones first: the cumulative brightness's cut points
+        (:func:`~raybundle.lights.compiled_world.cut_points`), the pixels in cell order, each cell's first
         and last place in that order, each pixel's cell; the cumulative brightness, in cell order,
         before each cell and in it; each pixel's probability, the rows' pixel solid angle and the
         rows' z edges (:mod:`~raybundle.lights.compiled_world`)."""
-        return (self._order, self._cell_first, self._cell_last, self._pixel_cell, self.cdf, self._cum,
+        return (self._cut, self._order, self._cell_first, self._cell_last, self._pixel_cell, self.cdf, self._cum,
                 self._cell_before, self._cell_weight, self.p, self.omega, self.z_edges)
 
     def _density(self, k, row, guide, sides):
