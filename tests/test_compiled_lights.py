@@ -87,21 +87,20 @@ def test_compiled_shadow_rays_match_numpy(monkeypatch):
     assert np.any(got[0] > 0)
 
 
-@pytest.mark.parametrize("tree", ["off", "on"])
-def test_compiled_lamp_samples_give_the_numpy_paths_estimate(tree, monkeypatch):
-    """:func:`reflected_radiance` on a glossy floor under a mesh lamp, two area lamps (one
-    an ellipse) and a point lamp, a blocker casting penumbrae: with the control variate, penumbra samples on
-    Kronecker sequences, lamps chosen by their contribution (or the light tree), the glossy
-    lobe's MIS share and its part apart, the same estimates and shadow flags on both paths."""
-    from raybundle.lights.reflected_direct import reflected_radiance
+def _lamp_floor(n=6000, blocker="diffuse"):
+    """A glossy floor under a mesh lamp, two area lamps and a point lamp, a ``blocker``
+    (diffuse or glass) casting penumbrae, and ``n`` points on the floor with their normals, eye
+    directions and which of them ask for the glossy lobe's MIS share."""
     from raybundle.scene.build import build_scene
     from raybundle.scene.materials import MaterialTable
     from raybundle.scene.model import AreaLights, PointLights
-    from raybundle.tracing.visibility import RayTracer
 
+    block = dict(name="blocker", diffuse=(0.2, 0.2, 0.2))
+    if blocker == "glass":
+        block.update(transmission=1.0, transmission_ior=1.5)
     mats = MaterialTable.from_list([
         dict(name="floor", diffuse=(0.5, 0.4, 0.3), glossy=(0.8, 0.8, 0.8), glossy_weight=0.3, roughness=0.2),
-        dict(name="lamp", emission=(4.0, 4.0, 4.0)), dict(name="blocker", diffuse=(0.2, 0.2, 0.2))])
+        dict(name="lamp", emission=(4.0, 4.0, 4.0)), block])
     v = np.array([[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0], [-0.2, -0.2, 2], [-0.2, 0.2, 2], [0.2, 0.2, 2],
                   [0.2, -0.2, 2], [-0.5, -0.5, 0.6], [0.5, -0.5, 0.6], [0.5, 0.5, 0.6], [-0.5, 0.5, 0.6]], float)
     t = [[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7], [8, 9, 10], [8, 10, 11]]
@@ -110,11 +109,23 @@ def test_compiled_lamp_samples_give_the_numpy_paths_estimate(tree, monkeypatch):
     sc = build_scene(v, t, [0, 0, 1, 1, 2, 2], mats, area_lights=area,
                      point_lights=PointLights(np.array([[0.5, -1.0, 1.0]]), np.array([[3.0, 3.0, 3.0]])))
     rng = np.random.default_rng(9)
-    n = 6000
     p = np.c_[rng.uniform(-2.0, 2.0, (n, 2)), np.zeros(n)]
     up = np.tile([0.0, 0.0, 1.0], (n, 1))
     eye = _unit(np.c_[rng.normal(size=(n, 2)) * 0.5, np.ones(n)])
-    mis = rng.random(n) < 0.5
+    return sc, p, up, eye, rng.random(n) < 0.5
+
+
+@pytest.mark.parametrize("tree", ["off", "on"])
+def test_compiled_lamp_samples_give_the_numpy_paths_estimate(tree, monkeypatch):
+    """:func:`reflected_radiance` on a glossy floor under a mesh lamp, two area lamps (one
+    an ellipse) and a point lamp, a blocker casting penumbrae: with the control variate, penumbra samples on
+    Kronecker sequences, lamps chosen by their contribution (or the light tree), the glossy
+    lobe's MIS share and its part apart, the same estimates and shadow flags on both paths."""
+    from raybundle.lights.reflected_direct import reflected_radiance
+    from raybundle.tracing.visibility import RayTracer
+
+    sc, p, up, eye, mis = _lamp_floor()
+    n = len(p)
 
     def run():
         tr = RayTracer(sc, threads=1)
@@ -134,6 +145,45 @@ def test_compiled_lamp_samples_give_the_numpy_paths_estimate(tree, monkeypatch):
         assert np.allclose(g, w, rtol=1e-9, atol=1e-12), np.abs(g - w).max()
     assert np.any(got[2][:, 0] & got[2][:, 1])              # some penumbrae
 
+
+
+@pytest.mark.parametrize("blocker", ["diffuse", "glass"])
+def test_lamp_samples_in_pieces_are_the_same_on_any_threads(blocker):
+    """:func:`reflected_radiance` split into pieces
+    (:meth:`~raybundle.tracing.visibility.RayTracer.map_pieces`) on two threads and on one:
+    the same estimates, shadow flags and ray count, where shadow rays pass glass too (its
+    random choices are hashed from the pieces' own query numbers); and without glass, the
+    same as one call on all the points."""
+    from raybundle.lights.reflected_direct import reflected_radiance
+    from raybundle.tracing import visibility
+    from raybundle.tracing.visibility import RayTracer
+
+    sc, p, up, eye, mis = _lamp_floor(20000, blocker)
+    n = len(p)
+
+    def run(threads, piece=visibility.PIECE_POINTS):
+        tr = RayTracer(sc, threads=threads)
+        dl = DirectLighting(sc, tr)
+        flags, lobe = np.zeros((n, 2), np.uint64), np.zeros((n, 3))
+        visibility.PIECE_POINTS, before = piece, visibility.PIECE_POINTS
+        try:
+            out = reflected_radiance(dl, p, up, np.zeros(n, int), eye, np.random.default_rng(5), 2, mis=mis,
+                                     shadow_flags=flags, analytic=np.ones(n, bool), glossy_part=lobe,
+                                     penumbra=(np.full(n, np.uint64(3)), 2, np.random.default_rng(4).random((n, 3)),
+                                               None),
+                                     select=np.random.default_rng(6).random(n))
+        finally:
+            visibility.PIECE_POINTS = before
+        tr.close()
+        return out, lobe, flags, dl.rays
+
+    two, one = run(2), run(1)
+    assert n >= visibility.PIECE_POINTS                       # two pieces at least
+    for g, w in zip(two, one):
+        assert np.any(w != 0) and np.array_equal(g, w)
+    if blocker == "diffuse":
+        for g, w in zip(two, run(2, 10 * n)):                 # one piece
+            assert np.array_equal(g, w)
 
 def test_compiled_world_samples_match_numpy(monkeypatch):
     """The world light's samples (:mod:`raybundle.lights.compiled_world`) by brightness alone
@@ -201,8 +251,8 @@ def test_compiled_world_guides_match_numpy(monkeypatch):
     rng = np.random.default_rng(3)
     n_s = sc.n_sides
     assert n_s >= 2
-    bundle = (rng.random((GUIDE_CELLS, n_s)) ** 6).astype(np.float32)
-    bundle[:, 0] = 0.0
+    bundle = (rng.random((n_s, GUIDE_CELLS)) ** 6).astype(np.float32)
+    bundle[0] = 0.0
     learned = np.arange(1, n_s)
     wl.learn(np.repeat(learned, 50), _unit(rng.normal(size=(50 * len(learned), 3))), rng.random(50 * len(learned)))
     sides = rng.integers(0, n_s, 500)
@@ -212,3 +262,56 @@ def test_compiled_world_guides_match_numpy(monkeypatch):
         for g, w in zip(got, want):
             assert np.allclose(g, w, rtol=1e-12, atol=1e-15), np.abs(g - w).max()
     tr.close()
+
+
+@pytest.mark.parametrize("blocker", ["diffuse", "glass"])
+def test_world_samples_in_pieces_are_the_same_on_any_threads(blocker):
+    """The world's light (:meth:`WorldLight.irradiance`, with sides' guides, the glossy lobes'
+    part and the learned guide) split into pieces on two threads and on one: the same
+    estimates, rays and learned sums, where shadow rays pass glass too; and without glass, the
+    same as one call on all the points."""
+    from raybundle.lights.world_light import GUIDE_CELLS, WorldLight
+    from raybundle.scene.build import build_scene
+    from raybundle.scene.materials import MaterialTable
+    from raybundle.scene.world import World
+    from raybundle.tracing import visibility
+    from raybundle.tracing.visibility import RayTracer
+
+    from test_world import sky_and_ground
+
+    block = dict(name="blocker", diffuse=(0.2, 0.2, 0.2))
+    if blocker == "glass":
+        block.update(transmission=1.0, transmission_ior=1.5)
+    mats = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.4, 0.3), glossy=(0.8, 0.8, 0.8),
+                                         glossy_weight=0.3, roughness=0.2), block])
+    v = np.array([[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0], [-1, -1, 0.6], [1, -1, 0.6], [1, 1, 0.6],
+                  [-1, 1, 0.6]], float)
+    sc = build_scene(v, [[0, 1, 2], [0, 2, 3], [4, 6, 5], [4, 7, 6]], [0, 0, 1, 1], mats, world=World(sky_and_ground()))
+    rng = np.random.default_rng(5)
+    n = 20000
+    p = np.c_[rng.uniform(-2.0, 2.0, (n, 2)), np.zeros(n)]
+    up = np.tile([0.0, 0.0, 1.0], (n, 1))
+    eye = _unit(np.c_[rng.normal(size=(n, 2)) * 0.5, np.ones(n)])
+    sides = rng.integers(0, sc.n_sides, n)
+    guide = WorldLight.guide_of(rng.random((sc.n_sides, GUIDE_CELLS)) ** 8)
+    glossy = np.nonzero(rng.random(n) < 0.5)[0]
+    u = rng.random((n, 2, 3))
+
+    def run(threads, piece=visibility.PIECE_POINTS):
+        tr = RayTracer(sc, threads=threads)
+        wl = WorldLight(sc.world, tr)
+        visibility.PIECE_POINTS, before = piece, visibility.PIECE_POINTS
+        try:
+            e, lobe = wl.irradiance(p, up, u, (guide, sides), learn=sides,
+                                    lobe=(sc.materials, glossy, np.zeros(len(glossy), int), eye[glossy]))
+        finally:
+            visibility.PIECE_POINTS = before
+        tr.close()
+        return e, lobe, wl.rays, *wl.learned_rows()
+
+    two, one = run(2), run(1)
+    for g, w in zip(two, one):
+        assert np.any(w != 0) and np.array_equal(g, w)
+    if blocker == "diffuse":
+        for g, w in zip(two, run(2, 10 * n)):
+            assert np.array_equal(g, w)

@@ -8,7 +8,8 @@ from raybundle.scene.build import build_scene
 from raybundle.scene.builtin import _box_quads, _mesh, _oriented
 from raybundle.scene.materials import MaterialTable
 from raybundle.tracing.sampling import uniform_sphere
-from raybundle.tracing.visibility import ENVIRONMENT, RayTracer, brute_force_bundle, brute_force_hits, bundle_from_hits
+from raybundle.tracing.brute_force import brute_force_bundle, brute_force_hits
+from raybundle.tracing.visibility import ENVIRONMENT, RayTracer, bundle_from_hits
 
 MATS = MaterialTable.from_list([dict(name="w", diffuse=(0.5, 0.5, 0.5), emission=(1, 1, 1))])
 

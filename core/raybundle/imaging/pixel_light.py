@@ -63,9 +63,10 @@ class PixelLight:
         out[:, :-1] |= pen[:, 1:]
         return out.ravel()
 
-    def lamps(self, g, hf, pixels, u_light, passes, mis, glossy_part=None):
+    def lamps(self, g, hf, pixels, u_light, passes, mis, scale, glossy_part=None):
         """(len(hf), 3) the first-shot lights' light reflected at the front-facing points ``hf``
-        of G-buffer ``g``, seen in ``pixels``; ``u_light`` a Generator for the light samples, or
+        of G-buffer ``g`` (``scale``: their texture's modulation of the diffuse reflectance, the
+        scene's ``albedo_at``), seen in ``pixels``; ``u_light`` a Generator for the light samples, or
         None for a pass's own (the module docstring's sequences, ``passes`` so far); ``mis``
         (len(hf),) bool the points whose glossy lobe's MIS counts these light samples, or None;
         ``glossy_part`` (len(hf), 3) or None: the glossy lobe's share is added to it."""
@@ -93,7 +94,7 @@ class PixelLight:
             u, sequence = u_light, (self.rng.random((len(hf), 3)), None)
         value = reflected_radiance(direct, 
             g.point[hf], g.normal[hf], g.material[hf], g.w_eye[hf], u, n_s,
-            mis=mis, diffuse_scale=self.scene.albedo_at(g.triangle[hf], g.point[hf]), shadow_flags=f,
+            mis=mis, diffuse_scale=scale, shadow_flags=f,
             analytic=np.full(len(hf), ALL_LIGHTS) if start else flags[:, 0],
             penumbra=(pen_lights, share) + sequence, select=self.rng.random(len(hf)),
             receivers=self.scene.link_groups(g.triangle[hf]), glossy_part=glossy_part)
@@ -113,8 +114,9 @@ class PixelLight:
                                                                         self.scene.link_groups(g.triangle[t]))
         return out
 
-    def world(self, g, hf, lobe=None):
-        """The world's light at the front-facing points ``hf`` of G-buffer ``g``: (len(hf), 3)
+    def world(self, g, hf, scale, lobe=None):
+        """The world's light at the front-facing points ``hf`` of G-buffer ``g`` (``scale`` as
+        for :meth:`lamps`): (len(hf), 3)
         on their diffuse lobe, and with ``lobe`` (positions in ``hf`` of glossy points whose
         lobes share these samples) also the lobes' part, (len(lobe), 3), and the guide the
         samples were drawn by (for the lobes' MIS); else None for both.  The unblocked samples
@@ -132,6 +134,5 @@ class PixelLight:
         m = g.material[hf]
         mats = self.scene.materials
         w_d = mats.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[hf], g.w_eye[hf]))
-        scale = self.scene.albedo_at(g.triangle[hf], g.point[hf])
         self.rays += self.world_light.rays - before
         return w_d * mats.diffuse_reflectance[m] / np.pi * e * (1.0 if scale is None else scale), sky, lobe_guide

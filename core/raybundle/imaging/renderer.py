@@ -252,10 +252,11 @@ class Renderer(ProgressiveImage):
         hf = h[np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]) > 0]
         light = self.light
         before = light.rays
+        scale = self.scene.albedo_at(g.triangle[hf], g.point[hf]) if len(hf) else None
         if self.direct.n_lights and len(hf):
             mis = self.glossy_material[g.material[hf]] if self.glossy_paths.light_mis else None
             lobe = None if lamps is None else np.zeros((len(hf), 3))
-            lit = light.lamps(g, hf, pixels, u_light, self.passes, mis, glossy_part=lobe)
+            lit = light.lamps(g, hf, pixels, u_light, self.passes, mis, scale, glossy_part=lobe)
             out[hf] += lit
             if lamps is not None:
                 lamps[hf] += lit - lobe
@@ -270,7 +271,7 @@ class Renderer(ProgressiveImage):
         lobe_guide = None       # ... and the guide they were drawn by, for the lobes' MIS
         if self.world_light is not None and len(hf):
             shared = self.settings.glossy_gather and self.glossy_paths.world_light is self.world_light and len(gl)
-            diffuse, sky, guide = light.world(g, hf, np.searchsorted(hf, gl) if shared else None)
+            diffuse, sky, guide = light.world(g, hf, scale, np.searchsorted(hf, gl) if shared else None)
             if shared:
                 out[gl] += sky
                 lobe_world, lobe_guide = self.world_samples, guide

@@ -14,6 +14,8 @@ is :class:`raybundle.lights.first_shot.PatchFirstShot`.
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ..tracing.sampling import kronecker_alpha
@@ -23,7 +25,8 @@ from .light_tree import build_light_tree
 from .polygon import light_polygon_irradiance
 from .sources import MeshLight, PointLight, ShapeLight, SunLight, sample_point_lights, small_emitters
 
-
+#: guards the shadow-ray count: pieces of a query run on threads (RayTracer.map_pieces)
+_COUNTING = threading.Lock()
 #: a light mask with every light's bit set (:func:`light_bits`)
 ALL_LIGHTS = np.uint64(0xFFFF_FFFF_FFFF_FFFF)
 def light_bits(n):
@@ -254,7 +257,8 @@ class DirectLighting:
                 direction, t_max = seg / np.maximum(dist, 1e-300)[:, None], np.maximum(dist - 2 * eps, 0.0)
             else:
                 org, direction, t_max = org_all[live], dir_all[live], t_all[live]
-            self.rays += int(live.sum())
+            with _COUNTING:
+                self.rays += int(live.sum())
             through = None if crossed is None else np.zeros(len(org), bool)
             blocked = self.tracer.occluded(org, direction, t_max, crossed=through,
                                            link=None if link is None else np.broadcast_to(link, live.shape)[live])

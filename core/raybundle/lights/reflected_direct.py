@@ -140,16 +140,38 @@ def reflected_radiance(direct, points, normals, mats, w_out, u, samples_per_ligh
     mask of lights): where the control variate applies (module docstring).  ``glossy_part``
     (N, 3) or None: the glossy lobe's share of the result is added to it (the rest is the
     diffuse lobe's, the control variate's whole part included).
+
+    The points are split into pieces run in parallel
+    (:meth:`~raybundle.tracing.visibility.RayTracer.map_pieces`); a point's value does not
+    depend on the split but for the cut-out and glass choices of its shadow rays.
     """
     n = len(points)
-    out = np.zeros((n, 3))
     if isinstance(u, np.random.Generator):
         u = u.random((n, direct.samples_per_pass(samples_per_light), 3))
+    an = np.asarray(analytic)
+    an = np.where(np.broadcast_to(an, n), ALL_LIGHTS, np.uint64(0)) if an.dtype == bool else an.astype(np.uint64)
+
+    def piece(a, b):
+        def cut(x):
+            return x[a:b] if isinstance(x, np.ndarray) and x.ndim else x
+
+        pen = None if penumbra is None else tuple(cut(x) for x in penumbra)
+        return _reflected(direct, *(cut(x) for x in (points, normals, mats, w_out, u)), samples_per_light,
+                          *(cut(x) for x in (mis, diffuse_scale, shadow_flags, an)), pen,
+                          *(cut(x) for x in (select, receivers, glossy_part)))
+
+    return np.concatenate(direct.tracer.map_pieces(piece, n))
+
+
+def _reflected(direct, points, normals, mats, w_out, u, samples_per_light, mis, diffuse_scale, shadow_flags, an,
+               penumbra, select, receivers, glossy_part):
+    """:func:`reflected_radiance` at one piece of its points, ``u`` an array or None and ``an``
+    (N,) uint64 masks."""
+    n = len(points)
+    out = np.zeros((n, 3))
     lights = direct.light_list()
     at = _Points(lights, light_bits(len(lights)), points, normals, mats, w_out, diffuse_scale, mis, shadow_flags,
                  receivers, glossy_part)
-    an = np.asarray(analytic)
-    an = np.where(np.broadcast_to(an, n), ALL_LIGHTS, np.uint64(0)) if an.dtype == bool else an.astype(np.uint64)
     f_d_all = _diffuse_part(direct, at, an)
     # with a light tree, the tree's samples (TREE) and the suns on their own
     own = range(len(lights)) if direct.tree is None else direct.suns

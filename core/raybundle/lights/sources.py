@@ -80,7 +80,7 @@ class MeshLight(_Light):
             centre = 0.5 * (c.reshape(-1, 3).min(axis=0) + c.reshape(-1, 3).max(axis=0))
             radius = float(np.linalg.norm(c.reshape(-1, 3) - centre, axis=1).max())
             if self.area >= self.COMPACT_SHARE * 4.0 * np.pi * radius * radius:
-                from ..tracing.visibility import TriangleSet
+                from ..tracing.triangle_set import TriangleSet
 
                 self._cone = (centre, radius, TriangleSet(c))
         #: points closer than this to the plane of the part sampled lie in it (the light itself, or

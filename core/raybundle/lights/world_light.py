@@ -110,6 +110,7 @@ class WorldLight:
         self._row = np.full(tracer.scene.n_sides, -1, np.int64)
         self._learned = np.zeros((0, GUIDE_CELLS), np.float32)
         self._hits = np.zeros(0, np.int64)
+        self._rows_used = 0                             # rows in use (the arrays have room for more)
 
     def sample(self, u, guide=None, sides=None):
         """``(directions (N, 3), pdf (N,) [1/sr], radiance (N, 3))`` for uniforms ``u`` (N, 3),
@@ -147,7 +148,8 @@ class WorldLight:
 
     def learned_rows(self):
         """What :meth:`learn` has kept: each side's row (-1: none yet), each row's unblocked
-        samples and its sums by guide cell (rows, cells) (:mod:`~raybundle.lights.compiled_world`)."""
+        samples and its sums by guide cell (rows, cells) (:mod:`~raybundle.lights.compiled_world`;
+        rows no side has yet are zero)."""
         return self._row, self._hits, self._learned
 
     def tables(self):
@@ -181,7 +183,7 @@ class WorldLight:
     def guide_at(self, bundle_sums, sides):
         """``(guide, at)`` for points on ``sides`` (N,): the :meth:`sample` guide of the sides
         they are on and each point's place among them (module docstring).  ``bundle_sums``
-        (cells, S) or None: what the solver's bundles brought each side from each cell; the
+        (S, cells) or None: what the solver's bundles brought each side from each cell; the
         sides' learned sums (:meth:`learn`) are mixed in by their unblocked samples."""
         seen, at = np.unique(np.asarray(sides), return_inverse=True)
         if compiled.use():
@@ -189,7 +191,7 @@ class WorldLight:
                                                GUIDE_ROWS, GUIDE_COLS), at.reshape(-1)
         g = np.zeros((len(seen), GUIDE_CELLS))
         if bundle_sums is not None:
-            g += _normalized(bundle_sums[:, seen].T.astype(float))
+            g += _normalized(bundle_sums[seen].astype(float))
         rows = self._row[seen]
         has = np.nonzero(rows >= 0)[0]
         if len(has):
@@ -219,9 +221,12 @@ class WorldLight:
             return
         new = np.unique(sides[self._row[sides] < 0])
         if len(new):
-            self._row[new] = len(self._hits) + np.arange(len(new))
-            self._learned = np.vstack([self._learned, np.zeros((len(new), GUIDE_CELLS), np.float32)])
-            self._hits = np.concatenate([self._hits, np.zeros(len(new), np.int64)])
+            self._row[new] = self._rows_used + np.arange(len(new))
+            self._rows_used += len(new)
+            if self._rows_used > len(self._hits):       # room for twice the rows: a pass adds a few
+                more = max(self._rows_used, 2 * len(self._hits)) - len(self._hits)
+                self._learned = np.vstack([self._learned, np.zeros((more, GUIDE_CELLS), np.float32)])
+                self._hits = np.concatenate([self._hits, np.zeros(more, np.int64)])
         rows = self._row[sides]
         cells = guide_cell(directions, self.h, self.w)
         np.add.at(self._learned, (rows, cells), value.astype(np.float32))
@@ -240,13 +245,43 @@ class WorldLight:
         against one lobe-sampled ray (power heuristic with the sample counts, ``p_g`` the lobe's
         density, :meth:`~raybundle.scene.materials.MaterialTable.glossy_pdf`), which then takes
         ``p_g^2 / (p_g^2 + (K p_w)^2)`` of the sky it meets: returns ``(E, glossy (len(idx), 3))``.
-        The diffuse lobe's shadow rays serve the glossy lobe too, K of them where it had one."""
+        The diffuse lobe's shadow rays serve the glossy lobe too, K of them where it had one.
+
+        The points are split into pieces run in parallel
+        (:meth:`~raybundle.tracing.visibility.RayTracer.map_pieces`); a point's value does not
+        depend on the split but for the cut-out and glass choices of its shadow rays."""
         points, normals = np.asarray(points, float), np.asarray(normals, float)
+        n, k = u.shape[:2]
+        if not self.emits or n == 0:
+            out = np.zeros((n, 3))
+            return out if lobe is None else (out, np.zeros((len(lobe[1]), 3)))
+        idx = None if lobe is None else np.asarray(lobe[1])
+
+        def piece(a, b):
+            at = None if guide is None else (guide[0], guide[1][a:b])
+            lb = None
+            if lobe is not None:                  # the piece's glossy points, in order
+                i, j = np.searchsorted(idx, [a, b])
+                lb = (lobe[0], idx[i:j] - a, lobe[2][i:j], lobe[3][i:j])
+            return self._irradiance(points[a:b], normals[a:b], u[a:b], at, lb, learn is not None)
+
+        parts = self.tracer.map_pieces(piece, n)
+        self.rays += sum(p[3] for p in parts)
+        if learn is not None:                     # in the points' order, as one piece would
+            first = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])
+            rows = np.concatenate([p[2][0] + a for p, a in zip(parts, first)])
+            self.learn(np.asarray(learn)[rows], *(np.concatenate([p[2][c] for p in parts]) for c in (1, 2)))
+        out = np.concatenate([p[0] for p in parts]) / k
+        return out if lobe is None else (out, np.concatenate([p[1] for p in parts]) / k)
+
+    def _irradiance(self, points, normals, u, guide, lobe, learn):
+        """:meth:`irradiance` at one piece of its points, not divided by the samples per point:
+        ``(E, glossy or None, learned, rays)``, ``learned`` the unblocked samples' points,
+        directions and values for :meth:`learn` (None without ``learn``)."""
         n, k = u.shape[:2]
         out = np.zeros((n, 3))
         glossy = None if lobe is None else np.zeros((len(lobe[1]), 3))
-        if not self.emits or n == 0:
-            return out if lobe is None else (out, glossy)
+        learned = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0)) if learn else None
         rep = np.repeat(np.arange(n), k)
         g, at = (None, None) if guide is None else (guide[0], guide[1][rep])
         d, pdf, L = self.sample(u.reshape(-1, 3), g, at)
@@ -255,11 +290,10 @@ class WorldLight:
         if len(live):
             origin = points[rep[live]] + normals[rep[live]] * self.tracer.eps
             blocked = self.tracer.occluded(origin, d[live], np.full(len(live), self.far))
-            self.rays += len(live)
             ok = live[~blocked]
             contrib = L[ok] * (cos[ok] / pdf[ok])[:, None]
-            if learn is not None:
-                self.learn(np.asarray(learn)[rep[ok]], d[ok], contrib.max(axis=1))
+            if learn:
+                learned = (rep[ok], d[ok], contrib.max(axis=1))
             for c in range(3):
                 out[:, c] = np.bincount(rep[ok], contrib[:, c], minlength=n)
             if lobe is not None and len(lobe[1]):
@@ -273,4 +307,4 @@ class WorldLight:
                 g = L[j] * f * (cos[j] / pdf[j] * w)[:, None]
                 for c in range(3):
                     glossy[:, c] = np.bincount(r, g[:, c], minlength=len(idx))
-        return out / k if lobe is None else (out / k, glossy / k)
+        return out, glossy, learned, len(live)

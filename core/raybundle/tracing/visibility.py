@@ -27,11 +27,16 @@ probability that the ray does not pass straight through
 refract there instead (``first_hit(..., glass=False)``).
 
 ``embreex`` traces one ray after another in C and releases the GIL, so every
-query is split into one chunk per core and run on a thread pool.
+query is split into one chunk per core and run on a thread pool.  Point-wise work whose own
+steps also release the GIL (compiled kernels, large NumPy steps) goes one level up:
+:meth:`RayTracer.map_pieces` runs it on the pool piece by piece, each piece tracing its rays on
+its own thread.
 """
 from __future__ import annotations
 
+import itertools
 import os
+import threading
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -44,6 +49,8 @@ from .sampling import (Stream, cosine_directions, frames_from_normals, points_on
 _MAX_LAYERS = 10000
 #: most surfaces a first-hit query passes through before it gives up (the ray then misses)
 _MAX_PASSES = 1000
+#: points per piece of :meth:`RayTracer.map_pieces` (about: a call's pieces are equal)
+PIECE_POINTS = 12_000
 #: sender id of light that comes from the environment (world) in a :class:`Bundle`: along
 #: ``travel_sign`` +1 it arrives from the world at -d, along -1 from the world at +d
 ENVIRONMENT = -1
@@ -82,29 +89,6 @@ class Bundle:
         return uniq, counts * self.cell_area
 
 
-class TriangleSet:
-    """Embree over a few triangles of their own (a lamp's), apart from the scene: where rays
-    first meet them, whatever else lies in the way."""
-
-    def __init__(self, corners):
-        """``corners`` (K, 3, 3) [m]."""
-        from embreex import rtcore_scene
-        from embreex.mesh_construction import TriangleMesh
-
-        corners = np.asarray(corners, float)
-        self.center = corners.reshape(-1, 3).mean(axis=0)
-        self._embree = rtcore_scene.EmbreeScene()
-        TriangleMesh(self._embree, (corners.reshape(-1, 3) - self.center).astype(np.float32),
-                     np.arange(3 * len(corners), dtype=np.int32).reshape(-1, 3))
-
-    def first_hit(self, origins, directions):
-        """(triangle index (N,) or -1, distance t (N,) [m]) of rays from ``origins`` along unit
-        ``directions`` (N, 3)."""
-        r = self._embree.run(np.ascontiguousarray(origins - self.center, np.float32),
-                             np.ascontiguousarray(directions, np.float32), output=1)
-        tri = np.asarray(r["primID"], np.int64)
-        return np.where(tri >= 0, tri, -1), np.asarray(r["tfar"], float)
-
 
 class RayTracer:
     """Embree acceleration structure over a :class:`~raybundle.scene.model.PatchScene`.
@@ -138,6 +122,8 @@ class RayTracer:
         #: (T,) bool triangles a ray may pass (cut-outs and glass), or None
         self._through = np.logical_or.reduce(masks) if masks else None
         self._queries = 0
+        #: per thread: within :meth:`map_pieces`, the piece's own query numbers (else unset)
+        self._piece = threading.local()
 
     def close(self):
         if self._pool is not None:
@@ -146,10 +132,36 @@ class RayTracer:
 
     def _map_chunks(self, fn, n, min_chunk=2048, threaded=True):
         """Run fn(start, stop) over [0, n) split into one chunk per thread; list of results."""
-        if self._pool is None or n < 2 * min_chunk or not threaded:
+        if self._pool is None or n < 2 * min_chunk or not threaded or self._in_piece():
             return [fn(0, n)]
         bounds = np.linspace(0, n, self.threads + 1).astype(int)
         return list(self._pool.map(fn, bounds[:-1], bounds[1:]))
+
+    def map_pieces(self, fn, n):
+        """Run ``fn(start, stop)`` over [0, n) split into an even number of pieces of about
+        :data:`PIECE_POINTS` points, in parallel on the pool, each piece tracing its rays on its own thread: for
+        point-wise work whose other steps release the GIL too.  The split depends on ``n``
+        only, and a piece's cut-out and glass choices are hashed from query numbers of its own
+        (this call's, the piece's index, and its queries so far), so the result is the same for
+        any number of threads and any timing.  ``fn`` must write only its own points' rows of
+        shared arrays.  The results in order (``[fn(0, n)]`` for one piece or within a piece)."""
+        pieces = 1 if n < PIECE_POINTS else max(2, 2 * round(n / (2 * PIECE_POINTS)))      # even: 2 cores
+        if pieces == 1 or self._in_piece():
+            return [fn(0, n)]
+        bounds = np.linspace(0, n, pieces + 1).astype(int)
+        base = self._next_query() << 32
+
+        def piece(k):
+            self._piece.queries = itertools.count(base + ((k + 1) << 24))
+            try:
+                return fn(bounds[k], bounds[k + 1])
+            finally:
+                self._piece.queries = None
+
+        return [piece(k) for k in range(pieces)] if self._pool is None else list(self._pool.map(piece, range(pieces)))
+
+    def _in_piece(self):
+        return getattr(self._piece, "queries", None) is not None
 
     # -------------------------------------------------------------- queries
     def _run(self, origins, directions, **kw):
@@ -212,6 +224,8 @@ class RayTracer:
         return hashed_uniform(rays, layer, query) < keep
 
     def _next_query(self):
+        if self._in_piece():
+            return next(self._piece.queries)
         self._queries += 1
         return self._queries
 
@@ -543,55 +557,3 @@ def bundle_from_hits(scene, d, delta, up, down, n_rays, casts, first=None, last=
             sign.append(np.full(len(side), s, np.int8))
     return Bundle(d, delta * delta, receiver=np.concatenate(receiver), sender=np.concatenate(sender),
                   travel_sign=np.concatenate(sign), n_rays=n_rays, n_casts=casts)
-
-
-# ------------------------------------------------------------ brute force twin
-def brute_force_hits(corners, origins, direction, eps):
-    """All hits of parallel rays with every triangle, by Moller-Trumbore in NumPy.
-
-    The obviously-correct twin of :meth:`RayTracer.all_hit_pairs` for small
-    scenes.  Returns, per ray, a list of ``(t, triangle)`` sorted by t, with
-    hits closer than ``eps`` merged (the first triangle index wins).
-    """
-    corners = np.asarray(corners, float)
-    d = np.asarray(direction, float)
-    e1 = corners[:, 1] - corners[:, 0]
-    e2 = corners[:, 2] - corners[:, 0]
-    p = np.cross(d, e2)                                   # (T, 3)
-    det = np.einsum("ij,ij->i", e1, p)
-    ok_tri = np.abs(det) > 1e-300
-    inv = np.where(ok_tri, 1.0 / np.where(ok_tri, det, 1.0), 0.0)
-    s = origins[:, None, :] - corners[None, :, 0]         # (N, T, 3)
-    u = np.einsum("ntk,tk->nt", s, p) * inv
-    q = np.cross(s, e1[None])
-    v = (q @ d) * inv
-    t = np.einsum("ntk,tk->nt", q, e2) * inv
-    tol = 1e-12
-    hit = ok_tri & (u >= -tol) & (v >= -tol) & (u + v <= 1 + tol) & (t > 0)
-    out = []
-    for n in range(len(origins)):
-        idx = np.nonzero(hit[n])[0]
-        order = np.lexsort((idx, t[n, idx]))
-        seq = []
-        for k in idx[order]:
-            if seq and t[n, k] - seq[-1][0] < eps:
-                continue
-            seq.append((float(t[n, k]), int(k)))
-        out.append(seq)
-    return out
-
-
-def brute_force_bundle(scene, origins, direction, delta, eps):
-    """The :class:`Bundle` of the same rays computed with :func:`brute_force_hits`."""
-    d = np.asarray(direction, float)
-    up, down, first, last = [], [], [], []
-    for seq in brute_force_hits(scene.triangle_corners, origins, d, eps):
-        for (_, a), (_, b) in zip(seq[:-1], seq[1:]):
-            up.append(a)
-            down.append(b)
-        if seq:
-            first.append(seq[0][1])
-            last.append(seq[-1][1])
-    ends = [np.array(first, np.int64), np.array(last, np.int64)] if scene.world.emits else []
-    return bundle_from_hits(scene, d, delta, np.array(up, np.int64), np.array(down, np.int64),
-                            len(origins), 0, *ends)
