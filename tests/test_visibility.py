@@ -336,8 +336,12 @@ def test_cut_outs_pass_rays_where_they_are_cut_out_and_with_their_coverage_elsew
         inside = np.abs(x - 0.5) > 0.02                       # off the bilinear seam
         assert np.all((t[inside] < 1.5) == (x[inside] > 0.5)), (x, t)
         assert np.all(sc.triangle_source[tri[inside]] // 2 == np.where(x[inside] > 0.5, 0, 1))
-        shadow = tr.occluded(o + 1.5 * d, -d, np.full(len(o), 1.2))   # from z = 0.5 up to z = 1.7
+        crossed = np.zeros(len(o), bool)
+        shadow = tr.occluded(o + 1.5 * d, -d, np.full(len(o), 1.2), crossed=crossed)   # from z = 0.5 up to 1.7
         assert np.all(shadow[inside] == (x[inside] > 0.5))
+        assert np.all(crossed[inside] == (x[inside] < 0.5))  # passed the cut-out: the outcome was random
+        short = np.zeros(len(o), bool)                        # up to z = 0.8: nothing met, nothing crossed
+        assert not tr.occluded(o + 1.5 * d, -d, np.full(len(o), 0.3), crossed=short).any() and not short.any()
         up, down, ray, _ = tr.all_hit_pairs(o, d)
         pairs = set(ray.tolist())                             # a front-back pair only where the front is kept
         assert {k for k in np.nonzero(inside)[0] if x[k] > 0.5} <= pairs

@@ -184,10 +184,10 @@ class RayTracer:
         through = self._cut if not glass else self._through
         return hits if through is None else self._through_surfaces(origins, directions, *hits, glass=glass)
 
-    def _through_surfaces(self, origins, directions, tri, t, u, v, glass=True):
+    def _through_surfaces(self, origins, directions, tri, t, u, v, glass=True, dist=None):
         """:meth:`first_hit`'s hits ``(tri, t, u, v)`` (changed in place) with the hits on
         cut-outs (and with ``glass`` on transmissive surfaces) that are not kept traced on from
-        just past them."""
+        just past them (only up to ``dist`` (N,) where given)."""
         query = self._next_query()
         through = self._through if glass else self._cut
         todo = np.arange(len(tri))
@@ -202,7 +202,7 @@ class RayTracer:
                 return tri, t, u, v
             start = t[go] + self.eps
             tri[go], dt, u[go], v[go] = self._first_hits(origins[go] + start[:, None] * directions[go],
-                                                         directions[go])
+                                                         directions[go], None if dist is None else dist[go] - start)
             t[go] = start + dt
             todo = go
         tri[todo] = -1                  # passed through more surfaces than any scene has: a miss
@@ -229,11 +229,13 @@ class RayTracer:
         self._queries += 1
         return self._queries
 
-    def _first_hits(self, origins, directions):
-        """Embree's closest hits, cut-outs or not: ``(triangle, t, u, v)``."""
+    def _first_hits(self, origins, directions, dist=None):
+        """Embree's closest hits, cut-outs or not, within ``dist`` (N,) where given: ``(triangle,
+        t, u, v)``."""
 
         def work(a, b):
-            r = self._run(origins[a:b], directions[a:b], output=1)
+            d = None if dist is None else np.array(dist[a:b], np.float32)      # Embree writes its hits' t there
+            r = self._run(origins[a:b], directions[a:b], output=1, **({} if d is None else {"dists": d}))
             return r["primID"], r["tfar"], r["u"], r["v"]
 
         parts = self._map_chunks(work, len(origins))
@@ -252,13 +254,23 @@ class RayTracer:
         origins = np.asarray(origins, float)
         directions = np.broadcast_to(np.asarray(directions, float), origins.shape)
         dist = np.asarray(distances, np.float32)
+        linking = self.scene.linking
+        if self._through is not None and (linking is None or link is None):
+            # surfaces a ray may pass: closest hits within the distance, traced on past those
+            # passed (one query per ray, where an occlusion query and a closest-hit one were)
+            hits = self._first_hits(origins, directions, dist)
+            met = hits[0] >= 0
+            tri, t, _, _ = self._through_surfaces(origins, directions, *hits, dist=dist) if met.any() else hits
+            hit = (tri >= 0) & (t < dist)
+            if crossed is not None:
+                crossed[met & ~hit] = True
+            return hit
 
         def work(a, b):
             return self._run(origins[a:b], directions[a:b], query="OCCLUDED",
                              dists=np.ascontiguousarray(dist[a:b]))
 
         hit = np.concatenate(self._map_chunks(work, len(origins))) != -1
-        linking = self.scene.linking
         partial = None
         if linking is not None and link is not None:      # rays some triangles do not stop
             link = np.broadcast_to(np.asarray(link, np.int64), hit.shape)
