@@ -161,11 +161,11 @@ def test_lamp_samples_in_pieces_are_the_same_on_any_threads(blocker):
     sc, p, up, eye, mis = _lamp_floor(20000, blocker)
     n = len(p)
 
-    def run(threads, piece=visibility.PIECE_POINTS):
+    def run(threads, fewest=visibility.PIECE_MIN):
         tr = RayTracer(sc, threads=threads)
         dl = DirectLighting(sc, tr)
         flags, lobe = np.zeros((n, 2), np.uint64), np.zeros((n, 3))
-        visibility.PIECE_POINTS, before = piece, visibility.PIECE_POINTS
+        visibility.PIECE_MIN, before = fewest, visibility.PIECE_MIN
         try:
             out = reflected_radiance(dl, p, up, np.zeros(n, int), eye, np.random.default_rng(5), 2, mis=mis,
                                      shadow_flags=flags, analytic=np.ones(n, bool), glossy_part=lobe,
@@ -173,12 +173,12 @@ def test_lamp_samples_in_pieces_are_the_same_on_any_threads(blocker):
                                                None),
                                      select=np.random.default_rng(6).random(n))
         finally:
-            visibility.PIECE_POINTS = before
+            visibility.PIECE_MIN = before
         tr.close()
         return out, lobe, flags, dl.rays
 
     two, one = run(2), run(1)
-    assert n >= visibility.PIECE_POINTS                       # two pieces at least
+    assert n >= visibility.PIECE_MIN                          # two pieces at least
     for g, w in zip(two, one):
         assert np.any(w != 0) and np.array_equal(g, w)
     if blocker == "diffuse":
@@ -297,15 +297,15 @@ def test_world_samples_in_pieces_are_the_same_on_any_threads(blocker):
     glossy = np.nonzero(rng.random(n) < 0.5)[0]
     u = rng.random((n, 2, 3))
 
-    def run(threads, piece=visibility.PIECE_POINTS):
+    def run(threads, fewest=visibility.PIECE_MIN):
         tr = RayTracer(sc, threads=threads)
         wl = WorldLight(sc.world, tr)
-        visibility.PIECE_POINTS, before = piece, visibility.PIECE_POINTS
+        visibility.PIECE_MIN, before = fewest, visibility.PIECE_MIN
         try:
             e, lobe = wl.irradiance(p, up, u, (guide, sides), learn=sides,
                                     lobe=(sc.materials, glossy, np.zeros(len(glossy), int), eye[glossy]))
         finally:
-            visibility.PIECE_POINTS = before
+            visibility.PIECE_MIN = before
         tr.close()
         return e, lobe, wl.rays, *wl.learned_rows()
 

@@ -407,3 +407,41 @@ def test_a_time_limited_run_bounds_its_first_pass_and_final_image_by_the_pace_of
     assert r.indirect.samples(None, None) == r.settings.resolve_samples == 16
     assert r.indirect.samples(None, 3.5 * pace) == 3 and r.indirect.samples(None, 0.01 * pace) == 1
     assert r.indirect.samples(None, 100 * pace) == 16 and 0 < FIRST_EDGE_SHARE < 0.5
+
+
+def test_an_image_is_the_same_on_one_thread_and_on_two():
+    """Image passes run their pixels in pieces on the tracer's threads (lamps, world, glossy
+    eye paths: :meth:`~raybundle.tracing.visibility.RayTracer.map_pieces`): a glossy floor
+    under area lamps and a world, with two glass panes that shadow rays and eye paths pass,
+    rendered at enough pixels for several pieces is the same image, bit for bit, on one
+    thread and on two."""
+    from raybundle.app.pipeline import run_plan
+    from raybundle.app.plan import RunOptions, plan
+    from raybundle.scene.build import build_scene
+    from raybundle.scene.camera import Camera
+    from raybundle.scene.materials import MaterialTable
+    from raybundle.scene.model import AreaLights
+    from raybundle.scene.world import World
+    from raybundle.tracing.visibility import PIECE_POINTS
+
+    from test_world import sky_and_ground
+
+    mats = MaterialTable.from_list([
+        dict(name="floor", diffuse=(0.5, 0.4, 0.3), glossy=(0.8, 0.8, 0.8), glossy_weight=0.3, roughness=0.2),
+        dict(name="glass", transmission=1.0, transmission_ior=1.5), dict(name="box", diffuse=(0.6, 0.6, 0.6))])
+    v = np.array([[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0], [-1, -1, 0.6], [1, -1, 0.6], [1, 1, 0.6],
+                  [-1, 1, 0.6], [1.2, 0.2, 0], [1.2, 0.2, 1.0], [1.2, 1.2, 1.0], [1.2, 1.2, 0], [-1, -1, 0.8],
+                  [1, -1, 0.8], [1, 1, 0.8], [-1, 1, 0.8]], float)
+    t = [[0, 1, 2], [0, 2, 3], [4, 6, 5], [4, 7, 6], [8, 9, 10], [8, 10, 11], [12, 14, 13], [12, 15, 14]]
+    area = AreaLights([[-1.0, 0.5, 1.5]], [[0.3, 0, 0]], [[0, 0.2, 0]], [[0, 0, -1]], [0], [[8.0, 6.0, 4.0]])
+    w = h = int(np.ceil(np.sqrt(2 * PIECE_POINTS)))
+    cam = Camera.look_at((0, -4.0, 2.5), (0, 0, 0.3), (0, 0, 1), 35.0, 36.0, (w, h))
+    scene = build_scene(v, t, [0, 0, 1, 1, 2, 2, 1, 1], mats, camera=cam, area_lights=area, world=World(sky_and_ground()),
+                        two_sided=True)
+
+    def render(threads):
+        return run_plan(scene, plan(scene, RunOptions(iterations=3, seed=2, threads=threads, patches=200)))[1].image
+
+    one, two = render(1), render(2)
+    assert np.all(np.isfinite(one)) and one.mean() > 0
+    assert np.array_equal(one, two)

@@ -9,7 +9,8 @@ a mirror shows is shaded per pixel as what the camera sees, not read from the pa
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import copy
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -88,10 +89,30 @@ class EyeRays:
         [0,1)^2 (:meth:`~raybundle.scene.camera.Camera.subpixel`: the pixel filter's), for all
         pixels or for the pixel indices ``pixels`` (N,), followed through the interfaces of
         glass and other transmissive surfaces (:meth:`through_interfaces`; a third column of
-        ``jitter`` chooses at the first interface, reflected or refracted)."""
-        cam = self.camera
+        ``jitter`` chooses at the first interface, reflected or refracted).  The rays are split
+        into pieces run in parallel, each with random numbers of its own
+        (:meth:`~raybundle.tracing.visibility.RayTracer.map_pieces`)."""
         jitter = np.asarray(jitter, float)
-        pos = (self.pixel if pixels is None else self.pixel[pixels]) + cam.subpixel(jitter[:, :2])
+        pixels = np.arange(len(self.pixel)) if pixels is None else np.asarray(pixels)
+
+        def piece(a, b, rng):
+            rays = self
+            if rng is not self.rng:                  # a piece of several: its own random numbers
+                rays = copy.copy(self)
+                rays.rng, rays.rays = rng, 0
+            return rays._trace(jitter[a:b], pixels[a:b]), rays.rays
+
+        parts = self.tracer.map_pieces(piece, len(pixels), self.rng)
+        if len(parts) == 1:
+            return parts[0][0]
+        self.rays += sum(p[1] for p in parts)
+        return GBuffer(*(None if getattr(parts[0][0], f.name) is None else
+                         np.concatenate([getattr(p[0], f.name) for p in parts]) for f in fields(GBuffer)))
+
+    def _trace(self, jitter, pixels):
+        """:meth:`trace` of the rays in one piece."""
+        cam = self.camera
+        pos = self.pixel[pixels] + cam.subpixel(jitter[:, :2])
         org, dirs = cam.rays(pos[:, 0], pos[:, 1])
         tri, t, u, v = self.tracer.first_hit(org, dirs, glass=False)
         self.rays += len(dirs)
@@ -109,8 +130,7 @@ class EyeRays:
             normal[h] = self._shading_normals(tri[h], point[h], normal[h], -dirs[h])
         return GBuffer(tri, ts, point, normal,
                        sc.triangle_material[sc.tside_triangle[ts]], -dirs, np.stack([1 - u - v, u, v], axis=1),
-                       np.arange(len(self.pixel)) if pixels is None else np.asarray(pixels), weight, bounced, lamps,
-                       reflected)
+                       pixels, weight, bounced, lamps, reflected)
 
     def _shading_normals(self, tri, point, flat, w_eye):
         """The normals (N, 3) the points ``point`` seen on triangles ``tri`` are shaded with, from

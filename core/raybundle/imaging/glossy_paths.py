@@ -14,6 +14,8 @@ that meets glass passes straight on or is mirrored by its interface, as the eye'
 """
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from ..lights.direct import DirectLighting
@@ -36,6 +38,7 @@ class GlossyEyePaths:
         self.world_light = world_light if self.light_mis else None
         #: per material, the mean share of the rays its surface stops (1 where nothing passes)
         self._kept = solver_share(scene.materials)[0]
+        self._vert = None           # the last side values and their vertex values (_vertex_values)
         self.rays = 0
 
     def gather(self, g, idx, u, world_samples=0, guide=None):
@@ -58,17 +61,46 @@ class GlossyEyePaths:
         (:meth:`WorldLight.guide_at`; None: the sides' guide now).  Returns ``(light, solved)``, (len(idx), 3) each: what
         the paths took from the lamps and the world (:meth:`trace`), which does not depend on the
         solver's iterations, and what they read from the solver.
+
+        The pixels are split into pieces run in parallel, each with random numbers of its own
+        (:meth:`~raybundle.tracing.visibility.RayTracer.map_pieces`).
         """
         sc, solver = self.scene, self.solver
         e = solver.received()
-        vert = solver.reconstruction.averaged(e) if self.settings.smooth and len(idx) else None
+        vert = self._vertex_values(e) if self.settings.smooth and len(idx) else None
+        if self.world_light is not None and guide is None and len(idx):
+            guide = self.world_light.guide_at(solver.world_guide, sc.tside_side[g.tside[idx]])
+
+        def piece(a, b, rng):
+            paths = self
+            if rng is not self.rng:                  # a piece of several: its own random numbers
+                paths = copy.copy(self)
+                paths.rng, paths.rays = rng, 0
+            part = None if guide is None else (guide[0], guide[1][a:b])
+            return paths._gather(g, idx[a:b], u[a:b], e, vert, world_samples, part), paths.rays
+
+        parts = self.tracer.map_pieces(piece, len(idx), self.rng)
+        if len(parts) > 1:
+            self.rays += sum(p[1] for p in parts)           # one piece counted on self
+        return tuple(np.concatenate([p[0][c] for p in parts]) for c in (0, 1))
+
+    def _vertex_values(self, e):
+        """The solver's vertex values of the side values ``e``, kept while ``e`` stays the same
+        (a pass gathers its own samples and its extra ones from the same solution)."""
+        if self._vert is None or not np.array_equal(self._vert[0], e):
+            self._vert = (e, self.solver.reconstruction.averaged(e))
+        return self._vert[1]
+
+    def _gather(self, g, idx, u, e, vert, world_samples, guide):
+        """:meth:`gather` at the pixels ``idx`` of one piece, with the side values ``e``, their
+        vertex values ``vert`` and the ``(guide, at)`` of those pixels (None without world
+        samples)."""
+        sc = self.scene
         m, n, wo = g.material[idx], g.normal[idx], g.w_eye[idx]
         w_i, weight = sc.materials.sample_glossy(m, n, wo, u)
         if self.world_light is None or len(idx) == 0:
             return self.trace(g.point[idx], n, w_i, weight, e, vert, light_mis=(m, wo) if self.light_mis else None,
                               groups=sc.link_groups(g.triangle[idx]))
-        if guide is None:
-            guide = self.world_light.guide_at(solver.world_guide, sc.tside_side[g.tside[idx]])
         guide, at = guide
         world_mis = (max(world_samples, 1) * self.world_light.density(w_i, guide, at),
                      sc.materials.glossy_pdf(m, n, w_i, wo))

@@ -49,8 +49,9 @@ from .sampling import (Stream, cosine_directions, frames_from_normals, points_on
 _MAX_LAYERS = 10000
 #: most surfaces a first-hit query passes through before it gives up (the ray then misses)
 _MAX_PASSES = 1000
-#: points per piece of :meth:`RayTracer.map_pieces` (about: a call's pieces are equal)
-PIECE_POINTS = 12_000
+#: points per piece of :meth:`RayTracer.map_pieces` (about: a call's pieces are equal), and the
+#: fewest points it splits (in two)
+PIECE_POINTS, PIECE_MIN = 12_000, 4_000
 #: sender id of light that comes from the environment (world) in a :class:`Bundle`: along
 #: ``travel_sign`` +1 it arrives from the world at -d, along -1 from the world at +d
 ENVIRONMENT = -1
@@ -137,24 +138,28 @@ class RayTracer:
         bounds = np.linspace(0, n, self.threads + 1).astype(int)
         return list(self._pool.map(fn, bounds[:-1], bounds[1:]))
 
-    def map_pieces(self, fn, n):
+    def map_pieces(self, fn, n, rng=None):
         """Run ``fn(start, stop)`` over [0, n) split into an even number of pieces of about
-        :data:`PIECE_POINTS` points, in parallel on the pool, each piece tracing its rays on its own thread: for
-        point-wise work whose other steps release the GIL too.  The split depends on ``n``
-        only, and a piece's cut-out and glass choices are hashed from query numbers of its own
-        (this call's, the piece's index, and its queries so far), so the result is the same for
-        any number of threads and any timing.  ``fn`` must write only its own points' rows of
-        shared arrays.  The results in order (``[fn(0, n)]`` for one piece or within a piece)."""
-        pieces = 1 if n < PIECE_POINTS else max(2, 2 * round(n / (2 * PIECE_POINTS)))      # even: 2 cores
+        :data:`PIECE_POINTS` points (one below :data:`PIECE_MIN`), in parallel on the pool, each piece tracing its rays on its
+        own thread: for point-wise work whose other steps release the GIL too.  The split
+        depends on ``n`` only, and a piece's cut-out and glass choices are hashed from query
+        numbers of its own (this call's, the piece's index, and its queries so far), so the
+        result is the same for any number of threads and any timing.  With a Generator ``rng``,
+        ``fn(start, stop, rng)``: one piece takes ``rng`` itself, several a Generator each,
+        seeded by draws from ``rng``.  ``fn`` must write only its own points' rows of shared
+        arrays.  The results in order (one piece within a piece)."""
+        pieces = 1 if n < PIECE_MIN else max(2, 2 * round(n / (2 * PIECE_POINTS)))      # even: 2 cores
         if pieces == 1 or self._in_piece():
-            return [fn(0, n)]
+            return [fn(0, n) if rng is None else fn(0, n, rng)]
         bounds = np.linspace(0, n, pieces + 1).astype(int)
         base = self._next_query() << 32
+        seeds = None if rng is None else rng.integers(0, 1 << 63, pieces)
 
         def piece(k):
             self._piece.queries = itertools.count(base + ((k + 1) << 24))
             try:
-                return fn(bounds[k], bounds[k + 1])
+                a, b = bounds[k], bounds[k + 1]
+                return fn(a, b) if seeds is None else fn(a, b, np.random.default_rng(seeds[k]))
             finally:
                 self._piece.queries = None
 
