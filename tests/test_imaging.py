@@ -445,3 +445,28 @@ def test_an_image_is_the_same_on_one_thread_and_on_two():
     one, two = render(1), render(2)
     assert np.all(np.isfinite(one)) and one.mean() > 0
     assert np.array_equal(one, two)
+
+
+def test_eye_rays_in_pieces_count_each_ray_once():
+    """The eye's rays split into pieces (:meth:`~raybundle.imaging.eye_rays.EyeRays.trace`)
+    count each primary ray once, and give the G-buffer of one piece."""
+    from raybundle.tracing import visibility
+
+    sc = pipeline.prepare(scenes.load_scene("cornell"), patches=200)
+    n = 2 * visibility.PIECE_MIN
+    sc.camera = sc.camera.with_resolution(n // 50, 50)
+    r = pipeline.make_renderer(sc, RenderSettings(seed=1, threads=2))
+    try:
+        jitter = np.random.default_rng(3).random((n, 3))
+        split = r.eye.trace(jitter)
+        assert r.eye.rays == n
+        visibility.PIECE_MIN, before = 10 * n, visibility.PIECE_MIN
+        try:
+            whole = r.eye.trace(jitter)
+        finally:
+            visibility.PIECE_MIN = before
+        assert r.eye.rays == 2 * n
+        for f in ("triangle", "tside", "point", "normal", "material", "w_eye", "bary", "pixel"):
+            assert np.array_equal(getattr(split, f), getattr(whole, f)), f
+    finally:
+        r.tracer.close()

@@ -95,17 +95,18 @@ class EyeRays:
         jitter = np.asarray(jitter, float)
         pixels = np.arange(len(self.pixel)) if pixels is None else np.asarray(pixels)
 
-        def piece(a, b, rng):
-            rays = self
-            if rng is not self.rng:                  # a piece of several: its own random numbers
-                rays = copy.copy(self)
-                rays.rng, rays.rays = rng, 0
+        def piece(a, b, rng=None):
+            if b - a == len(pixels):                 # one piece: this object, its rays counted
+                return self._trace(jitter, pixels), 0
+            rays = copy.copy(self)                   # one of several: its own count and random numbers
+            rays.rng, rays.rays = rng, 0
             return rays._trace(jitter[a:b], pixels[a:b]), rays.rays
 
-        parts = self.tracer.map_pieces(piece, len(pixels), self.rng)
+        # only the interfaces past the first draw random numbers
+        parts = self.tracer.map_pieces(piece, len(pixels), None if self.turning is None else self.rng)
+        self.rays += sum(p[1] for p in parts)
         if len(parts) == 1:
             return parts[0][0]
-        self.rays += sum(p[1] for p in parts)
         return GBuffer(*(None if getattr(parts[0][0], f.name) is None else
                          np.concatenate([getattr(p[0], f.name) for p in parts]) for f in fields(GBuffer)))
 

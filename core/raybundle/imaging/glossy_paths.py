@@ -72,16 +72,15 @@ class GlossyEyePaths:
             guide = self.world_light.guide_at(solver.world_guide, sc.tside_side[g.tside[idx]])
 
         def piece(a, b, rng):
-            paths = self
-            if rng is not self.rng:                  # a piece of several: its own random numbers
-                paths = copy.copy(self)
-                paths.rng, paths.rays = rng, 0
             part = None if guide is None else (guide[0], guide[1][a:b])
+            if b - a == len(idx):                    # one piece: this object, its rays counted
+                return self._gather(g, idx, u, e, vert, world_samples, part), 0
+            paths = copy.copy(self)                  # one of several: its own count and random numbers
+            paths.rng, paths.rays = rng, 0
             return paths._gather(g, idx[a:b], u[a:b], e, vert, world_samples, part), paths.rays
 
         parts = self.tracer.map_pieces(piece, len(idx), self.rng)
-        if len(parts) > 1:
-            self.rays += sum(p[1] for p in parts)           # one piece counted on self
+        self.rays += sum(p[1] for p in parts)
         return tuple(np.concatenate([p[0][c] for p in parts]) for c in (0, 1))
 
     def _vertex_values(self, e):
