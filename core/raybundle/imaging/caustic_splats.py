@@ -39,17 +39,24 @@ class CausticSplats:
         average, interpolated: sharp caustics (a glossy floor throwing the lamp onto the
         walls, with the shadow of a block in it) came out blurred over a patch or two,
         most of the glossy box's bias, which the splats measured to cut (docs/benchmarks.md, 'Measured
-        choices behind the defaults')."""
+        choices behind the defaults').  The samples are drawn in pieces run in parallel, each
+        with random numbers of its own (:meth:`~raybundle.tracing.visibility.RayTracer.map_pieces`)."""
         cs, sc = self.caustic, self.scene
         before = self.direct.rays
-        h = cs.sample(n_samples, self.rng)
-        normals = sc.tside_normal[sc.seen_tside(h.triangles, h.travel)]
-        pix, value, rays = splat_to_camera(sc, self.camera, self.tracer, h.points, normals, h.triangles,
-                                           h.travel, h.power, glossy=False)
-        for k in range(3):
-            self.sum[:, k] += np.bincount(pix, value[:, k], minlength=len(self.sum))
+
+        def piece(a, b, rng):
+            h = cs.sample(b - a, rng)
+            normals = sc.tside_normal[sc.seen_tside(h.triangles, h.travel)]
+            pix, value, rays = splat_to_camera(sc, self.camera, self.tracer, h.points, normals, h.triangles,
+                                               h.travel, h.power, glossy=False)
+            return np.stack([np.bincount(pix, value[:, k], minlength=len(self.sum)) for k in range(3)], axis=1), \
+                h.rays + rays
+
+        for summed, rays in self.tracer.map_pieces(piece, n_samples, self.rng):
+            self.sum += summed
+            self.rays += rays
         self.samples += n_samples
-        self.rays += h.rays + rays + self.direct.rays - before
+        self.rays += self.direct.rays - before
 
     def image(self):
         """(N, 3) the caustic splats' average per pixel [W m^-2 sr^-1], filtered, until the
