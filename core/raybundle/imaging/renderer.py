@@ -252,7 +252,9 @@ class Renderer(ProgressiveImage):
         hf = h[np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]) > 0]
         light = self.light
         before = light.rays
-        scale = self.scene.albedo_at(g.triangle[hf], g.point[hf]) if len(hf) else None
+        # the diffuse texture at the points, for the lamps and the world
+        lit_here = len(hf) and (self.direct.n_lights or self.world_light is not None)
+        scale = self.scene.albedo_at(g.triangle[hf], g.point[hf]) if lit_here else None
         if self.direct.n_lights and len(hf):
             mis = self.glossy_material[g.material[hf]] if self.glossy_paths.light_mis else None
             lobe = None if lamps is None else np.zeros((len(hf), 3))

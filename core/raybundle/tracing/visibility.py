@@ -90,7 +90,6 @@ class Bundle:
         return uniq, counts * self.cell_area
 
 
-
 class RayTracer:
     """Embree acceleration structure over a :class:`~raybundle.scene.model.PatchScene`.
 
@@ -140,8 +139,9 @@ class RayTracer:
 
     def map_pieces(self, fn, n, rng=None):
         """Run ``fn(start, stop)`` over [0, n) split into an even number of pieces of about
-        :data:`PIECE_POINTS` points (one below :data:`PIECE_MIN`), in parallel on the pool, each piece tracing its rays on its
-        own thread: for point-wise work whose other steps release the GIL too.  The split
+        :data:`PIECE_POINTS` points (one below :data:`PIECE_MIN`), in parallel on the pool, each
+        piece tracing its rays on its own thread: for point-wise work whose other steps release
+        the GIL too.  The split
         depends on ``n`` only, and a piece's cut-out and glass choices are hashed from query
         numbers of its own (this call's, the piece's index, and its queries so far), so the
         result is the same for any number of threads and any timing.  With a Generator ``rng``,
