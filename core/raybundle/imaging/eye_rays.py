@@ -9,7 +9,6 @@ a mirror shows is shaded per pixel as what the camera sees, not read from the pa
 """
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -95,20 +94,13 @@ class EyeRays:
         jitter = np.asarray(jitter, float)
         pixels = np.arange(len(self.pixel)) if pixels is None else np.asarray(pixels)
 
-        def piece(a, b, rng=None):
-            if b - a == len(pixels):                 # one piece: this object, its rays counted
-                return self._trace(jitter, pixels), 0
-            rays = copy.copy(self)                   # one of several: its own count and random numbers
-            rays.rng, rays.rays = rng, 0
-            return rays._trace(jitter[a:b], pixels[a:b]), rays.rays
-
         # only the interfaces past the first draw random numbers
-        parts = self.tracer.map_pieces(piece, len(pixels), None if self.turning is None else self.rng)
-        self.rays += sum(p[1] for p in parts)
+        parts = self.tracer.map_pieces_of(self, lambda rays, a, b: rays._trace(jitter[a:b], pixels[a:b]), len(pixels),
+                                          None if self.turning is None else self.rng)
         if len(parts) == 1:
-            return parts[0][0]
-        return GBuffer(*(None if getattr(parts[0][0], f.name) is None else
-                         np.concatenate([getattr(p[0], f.name) for p in parts]) for f in fields(GBuffer)))
+            return parts[0]
+        return GBuffer(*(None if getattr(parts[0], f.name) is None else
+                         np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(GBuffer)))
 
     def _trace(self, jitter, pixels):
         """:meth:`trace` of the rays in one piece."""

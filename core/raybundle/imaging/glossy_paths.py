@@ -14,8 +14,6 @@ that meets glass passes straight on or is mirrored by its interface, as the eye'
 """
 from __future__ import annotations
 
-import copy
-
 import numpy as np
 
 from ..lights.direct import DirectLighting
@@ -71,17 +69,12 @@ class GlossyEyePaths:
         if self.world_light is not None and guide is None and len(idx):
             guide = self.world_light.guide_at(solver.world_guide, sc.tside_side[g.tside[idx]])
 
-        def piece(a, b, rng):
+        def piece(paths, a, b):
             part = None if guide is None else (guide[0], guide[1][a:b])
-            if b - a == len(idx):                    # one piece: this object, its rays counted
-                return self._gather(g, idx, u, e, vert, world_samples, part), 0
-            paths = copy.copy(self)                  # one of several: its own count and random numbers
-            paths.rng, paths.rays = rng, 0
-            return paths._gather(g, idx[a:b], u[a:b], e, vert, world_samples, part), paths.rays
+            return paths._gather(g, idx[a:b], u[a:b], e, vert, world_samples, part)
 
-        parts = self.tracer.map_pieces(piece, len(idx), self.rng)
-        self.rays += sum(p[1] for p in parts)
-        return tuple(np.concatenate([p[0][c] for p in parts]) for c in (0, 1))
+        parts = self.tracer.map_pieces_of(self, piece, len(idx), self.rng)
+        return tuple(np.concatenate([p[c] for p in parts]) for c in (0, 1))
 
     def _vertex_values(self, e):
         """The solver's vertex values of the side values ``e``, kept while ``e`` stays the same

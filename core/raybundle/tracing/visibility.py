@@ -34,6 +34,7 @@ its own thread.
 """
 from __future__ import annotations
 
+import copy
 import itertools
 import os
 import threading
@@ -164,6 +165,28 @@ class RayTracer:
                 self._piece.queries = None
 
         return [piece(k) for k in range(pieces)] if self._pool is None else list(self._pool.map(piece, range(pieces)))
+
+    def map_pieces_of(self, owner, fn, n, rng=None):
+        """:meth:`map_pieces` of ``fn(part, start, stop)`` for an ``owner`` that counts its rays
+        (``rays``) and draws from ``rng``: one piece runs on ``owner`` itself, several each on a
+        shallow copy with a count of its own (added to ``owner``'s after) and, with ``rng``, the
+        piece's Generator.  The results in order."""
+        counts = []
+
+        def piece(a, b, r=None):
+            if b - a == n:
+                return fn(owner, a, b)
+            part = copy.copy(owner)
+            part.rays = 0
+            if r is not None:
+                part.rng = r
+            out = fn(part, a, b)
+            counts.append(part.rays)
+            return out
+
+        parts = self.map_pieces(piece, n, rng)
+        owner.rays += sum(counts)
+        return parts
 
     def _in_piece(self):
         return getattr(self._piece, "queries", None) is not None
