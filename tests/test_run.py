@@ -176,3 +176,54 @@ def test_a_timed_run_ends_within_half_a_step_of_its_budget(monkeypatch):
         took = clock.now - 100.0
         assert 9.0 <= took <= latest, (long_from, took)
         assert not loop.short
+
+
+def _schedule_passes(r, iteration_seconds, pass_seconds, steps):
+    """Steps of a timed pass schedule over ``r``'s solver with an iteration of
+    ``iteration_seconds`` and a pass of ``pass_seconds`` after a first pass of set-up (3 s): the
+    schedule, the number of passes, and the steps whose length it foretold (``next_step_seconds``)."""
+    from raybundle.imaging.passes import PassSchedule
+
+    s = PassSchedule(r.solver, r.settings)
+    s.by_time = True
+    r.solver.stats.iterations = 0
+    s.passed(3.0, 0, True)
+    passes, rays, foretold = 1, 0, 0
+    for _ in range(steps):
+        guess = s.next_step_seconds(passes, rays)
+        r.solver.stats.iterations += 1
+        s.iterated(iteration_seconds)
+        k = s.passes_due(passes, rays)
+        for _ in range(k):
+            s.passed(pass_seconds, 0, False)
+        passes += k
+        foretold += r.solver.stats.iterations > 1 and abs(guess - iteration_seconds - k * pass_seconds) < 1e-9
+    return s, passes - 1, foretold
+
+
+def test_a_timed_run_shares_time_so_cheaper_passes_buy_more_of_them(scene):
+    """``image_share`` 0.5, iterations of 0.1 s: a timed run's passes take as many seconds as its
+    iterations, within half a pass, so passes of 0.4 s run every fourth iteration and passes of
+    0.025 s four after each; the run loop knows what each step will take.  A run of given
+    iterations shares rays, which the clock does not move (it repeats with its seed)."""
+    r = pipeline.make_renderer(scene, RenderSettings(seed=1, image_share=0.5, resolve_samples=1))
+    try:
+        r.run(iterations=4)
+        s = r.schedule
+        assert not s.by_time
+
+        def due_after(since):
+            s.since = since
+            return s.passes_due(r.passes, r.image_rays)
+        by_rays = [due_after(k) for k in range(8)]
+        s.iteration_seconds, s.pass_seconds = 1e-6, 1e6
+        assert [due_after(k) for k in range(8)] == by_rays and by_rays[0] == 0 and by_rays == sorted(by_rays)
+        RunLoop(r, time_limit=1.0)                 # a timed run's loop shares time
+        assert r.schedule.by_time
+        for pass_seconds, passes in ((0.4, 25), (0.025, 400)):
+            s, n, foretold = _schedule_passes(r, 0.1, pass_seconds, 100)
+            # all but the first step, and the one of the first pass after set-up (foretold at set-up's cost)
+            assert n == passes and foretold == 98
+            assert abs(s.pass_seconds - s.setup_seconds - s.iteration_seconds) <= 0.5 * pass_seconds + 1e-9
+    finally:
+        r.tracer.close()

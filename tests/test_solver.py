@@ -225,7 +225,7 @@ def test_diffuse_only_scene_takes_the_view_independent_path():
 
 @pytest.mark.parametrize("kwargs,msg", [
     (dict(light_samples=0), "light_samples"), (dict(bundle_resolution=-1), "bundle_resolution"),
-    (dict(image_ray_share=1.0), "image_ray_share"), (dict(image_ray_share=-0.1), "image_ray_share"), (dict(first_shot="all"), "first_shot"),
+    (dict(image_share=1.0), "image_share"), (dict(image_share=-0.1), "image_share"), (dict(first_shot="all"), "first_shot"),
     (dict(glossy_send_rays=0), "glossy_send_rays"), (dict(gather_rays=-2), "gather_rays"),
     (dict(gather_share=1.0), "gather_share"),
 ])

@@ -19,7 +19,7 @@ The scene is a built-in scene's name or a ``.npz`` file (``python -m raybundle_a
 set as ``tools/bench_blender.py --clay`` sets it).  Examples::
 
     python tools/compare_settings.py cornell --seconds 20 --seeds 3,4 \\
-        '{}' '{"image_ray_share": 0.5}' '{"patches": 6000}'
+        '{}' '{"image_share": 0.5}' '{"patches": 6000}'
     python tools/compare_settings.py living-clay.npz --seconds 60 --seeds 3 --halves \\
         demo_scenes/interiors/references/living-room-clay-{1,2}.exr \\
         '{}' '{"patches": 16000}' '{"method": "path-tracing"}'

@@ -1,53 +1,94 @@
 """When image passes run, and which pixels take more samples in them.
 
-The renderer alternates solver iterations and image passes.  An image pass is due once the
-iterations since the last one have done ``(1 - s) / s`` times the work of the rays an image
-pass traces on average, ``s`` the image passes' share of the traced rays (``image_ray_share``;
-by default :data:`PassSchedule.DIFFUSE_IMAGE_SHARE` for diffuse scenes and
-:data:`PassSchedule.GLOSSY_IMAGE_SHARE` with glossy lobes, whose eye paths the passes trace and
-whose caustic they splat).  The first pass's rays, with every pixel a penumbra, are set-up, not
-the passes' average; passes grow when penumbrae are found, so the ratio is re-read every time.
-Within a pass, the pixels whose estimates vary most take extra samples (:meth:`PassSchedule.noisy_pixels`).
+The renderer alternates solver iterations and image passes, so that the passes take ``s`` of the
+work, the image passes' share (``image_share``; by default :data:`PassSchedule.DIFFUSE_SHARE` for
+diffuse scenes and :data:`PassSchedule.GLOSSY_SHARE` with glossy lobes, whose eye paths the passes
+trace and whose caustic they splat).  The first pass, with every pixel a penumbra, is set-up and
+left out of the passes' work; passes grow when penumbrae are found, so their mean is re-read every
+time.
+
+* A run limited by time shares its time, measured as it goes, so that cheaper passes buy more of
+  them: after each iteration, passes run while the passes' seconds stay within half a pass of
+  ``s / (1 - s)`` times the iterations' (several in a row where a pass costs less than that share of
+  an iteration).
+* A run of given iterations shares the traced rays, so that it repeats with its seed: a pass is
+  due once the iterations since the last one have traced ``(1 - s) / s`` times a pass's mean rays.
+
+:class:`~raybundle.imaging.run.RunLoop` says which (:attr:`PassSchedule.by_time`).  Within a pass,
+the pixels whose estimates vary most take extra samples (:meth:`PassSchedule.noisy_pixels`).
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 
 class PassSchedule:
-    """The pass schedule of a renderer over ``solver`` with ``settings``: ``since`` iterations
-    since the last pass, the seconds spent in iterations and in passes, and the first pass's
-    rays (``setup_rays``)."""
+    """The pass schedule of a renderer over ``solver`` with ``settings``: the iterations since the
+    last pass, the seconds spent in iterations and in passes, and the first pass's rays and seconds
+    (its set-up)."""
 
-    #: the image passes' share of the traced rays when ``image_ray_share`` is 0
-    DIFFUSE_IMAGE_SHARE = 0.2
-    GLOSSY_IMAGE_SHARE = 0.55
+    #: the image passes' share of the work when ``image_share`` is 0, by ray count
+    #: (:attr:`by_time` False) and by time (True): diffuse scenes, and with glossy lobes (the
+    #: shares of time chosen on the interior bench's rooms: CHANGELOG)
+    DIFFUSE_SHARE = {False: 0.2, True: 0.4}
+    GLOSSY_SHARE = {False: 0.55, True: 0.7}
 
     def __init__(self, solver, settings):
         self.solver, self.settings = solver, settings
+        #: share time (a run limited by time: :class:`~raybundle.imaging.run.RunLoop` sets it), else rays
+        self.by_time = False
         self.since = 0                       # iterations since the last image pass
         self.iteration_seconds = 0.0         # seconds spent in solver iterations
         self.pass_seconds = 0.0              # seconds spent in image passes
         self.setup_rays = 0                  # the first pass's rays
+        self.setup_seconds = 0.0             # ... and seconds
 
-    def due(self, since, passes, image_rays):
-        """Whether an image pass is due after ``since`` iterations since the last, ``passes``
-        passes and ``image_rays`` image rays so far (module docstring)."""
-        solver = self.solver
-        share = self.settings.image_ray_share or (
-            self.DIFFUSE_IMAGE_SHARE if solver.diffuse_only else self.GLOSSY_IMAGE_SHARE)
-        per_pass = (image_rays - self.setup_rays) / (passes - 1) if passes > 1 else self.setup_rays
-        per_iter = solver.work_rays() / max(solver.stats.iterations, 1)
-        return since * share * max(per_iter, 1) >= per_pass * (1 - share)
+    def share(self):
+        """The image passes' share of the work (module docstring)."""
+        return self.settings.image_share or (
+            self.DIFFUSE_SHARE if self.solver.diffuse_only else self.GLOSSY_SHARE)[self.by_time]
+
+    def iterated(self, seconds):
+        """Count a solver iteration of ``seconds``."""
+        self.iteration_seconds += seconds
+        self.since += 1
+
+    def passed(self, seconds, rays, first):
+        """Count an image pass of ``seconds`` and ``rays``; the ``first`` is set-up."""
+        self.pass_seconds += seconds
+        self.since = 0
+        if first:
+            self.setup_rays, self.setup_seconds = rays, seconds
+
+    @staticmethod
+    def _mean_pass(spent, setup, passes):
+        """A pass's mean work, the first (set-up) left out once there are others."""
+        return (spent - setup) / (passes - 1) if passes > 1 else setup
+
+    def _iteration_seconds(self):
+        return self.iteration_seconds / max(self.solver.stats.iterations, 1)
+
+    def passes_due(self, passes, image_rays, ahead=0):
+        """How many image passes are due now, after ``passes`` passes and ``image_rays`` image
+        rays (or after ``ahead`` more iterations), by the module docstring's rules."""
+        s = self.share()
+        if self.by_time:
+            per_pass = max(self._mean_pass(self.pass_seconds, self.setup_seconds, passes), 1e-9)
+            budget = s / (1 - s) * (self.iteration_seconds + ahead * self._iteration_seconds())
+            return max(0, math.floor((budget - (self.pass_seconds - self.setup_seconds)) / per_pass + 0.5))
+        since = self.since + ahead
+        per_iter = max(self.solver.work_rays() / max(self.solver.stats.iterations, 1), 1)
+        return int(since > 0 and since * s * per_iter >= self._mean_pass(image_rays, self.setup_rays, passes) * (1 - s))
 
     def next_step_seconds(self, passes, image_rays):
-        """What the next step will take [s], from this run's means: an iteration, and an image
-        pass where one will be due (the run loop's clock, :class:`~raybundle.imaging.run.RunLoop`)."""
-        iterations = self.solver.stats.iterations
-        if iterations == 0 or passes == 0:
+        """What the next step will take [s], from this run's means: an iteration, and the image
+        passes that will be due after it (the run loop's clock, :class:`~raybundle.imaging.run.RunLoop`)."""
+        if self.solver.stats.iterations == 0 or passes == 0:
             return 0.0
-        t = self.iteration_seconds / iterations
-        return t + (self.pass_seconds / passes if self.due(self.since + 1, passes, image_rays) else 0.0)
+        per_pass = self._mean_pass(self.pass_seconds, self.setup_seconds, passes)
+        return self._iteration_seconds() + per_pass * self.passes_due(passes, image_rays, ahead=1)
 
     #: :meth:`noisy_pixels`: at most this share of the pixels, those whose squared standard
     #: error is above NOISY_CUT times the image's mean one

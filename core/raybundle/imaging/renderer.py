@@ -213,11 +213,9 @@ class Renderer(ProgressiveImage):
             cs.splat(int(np.ceil(self.settings.caustic_splats * n)))
             self.image_rays += cs.rays - before
             self.part_seconds["caustic splats"] += time.perf_counter() - t1
-        if self.passes == 0:
-            self.schedule.setup_rays = self.image_rays - before_pass
+        self.schedule.passed(time.perf_counter() - t0, self.image_rays - before_pass, self.passes == 0)
         self.passes += 1
         self._glossy_pixels = gl
-        self.schedule.pass_seconds += time.perf_counter() - t0
 
     def _restart_solver_parts(self):
         """Drop what the passes and iterations read from the solver before its running
@@ -391,9 +389,9 @@ class Renderer(ProgressiveImage):
                                  (self.camera.height, self.camera.width))
 
     def step(self):
-        """One solver iteration, this iterate's glossy lobe per pixel, and an image pass when
-        one is due (:class:`~raybundle.imaging.passes.PassSchedule`; the first call also makes
-        the first pass)."""
+        """One solver iteration, this iterate's glossy lobe per pixel, and the image passes then
+        due (:class:`~raybundle.imaging.passes.PassSchedule`; the first call also makes the first
+        pass)."""
         self.indirect.forget_plan()
         solver, schedule = self.solver, self.schedule
         if self.passes == 0:
@@ -402,12 +400,10 @@ class Renderer(ProgressiveImage):
         solver.step()
         if not solver.diffuse_only:
             self.accumulate_glossy()
-        schedule.iteration_seconds += time.perf_counter() - t0
+        schedule.iterated(time.perf_counter() - t0)
         self.part_seconds["iterations"] += time.perf_counter() - t0
-        schedule.since += 1
-        if schedule.due(schedule.since, self.passes, self.image_rays):
+        for _ in range(schedule.passes_due(self.passes, self.image_rays)):
             self.image_pass()
-            schedule.since = 0
 
     def next_step_seconds(self):
         """What the next :meth:`step` will take [s] (:meth:`~raybundle.imaging.passes.PassSchedule.next_step_seconds`)."""

@@ -76,6 +76,9 @@ class RunLoop:
                                                                                self.final_share)
         self.cancelled = self.short = self.finished = False
         self._first_iteration = self.iterations
+        schedule = getattr(runner, "schedule", None)     # a renderer's passes share time or rays
+        if schedule is not None:
+            schedule.by_time = time_limit is not None
 
     @property
     def iterations(self):

@@ -28,9 +28,11 @@ class RenderSettings:
     light_tree: str = "auto"
     #: shadow rays per light per pixel per image pass
     light_samples: int = 1
-    #: the share of traced rays spent on image passes (the rest on bundles); 0: automatic, 0.2 for
-    #: diffuse scenes, 0.55 where the passes' eye paths also carry glossy lobes (:class:`~raybundle.imaging.passes.PassSchedule`)
-    image_ray_share: float = 0.0
+    #: the image passes' share of the work (the rest goes to the bundles' iterations): of the time
+    #: in a run limited by time, of the traced rays in a run of given iterations (which repeats
+    #: with its seed); 0: automatic, by whether the passes' eye paths carry glossy lobes
+    #: (:class:`~raybundle.imaging.passes.PassSchedule`)
+    image_share: float = 0.0
     #: sub-pixel positions at which the diffuse indirect part is resolved
     resolve_samples: int = 16
     #: interpolate the patch values across smooth surfaces
@@ -99,8 +101,8 @@ class RenderSettings:
             raise ValueError("light_samples must be at least 1 (small lights are lit only by the first shot)")
         if int(self.resolve_samples) < 1 or int(self.emission_edge_samples) < 0:
             raise ValueError("resolve_samples must be >= 1 and emission_edge_samples >= 0")
-        if not 0.0 <= float(self.image_ray_share) < 1.0:
-            raise ValueError("image_ray_share must lie in [0, 1) (0 = automatic)")
+        if not 0.0 <= float(self.image_share) < 1.0:
+            raise ValueError("image_share must lie in [0, 1) (0 = automatic)")
         if self.first_shot not in ("auto", "none"):
             raise ValueError("first_shot must be 'auto' or 'none'")
         if self.light_tree not in ("auto", "on", "off"):
