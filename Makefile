@@ -58,7 +58,7 @@ demo: $(STAMP)
 	$(VENV)/bin/raybundle-blender demo_scenes/cornell_box.blend --time 30 --out out/cornell_box_blend.exr
 
 # The full suite on the newest Blender; then, side by side, its chains' file and the extension zip
-# in the oldest (73 s where one after the other took 98 s, 2026-11-28); the last line names an
+# in the oldest (73 s where one after the other took 98 s); the last line names an
 # environment that could not run (an error under CI=true)
 test: test-suite
 	@$(MAKE) --no-print-directory --output-sync=target -j2 test-chains test-oldest
@@ -68,7 +68,7 @@ test-newest: test-suite test-chains
 
 # two processes, a file each at a time (the machines have 2 cores), the slowest files first so that both
 # end together (tests/conftest.py); a process that crashes ends the run at once, naming its test: xdist's
-# replacement worker can wait forever under --dist loadfile (pytest-xdist#784; a CI run of 2026-12-01
+# replacement worker can wait forever under --dist loadfile (pytest-xdist#784; a CI run
 # hung 75 min so)
 test-suite: $(STAMP)
 	$(PY) -m pytest -q -n 2 --dist loadfile --no-loadscope-reorder --max-worker-restart=0 --ignore=tests/test_chains.py --ignore=tests/test_golden.py tests

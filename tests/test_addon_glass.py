@@ -68,7 +68,7 @@ def test_a_glass_pane_lets_an_area_lamps_light_through_as_in_cycles(fresh, tmp_p
     assert ex.warnings == [], ex.warnings
     assert ex.scene.materials.transmission.max() == 1.0
     rel, mean = _regions_against_cycles(tmp_path, 2048, 20)
-    # measured 2026-11-28 (seeds 3, 4; 5 at 100 iterations): rms 1.1 / 1.2 / 1.0%, largest 2.9 / 5.5 / 4.6%,
+    # measured (seeds 3, 4; 5 at 100 iterations): rms 1.1 / 1.2 / 1.0%, largest 2.9 / 5.5 / 4.6%,
     # means x0.996 / 0.993 / 0.995 (the reference's halves differ by up to 2.6% where seen through the
     # glass); black glass patches: means x0.988, largest 5.4%
     assert np.sqrt((rel ** 2).mean()) < 0.025 and np.abs(rel).max() < 0.08, rel
@@ -178,7 +178,7 @@ def test_a_translucent_curtain_lets_an_area_lamps_light_through_as_in_cycles(fre
     k = ex.scene.materials.names.index("curtain")
     np.testing.assert_allclose(ex.scene.materials.translucent[k], [0.35, 0.25, 0.15], atol=1e-6)
     rel, mean = _regions_against_cycles(tmp_path, 1024, 100)
-    # measured 2026-11-28 (2 x 2048 spp): rms 1.0%, largest 2.4%, mean x1.001 (20 iterations: largest
+    # measured (2 x 2048 spp): rms 1.0%, largest 2.4%, mean x1.001 (20 iterations: largest
     # 21% on the floor the curtain lights, not yet converged); the old export: the curtain dark
     assert np.sqrt((rel ** 2).mean()) < 0.025 and np.abs(rel).max() < 0.06, rel
     assert mean == pytest.approx(1.0, abs=0.02)
@@ -214,7 +214,7 @@ def test_lightmaps_under_a_glass_pane_and_of_a_translucent_sheet_are_cycles_bake
         ob = bpy.data.objects[name]
         ours = read_exr(out.lightmaps[name])[::-1]              # rows bottom-up, as Image.pixels
         rel[name] = lightmap_blocks(ours) / lightmap_blocks(cycles_bake(ob, 32)) - 1
-    # measured 2026-11-28: plate mean 0.7%, RMS 3.4%, largest 10%; sheet 0.04%, 0.08%, 0.35% (without
+    # measured: plate mean 0.7%, RMS 3.4%, largest 10%; sheet 0.04%, 0.08%, 0.35% (without
     # the penumbra samples where shadow rays passed the glass: plate mean +4.1%; translucency: -100%)
     for name, (mean, rms, most) in {"plate": (0.02, 0.05, 0.12), "sheet": (0.01, 0.02, 0.05)}.items():
         r = rel[name]

@@ -157,7 +157,7 @@ def test_glossy_furnace_with_its_weak_lobes_gathered_by_chance(monkeypatch):
 def test_glossy_furnace_image_without_gather():
     """The thesis' own eye estimator E_i f(t_i, w_eye) per iteration (glossy_gather off)."""
     r = furnace_renderer(True, "prng", glossy_gather=False)
-    patch, img = batch_means(r, 12, 40)          # SE 0.64% of the exact (2026-11-28)
+    patch, img = batch_means(r, 12, 40)          # SE 0.64% of the exact
     assert r.glossy_iterations > 0 and not r.settings.glossy_gather
     assert_converged(img, r.scene.analytic_radiance, max_se=0.03)
     r.tracer.close()

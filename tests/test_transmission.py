@@ -143,7 +143,7 @@ def test_a_pane_passes_the_sun_and_the_eye_by_fresnel():
     t_sun = 1.0 - fresnel_dielectric_cos(np.cos(th), 1.5)
     exact = (t_sun ** 2 * (1 - r_eye) ** 2 / (1 - r_eye ** 2)).mean()
     mean, se = np.mean(ratios), np.std(ratios, ddof=1) / np.sqrt(len(ratios))
-    # measured 2026-11-28: mean / exact 1.0006, SE 0.06%
+    # measured: mean / exact 1.0006, SE 0.06%
     assert se < 0.005 and abs(mean - exact) < 4.5 * se + 0.002 * exact, (mean, exact, se)
 
 
@@ -220,7 +220,7 @@ def test_a_glossy_furnace_with_a_glass_box_inside_stays_exact(share):
     r.tracer.close()
     rounds = np.array(rounds) / c
     mean, se = rounds.mean(axis=0), rounds.std(axis=0, ddof=1) / np.sqrt(len(rounds))
-    # measured 2026-12-03 with the exact patch values: half-glass 0.9999 and 1.0001 at seeds 0 and 1,
+    # measured with the exact patch values: half-glass 0.9999 and 1.0001 at seeds 0 and 1,
     # SE 0.05% (without the opaque rest's share of the stopped rays, the half-glass box read 0.936);
     # the 0.2% is for the glossy walls' iterate, which the paths that stop on them read
     assert np.all(np.abs(mean - 1.0) < 4.5 * se + 0.002), (mean, se)
@@ -382,7 +382,7 @@ def test_a_glossy_lobe_sees_the_room_mirrored_in_a_pane():
     R = fresnel_dielectric_cos(np.abs(d[:, 0]), 1.5)
     exact = (R * (1 + (1 - R) ** 2 / (1 - R ** 2))).mean() * card_radiance
     mean, se = np.mean(rounds), np.std(rounds, ddof=1) / np.sqrt(len(rounds))
-    # measured 2026-11-29: mean / exact 0.991, SE 0.57% (the old paths: 0.741)
+    # measured: mean / exact 0.991, SE 0.57% (the old paths: 0.741)
     assert se < 0.01 * exact and abs(mean - exact) < 4.5 * se + 0.015 * exact, (mean / exact, se / exact)
 
 

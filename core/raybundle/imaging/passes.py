@@ -68,6 +68,7 @@ class PassSchedule:
         return (spent - setup) / (passes - 1) if passes > 1 else setup
 
     def _iteration_seconds(self):
+        """An iteration's mean seconds so far."""
         return self.iteration_seconds / max(self.solver.stats.iterations, 1)
 
     def passes_due(self, passes, image_rays, ahead=0):

@@ -400,8 +400,9 @@ class Renderer(ProgressiveImage):
         solver.step()
         if not solver.diffuse_only:
             self.accumulate_glossy()
-        schedule.iterated(time.perf_counter() - t0)
-        self.part_seconds["iterations"] += time.perf_counter() - t0
+        took = time.perf_counter() - t0
+        schedule.iterated(took)
+        self.part_seconds["iterations"] += took
         for _ in range(schedule.passes_due(self.passes, self.image_rays)):
             self.image_pass()
 
