@@ -535,3 +535,23 @@ def test_coplanar_overlaps_are_warned_and_cycles_renders_them_darker(fresh, tmp_
     img = render_cycles(str(tmp_path / "cycles.exr"), samples=16).mean(axis=2)
     beside, overlap = img[4:28, 10:20].mean(), img[4:28, 26:30].mean()       # x = -0.75..0.5 m and 1.25..1.75 m
     assert beside > 0.5 and overlap < 0.5 * beside, (beside, overlap)
+
+
+def test_materials_converted_ahead_warn_only_where_an_exported_object_uses_them(fresh):
+    """The export converts the materials that wait for no graph bake before its loop over the
+    objects (their images decoded while Blender bakes): a material's warnings are told when an
+    exported object first uses it, in the objects' order, and never for a material only an
+    object no ray sees uses."""
+    minimal(fresh)
+    v, f = quad(2.0)
+    mats = []
+    for name in ("unseen", "second", "first"):
+        mat = node_material(name, kind="principled", color=(1.5, 0.5, 0.5))      # above 1: warned
+        mats.append(mat)
+    hidden = add_object("hidden", v, f, [mats[0]], location=(0, 0, -3))
+    for k in ("visible_camera", "visible_diffuse", "visible_glossy", "visible_shadow", "visible_transmission"):
+        setattr(hidden, k, False)
+    add_object("a", v, f, [mats[2]], location=(0, 0, -1))
+    add_object("b", v, f, [mats[1]], location=(0, 0, -2))
+    warned = [w for w in export().warnings if w.startswith("material")]
+    assert [w.split("'")[1] for w in warned] == ["first", "second"], warned

@@ -255,6 +255,25 @@ def test_unique_rows_and_group_ids_match_numpy():
         assert np.array_equal(group_ids(list(a.T)), inverse.reshape(-1)), span
 
 
+def test_stable_order_and_unique_ints_match_numpy():
+    """The layout's 1-D sorts (one sort of ``(key - min) * N + index`` where that fits in 62
+    bits, an argsort beyond) give the stable argsort and ``np.unique``'s values, first indices
+    and inverse, for keys of any sign, dtype and span, empty and single ones too."""
+    from raybundle.util.arrays import stable_order, unique_ints
+    rng = np.random.default_rng(11)
+    for span, dtype in ((4, np.int64), (1000, np.int32), (2 ** 40, np.int64), (2 ** 62, np.int64)):
+        for n in (0, 1, 7, 5000):
+            key = rng.integers(-span // 2, span // 2, n).astype(dtype)
+            if n > 10:
+                key[: n // 3] = key[rng.integers(n // 3, n, n // 3)]          # repeated values
+            order, value = stable_order(key)
+            assert np.array_equal(order, np.argsort(key, kind="stable")) and value.dtype == key.dtype
+            assert np.array_equal(value, np.sort(key))
+            want = np.unique(key, return_index=True, return_inverse=True)
+            got = unique_ints(key)
+            assert all(np.array_equal(g, w.reshape(-1)) for g, w in zip(got, want)), (span, n)
+
+
 @pytest.mark.parametrize("kind,width", [("BLACKMAN_HARRIS", 1.5), ("GAUSSIAN", 1.0), ("BOX", 2.0)])
 def test_sample_positions_follow_the_pixel_filter(kind, width):
     """Cycles' pixel filters (its width conventions: Blackman-Harris reaches ``width`` from the
@@ -394,3 +413,4 @@ def test_a_patch_of_many_small_triangles_takes_an_unbiased_mean_albedo():
     assert np.all(err < 4 * se), np.max(err / se)
     got = runs[0]
     assert np.sum(got[side] * area) / area.sum() == pytest.approx(1.0, abs=0.01)
+

@@ -397,10 +397,15 @@ def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
     """:func:`export_scene`'s objects, lights and materials, with the camera and world made;
     Blender bakes the node graphs on the materials' inputs meanwhile (:mod:`.node_graphs`)."""
     override = getattr(depsgraph.view_layer, "material_override", None)
-    graphs = start_graph_bake(*_used_materials(depsgraph, override), camera=camera)
+    materials, users = _used_materials(depsgraph, override)
+    graphs = start_graph_bake(materials, users, camera=camera)
     try:
+        converter = MaterialConverter(warn, graphs)
+        for m in materials:         # while Blender bakes: those that do not wait for it (their images decoded)
+            if not graphs.bakes(m):
+                converter.convert_ahead(m)
         return _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, world, t0,
-                               MaterialConverter(warn, graphs), override)
+                               converter, override)
     finally:
         graphs.cancel()
 

@@ -238,6 +238,11 @@ class GraphBake:
             return {k[3]: self._results.get(k, self._reasons.get(k, failed)) for k in self._objects.get(key, [])}
         return self._results.get(key, failed)
 
+    def bakes(self, mat):
+        """Whether Blender is still baking graphs and one of them is of material ``mat`` (reading
+        it would wait for the bake)."""
+        return self._job is not None and any(k[0] == mat.name_full for k in self._inputs)
+
     def uv(self, mat, sock, obj=None):
         """The UV map the graph of ``sock`` is baked over ("" the active render one); on object
         ``obj`` (name) for a graph baked on each object."""

@@ -129,7 +129,8 @@ class AlbedoTexture:
 class MaterialConverter:
     """Converts Blender materials to :meth:`MaterialTable.from_list` specs.
 
-    ``warn(message)`` collects warnings; each material is converted once (cache).
+    ``warn(message)`` collects warnings; each material is converted once (cache), ahead of its
+    use by :meth:`convert_ahead` too.
     """
 
     def __init__(self, warn, graphs=None):
@@ -138,6 +139,7 @@ class MaterialConverter:
         self.graphs = graphs
         self._material = None
         self._cache = {}
+        self._held = {}                 # material name -> the warnings of a conversion made ahead
         self._image_pixels = {}
         #: material name -> its :class:`AlbedoTexture`
         self.textures = {}
@@ -156,11 +158,27 @@ class MaterialConverter:
 
     # ------------------------------------------------------------ materials
     def convert(self, mat):
-        """The spec dict of ``mat`` (a bpy Material or None)."""
+        """The spec dict of ``mat`` (a bpy Material or None); its warnings are told now, the
+        first time it is asked for."""
         key = None if mat is None else mat.name_full
         if key not in self._cache:
             self._cache[key] = self._convert(mat)
+        for message in self._held.pop(key, ()):
+            self.warn(message)
         return self._cache[key]
+
+    def convert_ahead(self, mat):
+        """Convert ``mat`` (a bpy Material) before it is needed, keeping its warnings until
+        :meth:`convert` asks for it (a material no exported object uses warns of nothing)."""
+        if mat.name_full in self._cache:
+            return
+        warn, held = self.warn, []
+        self.warn = held.append
+        try:
+            self._cache[mat.name_full] = self._convert(mat)
+        finally:
+            self.warn = warn
+        self._held[mat.name_full] = held
 
     def _convert(self, mat):
         if mat is None:

@@ -58,7 +58,7 @@ import numpy as np
 from ..scene.model import PatchScene
 from ..tracing.sampling import Stream, frames_from_normals, stream
 from ..tracing.visibility import RayTracer
-from ..util.arrays import connected_components, group_ids, ranges
+from ..util.arrays import connected_components, group_ids, ranges, stable_order
 from .contacts import welded_vertices
 from .gaps import CONTACT_SHARE, PROBE_CHUNK, gap_sides
 from .piercing import pierced_parts
@@ -405,8 +405,8 @@ def _pieces_apart(ids, carved, welded, area, least):
     # triangles of one cluster that share a welded corner are linked
     tri = np.repeat(np.arange(len(rows)), 3)
     key = group_ids([np.repeat(ids[rows], 3), welded.reshape(-1)])
-    order = np.argsort(key, kind="stable")
-    same = key[order][1:] == key[order][:-1]
+    order, key = stable_order(key)
+    same = key[1:] == key[:-1]
     links = np.stack([tri[order][1:][same], tri[order][:-1][same]], axis=1)
     comp = connected_components(len(rows), links)
     comp = np.where(np.bincount(comp, area[rows])[comp] >= least, comp, -1)

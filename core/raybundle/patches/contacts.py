@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..tracing.sampling import orthonormal_basis
-from ..util.arrays import ranges, unique_rows
+from ..util.arrays import ranges, stable_order, unique_rows
 from .convex_cuts import cut_triangles, worth_cutting
 
 
@@ -57,7 +57,7 @@ def _plane_groups(scene, faces, min_area=0.0):
     key = np.concatenate([np.round(n * 1e4), np.round(off / max(r * 1e-6, 1e-12))[:, None]], axis=1).astype(np.int64)
     label = unique_rows(key)[1]
     big = np.bincount(label, scene.triangle_area[faces]) >= min_area
-    order = np.argsort(label, kind="stable")
+    order = stable_order(label)[0]
     order = order[big[label[order]]]
     cuts = np.nonzero(np.diff(label[order]))[0] + 1
     return [(faces[g], n[g[0]], float(off[g[0]])) for g in np.split(order, cuts) if len(g)]

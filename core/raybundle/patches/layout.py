@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..scene.model import PatchScene
-from ..util.arrays import unique_rows
+from ..util.arrays import unique_ints, unique_rows
 
 #: scenes with at most this many reflecting patch triangles have every one cut at contacts,
 #: larger ones only their subdivided faces (:func:`subdivide`)
@@ -160,7 +160,7 @@ def _rebuilt(scene: PatchScene, vertices, triangles, row) -> PatchScene:
     # (a vertex no triangle uses may be NaN: build_scene checks only those in use)
     q = np.round(np.where(np.isfinite(vertices), vertices, 0.0) / max(r * 1e-7, 1e-12)).astype(np.int64)
     first, inv = unique_rows(q)
-    used, t = np.unique(inv[triangles], return_inverse=True)     # only the corners in use
+    used, _, t = unique_ints(inv[triangles])                     # only the corners in use
     return PatchScene(vertices[first[used]], t.reshape(-1, 3), scene.triangle_material[row], np.arange(len(row)),
                       scene.triangle_source[row], scene.materials, scene.point_lights, scene.camera,
                       scene.analytic_radiance, scene.name, scene.dropped_triangles, scene.triangle_solid[row],

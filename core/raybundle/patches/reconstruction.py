@@ -41,6 +41,7 @@ from functools import cached_property
 import numpy as np
 
 from ..util import compiled
+from ..util.arrays import stable_order, unique_ints
 
 #: sides of at least this many triangles are clusters, read through their linear fits
 #: (module docstring)
@@ -213,8 +214,8 @@ class ClusterFit:
         # sides that share a welded vertex: distinct (vertex, side) pairs, neighbours within a vertex
         # (pairs as one integer key each: one sort, no dense ids first)
         cv, cs = ids.ravel(), np.repeat(side, 3)
-        _, first = np.unique(cv.astype(np.int64) * n_sides + cs, return_index=True)
-        order = first[np.argsort(cv[first], kind="stable")]
+        first = unique_ints(cv.astype(np.int64) * n_sides + cs)[1]
+        order = first[stable_order(cv[first])[0]]
         v, s = cv[order], cs[order]
         del first, order
         start = np.flatnonzero(np.r_[True, v[1:] != v[:-1]])
@@ -230,7 +231,7 @@ class ClusterFit:
         s2 = np.concatenate(s2) if s2 else np.zeros(0, np.int64)
         at = cluster[s1]                                  # pairs from a cluster side, each once
         s1, s2 = s1[at], s2[at]
-        keep = np.unique(s1 * n_sides + s2, return_index=True)[1]
+        keep = unique_ints(s1 * n_sides + s2)[1]
         self.s1, self.s2 = s1[keep], s2[keep]
         del s1, s2, keep
         d = self.centroid[self.s2] - self.centroid[self.s1]
@@ -262,7 +263,7 @@ class ClusterFit:
         self._corner_vertex = vrow[cv[self._corner]]
         self._weight = a                                          # per tside
         # the pairs grouped by cluster: the limiter's reach (vertex_values)
-        self._by_cluster = np.argsort(r1, kind="stable")
+        self._by_cluster = stable_order(r1)[0]
         self._cluster_start = np.searchsorted(r1[self._by_cluster], np.arange(len(self.sides)))
 
     def vertex_values(self, side_values):

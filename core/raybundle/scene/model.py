@@ -30,7 +30,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..util.arrays import connected_components, group_ids, shared_edges, unique_rows
+from ..util.arrays import connected_components, group_ids, shared_edges, stable_order, unique_ints, unique_rows
 from .camera import Camera
 from .materials import MaterialTable
 from .transmission import pass_probability
@@ -562,15 +562,15 @@ def closed_solid_triangles(vertices, triangles, tol=1e-7):
     nv = int(t.max()) + 1
     a, b = t.ravel(), np.roll(t, -1, axis=1).ravel()        # directed edges a->b, 3 per triangle
     key, rev = a * nv + b, b * nv + a
-    uniq, inv, count = np.unique(key, return_inverse=True, return_counts=True)
+    uniq, _, inv = unique_ints(key)
+    count = np.bincount(inv)                                # every id has an element
     pos = np.clip(np.searchsorted(uniq, rev), 0, len(uniq) - 1)
-    twin = (uniq[pos] == rev)
-    ok_edge = (count[inv.reshape(-1)] == 1) & twin & (count[pos] == 1)
+    ok_edge = (count[inv] == 1) & (uniq[pos] == rev) & (count[pos] == 1)      # one twin each way
     tri_ok = ok_edge.reshape(-1, 3).all(axis=1)
     # connected components over shared (undirected) edges
     und = np.minimum(a, b) * nv + np.maximum(a, b)
-    order = np.argsort(und, kind="stable")
-    same = und[order][1:] == und[order][:-1]
+    order, und = stable_order(und)
+    same = und[1:] == und[:-1]
     label = connected_components(len(t), np.stack([order[:-1][same] // 3, order[1:][same] // 3], axis=1))
     bad = np.bincount(label, ~tri_ok, minlength=len(t)) > 0
     return ~bad[label]

@@ -190,14 +190,15 @@ class SurfaceTexture:
         if key not in self._pyramids:
             im = self.level(image, level - 1)
             if level == 1 and self.encoded[image] is not None:
-                im = srgb_to_linear(im) * self.encoded[image]
+                im = srgb_to_linear(im) * np.asarray(self.encoded[image], np.float32)
             for axis in (0, 1):
                 if im.shape[axis] > 1:
                     if im.shape[axis] % 2:
                         im = np.concatenate([im, np.take(im, [-1 if self.extend[image] else 0], axis=axis)],
                                             axis=axis)
-                    im = 0.5 * (np.take(im, np.arange(0, im.shape[axis], 2), axis=axis)
-                                + np.take(im, np.arange(1, im.shape[axis], 2), axis=axis))
+                    even = (slice(None),) * axis + (slice(0, None, 2),)
+                    odd = (slice(None),) * axis + (slice(1, None, 2),)
+                    im = 0.5 * (im[even] + im[odd])
             self._pyramids[key] = np.ascontiguousarray(im, np.float32)
         return self._pyramids[key]
 
@@ -356,9 +357,13 @@ class SurfaceTexture:
 
 
 def srgb_to_linear(c):
-    """The sRGB transfer function's inverse (IEC 61966-2-1), elementwise."""
-    c = np.asarray(c, float)
-    return np.where(c <= 0.04045, c / 12.92, ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4)
+    """The sRGB transfer function's inverse (IEC 61966-2-1), elementwise, in float32 for a
+    float32 array (an image's pyramid) and in float64 otherwise."""
+    c = np.asarray(c)
+    c = c if c.dtype == np.float32 else c.astype(float)
+    one = c.dtype.type
+    curve = ((np.maximum(c, one(0.04045)) + one(0.055)) * one(1 / 1.055)) ** one(2.4)
+    return np.where(c <= one(0.04045), c * one(1 / 12.92), curve)
 
 
 def modulation_map(image):

@@ -22,11 +22,10 @@ def unique_rows(a):
     for k in np.argsort([-(int(c.max()) - int(c.min())) for c in cols]):      # the widest column first
         if key is not None:
             break
-        cols[k] = np.unique(cols[k], return_inverse=True)[1].reshape(-1)
+        cols[k] = unique_ints(cols[k])[2]
         key = _mixed_radix(cols)
     if key is not None:
-        _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
-        return first, inverse.reshape(-1)
+        return unique_ints(key)[1:]
     order = np.lexsort(a.T[::-1])
     s = a[order]
     new = np.ones(len(a), bool)
@@ -41,21 +40,68 @@ def group_ids(columns):
     one 1-D sort of a mixed-radix key when it fits in 63 bits, else :func:`unique_rows`."""
     key = _mixed_radix(columns)
     if key is not None:
-        return np.unique(key, return_inverse=True)[1].reshape(-1)
+        return unique_ints(key)[2]
     return unique_rows(np.stack(columns, axis=1))[1]
+
+
+#: elements a step of :func:`stable_order` adds its indices to at a time
+_CHUNK = 1 << 20
+
+
+def stable_order(key):
+    """``(order, sorted)`` of an integer array ``key`` (N,): ``np.argsort(key, kind="stable")``
+    and ``key[order]``.  Where the key's span times N fits in 62 bits, one sort of the values
+    ``(key - min) * N + index`` (the order and the values read back from them): a plain sort of
+    integers, several times faster than an argsort of them."""
+    key = np.asarray(key).reshape(-1)
+    n = len(key)
+    if n == 0:
+        return np.zeros(0, np.int64), key.copy()
+    lo, hi = int(key.min()), int(key.max())
+    if (hi - lo + 1) * float(n) >= 2.0 ** 62:
+        order = np.argsort(key, kind="stable")
+        return order, key[order]
+    packed = key.astype(np.int64)      # a copy, worked in place: memory of two keys at most
+    packed -= lo
+    packed *= n
+    for start in range(0, n, _CHUNK):
+        packed[start:start + _CHUNK] += np.arange(start, min(start + _CHUNK, n))
+    packed.sort()
+    order = packed % n
+    packed //= n                       # the sorted values, in place
+    packed += lo
+    return order, packed.astype(key.dtype, copy=False)
+
+
+def unique_ints(key):
+    """``(values, first, inverse)`` of an integer array ``key`` (N,), as ``np.unique(key,
+    return_index=True, return_inverse=True)`` gives them (the distinct values in order, the
+    first index of each, each element's value id), by :func:`stable_order`."""
+    order, s = stable_order(key)
+    new = np.ones(len(s), bool)
+    np.not_equal(s[1:], s[:-1], out=new[1:])
+    values = s[new]
+    ids = np.cumsum(new, out=s if s.dtype == np.int64 else None)      # the sorted values no longer needed
+    ids -= 1
+    inverse = np.empty(len(s), np.int64)
+    inverse[order] = ids
+    return values, order[new], inverse
 
 
 def _mixed_radix(columns):
     """(N,) int64: the integer ``columns`` (a list of (N,) arrays) as the digits of one number,
     the first most significant (so its order is the rows' lexicographic order), or None when
     their spans do not fit in 62 bits."""
-    cols = [np.asarray(c, np.int64) - np.min(c) for c in columns]
-    spans = [int(c.max()) + 1 for c in cols]
+    lows = [int(np.min(c)) for c in columns]
+    spans = [int(np.max(c)) - lo + 1 for c, lo in zip(columns, lows)]
     if np.prod([float(s) for s in spans]) >= 2.0 ** 62:
         return None
-    key = np.zeros(len(cols[0]), np.int64)
-    for c, s in zip(cols, spans):
-        key = key * s + c
+    key = np.asarray(columns[0]).astype(np.int64)      # one key made in place: no column copied
+    key -= lows[0]
+    for c, lo, s in zip(columns[1:], lows[1:], spans[1:]):
+        key *= s
+        key += c
+        key -= lo
     return key
 
 
@@ -74,10 +120,13 @@ def shared_edges(corners):
     one edge: two pairs)."""
     a = np.asarray(corners).reshape(-1)
     b = np.asarray(corners)[:, [1, 2, 0]].reshape(-1)
-    key = np.minimum(a, b).astype(np.int64) * (int(a.max(initial=0)) + 1) + np.maximum(a, b)
-    order = np.argsort(key, kind="stable")
-    key = key[order]
+    key = np.minimum(a, b, dtype=np.int64)             # one key, made in place
+    key *= int(a.max(initial=0)) + 1
+    key += np.maximum(a, b)
+    del b
+    order, key = stable_order(key)
     same = np.flatnonzero(key[1:] == key[:-1])
+    del key
     return order[same], order[same + 1]
 
 
