@@ -334,7 +334,9 @@ def test_half_a_million_triangles_set_up_in_under_a_kilobyte_each():
     image pass and the image of a 500k-triangle box stay under 1 KB per triangle of NumPy memory
     (traced: Embree's BVH aside; the input scene, the export's, aside; measured 820 B, 920 B at
     250k: about 50 MB plus 720 B per triangle), and the patch count follows the target, not the
-    triangles. `make bench-scale` measures the whole command up to 4M triangles."""
+    triangles (the lamps' splits add at most ``MAX_ADDED`` of it). `make bench-scale` measures the
+    whole command up to 4M triangles."""
+    from raybundle.patches.lit_splits import MAX_ADDED
     import tracemalloc
 
     sc = tessellate(scenes.cornell(resolution=(16, 16)), 500_000)
@@ -351,7 +353,7 @@ def test_half_a_million_triangles_set_up_in_under_a_kilobyte_each():
     finally:
         tracemalloc.stop()
     r.tracer.close()
-    assert 3500 < laid.n_patches < 4500
+    assert 3500 < laid.n_patches < 4500 * (1 + MAX_ADDED)
     assert r.solver.bundle_resolution < 200
     assert peak < 1000 * len(sc.triangles), peak / len(sc.triangles)
 

@@ -176,10 +176,13 @@ def test_the_automatic_gather_runs_where_the_bias_it_removes_outweighs_its_noise
     wall) are biased everywhere next to the box's edges: the probe's bias there outweighs a
     gather ray's noise ``NOISE_MARGIN`` times over well below 128 rays per pixel, so a budget
     that buys about 128 rays gathers (a fixed floor of 256 rays, before, skipped it: the
-    interior bench's rooms at 60 s, 10.1% error, 6.3% with the gather)."""
+    interior bench's rooms at 60 s, 10.1% error, 6.3% with the gather).  The layout is
+    :func:`~raybundle.patches.clusters.make_patches`' own: the lamps' splits
+    (:mod:`raybundle.patches.lit_splits`) would refine the walls next to the lamp."""
+    from raybundle.patches.clusters import make_patches
     from raybundle.scene import builtin as scenes
 
-    sc = pipeline.prepare(scenes.load_scene("cornell"), patches=30)
+    sc = make_patches(scenes.load_scene("cornell"), patches=30)
     sc.camera = sc.camera.with_resolution(32, 32)
     r = pipeline.make_renderer(sc, RenderSettings(seed=5))
     try:

@@ -12,6 +12,8 @@ import time
 import warnings
 from dataclasses import replace
 
+import numpy as np
+
 from ..imaging.renderer import Renderer
 from ..imaging.settings import RenderSettings
 from ..lights.direct import DirectLighting
@@ -20,6 +22,7 @@ from ..methods.registry import SOLVERS, image_only
 from ..methods.stochastic_iteration import StochasticIterationSolver
 from ..patches.clusters import DEFAULT_PATCHES, make_patches, triangle_patches
 from ..patches.layout import subdivide
+from ..patches.lit_splits import split_where_lit_unevenly
 from ..tracing.sampling import NOT_CUD
 from ..tracing.visibility import RayTracer
 from ..util import compiled
@@ -81,8 +84,30 @@ def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None, stage=None, stop=None
     if max_edge is not None:
         return subdivide(scene, max_edge=max_edge)
     if patches:
-        return make_patches(scene, patches=patches, stage=stage)
+        laid_out = make_patches(scene, patches=patches, stage=stage)
+        _step(stage, stop, "splitting patches where the lamps' light changes within them")
+        return split_lit_unevenly(scene, laid_out)
     return triangle_patches(scene)
+
+
+def split_lit_unevenly(scene, laid_out):
+    """``laid_out`` (``scene``'s patch layout) with the patches over which the first shot's
+    lamps' light changes strongly split (:func:`~raybundle.patches.lit_splits.split_where_lit_unevenly`),
+    their light probed with shadow rays over ``scene`` (the same surfaces) from a fixed seed, so
+    a layout is the same on every run."""
+    tracer = RayTracer(scene)
+    try:
+        direct = DirectLighting(scene, tracer)
+        if not direct.n_lights:
+            return laid_out
+        rng = np.random.default_rng(0)
+
+        def light(points, normals):
+            return direct.irradiance(points, normals, rng, samples_per_light=2, penumbra_samples=8).mean(axis=1)
+
+        return split_where_lit_unevenly(laid_out, light)[0]
+    finally:
+        tracer.close()
 
 
 def _check_world(scene):
