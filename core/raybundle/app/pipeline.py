@@ -95,6 +95,8 @@ def split_lit_unevenly(scene, laid_out):
     lamps' light changes strongly split (:func:`~raybundle.patches.lit_splits.split_where_lit_unevenly`),
     their light probed with shadow rays over ``scene`` (the same surfaces) from a fixed seed, so
     a layout is the same on every run."""
+    if not (len(scene.point_lights) or len(scene.sun_lights) or len(scene.area_lights) or len(small_emitters(scene))):
+        return laid_out                 # no lamp of the first shot: no tracer built
     tracer = RayTracer(scene)
     try:
         direct = DirectLighting(scene, tracer)
