@@ -24,6 +24,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..scene.model import PatchScene
+from ..tracing.sampling import frames_from_normals
 from ..util.arrays import stable_order, unique_ints
 
 #: a patch is split while it misplaces more than this share of the power an average patch receives
@@ -41,28 +42,22 @@ def split_where_lit_unevenly(scene: PatchScene, light, levels=LEVELS, share=SPLI
     (module docstring), and the number of patches added.
 
     ``light(points (N, 3), normals (N, 3)) -> (N,)``: the lamps' direct irradiance [W/m^2] at
-    points facing ``normals``, or None where the scene has no such lamps (then nothing is
-    split).  It is asked at the centroids of up to :data:`PROBES_PER_PATCH` triangles of each
-    patch, and of each half of a patch split, so its cost grows with the patches, not the
-    triangles."""
-    if light is None or not len(scene.triangles):
-        return scene, 0
-    tri_patch = scene.triangle_patch
+    points facing ``normals``.  It is asked at the centroids of up to :data:`PROBES_PER_PATCH`
+    triangles of each patch, and of each half of a patch split, so its cost grows with the
+    patches, not the triangles."""
     n0 = scene.n_patches
-    probe = _Probe(scene, light)
-    probe.first(tri_patch, PROBES_PER_PATCH)
-    area = scene.triangle_area
-    # the mean irradiance over the sides that receive light, from the probed triangles
-    sides = scene.materials.reflects[scene.triangle_material][:, None] & np.stack(
-        [np.ones(len(area), bool), scene.triangle_two_sided], axis=1)
-    w = np.where(sides & ~np.isnan(probe.e), area[:, None], 0.0)
-    level = float((np.nan_to_num(probe.e) * w).sum() / max(w.sum(), 1e-300))
-    if not level > 0:
+    if not n0:
         return scene, 0
-    # the power an average patch receives, times share
-    unit = share * level * float(area[sides[:, 0]].sum()) / n0
-    patch = tri_patch
+    probe = _Probe(scene, light)
+    area = scene.triangle_area
+    patch = scene.triangle_patch
+    unit = None
     for _ in range(levels):
+        probe.first(patch, PROBES_PER_PATCH)
+        if unit is None:
+            unit = _unit(scene, probe.e, share, n0)
+            if not unit > 0:
+                return scene, 0
         n = int(patch.max()) + 1
         score = _spread(patch, probe.e, n) * np.bincount(patch, area, minlength=n)
         many = np.bincount(patch, minlength=n) > 1
@@ -72,8 +67,19 @@ def split_where_lit_unevenly(scene: PatchScene, light, levels=LEVELS, share=SPLI
         if not len(chosen):
             break
         patch = _halved(scene, patch, np.isin(patch, chosen), n)
-        probe.first(patch, PROBES_PER_PATCH)
-    return (scene, 0) if patch is tri_patch else (_with_patches(scene, patch), int(patch.max()) + 1 - n0)
+    added = int(patch.max()) + 1 - n0
+    return (replace(scene, triangle_patch=patch), added) if added else (scene, 0)
+
+
+def _unit(scene, e, share, n0):
+    """``share`` times the power an average patch receives: the mean irradiance over the
+    sides that receive light (from the probed triangles ``e`` (T, 2)) times the mean patch area."""
+    area = scene.triangle_area
+    sides = scene.materials.reflects[scene.triangle_material][:, None] & np.stack(
+        [np.ones(len(area), bool), scene.triangle_two_sided], axis=1)
+    w = np.where(sides & ~np.isnan(e), area[:, None], 0.0)
+    level = float((np.nan_to_num(e) * w).sum() / max(w.sum(), 1e-300))
+    return share * level * float(area[sides[:, 0]].sum()) / n0
 
 
 class _Probe:
@@ -129,7 +135,7 @@ def _halved(scene, patch, inside, n):
     two, a square in four)."""
     t = np.nonzero(inside)[0]
     p = patch[t]
-    u, v = _plane_axes(_normals(scene, patch, n)[p])
+    u, v = frames_from_normals(_normals(scene, patch, n)[p])
     c = scene.triangle_corners[t].mean(axis=1)
     xy = np.stack([np.einsum("ij,ij->i", c, u), np.einsum("ij,ij->i", c, v)], axis=1)
     lo = np.full((n, 2), np.inf)
@@ -150,15 +156,3 @@ def _normals(scene, patch, n):
     w = scene.triangle_normal * scene.triangle_area[:, None]
     s = np.stack([np.bincount(patch, w[:, k], minlength=n) for k in range(3)], axis=1)
     return s / np.maximum(np.linalg.norm(s, axis=1, keepdims=True), 1e-300)
-
-
-def _plane_axes(normals):
-    """Two unit in-plane axes (N, 3) each for unit ``normals`` (N, 3)."""
-    a = np.where((np.abs(normals[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    u = np.cross(normals, a)
-    u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-300)
-    return u, np.cross(normals, u)
-
-
-def _with_patches(scene, patch):
-    return replace(scene, triangle_patch=patch)
