@@ -180,3 +180,23 @@ def test_caustic_splat_filter_keeps_to_one_surface():
     r.caustic_splats.samples = r.caustic_splats.FILTER_SAMPLES * len(r.eye.pixel)
     assert np.array_equal(r.caustic_splats.image(), r.caustic_splats.sum / r.caustic_splats.samples)
     r.tracer.close()
+
+
+def test_caustic_draws_make_no_copy_of_the_first_shot_per_tside():
+    """The caustic shot's draw (:meth:`~raybundle.lights.caustics.CausticShot.sample`) picks its
+    tsides by power without a (T, L, 3) copy of the first shot: under 40 bytes per caustic tside
+    at its peak for one light (with the copy, 51)."""
+    import tracemalloc
+
+    s = pipeline.make_solver(subdivide(floor_and_wall(), patches=40000), RenderSettings(seed=2))
+    cs, rng = s.caustic, np.random.default_rng(0)
+    cs.sample(100, rng)
+    tracemalloc.start()
+    try:
+        base = tracemalloc.get_traced_memory()[0]
+        cs.sample(100, rng)
+        peak = tracemalloc.get_traced_memory()[1] - base
+    finally:
+        tracemalloc.stop()
+    assert s.first_shot.n_lights == 1 and len(cs.tsides) > 10_000
+    assert peak < 40 * len(cs.tsides), peak / len(cs.tsides)

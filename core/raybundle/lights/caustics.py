@@ -96,8 +96,8 @@ class CausticShot:
         and the ones that carry nothing)."""
         sc, fs = self.scene, self.first_shot
         side = sc.tside_side[self.tsides]
-        e1 = fs.E[side]                                     # (T, L, 3)
-        power = self.tside_area[:, None] * luminance(e1)    # (T, L)
+        power = luminance(fs.E)[side]                       # (T, L): no (T, L, 3) copy of E,
+        power *= self.tside_area[:, None]                   # nor a second (T, L) array
         total = power.sum()
         if n_samples <= 0 or not total > 0:                 # nothing lit yet: these samples carry zero
             return CausticHits.empty()

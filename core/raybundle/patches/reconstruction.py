@@ -60,8 +60,7 @@ class LinearReconstruction:
         self.n_vertices = int(self.ids.max()) + 1 if self.ids.size else 0
         self.area = np.asarray(tside_area, float)
         self._flat = self.ids.ravel()
-        self._weight = np.repeat(self.area, 3)
-        self.lumped = np.bincount(self._flat, self._weight / 3, minlength=self.n_vertices)
+        self.lumped = np.bincount(self._flat, np.repeat(self.area, 3) / 3, minlength=self.n_vertices)
         self.empty = self.lumped <= 0                          # vertices without receiving area
         many = np.bincount(scene.tside_side, minlength=scene.n_sides) >= CLUSTER_TRIANGLES
         self._fit = ClusterFit(scene, self.area, self.ids, many) if many.any() else None
@@ -91,25 +90,30 @@ class LinearReconstruction:
                          for c in range(per_corner.shape[-1])], axis=1)
 
     @cached_property
-    def _average_weights(self):
-        """(weights (TS, 3), their sums (V,)) of :meth:`averaged` over all tsides."""
-        w = np.where(self.empty[self.ids], 1.0, self.area[:, None])
-        return w, np.bincount(self._flat, w.ravel(), minlength=self.n_vertices)
+    def _average_sums(self):
+        """(V,) the sums of :meth:`averaged`'s weights over all tsides (the weights themselves,
+        (TS, 3), are made per call and only on the NumPy path)."""
+        return np.bincount(self._flat, self._corner_weights(self.ids, self.area).ravel(), minlength=self.n_vertices)
+
+    def _corner_weights(self, ids, area):
+        """(N, 3) :meth:`averaged`'s weight of each corner of tsides ``ids`` (N, 3) of receiving
+        ``area`` (N,): the area, 1 at a vertex without receiving area."""
+        return np.where(self.empty[ids], 1.0, area[:, None])
 
     def averaged(self, side_values, tsides=None):
         """Side values (S, C) -> (V, C): the mean of the sides around each vertex,
         weighted by their receiving area (vertices without any: unweighted); with
         ``tsides`` (indices) over those alone (right at the vertices all of whose tsides they hold)."""
-        w, den = self._average_weights
-        ids, side = self.ids, self.scene.tside_side
+        ids, side, area = self.ids, self.scene.tside_side, self.area
         if tsides is not None:
-            ids, side, w = ids[tsides], side[tsides], w[tsides]
+            ids, side, area = ids[tsides], side[tsides], area[tsides]
         if compiled.use():
-            num = _scatter_sides(ids, w, side, np.ascontiguousarray(side_values, float), self.n_vertices)
+            num = _scatter_sides(ids, area, side, np.ascontiguousarray(side_values, float), self.n_vertices,
+                                 self.empty)
         else:
             tri = np.asarray(side_values, float)[side]                              # (TS, C)
-            num = self._gather(w[..., None] * tri[:, None, :], ids.ravel())
-        return num / np.maximum(den, 1e-300)[:, None]
+            num = self._gather(self._corner_weights(ids, area)[..., None] * tri[:, None, :], ids.ravel())
+        return num / np.maximum(self._average_sums, 1e-300)[:, None]
 
     def projected(self, side_values):
         """Side values (S, C) -> (V, C): the L2 projection onto the hat functions,
@@ -118,8 +122,7 @@ class LinearReconstruction:
         side_values = np.ascontiguousarray(side_values, float)
         nv = len(self._p_vertices)
         if compiled.use():
-            b = _scatter_sides(self._p_ids, np.repeat(self._p_area[:, None] / 3, 3, axis=1), self._p_side,
-                               side_values, nv)
+            b = _scatter_sides(self._p_ids, self._p_area / 3, self._p_side, side_values, nv, np.zeros(nv, bool))
         else:
             tri = side_values[self._p_side]
             b = self._gather((self._p_area[:, None] * tri / 3)[:, None, :].repeat(3, axis=1), self._p_flat, nv)
@@ -259,8 +262,10 @@ class ClusterFit:
         vrow = np.full(n_vertices, -1, np.int64)
         vrow[self.vertices] = np.arange(len(self.vertices))
         self._scene = scene
-        self._corner = np.nonzero(vrow[cv] >= 0)[0]              # flat tside corners 3 t + k
-        self._corner_vertex = vrow[cv[self._corner]]
+        # flat tside corners 3 t + k and their rows (int32: half the memory of what a pass reads
+        # most; a scene of 700M tsides would not fit in memory anyway)
+        self._corner = np.nonzero(vrow[cv] >= 0)[0].astype(np.int32)
+        self._corner_vertex = vrow[cv[self._corner]].astype(np.int32)
         self._weight = a                                          # per tside
         # the pairs grouped by cluster: the limiter's reach (vertex_values)
         self._by_cluster = stable_order(r1)[0]
@@ -303,19 +308,21 @@ class ClusterFit:
 
 
 def _kernel_sample():
-    return np.array([[0, 1, 2]]), np.ones((1, 3)), np.zeros(1, np.int64), np.ones((1, 2)), 3
+    return np.array([[0, 1, 2]]), np.ones(1), np.zeros(1, np.int64), np.ones((1, 2)), 3, np.zeros(3, bool)
 
 
 @compiled.kernel(_kernel_sample)
-def _scatter_sides(ids, weight, side, side_values, n_vertices):
-    """(V, C): the sum over tsides t and their corners k of ``weight[t, k] side_values[side[t]]``
-    at vertex ``ids[t, k]`` (``ids`` (TS, 3) int, ``weight`` (TS, 3), ``side`` (TS,) int,
-    ``side_values`` (S, C))."""
+def _scatter_sides(ids, weight, side, side_values, n_vertices, unit):
+    """(V, C): the sum over tsides t and their corners k of ``w side_values[side[t]]`` at vertex
+    ``ids[t, k]``, ``w`` = 1 where ``unit[ids[t, k]]`` and ``weight[t]`` elsewhere (``ids`` (TS, 3)
+    int, ``weight`` (TS,), ``side`` (TS,) int, ``side_values`` (S, C), ``unit`` (V,) bool): no
+    (TS, 3) array of weights is made."""
     out = np.zeros((n_vertices, side_values.shape[1]))
     for t in range(ids.shape[0]):
         s = side[t]
         for k in range(3):
-            v, w = ids[t, k], weight[t, k]
+            v = ids[t, k]
+            w = 1.0 if unit[v] else weight[t]
             for c in range(side_values.shape[1]):
                 out[v, c] += w * side_values[s, c]
     return out
@@ -336,8 +343,8 @@ def _mass_product(ids, area, v, n_vertices):
     return out
 
 
-@compiled.kernel(lambda: (np.array([0, 1, 2]), np.array([0, 1, 2]), np.zeros(1, np.int64), np.zeros(1, np.int64),
-                          np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros(1, np.int64), np.zeros((1, 3, 2)),
+@compiled.kernel(lambda: (np.array([0, 1, 2], np.int32), np.array([0, 1, 2], np.int32), np.zeros(1, np.int64),
+                          np.zeros(1, np.int64), np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros(1, np.int64), np.zeros((1, 3, 2)),
                           np.zeros((1, 2)), np.ones((1, 2)), np.ones(1), 3))
 def _fit_corners(corner, corner_vertex, tside_side, tside_triangle, triangle_corners, centroid, row, g, reach,
                  v, weight, n_vertices):

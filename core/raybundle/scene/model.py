@@ -325,7 +325,7 @@ class PatchScene:
         """(T, 3, 3) float: corner positions."""
         return self.vertices[self.triangles]
 
-    @cached_property
+    # made per use (three, at most): cached, a (T, 3) array that areas and normals no longer need
     def _cross(self):
         c = self.triangle_corners
         return np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
@@ -333,12 +333,12 @@ class PatchScene:
     @cached_property
     def triangle_area(self):
         """(T,) float [m^2]."""
-        return 0.5 * np.linalg.norm(self._cross, axis=1)
+        return 0.5 * np.linalg.norm(self._cross(), axis=1)
 
     @cached_property
     def triangle_normal(self):
         """(T, 3) float unit front normals."""
-        return self._cross / (2.0 * self.triangle_area[:, None])
+        return self._cross() / (2.0 * self.triangle_area[:, None])
 
     @property
     def n_patches(self):
@@ -352,8 +352,8 @@ class PatchScene:
     @cached_property
     def patch_normal(self):
         """(P, 3) float: area-weighted unit normal (patches are planar)."""
-        n = np.stack([np.bincount(self.triangle_patch, self._cross[:, k], minlength=self.n_patches)
-                      for k in range(3)], axis=1)
+        n = np.stack([np.bincount(self.triangle_patch, column, minlength=self.n_patches)
+                      for column in self._cross().T], axis=1)
         return n / np.linalg.norm(n, axis=1, keepdims=True)
 
     @cached_property
