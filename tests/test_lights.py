@@ -651,3 +651,23 @@ def test_the_first_shot_refines_where_its_samples_spread():
     _, sd_round_robin = spread(True)
     assert sd < 0.5 * sd_round_robin, (sd / exact, sd_round_robin / exact)
     tr.close()
+
+
+def test_first_shot_keeps_its_sums_for_the_tsides_a_light_faces_only():
+    """A two-sided floor under a lamp: its undersides face no light and receive nothing, so the
+    first shot keeps no sums for them (what chains pool, ``sums()``; half the memory here), and its
+    E still comes out of ``set_sums`` from the pooled sums as it was."""
+    v = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], float)
+    sc = subdivide(build_scene(v, [[0, 1, 2], [0, 2, 3]], [0, 0], LAMP, two_sided=True,
+                               point_lights=PointLights(np.array([[0.3, -0.2, 0.8]]), np.array([[2.0, 1.0, 0.5]]))),
+                   max_edge=0.1)
+    tr = RayTracer(sc)
+    fs = PatchFirstShot(DirectLighting(sc, tr), np.random.default_rng(0), initial_samples=4)
+    fs.refine(500)
+    e_sum, d_sum, count = fs.sums()
+    assert len(fs.receiving_tsides) == len(sc.tside_triangle) // 2
+    assert len(e_sum) == len(d_sum) == len(count) == len(fs.receiving_tsides)
+    E = fs.E.copy()
+    fs.set_sums(e_sum, d_sum, count)
+    np.testing.assert_allclose(fs.E, E, rtol=1e-12, atol=1e-15)
+    tr.close()

@@ -20,7 +20,8 @@ class PatchFirstShot:
     irradiance-weighted travel direction, divided by the side's receiving area
     (``receiving_area`` (S,); buried parts receive nothing).  ``E`` (S, L, 3)
     [W/m^2] is the side-average irradiance, ``direction`` (S, L, 3) the mean
-    travel direction.  Samples are kept per triangle side (tside).
+    travel direction.  Samples are kept per triangle side (tside) that some light is in front of
+    (:attr:`receiving_tsides`: their rows of the sums), the others receiving nothing.
 
     A fixed first shot would freeze its Monte Carlo noise into the solution (a
     bias that no number of iterations removes); refining it with a few shadow
@@ -47,10 +48,7 @@ class PatchFirstShot:
         self.rng = rng
         self.scene = sc
         self.lights = direct.sampled_lights()
-        n_t, n_l = len(sc.tside_triangle), len(self.lights)
-        self._e_sum = np.zeros((n_t, n_l, 3))
-        self._d_sum = np.zeros((n_t, n_l, 3))
-        self._count = np.zeros(n_t)
+        n_l = len(self.lights)
         self._next = 0
         # per side: samples, and the sums of their sum_l e (mean over RGB) and its square
         self._side_n = np.zeros(sc.n_sides)
@@ -63,14 +61,18 @@ class PatchFirstShot:
         origin = sc.triangle_corners[sc.tside_triangle, 0]
         self.receiving_tsides = np.nonzero(np.any([light.in_front(origin, sc.tside_normal) for light in self.lights],
                                             axis=0))[0] if n_l else np.zeros(0, np.int64)
+        n_r = len(self.receiving_tsides)
+        self._e_sum = np.zeros((n_r, n_l, 3))          # per receiving tside (row), light, RGB
+        self._d_sum = np.zeros((n_r, n_l, 3))
+        self._count = np.zeros(n_r)
         # each receiving tside's share of its side's receiving tsides' area (Neyman's draws, _targeted)
         ts_area = sc.triangle_area[sc.tside_triangle[self.receiving_tsides]]
         ts_side = sc.tside_side[self.receiving_tsides]
         self._share_in_side = ts_area / np.maximum(np.bincount(ts_side, ts_area, minlength=sc.n_sides)[ts_side], 1e-300)
         # initial_samples per side, shared out over a cluster's triangles by area
         counts = sc.tside_samples(initial_samples)[self.receiving_tsides]
-        for r in range(initial_samples if len(self.receiving_tsides) else 0):
-            todo = self.receiving_tsides[counts > r]
+        for r in range(initial_samples if n_r else 0):
+            todo = np.nonzero(counts > r)[0]
             step = 1 << 18                                # bounded temporaries on big scenes
             for lo in range(0, len(todo), step):
                 self._add(todo[lo:lo + step])
@@ -79,14 +81,16 @@ class PatchFirstShot:
     def n_lights(self):
         return len(self.lights)
 
-    def _add(self, tri):
-        """One new sample on each tside in ``tri`` (distinct ids); updates E and direction."""
+    def _add(self, rows):
+        """One new sample on each receiving tside of ``rows`` (distinct rows of
+        :attr:`receiving_tsides`); updates E and direction."""
         sc = self.scene
+        tri = self.receiving_tsides[rows]
         u = self.rng.random((len(tri), 2))
         pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[tri]], u[:, 0], u[:, 1])
         nrm = sc.tside_normal[tri]
-        old = self._e_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
-        old_d = self._d_sum[tri] / np.maximum(self._count[tri], 1)[:, None, None]
+        old = self._e_sum[rows] / np.maximum(self._count[rows], 1)[:, None, None]
+        old_d = self._d_sum[rows] / np.maximum(self._count[rows], 1)[:, None, None]
         y = np.zeros(len(tri))
         for li, light in enumerate(self.lights):
             u_l = self.rng.random((len(tri), 3))
@@ -95,18 +99,18 @@ class PatchFirstShot:
                 continue
             e, travel, _ = self.direct.light_samples_at(pts[at], nrm[at], light, u_l[at],
                                                         receivers=sc.link_groups(sc.tside_triangle[tri[at]]))
-            self._e_sum[tri[at], li] += e
-            self._d_sum[tri[at], li] += e.sum(axis=1, keepdims=True) * travel
+            self._e_sum[rows[at], li] += e
+            self._d_sum[rows[at], li] += e.sum(axis=1, keepdims=True) * travel
             y[at] += e.mean(axis=1)
-        self._count[tri] += 1
+        self._count[rows] += 1
         # side average = sum over its tsides of area * (tside mean) / side area
         side = sc.tside_side[tri]
         self._side_n += np.bincount(side, minlength=sc.n_sides)
         self._side_y += np.bincount(side, y, minlength=sc.n_sides)
         self._side_y2 += np.bincount(side, y * y, minlength=sc.n_sides)
         w = (sc.triangle_area[sc.tside_triangle[tri]] / self.receiving_area[side])[:, None, None]
-        new = self._e_sum[tri] / self._count[tri][:, None, None]
-        new_d = self._d_sum[tri] / self._count[tri][:, None, None]
+        new = self._e_sum[rows] / self._count[rows][:, None, None]
+        new_d = self._d_sum[rows] / self._count[rows][:, None, None]
         p, at = np.unique(side, return_inverse=True)
         self.E[p] += _summed(at, len(p), w * (new - old))
         self._d_patch[p] += _summed(at, len(p), w * (new_d - old_d))
@@ -114,22 +118,23 @@ class PatchFirstShot:
         self.direction[p] = np.where(norm > 0, self._d_patch[p] / np.maximum(norm, 1e-300), 0.0)
 
     def sums(self):
-        """Copies of the per-tside sums and counts ``(e_sum, d_sum, count)`` that ``E`` and
-        ``direction`` are formed from (what chains pool, :mod:`raybundle.app.chains`)."""
+        """Copies of the sums and counts ``(e_sum, d_sum, count)`` per receiving tside that ``E``
+        and ``direction`` are formed from (what chains pool, :mod:`raybundle.app.chains`)."""
         return self._e_sum.copy(), self._d_sum.copy(), self._count.copy()
 
     def set_sums(self, e_sum, d_sum, count):
-        """Replace the per-tside sums and counts (e.g. those of several chains pooled,
+        """Replace the sums and counts per receiving tside (e.g. those of several chains pooled,
         :mod:`raybundle.app.chains`) and recompute ``E`` and ``direction`` from them."""
         sc = self.scene
         self._e_sum, self._d_sum, self._count = e_sum.copy(), d_sum.copy(), count.copy()
         c = np.maximum(self._count, 1)[:, None, None]
-        a = sc.triangle_area[sc.tside_triangle]
-        w = (a / np.maximum(self.receiving_area[sc.tside_side], 1e-300))[:, None, None]
+        ts = self.receiving_tsides
+        side = sc.tside_side[ts]
+        w = (sc.triangle_area[sc.tside_triangle[ts]] / np.maximum(self.receiving_area[side], 1e-300))[:, None, None]
         self.E = np.zeros_like(self.E)
         self._d_patch = np.zeros_like(self._d_patch)
-        np.add.at(self.E, sc.tside_side, w * self._e_sum / c)
-        np.add.at(self._d_patch, sc.tside_side, w * self._d_sum / c)
+        np.add.at(self.E, side, w * self._e_sum / c)
+        np.add.at(self._d_patch, side, w * self._d_sum / c)
         norm = np.linalg.norm(self._d_patch, axis=2, keepdims=True)
         self.direction = np.where(norm > 0, self._d_patch / np.maximum(norm, 1e-300), 0.0)
 
@@ -143,14 +148,14 @@ class PatchFirstShot:
         targeted = self._targeted(n_samples - n_samples // 2 if n_samples > 1 else 0)
         k = (self._next + np.arange(min(n_samples - len(targeted), n_t))) % n_t
         self._next = int((self._next + len(k)) % n_t)
-        self._add(self.receiving_tsides[k])
-        while len(targeted):                       # _add takes distinct tsides: in rounds
+        self._add(k)
+        while len(targeted):                       # _add takes distinct rows: in rounds
             first, at = np.unique(targeted, return_index=True)
             self._add(first)
             targeted = np.delete(targeted, at)
 
     def _targeted(self, n):
-        """(n,) receiving tsides drawn for Neyman's allocation (with repeats): a side with
+        """(n,) rows of receiving tsides drawn for Neyman's allocation (with repeats): a side with
         probability ``A_s sigma_s / sum``, then a tside of it by area; none while no side's
         samples spread."""
         n_s = np.maximum(self._side_n, 1)
@@ -162,7 +167,7 @@ class PatchFirstShot:
         ts = self.receiving_tsides
         # one draw: a tside with probability weight(side) * its share of the side's area
         cdf = np.cumsum(weight[self.scene.tside_side[ts]] * self._share_in_side)
-        return ts[np.minimum(np.searchsorted(cdf, self.rng.random(n) * cdf[-1], side="right"), len(ts) - 1)]
+        return np.minimum(np.searchsorted(cdf, self.rng.random(n) * cdf[-1], side="right"), len(ts) - 1)
 
 
 def _summed(group, n, values):
