@@ -48,13 +48,14 @@ def test_merged_chains_pool_their_sums_and_counts():
     assert np.allclose(fresh.emission.sum, sum(r.emission.sum for r in rs)) and np.array_equal(fresh.emission.count,
                                                                                              counts)
     fs = [r.solver.first_shot for r in rs]
-    # each triangle side's mean weighted by the two chains' sample counts there (they differ: the
-    # refinement goes where each chain's samples spread), then the side's area-weighted sum
+    # each receiving triangle side's mean weighted by the two chains' sample counts there (they
+    # differ: the refinement goes where each chain's samples spread), then the side's area-weighted sum
     (e0, _, c0), (e1, _, c1) = fs[0].sums(), fs[1].sums()
     mean = (e0 + e1) / np.maximum(c0 + c1, 1)[:, None, None]
-    w = sc.triangle_area[sc.tside_triangle] / fs[0].receiving_area[sc.tside_side]
+    ts = fs[0].receiving_tsides
+    w = sc.triangle_area[sc.tside_triangle[ts]] / fs[0].receiving_area[sc.tside_side[ts]]
     want = np.zeros_like(fs[0].E)
-    np.add.at(want, sc.tside_side, w[:, None, None] * mean)
+    np.add.at(want, sc.tside_side[ts], w[:, None, None] * mean)
     assert not np.array_equal(c0, c1) and np.allclose(fresh.solver.first_shot.E, want, rtol=1e-10)
     assert not np.allclose(fs[0].E, fs[1].E)                                               # different samples
     with pytest.raises(ValueError, match="another scene"):
