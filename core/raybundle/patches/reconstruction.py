@@ -344,8 +344,8 @@ def _mass_product(ids, area, v, n_vertices):
 
 
 @compiled.kernel(lambda: (np.array([0, 1, 2], np.int32), np.array([0, 1, 2], np.int32), np.zeros(1, np.int64),
-                          np.zeros(1, np.int64), np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros(1, np.int64), np.zeros((1, 3, 2)),
-                          np.zeros((1, 2)), np.ones((1, 2)), np.ones(1), 3))
+                          np.zeros(1, np.int64), np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros(1, np.int64),
+                          np.zeros((1, 3, 2)), np.zeros((1, 2)), np.ones((1, 2)), np.ones(1), 3))
 def _fit_corners(corner, corner_vertex, tside_side, tside_triangle, triangle_corners, centroid, row, g, reach,
                  v, weight, n_vertices):
     """:meth:`ClusterFit.vertex_values` at its corners: each flat tside corner ``corner`` (3 t + k)
