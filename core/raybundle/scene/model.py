@@ -325,7 +325,7 @@ class PatchScene:
         """(T, 3, 3) float: corner positions."""
         return self.vertices[self.triangles]
 
-    # made per use (three, at most): cached, a (T, 3) array that areas and normals no longer need
+    # not cached: a (T, 3) array that nothing reads once the areas and normals are made
     def _cross(self):
         c = self.triangle_corners
         return np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
