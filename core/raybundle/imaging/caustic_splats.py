@@ -40,7 +40,9 @@ class CausticSplats:
         walls, with the shadow of a block in it) came out blurred over a patch or two,
         most of the glossy box's bias, which the splats measured to cut (docs/benchmarks.md, 'Measured
         choices behind the defaults').  The samples are drawn in pieces run in parallel, each
-        with random numbers of its own (:meth:`~raybundle.tracing.visibility.RayTracer.map_pieces`)."""
+        with random numbers of its own (:meth:`~raybundle.tracing.visibility.RayTracer.each_piece`)
+        and summed in order as they end: a piece gives its samples' pixels and values, not an
+        image, so a draw holds a few pieces' samples and one image, whatever its size."""
         cs, sc = self.caustic, self.scene
         before = self.direct.rays
 
@@ -49,11 +51,11 @@ class CausticSplats:
             normals = sc.tside_normal[sc.seen_tside(h.triangles, h.travel)]
             pix, value, rays = splat_to_camera(sc, self.camera, self.tracer, h.points, normals, h.triangles,
                                                h.travel, h.power, glossy=False)
-            return np.stack([np.bincount(pix, value[:, k], minlength=len(self.sum)) for k in range(3)], axis=1), \
-                h.rays + rays
+            return pix, value, h.rays + rays
 
-        for summed, rays in self.tracer.map_pieces(piece, n_samples, self.rng):
-            self.sum += summed
+        for pix, value, rays in self.tracer.each_piece(piece, n_samples, self.rng):
+            for k in range(3):
+                self.sum[:, k] += np.bincount(pix, value[:, k], minlength=len(self.sum))
             self.rays += rays
         self.samples += n_samples
         self.rays += self.direct.rays - before

@@ -149,9 +149,14 @@ class RayTracer:
         ``fn(start, stop, rng)``: one piece takes ``rng`` itself, several a Generator each,
         seeded by draws from ``rng``.  ``fn`` must write only its own points' rows of shared
         arrays.  The results in order (one piece within a piece)."""
+        return list(self.each_piece(fn, n, rng))
+
+    def each_piece(self, fn, n, rng=None):
+        """:meth:`map_pieces` as an iterator: each piece's result in order, as it is ready, so
+        a caller that folds them holds a few at a time, not all."""
         pieces = 1 if n < PIECE_MIN else max(2, 2 * round(n / (2 * PIECE_POINTS)))      # even: 2 cores
         if pieces == 1 or self._in_piece():
-            return [fn(0, n) if rng is None else fn(0, n, rng)]
+            return iter([fn(0, n) if rng is None else fn(0, n, rng)])
         bounds = np.linspace(0, n, pieces + 1).astype(int)
         base = self._next_query() << 32
         seeds = None if rng is None else rng.integers(0, 1 << 63, pieces)
@@ -164,7 +169,7 @@ class RayTracer:
             finally:
                 self._piece.queries = None
 
-        return [piece(k) for k in range(pieces)] if self._pool is None else list(self._pool.map(piece, range(pieces)))
+        return map(piece, range(pieces)) if self._pool is None else self._pool.map(piece, range(pieces))
 
     def map_pieces_of(self, owner, fn, n, rng=None):
         """:meth:`map_pieces` of ``fn(part, start, stop)`` for an ``owner`` that counts its rays
