@@ -29,6 +29,9 @@ its own patch) of the same tessellations, for comparison.  Writes ``scale.csv``,
 seconds, each in a fresh process timed from opening the file, and reports each phase's seconds
 (as the progress display shows them) and the process's peak memory beyond the opened file's,
 against the scene's triangles, objects and materials: ``stress.csv``, ``stress.json``.
+
+``--rooms`` (names, or none for all) does the same for the bench rooms of ``demo_scenes/interiors``
+at 320 x 180, each in clay and in its own materials: ``rooms.csv``, ``rooms.json``.
 """
 from __future__ import annotations
 
@@ -117,15 +120,21 @@ def phase_seconds(phases):
     return out
 
 
-def stress_one(blend, seconds):
-    """Render the stress scene ``blend`` through the add-on in this process (a fresh one): its
-    counts, each phase's seconds, the iterations and the peak memory beyond the opened file's."""
+ROOMS = os.path.join(_ROOT, "demo_scenes", "interiors")
+
+
+def stress_one(blend, seconds, clay=False, resolution=None):
+    """Render the stress scene ``blend`` through the add-on in this process (a fresh one), with
+    the bench's ``clay`` and ``resolution`` (:data:`bench_blender.OPEN_SETTINGS`): its counts,
+    each phase's seconds, the iterations, the peak memory beyond the opened file's and the
+    phase that reached it."""
     import time
 
     import bench_blender
 
     from raybundle.app.phases import peak_rss_mb
 
+    bench_blender.OPEN_SETTINGS.update(clay=clay, resolution=resolution)
     bench_blender._open(blend)
     with open("/proc/self/statm") as f:
         opened_mb = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
@@ -137,46 +146,56 @@ def stress_one(blend, seconds):
     from raybundle_addon.engine import LAST_RUN
 
     st = LAST_RUN[bpy.context.scene.name]["stats"]
-    return dict(scene=os.path.splitext(os.path.basename(blend))[0], triangles=st["scene_triangles"],
+    peak = peak_rss_mb()
+    peak_phase = next((p["name"] for p in st["phases"] if p["peak_rss_mb"] >= peak - 16), "the end")
+    return dict(scene=os.path.splitext(os.path.basename(blend))[0] + (" (clay)" if clay else ""),
+                triangles=st["scene_triangles"],
                 objects=st["scene_objects"], materials=st["scene_materials"], patches=st["patches"],
                 iterations=st["iterations"], setup_s=st["setup_seconds"], wall_s=wall,
-                beyond_file_gb=(peak_rss_mb() - opened_mb) / 1024, phases=st["phases"],
+                beyond_file_gb=(peak - opened_mb) / 1024, peak_phase=peak_phase, phases=st["phases"],
                 **{f"{k}_s": v for k, v in phase_seconds(st["phases"]).items()})
 
 
-def run_stress(names, out, seconds):
-    """Build (once) and render each stress scene in a fresh process; the rows."""
+def run_stress(names, out, seconds, rooms=False):
+    """Build (once) and render each stress scene in a fresh process, or with ``rooms`` each
+    bench room in clay and in its own materials at 320 x 180; the rows."""
     folder = os.path.join(out, "stress")
     rows = []
-    for name in names:
-        blend = os.path.join(folder, name + ".blend")
+    for name, clay in [(n, c) for n in names for c in ((True, False) if rooms else (False,))]:
+        blend = os.path.join(ROOMS if rooms else folder, name + ".blend")
         if not os.path.exists(blend):
             subprocess.run([sys.executable, os.path.join(_ROOT, "tools", "stress_scenes.py"), "--out", folder,
                             "--only", name], check=True, capture_output=True)
-        got = subprocess.run([sys.executable, __file__, "--stress-one", json.dumps([blend, seconds])], check=True,
+        job = [blend, seconds, clay, [320, 180] if rooms else None]
+        got = subprocess.run([sys.executable, __file__, "--stress-one", json.dumps(job)], check=True,
                              capture_output=True, text=True).stdout
         row = json.loads(got.strip().splitlines()[-1])
         rows.append(row)
-        print(f"{name:>20}: {row['triangles']:>9,} triangles, {row['objects']:>5} objects, {row['materials']:>3} "
+        print(f"{row['scene']:>20}: {row['triangles']:>9,} triangles, {row['objects']:>5} objects, {row['materials']:>3} "
               f"materials: set-up {row['setup_s']:.1f} s (" + ", ".join(
                   f"{c} {row.get(c + '_s', 0):.1f}" for c in SETUP) + f"), {row['iterations']} iterations, "
-              f"wall {row['wall_s']:.1f} s, peak {row['beyond_file_gb']:.2f} GB beyond the file", flush=True)
+              f"wall {row['wall_s']:.1f} s, peak {row['beyond_file_gb']:.2f} GB beyond the file "
+              f"({row['peak_phase']})", flush=True)
     return rows
 
 
-def stress_body(seconds, rows):
-    """The stress bench's section of the benchmark page."""
+def stress_body(seconds, rows, rooms=False):
+    """The stress bench's section of the benchmark page (``rooms``: the bench rooms')."""
     head = ["scene", "triangles", "objects", "materials", *SETUP, "set-up", "iterations", "wall",
-            "peak beyond the file", "memory goal"]
-    return ("Each stress scene of `tools/stress_scenes.py` (what real rooms bring, alone in a plain room) rendered "
+            "peak beyond the file", "memory goal", "peak reached in"]
+    what = ("Each bench room of `demo_scenes/interiors`, in clay and in its own materials," if rooms else
+            "Each stress scene of `tools/stress_scenes.py` (what real rooms bring, alone in a plain room)")
+    return (f"{what} rendered "
             f"through the add-on with a Time Limit of {seconds:g} s at 320 x 180, in a fresh process timed from "
             "opening the file. Seconds per phase as the progress display shows them (layout: cutting large faces "
             "and grouping small triangles; contacts: the cuts along contacts and piercings); memory: the process's "
-            "peak beyond its size with the file open, against the goal of 0.5 GB + 1 KB per triangle.\n\n"
+            "peak beyond its size with the file open, against the goal of 0.5 GB + 1 KB per triangle, and the "
+            "phase whose end first showed it.\n\n"
             + table(head, [(r["scene"], f"{r['triangles']:,}", r["objects"], r["materials"],
                             *(f"{r.get(c + '_s', 0):.1f}" for c in SETUP), f"{r['setup_s']:.1f} s", r["iterations"],
                             f"{r['wall_s']:.1f} s", f"{r['beyond_file_gb']:.2f} GB",
-                            "met" if r["beyond_file_gb"] <= 0.5 + r["triangles"] * 1e3 / 2 ** 30 else "**over**")
+                            "met" if r["beyond_file_gb"] <= 0.5 + r["triangles"] * 1e3 / 2 ** 30 else "**over**",
+                            r.get("peak_phase", ""))
                            for r in rows]))
 
 
@@ -227,6 +246,7 @@ def main(argv=None):
     p.add_argument("--resolution", type=int, nargs=2, metavar=("W", "H"), help="the box's camera (default: "
                    "the built-in's, as the reference)")
     p.add_argument("--stress", nargs="*", metavar="NAME", help="the stress scenes (none named: all) instead")
+    p.add_argument("--rooms", nargs="*", metavar="NAME", help="the bench rooms (none named: all) instead, as --stress")
     p.add_argument("--one", help=argparse.SUPPRESS)
     p.add_argument("--stress-one", help=argparse.SUPPRESS)
     add_page_argument(p, "scale")
@@ -237,7 +257,7 @@ def main(argv=None):
     if a.stress_one:
         print(json.dumps(stress_one(*json.loads(a.stress_one))))
         return 0
-    if a.stress is not None:
+    if a.stress is not None or a.rooms is not None:
         return stress_main(a, argv)
     if not all(os.path.exists(os.path.join(a.reference, f"reference-{k}.exr")) for k in (1, 2)):
         print(f"no Cycles reference in {a.reference}: run tools/bench_blender.py cornell --out {a.reference} first",
@@ -275,23 +295,29 @@ def main(argv=None):
 def stress_main(a, argv):
     from stress_scenes import SCENES
 
-    unknown = sorted(set(a.stress) - set(SCENES))
+    rooms = a.rooms is not None
+    known = sorted(f[:-6] for f in os.listdir(ROOMS) if f.endswith(".blend")) if rooms else list(SCENES)
+    names = (a.rooms if rooms else a.stress) or known
+    unknown = sorted(set(names) - set(known))
     if unknown:
-        print(f"bench_scale: no stress scene {', '.join(unknown)} (there are {', '.join(SCENES)})", file=sys.stderr)
+        print(f"bench_scale: no {'bench room' if rooms else 'stress scene'} {', '.join(unknown)} "
+              f"(there are {', '.join(known)})", file=sys.stderr)
         return 2
     checked_page(a.page, "bench_scale")
     os.makedirs(a.out, exist_ok=True)
-    rows = run_stress(a.stress or list(SCENES), a.out, a.time)
-    with open(os.path.join(a.out, "stress.csv"), "w", newline="") as f:
+    rows = run_stress(names, a.out, a.time, rooms)
+    kind = "rooms" if rooms else "stress"
+    with open(os.path.join(a.out, f"{kind}.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=[k for k in rows[0] if k != "phases"], extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
-    with open(os.path.join(a.out, "stress.json"), "w") as f:
+    with open(os.path.join(a.out, f"{kind}.json"), "w") as f:
         json.dump(dict(seconds=a.time, rows=rows), f, indent=1)
-    print(f"wrote {a.out}/stress.csv, stress.json")
+    print(f"wrote {a.out}/{kind}.csv, {kind}.json")
     if a.page:
-        write_section(a.page, a.section or "stress", "Stress scenes: the set-up per phase", stress_body(a.time, rows),
-                      [], command=command_line("tools/bench_scale.py", argv))
+        title = "The bench rooms: the set-up per phase" if rooms else "Stress scenes: the set-up per phase"
+        write_section(a.page, a.section or kind, title, stress_body(a.time, rows, rooms), [],
+                      command=command_line("tools/bench_scale.py", argv))
         print(f"wrote its section of {a.page}")
     return 0
 
