@@ -123,8 +123,9 @@ def phase_seconds(phases):
 ROOMS = os.path.join(_ROOT, "demo_scenes", "interiors")
 
 
-def stress_one(blend, seconds, clay=False, resolution=None):
-    """Render the stress scene ``blend`` through the add-on in this process (a fresh one), with
+def stress_one(blend, seconds, clay=False, resolution=None, exr=None):
+    """Render the stress scene ``blend`` through the add-on in this process (a fresh one) into
+    ``exr`` (default: beside ``blend``), with
     the bench's ``clay`` and ``resolution`` (:data:`bench_blender.OPEN_SETTINGS`): its counts,
     each phase's seconds, the iterations, the peak memory beyond the opened file's and the
     phase that reached it."""
@@ -139,7 +140,7 @@ def stress_one(blend, seconds, clay=False, resolution=None):
     with open("/proc/self/statm") as f:
         opened_mb = int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2 ** 20
     t0 = time.perf_counter()
-    bench_blender.render(blend, os.path.splitext(blend)[0] + ".exr", "RAYBUNDLE", seconds=seconds)
+    bench_blender.render(blend, exr or os.path.splitext(blend)[0] + ".exr", "RAYBUNDLE", seconds=seconds)
     wall = time.perf_counter() - t0
     import bpy
 
@@ -166,7 +167,8 @@ def run_stress(names, out, seconds, rooms=False):
         if not os.path.exists(blend):
             subprocess.run([sys.executable, os.path.join(_ROOT, "tools", "stress_scenes.py"), "--out", folder,
                             "--only", name], check=True, capture_output=True)
-        job = [blend, seconds, clay, [320, 180] if rooms else None]
+        job = [blend, seconds, clay, [320, 180] if rooms else None,
+               os.path.join(out, f"{name}-{'clay' if clay else 'full'}.exr") if rooms else None]
         got = subprocess.run([sys.executable, __file__, "--stress-one", json.dumps(job)], check=True,
                              capture_output=True, text=True).stdout
         row = json.loads(got.strip().splitlines()[-1])

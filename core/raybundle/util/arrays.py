@@ -17,13 +17,7 @@ def unique_rows(a):
     a = np.asarray(a)
     if len(a) == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    cols = [a[:, k] for k in range(a.shape[1])]
-    key = _mixed_radix(cols)
-    for k in np.argsort([-(int(c.max()) - int(c.min())) for c in cols]):      # the widest column first
-        if key is not None:
-            break
-        cols[k] = unique_ints(cols[k])[2]
-        key = _mixed_radix(cols)
+    key = _dense_key([a[:, k] for k in range(a.shape[1])])
     if key is not None:
         return unique_ints(key)[1:]
     order = np.lexsort(a.T[::-1])
@@ -36,12 +30,25 @@ def unique_rows(a):
 
 
 def group_ids(columns):
-    """Dense ids (N,) of the distinct rows of integer ``columns`` (a list of (N,) arrays):
-    one 1-D sort of a mixed-radix key when it fits in 63 bits, else :func:`unique_rows`."""
-    key = _mixed_radix(columns)
+    """Dense ids (N,) of the distinct rows of integer ``columns`` (a list of (N,) arrays), as
+    :func:`unique_rows` of them side by side gives them, without the (N, K) copy."""
+    key = _dense_key(list(columns))
     if key is not None:
         return unique_ints(key)[2]
     return unique_rows(np.stack(columns, axis=1))[1]
+
+
+def _dense_key(cols):
+    """:func:`_mixed_radix` of the integer columns ``cols`` (a list of (N,) arrays, changed),
+    the widest replaced by its dense ranks first, one by one, while their spans are too wide
+    for it; None when even dense ranks do not fit."""
+    key = _mixed_radix(cols)
+    for k in np.argsort([-(int(c.max()) - int(c.min())) for c in cols]):      # the widest column first
+        if key is not None:
+            break
+        cols[k] = unique_ints(cols[k])[2]
+        key = _mixed_radix(cols)
+    return key
 
 
 #: elements a step of :func:`stable_order` adds its indices to at a time
