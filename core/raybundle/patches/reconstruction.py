@@ -104,16 +104,18 @@ class LinearReconstruction:
         """Side values (S, C) -> (V, C): the mean of the sides around each vertex,
         weighted by their receiving area (vertices without any: unweighted); with
         ``tsides`` (indices) over those alone (right at the vertices all of whose tsides they hold)."""
+        return self._numerator(side_values, tsides) / np.maximum(self._average_sums, 1e-300)[:, None]
+
+    def _numerator(self, side_values, tsides=None):
+        """(V, C) :meth:`averaged`'s weighted sums at each vertex, before the division."""
         ids, side, area = self.ids, self.scene.tside_side, self.area
         if tsides is not None:
             ids, side, area = ids[tsides], side[tsides], area[tsides]
         if compiled.use():
-            num = _scatter_sides(ids, area, side, np.ascontiguousarray(side_values, float), self.n_vertices,
-                                 self.empty)
-        else:
-            tri = np.asarray(side_values, float)[side]                              # (TS, C)
-            num = self._gather(self._corner_weights(ids, area)[..., None] * tri[:, None, :], ids.ravel())
-        return num / np.maximum(self._average_sums, 1e-300)[:, None]
+            return _scatter_sides(ids, area, side, np.ascontiguousarray(side_values, float), self.n_vertices,
+                                  self.empty)
+        tri = np.asarray(side_values, float)[side]                              # (TS, C)
+        return self._gather(self._corner_weights(ids, area)[..., None] * tri[:, None, :], ids.ravel())
 
     def projected(self, side_values):
         """Side values (S, C) -> (V, C): the L2 projection onto the hat functions,
@@ -126,12 +128,15 @@ class LinearReconstruction:
         else:
             tri = side_values[self._p_side]
             b = self._gather((self._p_area[:, None] * tri / 3)[:, None, :].repeat(3, axis=1), self._p_flat, nv)
-        x = np.zeros((self.n_vertices, side_values.shape[1]))
+        if len(self._fallback_tsides):     # the fallback's sums, divided where they are kept: one (V, C)
+            x = self._numerator(side_values, self._fallback_tsides)
+            x[self._fallback] /= np.maximum(self._average_sums[self._fallback], 1e-300)[:, None]
+        else:
+            x = np.zeros((self.n_vertices, side_values.shape[1]))
         x[self._p_vertices] = np.maximum(self._solve_mass(b), 0.0)
-        if len(self._fallback_tsides):
-            x[self._fallback] = self.averaged(side_values, self._fallback_tsides)[self._fallback]
         if self._fit is not None:
-            x[self._fit.vertices] = np.maximum(self._fit.vertex_values(np.asarray(side_values, float)), 0.0)
+            fitted = self._fit.vertex_values(np.asarray(side_values, float))
+            x[self._fit.vertices] = np.maximum(fitted, 0.0, out=fitted)
         return x
 
     def smooth_and_sharp(self, side_values, sharp=None):
