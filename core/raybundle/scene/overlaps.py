@@ -22,7 +22,7 @@ from ..tracing.sampling import orthonormal_basis
 from ..util.arrays import group_ids
 
 #: points x triangles tested at a time (memory: about 50 bytes each)
-BLOCK = 1 << 22
+BLOCK = 1 << 20
 #: at most about this many point-in-triangle tests per plane: beyond, a random subset of each
 #: group's triangles is tested and its covered area scaled up by the area sampled
 MAX_TESTS = 1 << 27
