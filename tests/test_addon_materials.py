@@ -516,7 +516,8 @@ def test_a_byte_srgb_checker_on_base_color_matches_cycles(fresh, tmp_path, inter
     seen 8 pixels a texel under a sun: the image mean within 3% of Cycles' and its 8 x 8 regions
     within 4.5 standard errors, for Linear and Closest interpolation.  Cycles interpolates such an
     image's encoded values and decodes after (ours decoded first: x1.32 the mean with Linear), and
-    Closest reads one texel (ours blended: the weak channel of each color up to x3)."""
+    Closest reads one texel (ours blended: the weak channel of each color up to x3).  The scene
+    keeps the image's bytes (a quarter of the memory of its float values)."""
     from addon_helpers import assert_like_cycles, plane_with_uvs, render_cycles, render_raybundle
 
     plane = plane_with_uvs(size=4.0)
@@ -534,6 +535,8 @@ def test_a_byte_srgb_checker_on_base_color_matches_cycles(fresh, tmp_path, inter
     add_light("SUN", rotation=(0.3, 0.2, 0), energy=3.0, angle=0.0)
     add_camera((0, 0, 5), resolution=(64, 64), ortho_scale=4.0)
     bpy.context.scene.cycles.pixel_filter_type = "BOX"
+    kept = _export().scene.texture.images
+    assert [(im.dtype, im.shape) for im in kept] == [(np.uint8, (8, 8, 3))]
     ours = [render_raybundle(tmp_path / f"rb{s}.exr", iterations=6, seed=s) for s in (1, 2)]
     theirs = [render_cycles(tmp_path / f"cy{s}.exr", samples=32, seed=s) for s in (1, 2)]
     assert_like_cycles(ours, theirs)

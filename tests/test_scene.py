@@ -396,6 +396,34 @@ def test_an_encoded_map_is_decoded_after_the_lookup_and_kept_by_the_npz_arrays()
     assert np.allclose(back.encoded[0], scale) and back.encoded[1] is None and back.closest == [False, True]
 
 
+def test_a_map_of_bytes_reads_the_very_values_of_its_float_twin():
+    """A byte image's map kept as its bytes (uint8, a quarter of the memory) with the value each
+    byte stands for: every lookup (bilinear, Closest, extended, on pyramid levels), a face's
+    modulation and the ``.npz`` arrays read the very float32 values of the same map kept as
+    floats."""
+    from raybundle.scene.textures import SurfaceTexture
+
+    rng = np.random.default_rng(3)
+    k = rng.integers(0, 256, (5, 7, 3)).astype(np.uint8)
+    values = (np.arange(256, dtype=np.float32) / np.float32(255))
+    values[rng.integers(0, 256, 40)] += np.float32(1e-6)                   # as an image holds them
+    corners = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], float)
+    uv = np.array([[[-0.3, 0.1], [1.4, 0.2], [0.2, 1.1]]])
+    scale = np.array([1.5, 2.0, 2.5])
+    for extend, closest in ((False, False), (True, False), (False, True)):
+        as_bytes = SurfaceTexture([k], [0], corners, uv, encoded=[scale], closest=[closest], extend=[extend],
+                                  byte_values=[values])
+        as_floats = SurfaceTexture([values[k]], [0], corners, uv, encoded=[scale], closest=[closest], extend=[extend])
+        assert as_bytes.images[0].dtype == np.uint8 and as_bytes.images[0].nbytes == k.size
+        at = rng.random((500, 2)) * 1.6 - 0.3
+        for level in (0, 1, 2):
+            assert np.array_equal(as_bytes.lookup(0, at, level), as_floats.lookup(0, at, level))
+        points = np.concatenate([rng.random((50, 2)) * 0.5, np.zeros((50, 1))], axis=1)
+        assert np.array_equal(as_bytes.at(np.zeros(50, int), points), as_floats.at(np.zeros(50, int), points))
+        back = SurfaceTexture.from_arrays(as_bytes.to_arrays())
+        assert np.array_equal(back.images[0], values[k]) and np.array_equal(back.lookup(0, at), as_floats.lookup(0, at))
+
+
 def test_an_extended_map_reads_its_edge_texels_beyond_its_edges():
     """Extend (Blender's Extension, and graphs baked on one object): beyond the outer texel
     centres a lookup reads the edge texel, where Repeat blends it with the opposite edge; inside,

@@ -15,9 +15,17 @@ def srgb_bytes(image):
 
 
 def image_bytes(image):
-    """(H, W, 3) the encoded values of a byte sRGB image (row 0 at the bottom), or None."""
-    px = image_rgba(image, decode=False)
-    return None if px is None else np.ascontiguousarray(px[..., :3])
+    """``(bytes (H, W, 3) uint8, values (256,) float32)`` of a byte sRGB image (row 0 at the
+    bottom): its texels and the encoded value each byte stands for as Blender holds it; or
+    None without pixel data."""
+    px = _pixels(image)
+    if px is None:
+        return None
+    rgb = px[..., :3] if px.shape[2] >= 3 else np.repeat(px[..., :1], 3, axis=2)
+    k = _bytes_of(rgb)
+    values = np.arange(256, dtype=np.float32) / np.float32(255)
+    values[k] = rgb                                 # each byte's value as the image holds it
+    return k, values
 
 
 def linear_pixels(image):
@@ -29,16 +37,39 @@ def linear_pixels(image):
 def decode_srgb_bytes(rgb):
     """:func:`~raybundle.scene.textures.srgb_to_linear` of a byte image's values (each one of 256,
     k / 255), through a table of the values it holds: the same numbers, without the power per texel."""
-    k = np.rint(np.clip(rgb, 0.0, 1.0) * 255).astype(np.uint8)
+    k = _bytes_of(rgb)
     held = np.zeros(256, np.float32)
     held[k] = rgb                                   # each byte's value as the image holds it
     return srgb_to_linear(held).astype(np.float32)[k]
+
+
+def _bytes_of(values):
+    """The bytes (uint8) of a byte image's values (each k / 255)."""
+    k = np.clip(values, 0.0, 1.0)
+    k *= 255
+    return np.rint(k, out=k).astype(np.uint8)
 
 
 def image_rgba(image, decode=True):
     """(H, W, 4) float32 linear RGB and alpha of an image's pixels (None without data), row 0
     at the bottom.  Byte images in an sRGB color space hold encoded values in
     ``Image.pixels``: their colors are decoded first (with ``decode``; else as they are)."""
+    px = _pixels(image)
+    if px is None:
+        return None
+    h, w, ch = px.shape
+    rgb = px[..., :3] if ch >= 3 else np.repeat(px[..., :1], 3, axis=2)
+    if decode and srgb_bytes(image):
+        rgb = decode_srgb_bytes(rgb)
+    alpha = px[..., 3:4] if ch in (2, 4) else np.ones((h, w, 1), np.float32)
+    if ch == 2:
+        alpha = px[..., 1:2]
+    return np.concatenate([rgb, alpha], axis=2).astype(np.float32)
+
+
+def _pixels(image):
+    """(H, W, channels) float32 ``Image.pixels`` as Blender holds them (row 0 at the bottom), or
+    None without data."""
     try:
         w, h = image.size
         ch = image.channels
@@ -48,13 +79,4 @@ def image_rgba(image, decode=True):
         image.pixels.foreach_get(px)
     except (RuntimeError, ValueError, AttributeError):
         return None
-    if px.size == 0:
-        return None
-    px = px.reshape(h, w, ch)
-    rgb = px[..., :3] if ch >= 3 else np.repeat(px[..., :1], 3, axis=2)
-    if decode and srgb_bytes(image):
-        rgb = decode_srgb_bytes(rgb)
-    alpha = px[..., 3:4] if ch in (2, 4) else np.ones((h, w, 1), np.float32)
-    if ch == 2:
-        alpha = px[..., 1:2]
-    return np.concatenate([rgb, alpha], axis=2).astype(np.float32)
+    return None if px.size == 0 else px.reshape(h, w, ch)

@@ -536,17 +536,17 @@ class MaterialConverter:
         return np.where(mean > 0, px / np.where(mean > 0, mean, 1.0), 1.0).astype(np.float32)
 
     def albedo_map(self, image):
-        """``(texels (H, W, 3), encoded)`` of ``image``'s albedo map
+        """``(texels (H, W, 3), encoded, byte values)`` of ``image``'s albedo map
         (:class:`raybundle.scene.textures.SurfaceTexture`): a byte image in the sRGB color space as
-        Cycles keeps it, its encoded texels with ``encoded`` the inverse of its linear mean
-        (the lookup decodes after interpolating, as Cycles does); any other its
-        :meth:`modulation` and None."""
+        Cycles keeps it, its bytes with the encoded value of each, and ``encoded`` the inverse of
+        its linear mean (the lookup decodes after interpolating, as Cycles does); any other its
+        :meth:`modulation` and None, None."""
         if self._normalizer.get(image.name_full) is None and srgb_bytes(image):
-            px = image_bytes(image)
-            if px is not None:
+            got = image_bytes(image)
+            if got is not None:
                 mean = self.image_mean(image)
-                return px, np.where(mean > 0, 1.0 / np.where(mean > 0, mean, 1.0), 1.0)
-        return self.modulation(image), None
+                return got[0], np.where(mean > 0, 1.0 / np.where(mean > 0, mean, 1.0), 1.0), got[1]
+        return self.modulation(image), None, None
 
     def image_pixels(self, image):
         """(H, W, 3) linear RGB of ``image`` (row 0 at the bottom), or None without pixel data."""
