@@ -30,7 +30,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..util.arrays import connected_components, group_ids, shared_edges, stable_order, unique_ints, unique_rows
+from ..util.arrays import connected_components, stable_order, unique_ints, unique_rows
 from .camera import Camera
 from .materials import MaterialTable
 from .transmission import pass_probability
@@ -39,9 +39,6 @@ from .world import World
 NPZ_FORMAT_VERSION = 3
 
 
-#: corners of triangles whose normals differ by less than this weld (:attr:`PatchScene.smooth_vertex_ids`;
-#: Blender's default Auto Smooth angle)
-SMOOTH_ANGLE = np.radians(30.0)
 
 
 class SceneError(ValueError):
@@ -398,17 +395,12 @@ class PatchScene:
         the other, or across a contact line.  Corners at one position weld when their tsides
         have the same normal and contact weld tag (a plane, T-junctions included), and when
         their tsides share an edge across which the normal turns by less than
-        :data:`SMOOTH_ANGLE` (tags agreeing): a tessellated sphere (or the clusters of its
-        triangles, :mod:`raybundle.patches.clusters`) is one smooth surface, a box's edges are creases."""
-        _, r = self.bounding_sphere
-        _, position = unique_rows(np.round(self.vertices / max(r * 1e-6, 1e-12)).astype(np.int64))
-        pos = position[self.triangles[self.tside_triangle]]                    # (TS, 3)
-        _, normal = unique_rows(np.round(self.tside_normal * 1e3).astype(np.int64))
-        tag = self.triangle_corner_tag[self.tside_triangle] if self.triangle_corner_tag is not None else None
-        cls = group_ids([pos.ravel(), np.repeat(normal, 3)] + ([] if tag is None else [tag.ravel()])).reshape(-1, 3)
-        links = _smooth_links(pos, normal, tag, cls, self.tside_normal)
-        del pos, normal, tag
-        return connected_components(int(cls.max(initial=-1)) + 1, links)[cls]
+        :data:`~raybundle.scene.welding.SMOOTH_ANGLE` (tags agreeing): a tessellated sphere (or the clusters of its
+        triangles, :mod:`raybundle.patches.clusters`) is one smooth surface, a box's edges are creases
+        (:func:`~raybundle.scene.welding.smooth_vertex_ids`)."""
+        from .welding import smooth_vertex_ids
+
+        return smooth_vertex_ids(self)
 
     # ---------------------------------------------------------------- sides
     @cached_property
@@ -574,27 +566,3 @@ def closed_solid_triangles(vertices, triangles, tol=1e-7):
     label = connected_components(len(t), np.stack([order[:-1][same] // 3, order[1:][same] // 3], axis=1))
     bad = np.bincount(label, ~tri_ok, minlength=len(t)) > 0
     return ~bad[label]
-
-
-def _smooth_links(pos, normal, tag, cls, tside_normal):
-    """(K, 2) pairs of corner classes ``cls`` (TS, 3) to weld (:attr:`PatchScene.smooth_vertex_ids`:
-    across edges shared by positions ``pos``, normal ids ``normal``, normals ``tside_normal``, tags
-    ``tag``); a function of its own, so that its arrays are freed before the components are found."""
-    # tsides sharing an edge (flat index 3 t + k: tside t's edge from corner k to corner k + 1)
-    e1, e2 = shared_edges(pos)
-    # tsides of one normal are welded already (same class at each shared position)
-    turn = normal[e1 // 3] != normal[e2 // 3]
-    e1, e2 = e1[turn], e2[turn]
-    (t1, k1), (t2, k2) = np.divmod(e1, 3), np.divmod(e2, 3)
-    del e1, e2, turn
-    smooth = np.einsum("ij,ij->i", tside_normal[t1], tside_normal[t2]) > np.cos(SMOOTH_ANGLE)
-    t1, k1, t2, k2 = t1[smooth], k1[smooth], t2[smooth], k2[smooth]
-    # the corner of t2 at the position of t1's corner k1, and the other end
-    flip = pos[t2, k2] != pos[t1, k1]
-    c2a = np.where(flip, (k2 + 1) % 3, k2)
-    c2b = np.where(flip, k2, (k2 + 1) % 3)
-    links = []
-    for c1, c2 in ((k1, c2a), ((k1 + 1) % 3, c2b)):
-        ok = np.ones(len(t1), bool) if tag is None else tag[t1, c1] == tag[t2, c2]
-        links.append(np.stack([cls[t1[ok], c1[ok]], cls[t2[ok], c2[ok]]], axis=1))
-    return np.concatenate(links)

@@ -6,30 +6,28 @@ first hits, re-shot just past each hit), and each pair of *consecutive* hits
 exchanges light in both directions between the sides that face each other
 (:meth:`~raybundle.scene.model.PatchScene.side_facing`; the black back of a one-sided
 triangle takes no part): the upstream side j sends along +d to the downstream
-side i, and i sends along -d to j.  With an environment (world) radiance the
-first hit of each ray also receives from the world along +d and the last hit
-along -d (sender :data:`ENVIRONMENT`).  Each ray
-stands for the area delta^2 of the plane perpendicular to d, so summed over a
-bundle the weight of a pair estimates ``P(i, j, d) = A(i, j, d) cos_i`` without
-bias when the grid gets a random sub-cell offset (and rotation) every time.
+side i, and i sends along -d to j.  With an environment (world) radiance the first hit of
+each ray also receives from the world along +d and the last hit along -d (sender
+:data:`ENVIRONMENT`).  Each ray stands for the area delta^2 of the plane perpendicular to d,
+so summed over a bundle the weight of a pair estimates ``P(i, j, d) = A(i, j, d) cos_i``
+without bias when the grid gets a random sub-cell offset (and rotation) every time.
 
-Hits closer than ``eps`` along a ray are one hit (``eps`` = 1e-5 of the scene
-radius; Embree's hit distances carry errors of that order in single precision): a ray through a shared edge or vertex is counted once, and walls
-thinner than ``eps`` behave as one surface.
+Hits closer than ``eps`` along a ray are one hit (``eps`` = 1e-5 of the scene radius; Embree's
+hit distances carry errors of that order in single precision): a ray through a shared edge or
+vertex is counted once, and walls thinner than ``eps`` behave as one surface.
 
 Cut-outs (:class:`~raybundle.scene.textures.SurfaceTexture`'s coverage): a hit on a face
 with a coverage map is kept with probability ``alpha`` at the hit point, drawn from a hash of
 the ray, the layer and the query (the same for any split over threads); a ray that passes
 goes on from just past the hit, in every query (first hits, shadow rays, bundle lines).
 So does a hit on a transmissive surface (glass, refraction, transparency), kept with the
-probability that the ray does not pass straight through
-(the scene's ``pass_probability``), except in the eye's paths, which
-refract there instead (``first_hit(..., glass=False)``).
+probability that the ray does not pass straight through (the scene's ``pass_probability``),
+except in the eye's paths, which refract there instead (``first_hit(..., glass=False)``).
 
 ``embreex`` traces one ray after another in C and releases the GIL, so every
 query is split into one chunk per core and run on a thread pool.  Point-wise work whose own
 steps also release the GIL (compiled kernels, large NumPy steps) goes one level up:
-:meth:`RayTracer.map_pieces` runs it on the pool piece by piece, each piece tracing its rays on
+:meth:`RayTracer.each_piece` runs it on the pool piece by piece, each piece tracing its rays on
 its own thread.
 """
 from __future__ import annotations
@@ -44,13 +42,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .sampling import (Stream, cosine_directions, frames_from_normals, points_on_triangles, stratified_2d_sets,
-                       stream)
+from .sampling import Stream, cosine_directions, frames_from_normals, points_on_triangles, stratified_2d_sets, stream
 
 _MAX_LAYERS = 10000
 #: most surfaces a first-hit query passes through before it gives up (the ray then misses)
 _MAX_PASSES = 1000
-#: points per piece of :meth:`RayTracer.map_pieces` (about: a call's pieces are equal), and the
+#: points per piece of :meth:`RayTracer.each_piece` (about: a call's pieces are equal), and the
 #: fewest points it splits (in two)
 PIECE_POINTS, PIECE_MIN = 12_000, 4_000
 #: sender id of light that comes from the environment (world) in a :class:`Bundle`: along
@@ -139,21 +136,20 @@ class RayTracer:
         return list(self._pool.map(fn, bounds[:-1], bounds[1:]))
 
     def map_pieces(self, fn, n, rng=None):
-        """Run ``fn(start, stop)`` over [0, n) split into an even number of pieces of about
-        :data:`PIECE_POINTS` points (one below :data:`PIECE_MIN`), in parallel on the pool, each
-        piece tracing its rays on its own thread: for point-wise work whose other steps release
-        the GIL too.  The split
-        depends on ``n`` only, and a piece's cut-out and glass choices are hashed from query
-        numbers of its own (this call's, the piece's index, and its queries so far), so the
-        result is the same for any number of threads and any timing.  With a Generator ``rng``,
-        ``fn(start, stop, rng)``: one piece takes ``rng`` itself, several a Generator each,
-        seeded by draws from ``rng``.  ``fn`` must write only its own points' rows of shared
-        arrays.  The results in order (one piece within a piece)."""
+        """:meth:`each_piece`'s results as a list."""
         return list(self.each_piece(fn, n, rng))
 
     def each_piece(self, fn, n, rng=None):
-        """:meth:`map_pieces` as an iterator: each piece's result in order, as it is ready, so
-        a caller that folds them holds a few at a time, not all."""
+        """Run ``fn(start, stop)`` over [0, n) split into an even number of pieces of about
+        :data:`PIECE_POINTS` points (one below :data:`PIECE_MIN`), in parallel on the pool, each
+        piece tracing its rays on its own thread: for point-wise work whose other steps release
+        the GIL too.  The split depends on ``n`` only, and a piece's cut-out and glass choices are
+        hashed from query numbers of its own (this call's, the piece's index, and its queries so
+        far), so the result is the same for any number of threads and any timing.  With a
+        Generator ``rng``, ``fn(start, stop, rng)``: one piece takes ``rng`` itself, several a
+        Generator each, seeded by draws from ``rng``.  ``fn`` must write only its own points' rows
+        of shared arrays.  An iterator of the results in order (one piece within a piece), each as
+        it is ready: a caller that folds them holds a few at a time."""
         pieces = 1 if n < PIECE_MIN else max(2, 2 * round(n / (2 * PIECE_POINTS)))      # even: 2 cores
         if pieces == 1 or self._in_piece():
             return iter([fn(0, n) if rng is None else fn(0, n, rng)])

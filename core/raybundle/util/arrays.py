@@ -19,7 +19,7 @@ def unique_rows(a):
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     key = _dense_key([a[:, k] for k in range(a.shape[1])])
     if key is not None:
-        return unique_ints(key)[1:]
+        return unique_ints(key, own=True)[1:]
     order = np.lexsort(a.T[::-1])
     s = a[order]
     new = np.ones(len(a), bool)
@@ -30,12 +30,13 @@ def unique_rows(a):
 
 
 def group_ids(columns):
-    """Dense ids (N,) of the distinct rows of integer ``columns`` (a list of (N,) arrays), as
+    """Dense ids (N,) of the distinct rows of integer ``columns`` (a list of arrays of one
+    shape, or shapes that broadcast to the first's, N its size; the ids flat), as
     :func:`unique_rows` of them side by side gives them, without the (N, K) copy."""
     key = _dense_key(list(columns))
     if key is not None:
-        return unique_ints(key)[2]
-    return unique_rows(np.stack(columns, axis=1))[1]
+        return unique_ints(key, own=True)[2]
+    return unique_rows(np.stack([c.ravel() for c in np.broadcast_arrays(*columns)], axis=1))[1]
 
 
 def _dense_key(cols):
@@ -46,7 +47,7 @@ def _dense_key(cols):
     for k in np.argsort([-(int(c.max()) - int(c.min())) for c in cols]):      # the widest column first
         if key is not None:
             break
-        cols[k] = unique_ints(cols[k])[2]
+        cols[k] = unique_ints(cols[k])[2].reshape(np.shape(cols[k]))
         key = _mixed_radix(cols)
     return key
 
@@ -55,11 +56,12 @@ def _dense_key(cols):
 _CHUNK = 1 << 20
 
 
-def stable_order(key):
+def stable_order(key, own=False):
     """``(order, sorted)`` of an integer array ``key`` (N,): ``np.argsort(key, kind="stable")``
     and ``key[order]``.  Where the key's span times N fits in 62 bits, one sort of the values
     ``(key - min) * N + index`` (the order and the values read back from them): a plain sort of
-    integers, several times faster than an argsort of them."""
+    integers, several times faster than an argsort of them.  With ``own``, an int64 ``key`` is
+    worked in place (the caller's to give up)."""
     key = np.asarray(key).reshape(-1)
     n = len(key)
     if n == 0:
@@ -68,7 +70,7 @@ def stable_order(key):
     if (hi - lo + 1) * float(n) >= 2.0 ** 62:
         order = np.argsort(key, kind="stable")
         return order, key[order]
-    packed = key.astype(np.int64)      # a copy, worked in place: memory of two keys at most
+    packed = key.astype(np.int64, copy=not own)      # worked in place: memory of two keys at most
     packed -= lo
     packed *= n
     for start in range(0, n, _CHUNK):
@@ -80,11 +82,11 @@ def stable_order(key):
     return order, packed.astype(key.dtype, copy=False)
 
 
-def unique_ints(key):
+def unique_ints(key, own=False):
     """``(values, first, inverse)`` of an integer array ``key`` (N,), as ``np.unique(key,
     return_index=True, return_inverse=True)`` gives them (the distinct values in order, the
-    first index of each, each element's value id), by :func:`stable_order`."""
-    order, s = stable_order(key)
+    first index of each, each element's value id), by :func:`stable_order` (``own`` as there)."""
+    order, s = stable_order(key, own)
     new = np.ones(len(s), bool)
     np.not_equal(s[1:], s[:-1], out=new[1:])
     values = s[new]
@@ -96,9 +98,10 @@ def unique_ints(key):
 
 
 def _mixed_radix(columns):
-    """(N,) int64: the integer ``columns`` (a list of (N,) arrays) as the digits of one number,
-    the first most significant (so its order is the rows' lexicographic order), or None when
-    their spans do not fit in 62 bits."""
+    """int64 of the first column's shape: the integer ``columns`` (a list of arrays, the others'
+    shapes broadcasting to the first's) as the digits of one number, the first most significant
+    (so its order is the rows' lexicographic order), or None when their spans do not fit in 62
+    bits."""
     lows = [int(np.min(c)) for c in columns]
     spans = [int(np.max(c)) - lo + 1 for c, lo in zip(columns, lows)]
     if np.prod([float(s) for s in spans]) >= 2.0 ** 62:
