@@ -137,10 +137,12 @@ bench-bake: $(STAMP)
 # The Cornell box meshed with 4k to 4M triangles: error, set-up time and memory against triangle count
 # (about 15 minutes on 2 cores and 5 GB of memory; needs out/bench-cornell's Cycles reference from bench-boxes);
 # then the stress scenes (tools/stress_scenes.py: many objects, node-graph materials, touching planes, glass,
-# glossy clusters, 1M and 4M triangles), each phase's seconds and the peak memory (about 8 minutes, 8 GB)
+# glossy clusters, 1M and 4M triangles), each phase's seconds and the peak memory (about 8 minutes, 8 GB),
+# and the same for the five bench rooms in clay and in their own materials (about 8 minutes)
 bench-scale: $(STAMP)
 	$(PY) tools/bench_scale.py --out out/bench-scale --one-patch-per-triangle 4000 16000 64000 --page $(PAGE)
 	$(PY) tools/bench_scale.py --out out/bench-scale --stress --time 30 --page $(PAGE)
+	$(PY) tools/bench_scale.py --out out/bench-scale --rooms --time 30 --page $(PAGE)
 
 # The Cornell .blend described in a dozen ways a Blender user would (subdivided, triangulated, flipped,
 # split, joined, instanced, transformed, scaled, reordered) against the file as it is, and the patch
