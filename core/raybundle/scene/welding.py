@@ -21,10 +21,12 @@ def smooth_vertex_ids(scene):
     pos = position.astype(np.int32)[scene.triangles][scene.tside_triangle]      # (TS, 3); memory: 32 bits
     del position
     normal = group_ids([np.round(scene.tside_normal[:, k] * 1e3).astype(np.int64) for k in range(3)])
-    tag = scene.triangle_corner_tag                 # as its ranks, per triangle: the same order and equality
+    tag = scene.triangle_corner_tag                 # in 32 bits, per triangle: the same order and equality
     if tag is not None:
-        tag = unique_ints(tag.ravel())[2].astype(np.int32).reshape(-1, 3)[scene.tside_triangle]
-    cls = group_ids([pos, normal[:, None]] + ([] if tag is None else [tag])).reshape(-1, 3)
+        lo = int(tag.min(initial=0))
+        tag = ((tag - lo).astype(np.int32) if int(tag.max(initial=0)) - lo < 2 ** 31 else
+               unique_ints(tag.ravel())[2].astype(np.int32).reshape(-1, 3))[scene.tside_triangle]
+    cls = group_ids([pos, normal[:, None]] + ([] if tag is None else [tag])).astype(np.int32).reshape(-1, 3)
     links = _smooth_links(pos, normal, tag, cls, scene.tside_normal)
     del pos, normal, tag
     return connected_components(int(cls.max(initial=-1)) + 1, links)[cls]
@@ -55,5 +57,5 @@ def _smooth_links(pos, normal, tag, cls, tside_normal):
     for c1, c2 in ((k1, c2a), ((k1 + 1) % 3, c2b)):
         ok = np.ones(len(t1), bool) if tag is None else tag[t1, c1] == tag[t2, c2]
         links.append(np.stack([cls[t1[ok], c1[ok]], cls[t2[ok], c2[ok]]], axis=1))
-    return np.concatenate(links)
+    return np.concatenate(links).astype(np.int64)
 

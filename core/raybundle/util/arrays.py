@@ -134,7 +134,7 @@ def shared_edges(corners):
     key *= int(a.max(initial=0)) + 1
     key += np.maximum(a, b)
     del b
-    order, key = stable_order(key)
+    order, key = stable_order(key, own=True)
     same = np.flatnonzero(key[1:] == key[:-1])
     del key
     return order[same], order[same + 1]
