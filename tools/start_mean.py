@@ -50,7 +50,7 @@ def main(argv=None):
     p.add_argument("--clay", action="store_true")
     p.add_argument("--resolution", nargs=2, type=int, metavar=("W", "H"))
     p.add_argument("--references", required=True, help="folder of <file>-<clay|full>-<1|2>.exr")
-    p.add_argument("--iterations", nargs="+", type=int, default=[8, 32])
+    p.add_argument("--iterations", nargs="*", type=int, default=[8, 32])
     p.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3, 4])
     p.add_argument("--seconds", nargs="*", type=float, default=[], help="Time Limits (the export's time included)")
     a = p.parse_args(argv)
