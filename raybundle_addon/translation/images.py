@@ -50,16 +50,16 @@ def _bytes_of(values):
     return np.rint(k, out=k).astype(np.uint8)
 
 
-def image_rgba(image, decode=True):
+def image_rgba(image):
     """(H, W, 4) float32 linear RGB and alpha of an image's pixels (None without data), row 0
     at the bottom.  Byte images in an sRGB color space hold encoded values in
-    ``Image.pixels``: their colors are decoded first (with ``decode``; else as they are)."""
+    ``Image.pixels``: their colors are decoded first."""
     px = _pixels(image)
     if px is None:
         return None
     h, w, ch = px.shape
     rgb = px[..., :3] if ch >= 3 else np.repeat(px[..., :1], 3, axis=2)
-    if decode and srgb_bytes(image):
+    if srgb_bytes(image):
         rgb = decode_srgb_bytes(rgb)
     alpha = px[..., 3:4] if ch in (2, 4) else np.ones((h, w, 1), np.float32)
     if ch == 2:

@@ -166,11 +166,10 @@ class SurfaceTexture:
                    d.get("texture_face_bump"), None if encoded is None else list(np.asarray(encoded, float)),
                    d.get("texture_closest"), d.get("texture_extend"))
 
-    def texels(self, image, rows=slice(None), cols=slice(None)):
-        """Map ``image``'s texels at ``rows``, ``cols`` (indices, as NumPy takes them) as
-        float32 values, read through :attr:`byte_values` for a map of bytes."""
+    def texels(self, image):
+        """(H, W, 3) float32 map ``image``'s texels, read through :attr:`byte_values` for a map of bytes."""
         im, values = self.images[image], self.byte_values[image]
-        return im[rows, cols] if values is None else values[im[rows, cols]]
+        return im if values is None else values[im]
 
     def lookup(self, image, uv, level=0):
         """Lookup (N, 3) of map ``image`` at ``uv`` (N, 2), repeating or with its edges extended
@@ -199,8 +198,9 @@ class SurfaceTexture:
 
     def level(self, image, level):
         """Level ``level`` of map ``image``'s pyramid (kept once made): level 0 is the map as
-        stored (bytes for a map of :attr:`byte_values`), each next level the means of 2 x 2 texels of decoded values (an odd row or column
-        is averaged with the first, as the map repeats, or with itself where its edges extend)."""
+        stored (bytes for a map of :attr:`byte_values`), each next level the means of 2 x 2 texels
+        of decoded values (an odd row or column is averaged with the first, as the map repeats, or
+        with itself where its edges extend)."""
         if level == 0:
             return self.images[image]
         key = (image, level)

@@ -40,9 +40,9 @@ def group_ids(columns):
 
 
 def _dense_key(cols):
-    """:func:`_mixed_radix` of the integer columns ``cols`` (a list of (N,) arrays, changed),
-    the widest replaced by its dense ranks first, one by one, while their spans are too wide
-    for it; None when even dense ranks do not fit."""
+    """:func:`_mixed_radix` of the integer columns ``cols`` (a list as :func:`group_ids` takes
+    them, changed here), the widest replaced by its dense ranks first, one by one, while their
+    spans are too wide for it; None when even dense ranks do not fit."""
     key = _mixed_radix(cols)
     for k in np.argsort([-(int(c.max()) - int(c.min())) for c in cols]):      # the widest column first
         if key is not None:
