@@ -19,13 +19,7 @@ def image_bytes(image):
     bottom): its texels and the encoded value each byte stands for as Blender holds it; or
     None without pixel data."""
     px = _pixels(image)
-    if px is None:
-        return None
-    rgb = px[..., :3] if px.shape[2] >= 3 else np.repeat(px[..., :1], 3, axis=2)
-    k = _bytes_of(rgb)
-    values = np.arange(256, dtype=np.float32) / np.float32(255)
-    values[k] = rgb                                 # each byte's value as the image holds it
-    return k, values
+    return None if px is None else _byte_table(_rgb(px))
 
 
 def linear_pixels(image):
@@ -37,17 +31,24 @@ def linear_pixels(image):
 def decode_srgb_bytes(rgb):
     """:func:`~raybundle.scene.textures.srgb_to_linear` of a byte image's values (each one of 256,
     k / 255), through a table of the values it holds: the same numbers, without the power per texel."""
-    k = _bytes_of(rgb)
-    held = np.zeros(256, np.float32)
-    held[k] = rgb                                   # each byte's value as the image holds it
+    k, held = _byte_table(rgb)
     return srgb_to_linear(held).astype(np.float32)[k]
 
 
-def _bytes_of(values):
-    """The bytes (uint8) of a byte image's values (each k / 255)."""
-    k = np.clip(values, 0.0, 1.0)
+def _byte_table(rgb):
+    """``(bytes, values (256,) float32)`` of a byte image's values ``rgb`` (each k / 255): its
+    bytes (uint8) and the value each byte stands for as the image holds it (k / 255 where none does)."""
+    k = np.clip(rgb, 0.0, 1.0)
     k *= 255
-    return np.rint(k, out=k).astype(np.uint8)
+    k = np.rint(k, out=k).astype(np.uint8)
+    values = np.arange(256, dtype=np.float32) / np.float32(255)
+    values[k] = rgb
+    return k, values
+
+
+def _rgb(px):
+    """The RGB channels of pixels (H, W, channels), a gray channel repeated."""
+    return px[..., :3] if px.shape[2] >= 3 else np.repeat(px[..., :1], 3, axis=2)
 
 
 def image_rgba(image):
@@ -58,7 +59,7 @@ def image_rgba(image):
     if px is None:
         return None
     h, w, ch = px.shape
-    rgb = px[..., :3] if ch >= 3 else np.repeat(px[..., :1], 3, axis=2)
+    rgb = _rgb(px)
     if srgb_bytes(image):
         rgb = decode_srgb_bytes(rgb)
     alpha = px[..., 3:4] if ch in (2, 4) else np.ones((h, w, 1), np.float32)

@@ -39,8 +39,6 @@ from .world import World
 NPZ_FORMAT_VERSION = 3
 
 
-
-
 class SceneError(ValueError):
     """A scene that cannot be rendered; the message says why and what to do."""
 

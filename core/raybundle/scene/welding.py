@@ -15,7 +15,7 @@ SMOOTH_ANGLE = np.radians(30.0)
 def smooth_vertex_ids(scene):
     """(TS, 3) int: ``scene``'s tside corners welded where the surface is smooth
     (:attr:`~raybundle.scene.model.PatchScene.smooth_vertex_ids`).  Memory grows with the
-    tsides, a few arrays of them at a time: positions in 32 bits, corner tags as their ranks."""
+    tsides, a few arrays of them at a time: positions, tags and corner classes in 32 bits."""
     _, r = scene.bounding_sphere
     _, position = unique_rows(np.round(scene.vertices / max(r * 1e-6, 1e-12)).astype(np.int64))
     pos = position.astype(np.int32)[scene.triangles][scene.tside_triangle]      # (TS, 3); memory: 32 bits
@@ -58,4 +58,3 @@ def _smooth_links(pos, normal, tag, cls, tside_normal):
         ok = np.ones(len(t1), bool) if tag is None else tag[t1, c1] == tag[t2, c2]
         links.append(np.stack([cls[t1[ok], c1[ok]], cls[t2[ok], c2[ok]]], axis=1))
     return np.concatenate(links).astype(np.int64)
-
