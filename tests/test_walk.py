@@ -45,7 +45,7 @@ def test_walk_furnace_converges_to_analytic(glossy, batches, per_batch):
 
 def test_walk_driven_by_halton_converges_to_a_wrong_answer():
     """Thesis 1.2 for the walk too: Halton directions bias it; the blue channel (albedo 0.7 = q,
-    so almost no roulette noise) shows it beyond 4.5 SE (measured: -0.24%, 8.8 SE in 8 x 150
+    so almost no roulette noise) shows it beyond 4.5 SE (measured: -0.21%, 6.6 SE in 8 x 80
     steps), and the run warns."""
     with pytest.warns(UserWarning, match="Halton.*ray-bundle-walk"):
         r = walk_renderer(False, "halton")

@@ -34,13 +34,20 @@ class PatchFirstShot:
     or plane, lit on a small part of its area, has samples of 0 and of nearly
     pi Le: round robin alone leaves its power a few samples' guess.
 
+    The spread is measured on ``pilot_samples`` per side drawn at the start and kept out
+    of E (two-phase sampling).  Were E's own samples to decide where more samples go, a
+    side whose samples happened to be high would be refined down to its mean while one
+    whose samples happened to be low (a side lit on a sliver, all of whose samples missed
+    the light) would not be, and E would be low on average: where the samples drawn do
+    not depend on the values averaged, each tside's mean is unbiased.
+
     For glossy patches the reflected first shot uses one mean
     direction per light, ``E f(w_mean, w)``: an approximation (exact for point
     lights, close for lights small as seen from the patch), used only inside
     the iteration; the image's direct light is per pixel and exact.
     """
 
-    def __init__(self, direct: DirectLighting, rng, initial_samples=16, receiving_area=None):
+    def __init__(self, direct: DirectLighting, rng, initial_samples=16, receiving_area=None, pilot_samples=4):
         self.direct = direct
         # average over the area that can receive light (see RayTracer.open_fraction)
         sc = direct.scene
@@ -50,7 +57,7 @@ class PatchFirstShot:
         self.lights = direct.sampled_lights()
         n_l = len(self.lights)
         self._next = 0
-        # per side: samples, and the sums of their sum_l e (mean over RGB) and its square
+        # per side: pilot samples, and the sums of their sum_l e (mean over RGB) and its square
         self._side_n = np.zeros(sc.n_sides)
         self._side_y = np.zeros(sc.n_sides)
         self._side_y2 = np.zeros(sc.n_sides)
@@ -69,28 +76,32 @@ class PatchFirstShot:
         ts_area = sc.triangle_area[sc.tside_triangle[self.receiving_tsides]]
         ts_side = sc.tside_side[self.receiving_tsides]
         self._share_in_side = ts_area / np.maximum(np.bincount(ts_side, ts_area, minlength=sc.n_sides)[ts_side], 1e-300)
-        # initial_samples per side, shared out over a cluster's triangles by area
-        counts = sc.tside_samples(initial_samples)[self.receiving_tsides]
-        for r in range(initial_samples if n_r else 0):
-            todo = np.nonzero(counts > r)[0]
-            step = 1 << 18                                # bounded temporaries on big scenes
-            for lo in range(0, len(todo), step):
-                self._add(todo[lo:lo + step])
+        # initial_samples per side into E and pilot_samples per side into the spread, each shared
+        # out over a cluster's triangles by area
+        for samples, pilot in ((initial_samples, False), (pilot_samples, True)):
+            counts = sc.tside_samples(samples)[self.receiving_tsides]
+            for r in range(samples if n_r else 0):
+                todo = np.nonzero(counts > r)[0]
+                step = 1 << 18                            # bounded temporaries on big scenes
+                for lo in range(0, len(todo), step):
+                    self._add(todo[lo:lo + step], pilot)
 
     @property
     def n_lights(self):
         return len(self.lights)
 
-    def _add(self, rows):
+    def _add(self, rows, pilot=False):
         """One new sample on each receiving tside of ``rows`` (distinct rows of
-        :attr:`receiving_tsides`); updates E and direction."""
+        :attr:`receiving_tsides`): into E and direction, or with ``pilot`` into the sides'
+        spread only (class docstring)."""
         sc = self.scene
         tri = self.receiving_tsides[rows]
         u = self.rng.random((len(tri), 2))
         pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[tri]], u[:, 0], u[:, 1])
         nrm = sc.tside_normal[tri]
-        old = self._e_sum[rows] / np.maximum(self._count[rows], 1)[:, None, None]
-        old_d = self._d_sum[rows] / np.maximum(self._count[rows], 1)[:, None, None]
+        if not pilot:
+            old = self._e_sum[rows] / np.maximum(self._count[rows], 1)[:, None, None]
+            old_d = self._d_sum[rows] / np.maximum(self._count[rows], 1)[:, None, None]
         y = np.zeros(len(tri))
         for li, light in enumerate(self.lights):
             u_l = self.rng.random((len(tri), 3))
@@ -99,15 +110,18 @@ class PatchFirstShot:
                 continue
             e, travel, _ = self.direct.light_samples_at(pts[at], nrm[at], light, u_l[at],
                                                         receivers=sc.link_groups(sc.tside_triangle[tri[at]]))
-            self._e_sum[rows[at], li] += e
-            self._d_sum[rows[at], li] += e.sum(axis=1, keepdims=True) * travel
             y[at] += e.mean(axis=1)
+            if not pilot:
+                self._e_sum[rows[at], li] += e
+                self._d_sum[rows[at], li] += e.sum(axis=1, keepdims=True) * travel
+        side = sc.tside_side[tri]
+        if pilot:
+            self._side_n += np.bincount(side, minlength=sc.n_sides)
+            self._side_y += np.bincount(side, y, minlength=sc.n_sides)
+            self._side_y2 += np.bincount(side, y * y, minlength=sc.n_sides)
+            return
         self._count[rows] += 1
         # side average = sum over its tsides of area * (tside mean) / side area
-        side = sc.tside_side[tri]
-        self._side_n += np.bincount(side, minlength=sc.n_sides)
-        self._side_y += np.bincount(side, y, minlength=sc.n_sides)
-        self._side_y2 += np.bincount(side, y * y, minlength=sc.n_sides)
         w = (sc.triangle_area[sc.tside_triangle[tri]] / self.receiving_area[side])[:, None, None]
         new = self._e_sum[rows] / self._count[rows][:, None, None]
         new_d = self._d_sum[rows] / self._count[rows][:, None, None]
@@ -156,8 +170,8 @@ class PatchFirstShot:
 
     def _targeted(self, n):
         """(n,) rows of receiving tsides drawn for Neyman's allocation (with repeats): a side with
-        probability ``A_s sigma_s / sum``, then a tside of it by area; none while no side's
-        samples spread."""
+        probability ``A_s sigma_s / sum`` (``sigma_s`` from the pilot samples), then a tside of it
+        by area; none where no side's pilot samples spread."""
         n_s = np.maximum(self._side_n, 1)
         var = np.maximum(self._side_y2 / n_s - (self._side_y / n_s) ** 2, 0.0) * self._side_n / np.maximum(n_s - 1, 1)
         weight = self.receiving_area * np.sqrt(var)
