@@ -120,7 +120,11 @@ def test_the_automatic_gather_runs_in_time_limited_runs_within_its_share():
     sc = pipeline.prepare(scenes.load_scene("cornell"), patches=300)
     sc.camera = sc.camera.with_resolution(32, 32)
 
-    def run(share=0.2, **limit):
+    # the budget is timed: on a busy machine a share of 0.2 bought fewer rays than the noise
+    # margin asks for (the suite on 2 loaded cores once gathered none)
+    share = 0.4
+
+    def run(share=share, **limit):
         r = pipeline.make_renderer(sc, RenderSettings(seed=5, gather_share=share))
         try:
             res = r.run(**limit)
@@ -132,7 +136,7 @@ def test_the_automatic_gather_runs_in_time_limited_runs_within_its_share():
     assert timed.stats["gather_rays_per_pixel"] >= EdgeGather.MIN_GATHER_RAYS
     assert plain.stats["gather_rays_per_pixel"] == 0
     extra = timed.stats["resolve_seconds"] - plain.stats["resolve_seconds"]
-    assert extra < 3 * 0.2 * 3.0 + 0.3, (extra, timed.stats, plain.stats)
+    assert extra < 3 * share * 3.0 + 0.3, (extra, timed.stats, plain.stats)
     a, b = run(iterations=20), run(iterations=20)
     assert a.stats["gather_rays_per_pixel"] == 0 and np.array_equal(a.image, b.image)
 
