@@ -30,7 +30,7 @@ class PatchFirstShot:
     noise is: to the sides in proportion to ``A_s sigma_s`` (Neyman's allocation,
     which minimises the variance ``sum_s A_s^2 sigma_s^2 / n_s`` of the light's power
     over the sides), ``sigma_s`` the spread of the side's samples of ``sum_l e``
-    (their mean over RGB) and ``n_s`` their number.  A side cut by a lamp's edge
+    (their mean over RGB; pilot samples, below) and ``n_s`` the number of its samples.  A side cut by a lamp's edge
     or plane, lit on a small part of its area, has samples of 0 and of nearly
     pi Le: round robin alone leaves its power a few samples' guess.
 
