@@ -9,7 +9,13 @@ bundles) renders the scene once per seed, for a fixed
 time or iteration count, and prints its error (``raybundle.app.metrics.image_error``: pixels >= 2 px from the lamp, the
 reference's own noise subtracted) and image mean against the reference.  With two seeds
 or more it splits the error into per-image noise (from the difference of two seeds) and
-bias (what the mean of the seeds keeps): ``e^2 = bias^2 + noise^2``.
+bias (what the mean of the seeds keeps): ``e^2 = bias^2 + noise^2``.  ``--where`` then says where
+that mean's error sits: its share in each of 3 x 3 image regions
+(``raybundle.app.metrics.region_errors``) and how few pixels hold half of it, and ``--save DIR``
+keeps the mean image (``DIR/variant-K.exr``) for a closer look.  The core's path tracer as one
+variant (``{"method": "path-tracing"}``) tells what the file leaves open (faces of two objects
+z-fighting, which Cycles renders darker) from the bundles' own bias: where it agrees with Cycles
+and the bundles do not, the bias is the method's.
 
 The reference halves are ``OUT/reference-1.exr`` and ``reference-2.exr`` as
 ``tools/bench_blender.py`` writes them (``make bench-boxes`` caches them in
@@ -45,15 +51,18 @@ def main(argv=None):
                    help="comma-separated seeds (default 3,4)")
     p.add_argument("--reference", default=None, help="folder of reference-1/2.exr (default out/bench-SCENE)")
     p.add_argument("--halves", nargs=2, metavar=("A", "B"), help="the reference's two halves (instead of --reference)")
+    p.add_argument("--where", action="store_true", help="where the seeds' mean's error sits: by region, and how "
+                                                        "few pixels hold half of it")
+    p.add_argument("--save", metavar="DIR", help="write each variant's mean over the seeds as DIR/variant-K.exr")
     a = p.parse_args(argv)
 
-    from raybundle.app.metrics import image_error, light_source_mask
+    from raybundle.app.metrics import image_error, light_source_mask, region_errors
     from raybundle.app.pipeline import make_renderer, prepare
     from raybundle.imaging.settings import RenderSettings
     from raybundle.methods.registry import image_only
     from raybundle.patches.clusters import DEFAULT_PATCHES
     from raybundle.scene.builtin import load_scene
-    from raybundle.util.io import read_exr
+    from raybundle.util.io import read_exr, write_exr
 
     folder = a.reference or os.path.join("out", f"bench-{a.scene}")
     files = a.halves or [os.path.join(folder, f"reference-{k}.exr") for k in (1, 2)]
@@ -65,7 +74,9 @@ def main(argv=None):
     mask = light_source_mask(scene)
     keep = ~mask
     run = {"time_limit": a.seconds} if a.seconds is not None else {"iterations": a.iterations}
-    for text in a.variants:
+    if a.save:
+        os.makedirs(a.save, exist_ok=True)
+    for number, text in enumerate(a.variants, 1):
         v = json.loads(text)
         method = v.pop("method", "stochastic-iteration")
         patches = v.pop("patches", DEFAULT_PATCHES)
@@ -99,6 +110,25 @@ def main(argv=None):
             bias = np.sqrt(max(e_mean ** 2 - noise ** 2 / len(images), 0.0))
             print(f"  per-image noise {100 * noise:.2f}%, error of the {len(images)}-seed mean "
                   f"{100 * e_mean:.2f}%, bias about {100 * bias:.2f}%", flush=True)
+        mean_image = np.mean(images, axis=0)
+        if a.where:
+            where(mean_image, ref, halves, mask, region_errors)
+        if a.save:
+            write_exr(os.path.join(a.save, f"variant-{number}.exr"), mean_image.astype(np.float32))
+
+
+def where(image, ref, halves, mask, region_errors):
+    """Print where ``image``'s error against ``ref`` sits: each of 3 x 3 regions' share of the
+    squared error and its mean against the reference's, and the fewest pixels holding half and
+    four fifths of the squared error (the reference's noise taken out per pixel)."""
+    regions = region_errors(image, ref, reference_halves=halves, exclude=mask)
+    print("  by region (top row first): " + "; ".join(
+        " ".join(f"x{g['mean_ratio']:.3f} {100 * g['share']:.0f}%" for g in regions[i:i + 3]) for i in (0, 3, 6)))
+    d2 = (((image - ref) ** 2).mean(axis=-1) - ((halves[0] - halves[1]) ** 2).mean(axis=-1) / 4.0)[~mask]
+    d2 = np.sort(np.maximum(d2, 0.0))[::-1]
+    share = np.cumsum(d2) / max(d2.sum(), 1e-300)
+    print(f"  half of the squared error in {np.searchsorted(share, 0.5) + 1:,} pixels, four fifths in "
+          f"{np.searchsorted(share, 0.8) + 1:,}, of {d2.size:,}", flush=True)
 
 
 if __name__ == "__main__":
