@@ -56,7 +56,7 @@ def main(argv=None):
     p.add_argument("--save", metavar="DIR", help="write each variant's mean over the seeds as DIR/variant-K.exr")
     a = p.parse_args(argv)
 
-    from raybundle.app.metrics import image_error, light_source_mask, region_errors
+    from raybundle.app.metrics import image_error, light_source_mask
     from raybundle.app.pipeline import make_renderer, prepare
     from raybundle.imaging.settings import RenderSettings
     from raybundle.methods.registry import image_only
@@ -66,6 +66,10 @@ def main(argv=None):
 
     folder = a.reference or os.path.join("out", f"bench-{a.scene}")
     files = a.halves or [os.path.join(folder, f"reference-{k}.exr") for k in (1, 2)]
+    missing = [f for f in files if not os.path.isfile(f)]
+    if missing:
+        raise SystemExit(f"compare_settings: no reference half {missing[0]} (--halves, or --reference with "
+                         "reference-1.exr and reference-2.exr)")
     halves = [read_exr(f)[..., :3] for f in files]
     ref = 0.5 * (halves[0] + halves[1])
     scene = load_scene(a.scene)
@@ -112,15 +116,17 @@ def main(argv=None):
                   f"{100 * e_mean:.2f}%, bias about {100 * bias:.2f}%", flush=True)
         mean_image = np.mean(images, axis=0)
         if a.where:
-            where(mean_image, ref, halves, mask, region_errors)
+            where(mean_image, ref, halves, mask)
         if a.save:
             write_exr(os.path.join(a.save, f"variant-{number}.exr"), mean_image.astype(np.float32))
 
 
-def where(image, ref, halves, mask, region_errors):
+def where(image, ref, halves, mask):
     """Print where ``image``'s error against ``ref`` sits: each of 3 x 3 regions' share of the
     squared error and its mean against the reference's, and the fewest pixels holding half and
     four fifths of the squared error (the reference's noise taken out per pixel)."""
+    from raybundle.app.metrics import region_errors
+
     regions = region_errors(image, ref, reference_halves=halves, exclude=mask)
     print("  by region (top row first): " + "; ".join(
         " ".join(f"x{g['mean_ratio']:.3f} {100 * g['share']:.0f}%" for g in regions[i:i + 3]) for i in (0, 3, 6)))
