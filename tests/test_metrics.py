@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from raybundle.app.metrics import TAIL_FLOOR, bias_and_noise, image_error, region_errors
+from raybundle.app.metrics import TAIL_FLOOR, bias_and_noise, image_error, pixel_errors, region_errors
 
 
 def test_the_reference_noise_is_subtracted_and_the_tail_and_mean_are_read():
@@ -74,3 +74,20 @@ def test_an_error_splits_into_the_bias_more_time_keeps_and_the_noise_it_removes(
     worst = max(blocks, key=lambda g: g["share"])
     assert (worst["row"], worst["column"], worst["share"]) == (2, 2, pytest.approx(1.0))
     assert worst["mean_ratio"] == pytest.approx(1.3) and worst["error"] == pytest.approx(0.3)
+
+
+def test_pixel_errors_are_the_image_error_pixel_by_pixel():
+    """The per-pixel squared errors (what the tools rank pixels and regions by) sum, over the
+    kept pixels and relative to the reference's mean, to the noise-corrected error squared."""
+    rng = np.random.default_rng(4)
+    truth = rng.random((20, 30, 3)) + 0.5
+    a, b = truth * (1 + 0.02 * rng.standard_normal((2, 20, 30, 3)))
+    ref = 0.5 * (a + b)
+    img = ref * (1 + 0.1 * rng.standard_normal(ref.shape))
+    exclude = np.zeros((20, 30), bool)
+    exclude[3:6, 4:9] = True
+    d2 = pixel_errors(img, ref, (a, b))
+    got = d2[~exclude].mean() / ref[~exclude].mean() ** 2
+    want = image_error(img, ref, (a, b), exclude)["error"] ** 2
+    assert want > 0.05 ** 2 and got == pytest.approx(want, rel=1e-12)
+    assert np.allclose(pixel_errors(img, ref), ((img - ref) ** 2).mean(axis=-1))

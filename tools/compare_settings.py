@@ -125,13 +125,12 @@ def where(image, ref, halves, mask):
     """Print where ``image``'s error against ``ref`` sits: each of 3 x 3 regions' share of the
     squared error and its mean against the reference's, and the fewest pixels holding half and
     four fifths of the squared error (the reference's noise taken out per pixel)."""
-    from raybundle.app.metrics import region_errors
+    from raybundle.app.metrics import pixel_errors, region_errors
 
     regions = region_errors(image, ref, reference_halves=halves, exclude=mask)
     print("  by region (top row first): " + "; ".join(
         " ".join(f"x{g['mean_ratio']:.3f} {100 * g['share']:.0f}%" for g in regions[i:i + 3]) for i in (0, 3, 6)))
-    d2 = (((image - ref) ** 2).mean(axis=-1) - ((halves[0] - halves[1]) ** 2).mean(axis=-1) / 4.0)[~mask]
-    d2 = np.sort(np.maximum(d2, 0.0))[::-1]
+    d2 = np.sort(np.maximum(pixel_errors(image, ref, halves)[~mask], 0.0))[::-1]
     share = np.cumsum(d2) / max(d2.sum(), 1e-300)
     print(f"  half of the squared error in {np.searchsorted(share, 0.5) + 1:,} pixels, four fifths in "
           f"{np.searchsorted(share, 0.8) + 1:,}, of {d2.size:,}", flush=True)

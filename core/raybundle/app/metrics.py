@@ -127,6 +127,18 @@ def bias_and_noise(image, twin, reference, reference_halves=None, exclude=None):
             "bias": float(np.sqrt(max(0.0, one["error"] ** 2 - n2))), "mean_ratio": one["mean_ratio"]}
 
 
+def pixel_errors(image, reference, reference_halves=None):
+    """(H, W): each pixel's squared error ``mean over channels (x - r)^2``, less the reference's
+    own noise ``(A - B)^2 / 4`` with ``reference_halves`` (A, B): :func:`image_error`'s sum,
+    pixel by pixel (a pixel within the reference's noise may come out below 0)."""
+    x, r = np.asarray(image, float), np.asarray(reference, float)
+    d2 = ((x - r) ** 2).sum(axis=-1) / r.shape[-1]
+    if reference_halves is not None:
+        a, b = (np.asarray(h, float) for h in reference_halves)
+        d2 = d2 - ((a - b) ** 2).sum(axis=-1) / r.shape[-1] / 4.0
+    return d2
+
+
 def region_errors(image, reference, reference_halves=None, exclude=None, grid=(3, 3)):
     """The error by image region: ``grid`` (rows, columns) blocks, each block's share of the
     squared error (``share``; the shares sum to 1, a block within the reference's noise has
@@ -136,10 +148,7 @@ def region_errors(image, reference, reference_halves=None, exclude=None, grid=(3
     x, r = np.asarray(image, float), np.asarray(reference, float)
     keep = np.ones(r.shape[:2], bool) if exclude is None else ~np.asarray(exclude, bool)
     mean = r[keep].mean()
-    d2 = ((x - r) ** 2).sum(axis=-1) / r.shape[-1]
-    if reference_halves is not None:
-        a, b = (np.asarray(h, float) for h in reference_halves)
-        d2 = d2 - ((a - b) ** 2).sum(axis=-1) / r.shape[-1] / 4.0
+    d2 = pixel_errors(x, r, reference_halves)
     h, w = keep.shape
     rows, cols = np.linspace(0, h, grid[0] + 1).astype(int), np.linspace(0, w, grid[1] + 1).astype(int)
     out = []
