@@ -151,7 +151,7 @@ def test_contact_segments_of_a_lamp_under_a_ceiling_and_a_wall_through_a_floor()
     wall = np.array([[-0.5, 0.3, -0.2], [0.5, 0.3, -0.2], [0.5, 0.3, 0.6], [-0.5, 0.3, 0.6]])
     v, t, m = _mesh([(ceiling, 0), (lamp, 1), (floor, 0), (wall, 0)])
     sc = build_scene(v, t, m, MATS, two_sided=True)
-    groups = {round(float(np.cross(e1, e2) @ o), 6): seg for g, o, e1, e2, seg in
+    groups = {round(float(np.cross(e1, e2) @ o), 6): seg for g, o, e1, e2, seg, _ in
               contact_segments(sc, np.arange(8), tol=1e-3)}
     ceil_segs = next(s for k, s in groups.items() if abs(abs(k) - 1) < 1e-9)
     assert len(ceil_segs) == 4                                   # the outline, not the diagonal
@@ -250,6 +250,72 @@ def shelf_through_a_wall(triangles=4000):
     v, t, m = _mesh([(q, 0) for q in room] + [(shelf, 0)])
     pl = PointLights(position=[[1.4, 0.0, 0.6]], intensity=[[20.0, 20.0, 20.0]])
     return tessellate(build_scene(v, t, m, MATS, point_lights=pl, two_sided=True), triangles)
+
+
+#: the lamp under the grid ceiling: x and y ranges [m]; two of its sides run along grid lines
+LAMP_X, LAMP_Y = (-0.3, 0.33), (-0.5, 0.52)
+
+
+def grid_ceiling_with_a_lamp(n=40, shift=0.0):
+    """A 2 x 2 m ceiling meshed as Edit Mode's Subdivide makes it (an n x n grid of quads sharing
+    their vertices, facing down) with a lamp 0.5 mm under it (:data:`LAMP_X`, :data:`LAMP_Y`:
+    two sides of its outline run along grid lines, through the grid's vertices; the other two
+    cross the grid's triangles; ``shift`` [m] moves the lamp along x, so the grid's vertices lie
+    that far inside the outline); a floor 1 m below.  Everything two-sided."""
+    x = np.linspace(-1.0, 1.0, n + 1)
+    gx, gy = np.meshgrid(x, x)
+    verts = np.column_stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+    j, i = np.divmod(np.arange(n * n), n)
+    a = j * (n + 1) + i
+    quads = np.stack([a, a + n + 1, a + n + 2, a + 1], axis=1)
+    tris = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    (x0, x1), (y0, y1) = LAMP_X, LAMP_Y
+    lamp = np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]]) + [shift, 0, 1 - 5e-4]
+    floor = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
+    v, t, m = _mesh([(lamp, 1), (floor, 0)])
+    return build_scene(np.concatenate([verts, v]), np.concatenate([tris, t + len(verts)]),
+                       np.concatenate([np.zeros(len(tris), np.int64), m]), MATS, two_sided=True)
+
+
+@pytest.mark.parametrize("shift", [0.0, -2e-5])
+def test_a_grid_ceiling_does_not_weld_the_light_above_a_lamp_to_the_ceiling_beside_it(monkeypatch, shift):
+    """A large scene is cut at contacts only where triangles straddle a gap or pierce a surface
+    (``CONTACT_ALL_MAX``, set to 0 here): the grid ceiling's triangles along the lamp's sides that
+    cross them.  The triangles along its other two sides straddle nothing (the outline runs
+    along their edges), yet their corners on it must not weld with those of the triangles above
+    the lamp: the light trapped there (the lamp's back, 0.5 mm below) would be interpolated into
+    the ceiling beside it.  (The old code tagged only the corners of the triangles it could cut:
+    a ceiling subdivided in Edit Mode over the Cornell box's lamp had corner values of 71 W/m^2
+    from the lamp's back where its patches held 0.15, and every bake's gather read them.)  With
+    the lamp shifted 20 microns, the grid's vertices on the outline lie inside it: the triangles
+    beside it cross the outline by a sliver too small to cut off, and their corners in the sliver
+    are on the contact all the same."""
+    from raybundle.patches import layout
+    monkeypatch.setattr(layout, "CONTACT_ALL_MAX", 0)
+    sc = pipeline.prepare(grid_ceiling_with_a_lamp(shift=shift), patches=300)
+    ids = sc.smooth_vertex_ids[:len(sc.triangles)]
+    c = sc.triangle_corners
+    ceiling = np.nonzero((np.abs(c[:, :, 2] - 1) < 1e-12).all(axis=1))[0]
+    (x0, x1), (y0, y1) = LAMP_X, LAMP_Y
+    x0, x1 = x0 + shift, x1 + shift
+    x, y = c[ceiling, :, 0], c[ceiling, :, 1]
+    tol = 1e-9 + abs(shift)
+    within = (x >= x0 - tol) & (x <= x1 + tol) & (y >= y0 - tol) & (y <= y1 + tol)      # (T, 3)
+    beyond = (x <= x0 + tol) | (x >= x1 - tol) | (y <= y0 + tol) | (y >= y1 - tol)
+    cx, cy = x.mean(axis=1), y.mean(axis=1)
+    centre_in = (cx > x0) & (cx < x1) & (cy > y0) & (cy < y1)
+    t_in, t_out = ceiling[within.all(axis=1) & centre_in], ceiling[beyond.all(axis=1) & ~centre_in]
+    assert (within & beyond)[np.isin(ceiling, t_out)].sum() > 40          # corners on the outline
+    assert not set(ids[t_in].ravel()) & set(ids[t_out].ravel())
+    solver = pipeline.make_solver(sc, RenderSettings(seed=5))
+    e = solver.first_shot.E.sum(axis=1)[:, 0]
+    down = sc.tside_normal[:, 2] < -0.5
+    inner = np.isin(sc.tside_triangle, t_in) & down
+    outer = np.isin(sc.tside_triangle, t_out) & down
+    assert e[sc.tside_side[inner]].mean() > 20 * e[sc.tside_side[outer]].max()      # the trapped light
+    vert = solver.reconstruction.smooth_and_sharp(e[:, None], None)
+    corner_values = vert[solver.reconstruction.ids[np.nonzero(outer)[0]]]
+    assert corner_values.max() <= 2 * e[sc.tside_side[outer]].max()
 
 
 def test_no_light_leaks_along_a_shelf_sunk_through_a_wall(monkeypatch):

@@ -109,9 +109,10 @@ def contact_segments(scene, faces, tol, min_plane_area=0.0):
     """Contact segments on the planes of triangles ``faces`` (ids into ``scene``) whose
     triangles add up to at least ``min_plane_area`` [m^2] in that plane.
 
-    Returns a list of ``(group, origin, e1, e2, segments)``: ``group`` the
+    Returns a list of ``(group, origin, e1, e2, segments, coplanar)``: ``group`` the
     triangle ids in one plane, ``origin`` (3,) and ``e1, e2`` (3,) that plane's
-    2D frame [m], ``segments`` (K, 2, 2) the contact segments in it.  Other
+    2D frame [m], ``segments`` (K, 2, 2) the contact segments in it, ``coplanar`` the ids of
+    the other triangles lying in the plane (none of ``faces``).  Other
     triangles meet the plane where their edges lie within ``tol`` [m] of it,
     or where they cross it.
     """
@@ -136,6 +137,7 @@ def contact_segments(scene, faces, tol, min_plane_area=0.0):
         cand = cand[~mine[cand]]
         mine[group] = False
         d = corners[cand] @ n - off                                   # (C, 3) signed distances
+        coplanar = cand[(np.abs(d).max(axis=1) <= 1e-6 * r) & (np.abs(scene.triangle_normal[cand] @ n) > 1 - 1e-6)]
         cand_mask = (d.min(axis=1) <= tol) & (d.max(axis=1) >= -tol)
         cand, d = cand[cand_mask], d[cand_mask]
         if len(cand) == 0:
@@ -146,7 +148,7 @@ def contact_segments(scene, faces, tol, min_plane_area=0.0):
         e1, e2 = orthonormal_basis(n)
         seg = _in_plane_frame(a3, b3, n * off, e1, e2, r)
         if len(seg):
-            out.append((group, n * off, e1, e2, seg))
+            out.append((group, n * off, e1, e2, seg, coplanar))
     return out
 
 
@@ -309,7 +311,10 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     ``scene`` has one patch per triangle (as :func:`raybundle.patches.layout.subdivide`
     makes); ``faces`` are the triangle ids that may be cut (the pieces of
     subdivided input faces); of those, planes holding less than ``min_plane_area`` [m^2] of
-    them are left whole.  Returns ``(scene, n_cut)``: a new scene whose
+    them are left whole.  The other triangles of those planes are not cut, but their corners on
+    a contact get its tags too (and those of their slivers beyond it, as of the triangles'
+    slivers not cut off): a grid vertex that a lamp's outline passes through would otherwise
+    weld the light trapped above the lamp to the ceiling beside it.  Returns ``(scene, n_cut)``: a new scene whose
     cut patches consist of the convex pieces' fan triangles, and the number of
     patches cut.  The new scene carries ``triangle_corner_tag`` (T, 3) int64
     (0 = no contact at that corner).
@@ -327,7 +332,8 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     tag_ids: dict = {}
     n_cut = 0
     seg_base = 0
-    for group, origin, e1, e2, seg in groups:
+    for may_cut, origin, e1, e2, seg, coplanar in groups:
+        group = np.concatenate([may_cut, coplanar])              # those that may be cut first
         to2d = np.stack([e1, e2], axis=1)
         c2 = (scene.triangle_corners[group] - origin) @ to2d                 # (F, 3, 2)
         f, k, crosses = _touching_pairs(c2, seg, eps)
@@ -343,15 +349,17 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
         # the others cut into convex pieces
         start = np.searchsorted(f, cut)
         count = np.searchsorted(f, cut, side="right") - start
-        pieces = cut_triangles(c2, cut, start, count, seg[k], crosses, eps, min_fraction)
-        tags = _piece_tags(pieces, start, count, k, seg, lines, seg_base, eps, tag_ids)
+        pieces, kept = cut_triangles(c2, cut, start, count, seg[k], crosses, eps, min_fraction,
+                                     whole=np.arange(len(group)) >= len(may_cut))
+        tags = _piece_tags(pieces, kept, start, count, k, seg, lines, seg_base, eps, tag_ids)
         j = 0
         for fi, polys in zip(cut.tolist(), pieces):
             tri, f_tags = group[fi], tags[j:j + len(polys)]
             j += len(polys)
             if len(polys) == 1:          # not cut: the triangle keeps its patch, its corners get their tags
                 if f_tags[0].any():
-                    corner_tag[tri] = _merged(corner_tag[tri], _tags_in_order(f_tags[0], polys[0], c2[fi], eps), tag_ids)
+                    corner_tag[tri] = _merged(corner_tag[tri], _tags_in_order(f_tags[0], polys[0], c2[fi], eps),
+                                              tag_ids)
                 continue
             replaced[tri] = True
             n_cut += 1
@@ -365,19 +373,45 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     return _with_pieces(scene, replaced, corner_tag, out), n_cut
 
 
-def _piece_tags(pieces, start, count, k, seg, lines, seg_base, eps, tag_ids):
+def _piece_tags(pieces, kept, start, count, k, seg, lines, seg_base, eps, tag_ids):
     """The corner tags (a list of (M,) arrays, piece by piece) of ``pieces`` against the segments
-    touching their triangle (:func:`_corner_tags`)."""
+    touching their triangle (:func:`_corner_tags`), and of the corners of the slivers not cut off
+    along the lines ``kept`` (:func:`~raybundle.patches.convex_cuts.cut_triangles`): those lie on
+    the line, the piece on its other side."""
     polys = [poly for p in pieces for poly in p]
     if not polys:
         return []
     size = np.array([len(poly) for poly in polys], np.int64)
+    centroid = np.array([poly.mean(axis=0) for poly in polys]).reshape(-1, 2)
+    on_line = _sliver_corners(polys, np.concatenate([[0], np.cumsum(size)[:-1]]), centroid,
+                              [line for p in kept for line in p], eps)
     tri_of = np.repeat(np.arange(len(pieces)), [len(p) for p in pieces])
-    tags = _corner_tags(np.concatenate(polys), np.repeat(np.arange(len(polys)), size),
-                        np.array([poly.mean(axis=0) for poly in polys]).reshape(-1, 2),
+    tags = _corner_tags(np.concatenate(polys), np.repeat(np.arange(len(polys)), size), centroid,
                         (np.repeat(np.arange(len(polys)), count[tri_of]), k[ranges(start[tri_of], count[tri_of])]),
-                        seg, lines, seg_base, eps, tag_ids)
+                        seg, lines, seg_base, eps, tag_ids, on_line)
     return np.split(tags, np.cumsum(size)[:-1])
+
+
+def _sliver_corners(polys, first, centroid, kept, eps):
+    """``(corner, line key, side)`` of the corners of ``polys`` (a list of (M, 2); their corners'
+    flat indices from ``first``, their ``centroid`` (N, 2)) on the small side of each line
+    ``(a, b, left)`` of ``kept[j]`` (the lines polygon j was not cut along): the sliver's corners,
+    on the line, the polygon on the side of its centroid (as :func:`_corner_tags` keys them)."""
+    rows = [(j, a, b, left) for j, lines_j in enumerate(kept) for a, b, left in lines_j]
+    if not rows:
+        return []
+    j = np.array([r[0] for r in rows])
+    ab = np.array([[r[1], r[2]] for r in rows], float)                   # (L, 2, 2)
+    u, key = _lines(ab, eps)
+    side = u[:, 0] * (centroid[j, 1] - ab[:, 0, 1]) - u[:, 1] * (centroid[j, 0] - ab[:, 0, 0]) > 0
+    d = (ab[:, 1] - ab[:, 0]) / np.hypot(*(ab[:, 1] - ab[:, 0]).T)[:, None]
+    out = []
+    for i, (jj, _, _, left) in enumerate(rows):
+        p = polys[jj]
+        s = d[i, 0] * (p[:, 1] - ab[i, 0, 1]) - d[i, 1] * (p[:, 0] - ab[i, 0, 0])
+        line, sd = tuple(key[i].tolist()), bool(side[i])
+        out += [(int(first[jj] + m), line, sd) for m in np.nonzero((s > eps) if left else (s < -eps))[0].tolist()]
+    return out
 
 
 def _with_pieces(scene, replaced, corner_tag, pieces):
@@ -494,15 +528,16 @@ def _tags_in_order(tags, poly, tri2d, eps):
     return out
 
 
-def _corner_tags(points, polygon, centroid, pairs, seg, lines, seg_base, eps, tag_ids):
+def _corner_tags(points, polygon, centroid, pairs, seg, lines, seg_base, eps, tag_ids, on_line=()):
     """Weld tag (M,) int per corner ``points`` (M, 2) of convex polygons (``polygon`` (M,) the
     corner's polygon, ascending; ``centroid`` (N, 2) theirs): which contact lines the corner lies
     on, and on which side of each its polygon lies; 0 for none.  A line, not a segment: the
     collinear segments of one contact (a floor's subdivided edge along a wall) weld along it
     (:func:`_lines`, of ``seg`` (K, 2, 2)).  ``pairs`` ``(polygon, segment)`` (P,) int, sorted
     by polygon: the segments each polygon's corners are tested against (those touching it; a
-    floor triangle under a chair may touch hundreds).  Ids come from ``tag_ids`` in corner order,
-    so equal keys give one tag in every call."""
+    floor triangle under a chair may touch hundreds).  ``on_line``: more ``(corner, line key, side)``
+    that hold whatever the segments say (a sliver's corners, :func:`_piece_tags`).  Ids come from
+    ``tag_ids`` in corner order, so equal keys give one tag in every call."""
     u, key = lines
     own, k = pairs
     first = np.searchsorted(own, np.arange(len(centroid)))
@@ -515,6 +550,8 @@ def _corner_tags(points, polygon, centroid, pairs, seg, lines, seg_base, eps, ta
     side = u[k[on], 0] * (c[:, 1] - a[on, 1]) - u[k[on], 1] * (c[:, 0] - a[on, 0]) > 0
     keys: dict = {}
     for m, line, sd in zip(corner[on].tolist(), key[k[on]].tolist(), side.tolist()):
+        keys.setdefault(m, set()).add(((seg_base, *line), sd))
+    for m, line, sd in on_line:
         keys.setdefault(m, set()).add(((seg_base, *line), sd))
     out = np.zeros(len(points), np.int64)
     for m in sorted(keys):

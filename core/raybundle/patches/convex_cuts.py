@@ -97,25 +97,35 @@ def worth_cutting(tri2d, f, k, crosses, seg, key):
     return out
 
 
-def cut_triangles(c2, cut, start, count, seg_k, crosses, eps, min_fraction):
-    """The convex pieces (lists of (M, 2) arrays) of each triangle ``cut`` (ids into ``c2``
-    (F, 3, 2)), cut along the lines of the segments that cross it (``seg_k``, ``crosses`` from
-    ``start`` for ``count`` pairs); a cut that would leave a piece under ``min_fraction`` of the
-    triangle is not made.  Corners are plain lists while cutting (NumPy's cost per call on 3-6
-    corners)."""
-    pieces = []
+def cut_triangles(c2, cut, start, count, seg_k, crosses, eps, min_fraction, whole=None):
+    """``(pieces, kept)``: the convex pieces (lists of (M, 2) arrays) of each triangle ``cut`` (ids
+    into ``c2`` (F, 3, 2)), cut along the lines of the segments that cross it (``seg_k``,
+    ``crosses`` from ``start`` for ``count`` pairs), and per piece the lines it was not cut along
+    (lists like ``pieces`` of lists of ``(a, b, left)``: the segment's ends and whether the sliver
+    it would have cut off lies on its left, as :func:`split_polygon` names the sides).  A cut that
+    would leave a piece under ``min_fraction`` of the triangle is not made; the corners of that
+    sliver lie on the line for their weld tags (:func:`~raybundle.patches.contacts.split_at_contacts`).
+    Triangles ``whole`` (F,) bool (None: none) are never cut, only their slivers' lines kept.
+    Corners are plain lists while cutting (NumPy's cost per call on 3-6 corners)."""
+    pieces, kept_lines = [], []
     for fi, lo, n in zip(cut.tolist(), start.tolist(), count.tolist()):
-        polys = [c2[fi].tolist()]
-        least = min_fraction * polygon_area(polys[0])
+        polys = [(c2[fi].tolist(), [])]                  # a piece and the lines it was not cut along
+        least = min_fraction * polygon_area(polys[0][0])
+        fixed = whole is not None and whole[fi]
         # a line that leaves the triangle's corners on one side misses every piece of it
         for a, b in seg_k[lo:lo + n][crosses[lo:lo + n]].tolist():
             nxt = []
-            for poly in polys:
+            for poly, kept in polys:
                 lft, rgt = split_polygon(poly, a, b, eps)
-                if lft is None or min(polygon_area(lft), polygon_area(rgt)) < least:
-                    nxt.append(poly)
+                if lft is None:
+                    nxt.append((poly, kept))
+                elif min(polygon_area(lft), polygon_area(rgt)) < least:
+                    nxt.append((poly, kept + [(a, b, polygon_area(lft) < polygon_area(rgt))]))
+                elif fixed:
+                    nxt.append((poly, kept))
                 else:
-                    nxt += [lft, rgt]
+                    nxt += [(lft, kept), (rgt, kept)]
             polys = nxt
-        pieces.append([without_collinear(poly, eps) for poly in polys])
-    return pieces
+        pieces.append([without_collinear(poly, eps) for poly, _ in polys])
+        kept_lines.append([kept for _, kept in polys])
+    return pieces, kept_lines
