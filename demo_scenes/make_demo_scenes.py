@@ -21,6 +21,10 @@ Writes:
 * ``cornell_bake.blend``: ``cornell_box.blend`` with every face cut 16 x 16 into its
   own 17 x 17 vertices (4,624 in all) and a lightmap UV map per object (a tile per
   face): press Bake in the Ray Bundle GI panel.
+* ``cornell_subdivided.blend``: ``cornell_box.blend`` with every mesh subdivided as Edit Mode's
+  Subdivide does it (15 cuts: each quad a 16 x 16 grid), so the vertices along a block's
+  creases are shared by faces of different normals, and a point-domain bake averages those
+  faces' corners there: the bake bench's harder file.
 * ``sierpinski.blend``: a level-4 Sierpinski tetrahedron (1024 triangles) on a floor
   under a sky-colored world and a sun (in the style of the thesis' Figure 1).
 * ``room.blend``: a small room with Principled BSDF materials (wooden floor, painted
@@ -372,9 +376,38 @@ def build_cornell_bake(n=16):
     return obs
 
 
+def subdivide_edit_mode(ob, cuts=15):
+    """``ob``'s mesh as a modeller makes it in Edit Mode: Merge by Distance (a block's faces share
+    their corners), then Subdivide (``bpy.ops.mesh.subdivide``): every edge cut ``cuts`` times and
+    each quad filled with a grid, the faces of one mesh sharing the vertices along their common
+    edges (bmesh's ``remove_doubles`` and ``subdivide_edges``, the operators' own code, without an
+    Edit Mode context)."""
+    import bmesh
+
+    bm = bmesh.new()
+    bm.from_mesh(ob.data)
+    bmesh.ops.remove_doubles(bm, verts=bm.verts[:], dist=1e-6)
+    bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=cuts, use_grid_fill=True)
+    bm.to_mesh(ob.data)
+    bm.free()
+    ob.data.update()
+    return ob
+
+
+def build_cornell_subdivided(cuts=15):
+    """The Cornell box .blend with every mesh subdivided in Edit Mode (``cuts`` cuts; module
+    docstring): the bake bench's file whose crease vertices are shared by faces of different
+    normals."""
+    obs = build_cornell(False)
+    for ob in obs.values():
+        subdivide_edit_mode(ob, cuts)
+    return obs
+
+
 SCENES = {
     "cornell_box": lambda: build_cornell(False),
     "cornell_bake": build_cornell_bake,
+    "cornell_subdivided": build_cornell_subdivided,
     "cornell_glossy": lambda: build_cornell(True),
     "sierpinski": build_sierpinski,
     "room": build_room,

@@ -6,14 +6,22 @@
 * :meth:`BakeJob.start` exports the evaluated depsgraph (:mod:`.translation.export`), picks
   the targets and reads what they need (corners, UVs), subdivides into patches
   and sets up the core's solver;
-* :meth:`BakeJob.step` iterates for about ``budget`` seconds and returns False
-  once the time limit or the iteration count is reached or ``stop`` is set (the
-  modal operator calls it on every timer tick, headless code in a loop);
+* :meth:`BakeJob.step` works for about ``budget`` seconds and returns False once done:
+  it iterates until the time limit or the iteration count is reached or ``stop`` is set,
+  then gathers the color attributes' indirect light (the modal operator calls it on every
+  timer tick, headless code in a loop);
 * :meth:`BakeJob.finish` evaluates the radiance at the targets' points
-  (:func:`raybundle.imaging.baking.baked_radiance`: per-point direct light with
-  ``light_samples`` shadow rays; the indirect light of vertices and corners by a final
-  gather of ``gather_rays`` rays each (1024) into the solution, that of lightmap texels
+  (:func:`raybundle.imaging.baking.baked_parts`: per-point direct light with
+  ``light_samples`` shadow rays; the indirect light of vertices and corners gathered from
+  the solution, :class:`raybundle.imaging.bake_gather.BakeGather`, that of lightmap texels
   interpolated from the patches) and writes it into the file, on the main thread.
+
+The gather of a bake limited by time is part of its budget: the run loop leaves
+:data:`~.properties.GATHER_SHARE` of the iteration time for it, and Gather Rays set to automatic
+(``gather_rays`` -1) gathers as many rays per point as the time left buys (at least
+:attr:`~raybundle.imaging.bake_gather.BakeGather.MIN_RAYS`, else the patches are interpolated); a
+bake of given iterations gathers :data:`~.properties.FIXED_GATHER_RAYS` rays a point, the same values on
+every run.  A stop during the gather keeps what is gathered and interpolates the rest (warned).
 
 What is written (Blender's units: linear radiance [W m^-2 sr^-1], view-independent:
 the diffuse light and the emission; glossy reflections depend on the viewer and
@@ -54,7 +62,7 @@ from raybundle.imaging.run import RunLoop
 
 from .translation.export import export_scene
 from .translation.mesh_data import corner_vertices
-from .properties import LAST_BAKE, BakeSettings, run_options
+from .properties import FIXED_GATHER_RAYS, GATHER_SHARE, LAST_BAKE, BakeSettings, run_options
 
 ATTRIBUTE = "RayBundle"
 COPY_SUFFIX = ".RayBundle"
@@ -123,6 +131,8 @@ class BakeJob:
         self.targets, self.lightmap_targets = [], []
         self.t_start = self.loop = None
         self.timings = {}
+        #: the color attributes' points once the iteration ends: ``(rep, back, points, parts, gather)``
+        self._points = None
 
     def warn(self, message):
         if message not in self.warnings:
@@ -164,7 +174,9 @@ class BakeJob:
         self.renderer = runner if b.camera else None
         self.solver = runner.solver if b.camera else runner
         self.timings["prepare_seconds"] = time.perf_counter() - self.t_start - self.timings["export_seconds"]
-        self.loop = RunLoop(runner, self.plan.iterations, self.plan.time_limit, started=self.t_start, stop=self.stop)
+        share = GATHER_SHARE if self.targets and b.gather_rays < 0 else 0.0
+        self.loop = RunLoop(runner, self.plan.iterations, self.plan.time_limit, started=self.t_start, stop=self.stop,
+                            final_share=share)
         return self
 
     def _attach_world(self, scene):
@@ -259,12 +271,66 @@ class BakeJob:
 
     # ------------------------------------------------------------------ step
     def step(self, budget=0.1):
-        """Iterate for about ``budget`` seconds (the run loop, :class:`raybundle.imaging.run.RunLoop`,
-        owns the whole job's budget from its start, export and set-up included); False once
-        done (limit reached or stopped)."""
-        more = self.loop.advance(max_seconds=budget)
-        self.fraction = self.loop.fraction
+        """Work for about ``budget`` seconds (the run loop, :class:`raybundle.imaging.run.RunLoop`,
+        owns the whole job's budget from its start, export and set-up included): iterate, then
+        gather the color attributes' indirect light; False once done (or stopped)."""
+        if not self.loop.finished:
+            more = self.loop.advance(max_seconds=budget)
+            self.fraction = self.loop.fraction / (1.0 + self.loop.final_share)
+            if more:
+                return True
+            if self.targets and not self.loop.cancelled:
+                self._start_gather()
+        gather = self._points[4] if self._points is not None else None
+        if gather is None or gather.done or self.stop.is_set():
+            self.fraction = 1.0
+            return False
+        more = gather.advance(budget)
+        share = self.loop.final_share / (1.0 + self.loop.final_share)
+        self.fraction = 1.0 - share + share * gather.fraction
         return more
+
+    @property
+    def phase(self):
+        """What :meth:`step` does now, for the progress display: the iteration or the gather."""
+        if self._points is None:
+            return f"iteration {self.solver.stats.iterations}"
+        g = self._points[4]
+        return f"gathering {g.gathered:,} of {len(g.todo):,} points, {g.rays:,} rays each"
+
+    def _start_gather(self):
+        """Locate the color attributes' points (cut where the lighting needs it first, with
+        Subdivide), light them directly and start their gather with the rays the bake affords
+        (module docstring)."""
+        from raybundle.imaging.bake_gather import BakeGather
+        from raybundle.imaging.baking import baked_parts, locate_points
+
+        solver, ex = self.solver, self.export
+        rng = np.random.default_rng([self.plan.settings.seed, 21])
+        for t in self.targets:
+            if t.refine:
+                self._refine(t, rng)
+        face = np.concatenate([t.corner_face for t in self.targets])
+        bary = np.concatenate([t.corner_bary for t in self.targets])
+        # corners at one point of one plane (a vertex inside a face) are one bake point
+        rep, back = _unique_points(ex.scene, face, bary)
+        pts = locate_points(ex.scene, solver.scene, solver.tracer, face[rep], bary[rep])
+        parts = baked_parts(solver, pts, self.bake.light_samples, rng)
+        gather = BakeGather(solver, pts, seed=self.plan.settings.seed)
+        rays, deadline = self.bake.gather_rays, None
+        if self.loop.cancelled or self.stop.is_set():
+            rays = 0
+        elif rays < 0 and self.plan.time_limit is None:
+            rays = FIXED_GATHER_RAYS
+        elif rays < 0:
+            deadline = self.t_start + 0.99 * self.plan.time_limit      # a hundredth left for the writing
+            left = deadline - time.perf_counter()
+            rays = gather.automatic_rays(left)
+            if not rays:
+                self.warn(f"no time left for the final gather ({max(left, 0.0):.1f} s): the indirect light is "
+                          "interpolated from the patches; raise the time limit")
+        gather.start(rays, deadline=deadline)
+        self._points = (rep, back, pts, parts, gather)
 
     def run(self):
         """start, step to the end, finish: the headless bake.  Returns :class:`BakeOutcome`."""
@@ -286,25 +352,24 @@ class BakeJob:
 
     def finish(self):
         """Evaluate and write everything (main thread).  Returns :class:`BakeOutcome`."""
-        from raybundle.imaging.baking import baked_radiance, locate_points
-
         t0 = time.perf_counter()
         cancelled = self.stop.is_set() or self.loop.cancelled
-        solver, ex = self.solver, self.export
-        rng = np.random.default_rng([self.plan.settings.seed, 21])
-        n = self.bake.light_samples
+        solver = self.solver
+        rng = np.random.default_rng([self.plan.settings.seed, 22])
         attributes, lightmaps, camera_path = [], {}, None
         try:
-            for t in self.targets:
-                if t.refine:
-                    self._refine(t, rng)
             if self.targets:
-                face = np.concatenate([t.corner_face for t in self.targets])
-                bary = np.concatenate([t.corner_bary for t in self.targets])
-                # corners at one point of one plane (a vertex inside a face) are one bake point
-                rep, back = _unique_points(ex.scene, face, bary)
-                pts = locate_points(ex.scene, solver.scene, solver.tracer, face[rep], bary[rep])
-                values = baked_radiance(solver, pts, n, rng, gather_rays=self.bake.gather_rays)[back]
+                if self._points is None:            # stopped while iterating: no gather
+                    self._start_gather()
+                    self.warn("stopped: the color attributes' indirect light is interpolated from the patches "
+                              "(no final gather)")
+                _, back, pts, parts, gather = self._points
+                if gather.interpolated and gather.gathered:
+                    why = "stopped during the final gather" if self.stop.is_set() else "the time limit came"
+                    self.warn(f"{why}: {gather.gathered:,} of {len(gather.todo):,} points gathered, the rest "
+                              "interpolated from the patches")
+                values = parts.radiance(gather.indirect)[back]
+                self.timings.update(gather_rays=gather.fewest, gather_seconds=gather.seconds)
                 found = pts.found[back]
                 k = 0
                 for t in self.targets:
@@ -326,7 +391,7 @@ class BakeJob:
             solver.tracer.close()
         t_done = time.perf_counter()
         st = solver.stats
-        note = self.loop.budget_note(t0 - self.t_start)          # the budget covers the iterations, not the writing
+        note = self.loop.budget_note(t0 - self.t_start)          # the budget covers the iterations and the gather
         if note:
             self.warn(note)
         stats = {"iterations": st.iterations, "directions": st.directions, "patches": int(solver.scene.n_patches),

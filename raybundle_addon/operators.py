@@ -3,8 +3,9 @@
 With a window (``invoke``), the bake runs as a modal operator: a timer calls
 :meth:`.bake.BakeJob.step` for ~0.1 s per tick on the main thread (NumPy and
 Embree do the work; Blender stays responsive between ticks), the status bar and
-the cursor show the progress, and Esc stops the iteration and writes what has
-converged so far.  Headless (``bpy.app.background``) and from scripts
+the cursor show the progress of the iteration and then of the final gather, and Esc
+stops either and writes what has converged so far (the points not gathered yet
+interpolated from the patches).  Headless (``bpy.app.background``) and from scripts
 (``execute``) it runs to the time limit in one call.  Lightmaps are baked for the
 selected objects (every mesh with a UV map when nothing is selected).
 """
@@ -105,8 +106,7 @@ class RAYBUNDLE_OT_bake(bpy.types.Operator):
 
     def _status(self, context):
         job = self.job
-        text = (f"Ray Bundle GI bake: {100 * job.fraction:.0f}% | iteration {job.solver.stats.iterations} | "
-                "Esc stops and keeps the result so far")
+        text = f"Ray Bundle GI bake: {100 * job.fraction:.0f}% | {job.phase} | Esc stops and keeps the result so far"
         if context.workspace is not None:
             context.workspace.status_text_set(text)
         context.window_manager.progress_update(100 * job.fraction)

@@ -95,15 +95,23 @@ class BakeSettings:
     directory: str = "//raybundle_bake/"
     light_samples: int = 32
     single_user: bool = False
-    gather_rays: int = 1024
+    #: rays per vertex or corner of the final gather: -1 automatic (what the time left buys, in the
+    #: budget), 0 none (the patches interpolated), else that many
+    gather_rays: int = -1
     subdivide: bool = False
     subdivide_levels: int = 3
 
     @classmethod
     def from_scene(cls, scene):
-        """The bake settings of ``scene.raybundle`` (:data:`BAKE_PROPERTIES`)."""
+        """The bake settings of ``scene.raybundle`` (:data:`BAKE_PROPERTIES`; Gather Rays -1 where
+        Automatic is on)."""
         rb = getattr(scene, "raybundle", None)
-        return cls() if rb is None else cls(**{field: getattr(rb, prop) for prop, field in BAKE_PROPERTIES.items()})
+        if rb is None:
+            return cls()
+        out = cls(**{field: getattr(rb, prop) for prop, field in BAKE_PROPERTIES.items()})
+        if rb.bake_gather_auto:
+            out.gather_rays = -1
+        return out
 
     def validate(self):
         if not (self.color_attribute or self.lightmaps or self.camera):
@@ -114,8 +122,8 @@ class BakeSettings:
             raise ValueError("the lightmap size must lie in [1, 16384]")
         if self.light_samples < 1:
             raise ValueError("light samples must be at least 1")
-        if self.gather_rays < 0:
-            raise ValueError("gather rays must be 0 (off) or more")
+        if self.gather_rays < -1:
+            raise ValueError("gather rays must be -1 (automatic), 0 (off) or more")
         if self.subdivide and not 1 <= self.subdivide_levels <= 6:
             raise ValueError("subdivision levels must lie in [1, 6]")
 
@@ -126,6 +134,26 @@ BAKE_PROPERTIES = {"bake_color_attribute": "color_attribute", "bake_domain": "do
                    "bake_directory": "directory", "bake_light_samples": "light_samples",
                    "bake_single_user": "single_user", "bake_gather_rays": "gather_rays",
                    "bake_subdivide": "subdivide", "bake_subdivide_levels": "subdivide_levels"}
+
+
+#: Gather Rays' default before it could be automatic: a file saved with it reads as automatic
+LEGACY_GATHER_RAYS = 1024
+#: the automatic gather's share of a timed bake's iteration time (the run loop's final share)
+GATHER_SHARE = 1.0
+#: rays per point of the automatic gather in a bake of given iterations
+FIXED_GATHER_RAYS = 1024
+
+
+def _get_gather_auto(self):
+    """Automatic gather's value: as set; in a file saved before it existed, on where Gather Rays
+    still held the old default (:data:`LEGACY_GATHER_RAYS`)."""
+    if "bake_gather_auto_choice" in self:
+        return bool(self["bake_gather_auto_choice"])
+    return self.get("bake_gather_rays", LEGACY_GATHER_RAYS) == LEGACY_GATHER_RAYS
+
+
+def _set_gather_auto(self, value):
+    self["bake_gather_auto_choice"] = bool(value)
 
 
 def _get_budget(self):
@@ -206,11 +234,16 @@ class RAYBUNDLE_PG_settings(bpy.types.PropertyGroup):
         description="Shadow rays per light per vertex or corner for the direct light, 16 times as many where "
         "they find a penumbra (lightmap texels: a quarter, and 4 times as many in a penumbra); polygonal "
         "lights are integrated exactly and the rays only find their shadows")
+    bake_gather_auto: BoolProperty(
+        name="Automatic Gather", get=_get_gather_auto, set=_set_gather_auto,
+        description="Color attributes: gather the indirect light of every vertex or corner with as many rays "
+        f"as the Time Limit leaves (it keeps {GATHER_SHARE / (1 + GATHER_SHARE):.0%} of the time after set-up "
+        f"for the gather); with Iterations, {FIXED_GATHER_RAYS:,} rays. Off: the Gather Rays below")
     bake_gather_rays: IntProperty(
-        name="Gather Rays", default=BakeSettings.gather_rays, min=0, max=65536,
-        description="Color attributes: rays per vertex or corner that gather the indirect light from the "
-        "solution (right next to corners and contacts, where patch values cannot follow the light); "
-        "0 = interpolate the patches (faster). Lightmaps always interpolate")
+        name="Gather Rays", default=LEGACY_GATHER_RAYS, min=0, max=65536,
+        description="Color attributes, Automatic Gather off: rays per vertex or corner that gather the indirect "
+        "light from the solution (right next to corners and contacts, where patch values cannot follow the "
+        "light); 0 = interpolate the patches (faster). Lightmaps always interpolate")
     bake_single_user: BoolProperty(
         name="Make Single User", default=BakeSettings.single_user,
         description="Objects sharing one mesh get their own copy of it, each baked with its own light; "

@@ -92,7 +92,10 @@ class RAYBUNDLE_PT_bake(RaybundlePanel, bpy.types.Panel):
         sub = col.column()
         sub.active = rb.bake_color_attribute
         sub.prop(rb, "bake_domain")
-        sub.prop(rb, "bake_gather_rays")
+        sub.prop(rb, "bake_gather_auto")
+        row = sub.row()
+        row.active = not rb.bake_gather_auto
+        row.prop(rb, "bake_gather_rays")
         sub.prop(rb, "bake_single_user")
         sub.prop(rb, "bake_subdivide")
         row = sub.row()

@@ -250,6 +250,59 @@ def test_cancel_keeps_a_valid_partial_bake_and_errors_are_one_line(fresh):
     assert LAST_BAKE[fresh.name]["status"].startswith("error: nothing to bake")
 
 
+def test_a_stop_during_the_gather_keeps_what_is_gathered_and_interpolates_the_rest(fresh):
+    """The gather runs in the job's steps after the iteration (a bake of given iterations gathers
+    FIXED_GATHER_RAYS a point): stopped after its first blocks, the job writes every vertex, the
+    gathered ones and the rest interpolated from the patches, and says so.  The furnace's
+    radiance is Le / (1 - a) everywhere, whichever way a vertex was baked (the bounds of
+    ``test_furnace_bakes_to_le_over_one_minus_albedo``)."""
+    import bmesh
+
+    from raybundle_addon.bake import BakeJob
+    from raybundle_addon.properties import FIXED_GATHER_RAYS
+
+    room, block = furnace_scene()
+    bm = bmesh.new()
+    bm.from_mesh(room.data)
+    bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=15, use_grid_fill=True)     # 1,538 vertices
+    bm.to_mesh(room.data)
+    bm.free()
+    bake_settings(fresh, iterations=20)
+    job = BakeJob(bpy.context.evaluated_depsgraph_get()).start()
+    while job.step(0.0) and job._points is None:
+        pass
+    gather = job._points[4]
+    assert gather.rays == FIXED_GATHER_RAYS and 0 < gather.gathered < len(gather.todo)
+    assert job.phase.startswith("gathering") and 0 < job.fraction < 1
+    job.stop.set()
+    assert job.step(0.0) is False
+    out = job.finish()
+    assert any(w.startswith("stopped during the final gather") for w in out.warnings), out.warnings
+    exact = LE / (1 - ALBEDO)
+    for ob in (room, block):
+        rel = attribute(ob)[1][:, :3] / exact - 1
+        assert len(rel) == len(ob.data.vertices) and np.all(np.isfinite(rel))
+        assert np.all(np.abs(rel.mean(axis=0)) < 0.025) and np.abs(rel).max() < 0.12, (ob.name, rel)
+
+
+def test_gather_rays_default_to_automatic_and_files_saved_with_1024_read_so(fresh):
+    """A new scene's bake gathers automatically; a file saved before Automatic Gather existed
+    kept Gather Rays' old default, 1,024 (an ID property as the file stores it), and reads as
+    automatic; one saved with another count keeps it."""
+    from raybundle_addon.properties import BakeSettings
+
+    rb = fresh.raybundle
+    assert rb.bake_gather_auto and BakeSettings.from_scene(fresh).gather_rays == -1
+    rb["bake_gather_rays"] = 1024
+    assert rb.bake_gather_auto and BakeSettings.from_scene(fresh).gather_rays == -1
+    rb["bake_gather_rays"] = 0
+    assert not rb.bake_gather_auto and BakeSettings.from_scene(fresh).gather_rays == 0
+    rb.bake_gather_auto = True
+    assert BakeSettings.from_scene(fresh).gather_rays == -1
+    rb.bake_gather_auto, rb.bake_gather_rays = False, 4096
+    assert BakeSettings.from_scene(fresh).gather_rays == 4096
+
+
 def test_headless_bake_writes_a_baked_copy_of_the_file_and_lightmaps(fresh, tmp_path):
     plane_with_uvs()
     add_light("AREA", location=(0, 0, 1.0), energy=50.0, size=0.5)

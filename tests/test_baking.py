@@ -299,3 +299,51 @@ def test_a_patch_over_many_texels_reads_its_mean_from_the_maps_pyramid():
     assert 64 * 64 * 64 / 2 > MAX_SAMPLES                  # each triangle covers more texels than it reads
     cover = tex.triangle_coverage(sc, seed=1)
     assert np.allclose(cover, noise[..., 0].mean() - 0.5, rtol=0.01), cover
+
+
+def _cornell_gather(iterations=10):
+    """A bake gather (raybundle.imaging.bake_gather) of 700 points of the Cornell box's faces."""
+    from raybundle.imaging.bake_gather import BakeGather
+
+    coarse = scenes.load_scene("cornell")
+    r = pipeline.make_renderer(pipeline.prepare(coarse), RenderSettings(seed=4))
+    for _ in range(iterations):
+        r.solver.step()
+    face, bary = random_face_points(coarse, 700 - 3 * len(coarse.triangles), np.random.default_rng(2))
+    pts = locate_points(coarse, r.scene, r.tracer, face, bary)
+    return r, pts, lambda: BakeGather(r.solver, pts, seed=9)
+
+
+def test_a_bake_gather_gives_the_same_values_however_its_slices_fall():
+    """Gathered in one call or a block at a time (a modal operator's ticks), the points take the
+    same values: each block has its own random stream.  Points not found keep zero."""
+    r, pts, make = _cornell_gather()
+    whole, sliced = make(), make()
+    whole.start(48)
+    assert whole.advance() is False and whole.gathered == pts.found.sum()
+    sliced.start(48)
+    steps = 0
+    while sliced.advance(0.0):
+        steps += 1
+    assert steps >= 2 and np.array_equal(whole.indirect, sliced.indirect)
+    assert not np.array_equal(whole.indirect, make().indirect)      # gathered, not the interpolation
+    r.tracer.close()
+
+
+def test_a_bake_gather_past_its_deadline_leaves_the_rest_interpolated():
+    """With its deadline passed, the gather does its first block (its cost is not known before)
+    and leaves every other point the values interpolated from the patches; the time a budget
+    buys is what its probe measures: none in no time, the most rays in an hour."""
+    import time
+
+    r, pts, make = _cornell_gather()
+    g = make()
+    interpolated = g.indirect.copy()
+    g.start(48, deadline=time.perf_counter() - 1.0)
+    assert g.advance() is False
+    first = g.todo[:g.gathered]
+    assert 0 < g.gathered < len(g.todo) and g.interpolated == len(g.todo) - g.gathered
+    assert not np.array_equal(g.indirect[first], interpolated[first])
+    assert np.array_equal(g.indirect[g.todo[g.gathered:]], interpolated[g.todo[g.gathered:]])
+    assert make().automatic_rays(1e-6) == 0 and make().automatic_rays(3600.0) == make().MAX_RAYS
+    r.tracer.close()

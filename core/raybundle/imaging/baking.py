@@ -138,6 +138,75 @@ def _locate_by_search(scene, face, point, todo, tri, fb, chunk):
         lo = hi
 
 
+@dataclass
+class BakedParts:
+    """The parts of the view-independent radiance at N located points (module docstring), zero at
+    points not found: ``emitted`` Le (N, 3), ``reflectance`` W_d kd / pi (N, 3), ``direct`` E_dir
+    (N, 3) [W/m^2] and ``through`` (N, 3), what a translucent side lets through;
+    :meth:`radiance` adds the indirect irradiance."""
+
+    emitted: np.ndarray
+    reflectance: np.ndarray
+    direct: np.ndarray
+    through: np.ndarray
+
+    def radiance(self, indirect):
+        """L (N, 3) [W m^-2 sr^-1] with the indirect irradiance ``indirect`` (N, 3) [W/m^2]."""
+        return self.emitted + self.reflectance * (self.direct + indirect) + self.through
+
+
+def baked_parts(solver, points: SurfacePoints, light_samples=16, rng=None, penumbra_samples=None) -> BakedParts:
+    """:class:`BakedParts` of located ``points``: all but the indirect light.  ``solver``, ``rng``,
+    ``light_samples`` and ``penumbra_samples`` as in :func:`baked_radiance`."""
+    sc = solver.scene
+    rng = np.random.default_rng(0) if rng is None else rng
+    parts = BakedParts(*(np.zeros((len(points.triangle), 3)) for _ in range(4)))
+    idx = np.nonzero(points.found)[0]
+    if len(idx) == 0:
+        return parts
+    ts, tri = points.tside[idx], points.triangle[idx]
+    m = sc.triangle_material[tri]
+    n = sc.tside_normal[ts]
+    mats = sc.materials
+    ones = np.ones(len(idx))
+    parts.emitted[idx] = mats.emitted_radiance(m, ones)
+    direct = solver.direct
+    if direct.n_lights:         # about the shading normal of a smooth-shaded face, as the image's
+        n_s = seen_normals(sc.shading, sc.triangle_source[tri], points.point[idx], n, n)
+        if sc.texture is not None and sc.texture.has_normal_maps:     # and of a normal or bump map
+            n_s = sc.texture.shading_normals(sc.triangle_source[tri], points.point[idx], n_s, n)
+        parts.direct[idx] = direct.irradiance(points.point[idx], n_s, rng, light_samples, penumbra_samples,
+                                              receivers=sc.link_groups(tri))
+    kd = mats.diffuse_reflectance[m]
+    if sc.texture is not None:                  # the texel's albedo: texture detail stays sharp
+        kd = kd * sc.texture.at(sc.triangle_source[tri], points.point[idx])
+    parts.reflectance[idx] = mats.diffuse_weight(m, ones) * kd / np.pi
+    if len(getattr(solver, "translucent_sides", ())):      # what a translucent side lets through
+        rec = solver.reconstruction
+        through = solver.translucent_radiance(solver.indirect_incoming())
+        parts.through[idx] = rec.at(rec.averaged(through), ts, points.bary[idx])
+        kt = mats.translucent[m]
+        far = np.nonzero(np.any(kt > 0, axis=1))[0]
+        if direct.n_lights and len(far):               # the first-shot lights on its far side
+            parts.through[idx[far]] += kt[far] / np.pi * direct.irradiance(
+                points.point[idx[far]], -n[far], rng, light_samples, penumbra_samples,
+                receivers=sc.link_groups(tri[far]))
+    return parts
+
+
+def interpolated_indirect(solver, points: SurfacePoints):
+    """E_ind (N, 3) [W/m^2] at located ``points`` interpolated linearly from the patch values (the
+    image's reconstruction, module docstring); zero at points not found."""
+    out = np.zeros((len(points.triangle), 3))
+    idx = np.nonzero(points.found)[0]
+    e_bar = solver.indirect_incoming()
+    if len(idx) and np.any(e_bar):
+        rec = solver.reconstruction
+        vert = rec.smooth_and_sharp(e_bar, solver.caustic.E if solver.caustic is not None else None)
+        out[idx] = rec.at(vert, points.tside[idx], points.bary[idx])
+    return out
+
+
 def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, gather_rays=0,
                    penumbra_samples=None):
     """View-independent outgoing radiance (N, 3) [W m^-2 sr^-1] at located ``points``
@@ -148,51 +217,20 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, ga
     shadow rays per area light per point, ``penumbra_samples`` where they find a penumbra
     (default 16 times as many); ``rng``: a Generator (default: seeded 0);
     ``gather_rays``: 0 = the indirect light interpolated from the patches, else gathered by
-    that many rays per point (:class:`~raybundle.imaging.gather.FinalGather`).
+    that many rays per point (:class:`~raybundle.imaging.gather.FinalGather`; in slices within a
+    budget: :mod:`raybundle.imaging.bake_gather`).
     """
-    sc = solver.scene
     rng = np.random.default_rng(0) if rng is None else rng
-    out = np.zeros((len(points.triangle), 3))
+    parts = baked_parts(solver, points, light_samples, rng, penumbra_samples)
+    if not gather_rays:
+        return parts.radiance(interpolated_indirect(solver, points))
+    e = np.zeros((len(points.triangle), 3))
     idx = np.nonzero(points.found)[0]
-    if len(idx) == 0:
-        return out
-    ts, tri = points.tside[idx], points.triangle[idx]
-    m = sc.triangle_material[tri]
-    n = sc.tside_normal[ts]
-    mats = sc.materials
-    ones = np.ones(len(idx))
-    out[idx] = mats.emitted_radiance(m, ones)
-    rec = solver.reconstruction
-    e_bar = solver.indirect_incoming()
-    if gather_rays:
-        e = FinalGather(solver).irradiance(points.point[idx], sc.tside_normal[ts], int(gather_rays), rng,
-                                           at=(ts, points.bary[idx]))
-    elif np.any(e_bar):
-        vert = rec.smooth_and_sharp(e_bar, solver.caustic.E if solver.caustic is not None else None)
-        e = rec.at(vert, ts, points.bary[idx])
-    else:
-        e = np.zeros((len(idx), 3))
-    direct = solver.direct
-    if direct.n_lights:         # about the shading normal of a smooth-shaded face, as the image's
-        n_s = seen_normals(sc.shading, sc.triangle_source[tri], points.point[idx], n, n)
-        if sc.texture is not None and sc.texture.has_normal_maps:     # and of a normal or bump map
-            n_s = sc.texture.shading_normals(sc.triangle_source[tri], points.point[idx], n_s, n)
-        e = e + direct.irradiance(points.point[idx], n_s, rng, light_samples, penumbra_samples,
-                                  receivers=sc.link_groups(tri))
-    kd = mats.diffuse_reflectance[m]
-    if sc.texture is not None:                  # the texel's albedo: texture detail stays sharp
-        kd = kd * sc.texture.at(sc.triangle_source[tri], points.point[idx])
-    out[idx] += mats.diffuse_weight(m, ones) * kd / np.pi * e
-    if len(getattr(solver, "translucent_sides", ())):      # what a translucent side lets through
-        through = solver.translucent_radiance(solver.indirect_incoming())
-        out[idx] += rec.at(rec.averaged(through), ts, points.bary[idx])
-        kt = mats.translucent[m]
-        far = np.nonzero(np.any(kt > 0, axis=1))[0]
-        if direct.n_lights and len(far):               # the first-shot lights on its far side
-            out[idx[far]] += kt[far] / np.pi * direct.irradiance(points.point[idx[far]], -n[far], rng,
-                                                                 light_samples, penumbra_samples,
-                                                                 receivers=sc.link_groups(tri[far]))
-    return out
+    if len(idx):
+        ts = points.tside[idx]
+        e[idx] = FinalGather(solver).irradiance(points.point[idx], solver.scene.tside_normal[ts], int(gather_rays), rng,
+                                                at=(ts, points.bary[idx]))
+    return parts.radiance(e)
 
 
 # ------------------------------------------------------------------ lightmaps

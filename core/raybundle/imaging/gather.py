@@ -41,8 +41,10 @@ from ..tracing.visibility import near_surface
 class FinalGather:
     """The gather of one solution state (its vertex values computed once)."""
 
-    def __init__(self, solver, near=1.0, near_light_samples=1, caustic=True, world=True, image_values=None):
+    def __init__(self, solver, near=1.0, near_light_samples=1, caustic=True, world=True, image_values=None,
+                 bounce=False):
         sc, rec = solver.scene, solver.reconstruction
+        self.bounce = bool(bounce)
         self.solver, self.scene, self.rec = solver, sc, rec
         # rays that leave the scene read the world (``world`` False: left out, for an image
         # that samples the world's direct light itself, :class:`~raybundle.lights.world_light.WorldLight`)
@@ -108,9 +110,12 @@ class FinalGather:
                     c = np.nonzero(dist[hit] < self.near * self.hit_size[tri[hit]])[0]
                     if len(c):
                         h = hit[c]
-                        e_hit[c] = rec.at(self.vert_indirect, ts[c], bary[c]) + sv.direct.irradiance(
-                            origin[h] + w[h] * dist[h, None], sc.tside_normal[ts[c]], rng, self.near_light_samples,
-                            receivers=sc.link_groups(tri[h]))
+                        at_hit = origin[h] + w[h] * dist[h, None]
+                        e_ind = self._bounced(at_hit, sc.tside_normal[ts[c]], rng) if self.bounce else \
+                            rec.at(self.vert_indirect, ts[c], bary[c])
+                        e_hit[c] = e_ind + sv.direct.irradiance(at_hit, sc.tside_normal[ts[c]], rng,
+                                                                self.near_light_samples,
+                                                                receivers=sc.link_groups(tri[h]))
                 L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False,
                                      glossy_iterate=False, first_shot_glossy=self.first_shot_glossy)
                 L[hit] += self.glossy_reflected(origin[hit] + w[hit] * dist[hit, None], ts, -w[hit], rng)
@@ -121,6 +126,26 @@ class FinalGather:
             out += rec.at(self.vert_caustic, at[0], at[1])
         return out
 
+
+    def _bounced(self, points, normals, rng):
+        """E_ind (N, 3) [W/m^2] at ``points`` (N, 3) with unit ``normals`` by one cosine-distributed
+        ray each, reading at its hit what the solution's patches send (their first-shot emission
+        left out: the caller samples the lights at the points)."""
+        sv, sc = self.solver, self.scene
+        t, b = frames_from_normals(normals)
+        w = cosine_directions(rng.random((len(points), 2)), t, b, normals)
+        tri, dist, bu, bv = sv.tracer.first_hit(points + normals * sv.tracer.eps, w)
+        L = np.zeros((len(points), 3))
+        hit = np.nonzero(tri >= 0)[0]
+        if len(hit):
+            ts = sc.seen_tside(tri[hit], w[hit])
+            bary = np.stack([1 - bu[hit] - bv[hit], bu[hit], bv[hit]], axis=1)
+            L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=self.rec.at(self.vert, ts, bary),
+                                 first_shot_emission=False, glossy_iterate=False,
+                                 first_shot_glossy=self.first_shot_glossy)
+        if self.world and sc.world.emits:
+            L[tri < 0] = sc.world.radiance(w[tri < 0])
+        return np.pi * L
 
     def glossy_reflected(self, points, tside, w_out, rng):
         """What the glossy lobes of the sides ``tside`` (N,) at ``points`` (N, 3) reflect
