@@ -355,7 +355,7 @@ class BakeJob:
         t0 = time.perf_counter()
         cancelled = self.stop.is_set() or self.loop.cancelled
         solver = self.solver
-        rng = np.random.default_rng([self.plan.settings.seed, 22])
+        rng = np.random.default_rng([self.plan.settings.seed, 21])
         attributes, lightmaps, camera_path = [], {}, None
         try:
             if self.targets:

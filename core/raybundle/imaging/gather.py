@@ -43,6 +43,9 @@ class FinalGather:
 
     def __init__(self, solver, near=1.0, near_light_samples=1, caustic=True, world=True, image_values=None,
                  bounce=False):
+        """``bounce``: a ray landing within ``near`` patch sizes gathers its hit's indirect light by one
+        more ray (:meth:`_bounced`) rather than read it from the patches (bakes); its direct light is
+        sampled there either way."""
         sc, rec = solver.scene, solver.reconstruction
         self.bounce = bool(bounce)
         self.solver, self.scene, self.rec = solver, sc, rec
@@ -126,11 +129,11 @@ class FinalGather:
             out += rec.at(self.vert_caustic, at[0], at[1])
         return out
 
-
     def _bounced(self, points, normals, rng):
         """E_ind (N, 3) [W/m^2] at ``points`` (N, 3) with unit ``normals`` by one cosine-distributed
-        ray each, reading at its hit what the solution's patches send (their first-shot emission
-        left out: the caller samples the lights at the points)."""
+        ray each, reading at its hit what the solution's patches send, as :meth:`glossy_reflected`
+        reads its hits (their first-shot emission left out: the caller samples the lights at the
+        points; a glossy lobe as if it spread its light evenly)."""
         sv, sc = self.solver, self.scene
         t, b = frames_from_normals(normals)
         w = cosine_directions(rng.random((len(points), 2)), t, b, normals)
@@ -141,8 +144,7 @@ class FinalGather:
             ts = sc.seen_tside(tri[hit], w[hit])
             bary = np.stack([1 - bu[hit] - bv[hit], bu[hit], bv[hit]], axis=1)
             L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=self.rec.at(self.vert, ts, bary),
-                                 first_shot_emission=False, glossy_iterate=False,
-                                 first_shot_glossy=self.first_shot_glossy)
+                                 first_shot_emission=False, glossy_as_diffuse=True)
         if self.world and sc.world.emits:
             L[tri < 0] = sc.world.radiance(w[tri < 0])
         return np.pi * L
