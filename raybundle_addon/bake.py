@@ -361,8 +361,9 @@ class BakeJob:
             if self.targets:
                 if self._points is None:            # stopped while iterating: no gather
                     self._start_gather()
-                    self.warn("stopped: the color attributes' indirect light is interpolated from the patches "
-                              "(no final gather)")
+                    if self.bake.gather_rays:
+                        self.warn("stopped: the color attributes' indirect light is interpolated from the patches "
+                                  "(no final gather)")
                 _, back, pts, parts, gather = self._points
                 if gather.interpolated and gather.gathered:
                     why = "stopped during the final gather" if self.stop.is_set() else "the time limit came"

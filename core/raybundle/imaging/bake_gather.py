@@ -110,8 +110,8 @@ class BakeGather:
         self._spent = 0.0                    # seconds and rays of the blocks so far
         self._cast = 0
 
-    def _block_rays(self, n):
-        """Rays per point for the next block of ``n`` points (:meth:`start`)."""
+    def _block_rays(self):
+        """Rays per point for the next block (:meth:`start`)."""
         if self._deadline is None or not self._cast:
             return self.rays
         per_ray = self._spent / self._cast
@@ -127,7 +127,7 @@ class BakeGather:
         while not self.done:
             block = self.gathered // BLOCK
             which = self.todo[block * BLOCK:(block + 1) * BLOCK]
-            rays = self._block_rays(len(which))
+            rays = self._block_rays()
             if not rays:
                 self.rays = 0                                    # the rest stay interpolated
                 break

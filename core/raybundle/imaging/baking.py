@@ -217,8 +217,9 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, ga
     shadow rays per area light per point, ``penumbra_samples`` where they find a penumbra
     (default 16 times as many); ``rng``: a Generator (default: seeded 0);
     ``gather_rays``: 0 = the indirect light interpolated from the patches, else gathered by
-    that many rays per point (:class:`~raybundle.imaging.gather.FinalGather`; in slices within a
-    budget: :mod:`raybundle.imaging.bake_gather`).
+    that many rays per point, all at once, as :class:`~raybundle.imaging.bake_gather.BakeGather`
+    gathers them in slices within a bake's budget (:class:`~raybundle.imaging.gather.FinalGather`
+    with ``bounce``).
     """
     rng = np.random.default_rng(0) if rng is None else rng
     parts = baked_parts(solver, points, light_samples, rng, penumbra_samples)
@@ -228,8 +229,8 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, ga
     idx = np.nonzero(points.found)[0]
     if len(idx):
         ts = points.tside[idx]
-        e[idx] = FinalGather(solver).irradiance(points.point[idx], solver.scene.tside_normal[ts], int(gather_rays), rng,
-                                                at=(ts, points.bary[idx]))
+        e[idx] = FinalGather(solver, bounce=True).irradiance(points.point[idx], solver.scene.tside_normal[ts],
+                                                             int(gather_rays), rng, at=(ts, points.bary[idx]))
     return parts.radiance(e)
 
 

@@ -117,10 +117,11 @@ def cut_triangles(c2, cut, start, count, seg_k, crosses, eps, min_fraction, whol
             nxt = []
             for poly, kept in polys:
                 lft, rgt = split_polygon(poly, a, b, eps)
-                if lft is None:
+                areas = (polygon_area(lft), polygon_area(rgt)) if lft is not None else None
+                if areas is None:
                     nxt.append((poly, kept))
-                elif min(polygon_area(lft), polygon_area(rgt)) < least:
-                    nxt.append((poly, kept + [(a, b, polygon_area(lft) < polygon_area(rgt))]))
+                elif min(areas) < least:
+                    nxt.append((poly, kept + [(a, b, areas[0] < areas[1])]))
                 elif fixed:
                     nxt.append((poly, kept))
                 else:
