@@ -285,8 +285,11 @@ def _bake(args, scene, options, interrupted):
     try:
         job.start()
         t0 = time.perf_counter()
-        while job.step(0.5):
-            bar(job.fraction, {"iterations": job.solver.stats.iterations, "seconds": time.perf_counter() - t0})
+        more = True
+        while more:
+            more = job.step(0.5)
+            bar(job.fraction, {"iterations": job.solver.stats.iterations, "phase": job.phase,
+                               "seconds": time.perf_counter() - t0})
         bar.close()
         out = job.finish()
     except (SceneError, ValueError) as e:

@@ -8,13 +8,13 @@
   and sets up the core's solver;
 * :meth:`BakeJob.step` works for about ``budget`` seconds and returns False once done:
   it iterates until the time limit or the iteration count is reached or ``stop`` is set,
-  then gathers the color attributes' indirect light (the modal operator calls it on every
-  timer tick, headless code in a loop);
+  then gathers the color attributes' indirect light, then bakes the lightmaps one at a time
+  (:mod:`.bake_lightmaps`; the modal operator calls it on every timer tick, headless code in a loop);
 * :meth:`BakeJob.finish` evaluates the radiance at the targets' points
   (:func:`raybundle.imaging.baking.baked_parts`: per-point direct light with
   ``light_samples`` shadow rays; the indirect light of vertices and corners gathered from
-  the solution, :class:`raybundle.imaging.bake_gather.BakeGather`, that of lightmap texels
-  interpolated from the patches) and writes it into the file, on the main thread.
+  the solution, :class:`raybundle.imaging.bake_gather.BakeGather`) and writes it and the
+  lightmaps into the file, on the main thread.
 
 The gather of a bake limited by time is part of its budget: the run loop leaves
 :data:`~.properties.GATHER_SHARE` of the iteration time for it, and Gather Rays set to automatic
@@ -39,8 +39,10 @@ are left out):
   renders (so it does not add its geometry twice), and the original is left alone;
 * a lightmap per selected mesh with a UV map: an RGB float EXR
   ``<object>.lightmap.exr`` of ``lightmap_size``² texels, each texel the radiance at
-  its centre's point (the active UV map), dilated by ``lightmap_margin`` texels
-  around the islands, loaded as an Image of the same name;
+  its centre's point (the active UV map), its direct light averaged over its footprint (as
+  Cycles' bake does), its indirect light interpolated from the patches or, next to concave
+  edges and contacts, gathered (:class:`raybundle.imaging.lightmap.TexelGather`), dilated by
+  ``lightmap_margin`` texels around the islands, loaded as an Image of the same name;
 * with ``camera``, the active camera's view as ``<scene>.camera.exr`` and an Image.
 
 Files go to ``directory`` (``//`` = next to the .blend); an unsaved file's
@@ -62,6 +64,7 @@ from raybundle.imaging.run import RunLoop
 
 from .translation.export import export_scene
 from .translation.mesh_data import corner_vertices
+from .bake_lightmaps import LightmapBake
 from .properties import FIXED_GATHER_RAYS, GATHER_SHARE, LAST_BAKE, BakeSettings, run_options
 
 ATTRIBUTE = "RayBundle"
@@ -128,7 +131,8 @@ class BakeJob:
         self.warnings = []
         self.fraction = 0.0
         self.export = self.solver = self.renderer = None
-        self.targets, self.lightmap_targets = [], []
+        self.targets = []
+        self.lightmaps = LightmapBake(self)
         self.t_start = self.loop = None
         self.timings = {}
         #: the color attributes' points once the iteration ends: ``(rep, back, points, parts, gather)``
@@ -160,8 +164,8 @@ class BakeJob:
             if b.color_attribute:
                 self._pick_attribute_targets()
             if b.lightmaps:
-                self._pick_lightmap_targets()
-                if not self.lightmap_targets and not b.color_attribute and not b.camera:
+                self.lightmaps.pick(self.lightmap_objects)
+                if not self.lightmaps.targets and not b.color_attribute and not b.camera:
                     raise ValueError("nothing to bake: no selected mesh has a UV map for a lightmap")
             self.timings["export_seconds"] = time.perf_counter() - self.t_start
             self.plan = plan(self.export.scene, self.options, bake=True)
@@ -239,60 +243,42 @@ class BakeJob:
                 self.warn(f"mesh of {t.info.original!r} is shared with {names}{more}: it holds "
                           f"{t.info.original!r}'s light (turn on Make Single User to bake each)")
 
-    def _pick_lightmap_targets(self):
-        seen = set()
-        for info in self.export.objects:
-            if info.is_instance or info.original in seen:
-                continue
-            if self.lightmap_objects is not None and info.original not in self.lightmap_objects:
-                continue
-            seen.add(info.original)
-            ob = bpy.data.objects.get(info.original)
-            if ob is None:
-                continue
-            ev = ob.evaluated_get(self.depsgraph)
-            me = ev.data if ev.type == "MESH" else None
-            layer = me.uv_layers.active if me is not None else None
-            if layer is None or len(me.loops) != info.n_loops:
-                self.warn(f"object {info.original!r} has no UV map: no lightmap (add one, e.g. UV > Smart UV "
-                          "Project or Lightmap Pack)")
-                continue
-            uv = np.empty(2 * info.n_loops, np.float32)
-            layer.uv.foreach_get("vector", uv)
-            tri = np.arange(info.first_triangle, info.first_triangle + info.n_triangles)
-            loops = self.export.triangle_loops[tri]
-            self.lightmap_targets.append((info, uv.reshape(-1, 2)[loops].astype(float), layer.name))
-        if self.lightmap_objects is not None:
-            missing = sorted(self.lightmap_objects - seen)
-            for name in missing:
-                ob = bpy.data.objects.get(name)
-                if ob is not None and ob.type in ("MESH",):
-                    self.warn(f"object {name!r} is not rendered (hidden or excluded): no lightmap")
-
     # ------------------------------------------------------------------ step
     def step(self, budget=0.1):
         """Work for about ``budget`` seconds (the run loop, :class:`raybundle.imaging.run.RunLoop`,
         owns the whole job's budget from its start, export and set-up included): iterate, then
-        gather the color attributes' indirect light; False once done (or stopped)."""
+        gather the color attributes' indirect light, then the lightmaps' (after the budget, one at a
+        time); False once done (or stopped)."""
+        lm = self.lightmaps
+        timed = 0.5 if lm.targets else 1.0          # the bar's share of the budgeted part
         if not self.loop.finished:
             more = self.loop.advance(max_seconds=budget)
-            self.fraction = self.loop.fraction / (1.0 + self.loop.final_share)
+            self.fraction = timed * self.loop.fraction / (1.0 + self.loop.final_share)
             if more:
                 return True
             if self.targets and not self.loop.cancelled:
                 self._start_gather()
-        gather = self._points[4] if self._points is not None else None
-        if gather is None or gather.done or self.stop.is_set():
+        if self.stop.is_set() or self.loop.cancelled:
             self.fraction = 1.0
             return False
-        more = gather.advance(budget)
-        share = self.loop.final_share / (1.0 + self.loop.final_share)
-        self.fraction = 1.0 - share + share * gather.fraction
+        gather = self._points[4] if self._points is not None else None
+        if gather is not None and not gather.done:
+            more = gather.advance(budget)
+            share = self.loop.final_share / (1.0 + self.loop.final_share)
+            self.fraction = timed * (1.0 - share + share * gather.fraction)
+            if more:
+                return True
+        t0 = time.perf_counter()
+        more = lm.step(budget)
+        self.timings["lightmap_seconds"] = self.timings.get("lightmap_seconds", 0.0) + time.perf_counter() - t0
+        self.fraction = 1.0 if not more else timed + (1.0 - timed) * lm.done / len(lm.targets)
         return more
 
     @property
     def phase(self):
-        """What :meth:`step` does now, for the progress display: the iteration or the gather."""
+        """What :meth:`step` does now, for the progress display: the iteration, the gather or a lightmap."""
+        if self.lightmaps.phase:
+            return self.lightmaps.phase
         if self._points is None:
             return f"iteration {self.solver.stats.iterations}"
         g = self._points[4]
@@ -353,9 +339,9 @@ class BakeJob:
     def finish(self):
         """Evaluate and write everything (main thread).  Returns :class:`BakeOutcome`."""
         t0 = time.perf_counter()
+        stepped = self.timings.get("lightmap_seconds", 0.0)        # the lightmaps' time in step
         cancelled = self.stop.is_set() or self.loop.cancelled
         solver = self.solver
-        rng = np.random.default_rng([self.plan.settings.seed, 21])
         attributes, lightmaps, camera_path = [], {}, None
         try:
             if self.targets:
@@ -380,24 +366,28 @@ class BakeJob:
                         attributes.append(got)
                     k += m
             directory = packed = None
-            if self.lightmap_targets or self.bake.camera:
+            if self.lightmaps.targets or self.bake.camera:
                 directory, packed = self._directory()
-            for info, uv, uv_name in self.lightmap_targets:
-                path = self._lightmap(info, uv, uv_name, directory, packed, rng)
-                if path:
-                    lightmaps[info.original] = path
+            t1 = time.perf_counter()
+            for (info, _, uv_name), img in self.lightmaps.images():
+                lightmaps[info.original] = self._save_image(
+                    f"{info.original}.lightmap", img, directory, packed,
+                    {"raybundle_object": info.original, "raybundle_uv_map": uv_name,
+                     "raybundle_iterations": self.solver.stats.iterations})
+            self.timings["lightmap_seconds"] = self.timings.get("lightmap_seconds", 0.0) + time.perf_counter() - t1
             if self.bake.camera:
                 camera_path = self._camera_image(directory, packed)
         finally:
             solver.tracer.close()
         t_done = time.perf_counter()
         st = solver.stats
-        note = self.loop.budget_note(t0 - self.t_start)          # the budget covers the iterations and the gather
+        # the budget covers the iterations and the gather, not the lightmaps
+        note = self.loop.budget_note(t0 - self.t_start - stepped)
         if note:
             self.warn(note)
         stats = {"iterations": st.iterations, "directions": st.directions, "patches": int(solver.scene.n_patches),
                  "triangles": int(len(solver.scene.triangles)), "rays_traced": int(st.rays),
-                 "solve_seconds": round(t0 - self.loop.t0, 4),
+                 "solve_seconds": round(t0 - self.loop.t0 - stepped, 4),
                  "bake_seconds": round(t_done - t0, 4), "total_seconds": round(t_done - self.t_start, 4),
                  "attributes": len(attributes), "lightmaps": len(lightmaps), "cancelled": cancelled,
                  **{k: round(v, 4) for k, v in self.timings.items()}}
@@ -551,35 +541,6 @@ class BakeJob:
         if packed:
             img.pack()
         return path
-
-    def _lightmap(self, info, uv, uv_name, directory, packed, rng):
-        from raybundle.imaging.baking import baked_radiance, dilate, locate_points, texel_points
-
-        size = self.bake.lightmap_size
-        tx = texel_points(uv, size, size)
-        if tx.overlap:
-            self.warn(f"object {info.original!r}: overlapping UV islands ({tx.overlap} texels claimed twice); "
-                      "use a UV map without overlaps (e.g. Lightmap Pack) for lightmaps")
-        if len(tx.texel) == 0:
-            self.warn(f"object {info.original!r}: its UV map covers no texel centre of a {size}² lightmap; "
-                      "no lightmap")
-            return None
-        pts = locate_points(self.export.scene, self.solver.scene, self.solver.tracer,
-                            info.first_triangle + tx.triangle, tx.bary)
-        # a million texels: a quarter of the shadow rays where they all agree (exact there: the
-        # light is integrated analytically) and 4 times as many in a penumbra, which neighbouring
-        # texels share (16 times as many everywhere took several times as long: docs/benchmarks.md, 'Measured
-        # choices behind the defaults')
-        n = self.bake.light_samples
-        values = baked_radiance(self.solver, pts, max(1, n // 4), rng, penumbra_samples=4 * n)
-        img = np.zeros((size * size, 3))
-        img[tx.texel] = values
-        filled = np.zeros(size * size, bool)
-        filled[tx.texel] = pts.found
-        img, _ = dilate(img.reshape(size, size, 3), filled.reshape(size, size), self.bake.lightmap_margin)
-        return self._save_image(f"{info.original}.lightmap", img, directory, packed,
-                                {"raybundle_object": info.original, "raybundle_uv_map": uv_name,
-                                 "raybundle_iterations": self.solver.stats.iterations})
 
     def _camera_image(self, directory, packed):
         r = self.renderer

@@ -192,25 +192,6 @@ def render_cycles(path, samples=64, seed=0, pixel_filter=("BOX", 1.0)):
     return read_exr(path)
 
 
-def cycles_bake(ob, size):
-    """Cycles' Combined bake (the scene's Cycles settings) of object ``ob``'s first material into a
-    ``size`` x ``size`` image through its active UV map: (size, size, 3), rows bottom-up (as
-    ``Image.pixels``).  The image node it bakes through is removed afterwards."""
-    nt = ob.data.materials[0].node_tree
-    target = bpy.data.images.new(f"cycles bake {ob.name}", size, size, float_buffer=True)
-    node = nt.nodes.new("ShaderNodeTexImage")
-    node.image = target
-    nt.nodes.active = node
-    for other in bpy.context.scene.objects:
-        other.select_set(other is ob)
-    bpy.context.view_layer.objects.active = ob
-    bpy.ops.object.bake(type="COMBINED", margin=0, use_clear=True, target="IMAGE_TEXTURES")
-    px = np.empty(size * size * 4, np.float32)
-    target.pixels.foreach_get(px)
-    nt.nodes.remove(node)
-    return px.reshape(size, size, 4)[..., :3]
-
-
 def lightmap_blocks(x, block=4):
     """(H / block, W / block, 3) means of ``block`` x ``block`` texels."""
     h, w = x.shape[:2]

@@ -310,8 +310,10 @@ def test_headless_bake_writes_a_baked_copy_of_the_file_and_lightmaps(fresh, tmp_
     bpy.ops.wm.save_as_mainfile(filepath=str(src))
     r = subprocess.run(blender_cli_command(src, "--bake", dst, "--iterations", 5, "--lightmaps", tmp_path / "maps",
                                            "--lightmap-size", 16, "--subdivide", 2),
-                       capture_output=True, text=True, cwd=tmp_path, timeout=300)
+                       capture_output=True, text=True, cwd=tmp_path, timeout=300,
+                       env=dict(os.environ, RAYBUNDLE_PROGRESS="1"))
     assert r.returncode == 0, r.stderr
+    assert "gathering" in r.stderr          # the bar names the phase, not only the iterations
     assert os.path.isfile(tmp_path / "maps" / "plane.lightmap.exr")
     bpy.ops.wm.open_mainfile(filepath=str(dst))
     _, rgba = attribute(bpy.data.objects["plane.RayBundle"])      # --subdivide: into the cut copy

@@ -190,7 +190,8 @@ def test_lightmaps_under_a_glass_pane_and_of_a_translucent_sheet_are_cycles_bake
     iterations) against Cycles' Combined bake (4096 samples, whose light through the glass is found
     by its BSDF's rays: 8 x 8 blocks of it differ by up to 3%), block by block.  The plate under the
     pane gets the lamp through both faces; the sheet sends on the lamp's light on its far side."""
-    from addon_helpers import cycles_bake, lightmap_blocks, plane_with_uvs
+    from addon_helpers import lightmap_blocks, plane_with_uvs
+    from cycles_reference import bake_image
     from cycles_reference import cycles_settings
 
     from raybundle.util.io import read_exr
@@ -213,7 +214,7 @@ def test_lightmaps_under_a_glass_pane_and_of_a_translucent_sheet_are_cycles_bake
     for name in ("plate", "sheet"):
         ob = bpy.data.objects[name]
         ours = read_exr(out.lightmaps[name])[::-1]              # rows bottom-up, as Image.pixels
-        rel[name] = lightmap_blocks(ours) / lightmap_blocks(cycles_bake(ob, 32)) - 1
+        rel[name] = lightmap_blocks(ours) / lightmap_blocks(bake_image(ob, 32)) - 1
     # measured: plate mean 0.7%, RMS 3.4%, largest 10%; sheet 0.04%, 0.08%, 0.35% (without
     # the penumbra samples where shadow rays passed the glass: plate mean +4.1%; translucency: -100%)
     for name, (mean, rms, most) in {"plate": (0.02, 0.05, 0.12), "sheet": (0.01, 0.02, 0.05)}.items():

@@ -344,7 +344,8 @@ def test_a_lightmap_of_a_node_graph_texture_is_cycles_bake(fresh, tmp_path):
     lightmap (32 x 32 texels, direct light of the point lamp times the graph's albedo) against
     Cycles' own Combined bake of the same material into the same UV map, in 8 x 8 blocks of
     4 x 4 texels (one texel of the image each)."""
-    from addon_helpers import cycles_bake, lightmap_blocks
+    from addon_helpers import lightmap_blocks
+    from cycles_reference import bake_image
     from cycles_reference import cycles_settings
 
     from raybundle.util.io import read_exr
@@ -363,7 +364,7 @@ def test_a_lightmap_of_a_node_graph_texture_is_cycles_bake(fresh, tmp_path):
     out = BakeJob(bpy.context.evaluated_depsgraph_get(), lightmap_objects=["plane"]).run()
     ours = read_exr(out.lightmaps["plane"])[::-1]              # rows bottom-up, as Image.pixels
     cycles_settings(256, 1, world_strength=None)
-    rel = lightmap_blocks(ours) / lightmap_blocks(cycles_bake(plane, 32)) - 1
+    rel = lightmap_blocks(ours) / lightmap_blocks(bake_image(plane, 32)) - 1
     # measured: mean 0.07%, RMS 0.16%, largest 0.41% (the socket's own color: -70 .. +400%)
     assert abs(rel.mean()) < 0.005 and np.sqrt((rel ** 2).mean()) < 0.01 and np.abs(rel).max() < 0.03, rel
 

@@ -195,7 +195,7 @@ def test_furnace_bake_is_le_over_one_minus_albedo(gather, seed=0):
 
 
 def test_texel_points_cover_each_texel_once_and_reproduce_its_centre():
-    from raybundle.imaging.baking import texel_points
+    from raybundle.imaging.lightmap import texel_points
 
     # the unit square as two triangles, plus a degenerate triangle (covers nothing)
     uv = np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]], [[0.2, 0.2], [0.2, 0.2], [0.3, 0.3]]], float)
@@ -213,7 +213,7 @@ def test_texel_points_cover_each_texel_once_and_reproduce_its_centre():
 
 
 def test_dilate_grows_the_margin_by_neighbour_means():
-    from raybundle.imaging.baking import dilate
+    from raybundle.imaging.lightmap import dilate
 
     img = np.zeros((9, 9, 1))
     ok = np.zeros((9, 9), bool)

@@ -61,9 +61,11 @@ def test_the_blender_bench_writes_its_section(tmp_path):
 
 def test_the_bake_bench_writes_its_section(tmp_path):
     _, _, body = run_tool(tmp_path, "bench_bake", "bake", "--reference-samples", 4, "--times", 0.5,
-                          "--max-cycles-seconds", 1, "--lightmap-size", 32, "--lightmap-seconds", 0.5)
+                          "--max-cycles-seconds", 1, "--lightmap-size", 32, "--lightmap-seconds", 0.5,
+                          "--lightmap-error-size", 16, "--lightmap-reference-samples", 4)
     assert "4,624 vertices" in body and "| 0.5 s |" in body and "A 32² lightmap of the floor" in body
-    charts(tmp_path / "docs", "bake", 1)
+    assert "The floor's 16² lightmap against Cycles' bake" in body
+    charts(tmp_path / "docs", "bake", 2)
 
 
 def test_the_scale_bench_writes_its_section(tmp_path):

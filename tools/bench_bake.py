@@ -25,8 +25,16 @@ creases shared by faces of different normals.
    (from its halves) subtracted.
 4. A 1024² lightmap of the floor (its lightmap UV tile) after a ``--lightmap-seconds``
    solve: the time of the whole job and of the lightmap itself.
+5. With ``--lightmap-error-size`` S (the bench file's default 256, 0 for none): the floor's S²
+   lightmap against Cycles' bake of it (two halves of ``--lightmap-reference-samples``, cached as
+   ``reference-lightmap-<file>-<S>-<samples>.npz``), raybundle after each of ``--times`` and Cycles
+   with 4, 16, 64, ... samples, each timed from opening the file to the lightmap written; the error
+   over the texels at least 2 texels from a seam (an island's edge).  Cycles' bake averages a
+   texel's footprint, raybundle's takes its centre: the texels whose footprint reaches under a
+   block differ by that.
 
-Writes ``bake-<file>.csv``, ``summary-<file>.json`` and ``bake-<file>.png`` into ``--out`` and prints, for
+Writes ``bake-<file>.csv``, ``summary-<file>.json`` and ``bake-<file>.png`` (and ``lightmap-<file>.png``) into
+``--out`` and prints, for
 every raybundle time, Cycles' error at the same time and Cycles' time for the same
 error (log-log interpolation between its runs).
 """
@@ -126,6 +134,90 @@ def raybundle_bake(blend, seconds, seed, lightmap_size=None, directory=None):
     return (*read_attribute("RayBundle"), wall, out)
 
 
+def floor_lightmap(size):
+    """(size, size, 3) the open file's ``floor.lightmap`` Image, rows bottom-up."""
+    import bpy
+
+    px = np.empty(size * size * 4, np.float32)
+    bpy.data.images["floor.lightmap"].pixels.foreach_get(px)
+    return px.reshape(size, size, 4)[..., :3].astype(float)
+
+
+def cycles_lightmap(blend, size, samples, seed):
+    """Open ``blend``, bake the floor's lightmap with Cycles; ((size, size, 3), wall s, kept (size, size) bool:
+    the texels at least 2 from a seam)."""
+    import bpy
+    from cycles_reference import bake_image, cycles_settings
+
+    from raybundle.app.metrics import dilate
+    from raybundle.imaging.lightmap import texel_points
+
+    t0 = time.perf_counter()
+    _open(blend)
+    cycles_settings(samples, seed, world_strength=None)
+    floor = bpy.data.objects["floor"]
+    img = bake_image(floor, size)
+    wall = time.perf_counter() - t0
+    me = floor.data
+    me.calc_loop_triangles()
+    loops = np.empty(3 * len(me.loop_triangles), np.int64)
+    me.loop_triangles.foreach_get("loops", loops)
+    uv = np.empty(2 * len(me.loops))
+    me.uv_layers.active.data.foreach_get("uv", uv)
+    covered = np.zeros(size * size, bool)
+    covered[texel_points(uv.reshape(-1, 2)[loops].reshape(-1, 3, 2), size, size).texel] = True
+    return img.astype(float), wall, ~dilate(~covered.reshape(size, size), 2)
+
+
+def lightmap_errors(blend, a, out_rows):
+    """Item 5 of the module docstring: rows of (engine, setting, seconds, error) into ``out_rows``;
+    the text for the page."""
+    from raybundle.app.metrics import image_error
+
+    size, n = a.lightmap_error_size, a.lightmap_reference_samples
+    cache = os.path.join(a.out, f"reference-lightmap-{_stem(blend)}-{size}-{n}.npz")
+    if not os.path.exists(cache):
+        halves = []
+        for seed in (1, 2):
+            print(f"Cycles reference lightmap, half {seed}: {size}², {n} samples ...", flush=True)
+            img, wall, kept = cycles_lightmap(blend, size, n, seed)
+            print(f"  {wall:.0f} s", flush=True)
+            halves.append(img)
+        np.savez(cache, a=halves[0], b=halves[1], kept=kept)
+    ref = np.load(cache)
+    halves, exclude = [ref["a"], ref["b"]], ~ref["kept"]
+    reference = 0.5 * (halves[0] + halves[1])
+
+    def error(img):
+        return image_error(img, reference, reference_halves=halves, exclude=exclude)
+
+    for t in a.times:
+        _, _, wall, out = raybundle_bake(blend, t, seed=3, lightmap_size=size,
+                                         directory=os.path.abspath(os.path.join(a.out, "lightmaps")))
+        e = error(floor_lightmap(size))
+        out_rows.append(dict(engine="raybundle", setting=t, seconds=wall, error=e["error"], raw=e["raw"],
+                             iterations=out.stats["iterations"], mean=e["mean_ratio"]))
+        print(f"raybundle lightmap {size}², {t:g} s: {wall:.1f} s wall, error {e['error']:.4f}, mean "
+              f"x{e['mean_ratio']:.4f}, {out.stats['iterations']} iterations", flush=True)
+    samples = 4
+    while True:
+        img, wall, _ = cycles_lightmap(blend, size, samples, seed=7)
+        e = error(img)
+        out_rows.append(dict(engine="cycles", setting=samples, seconds=wall, error=e["error"], raw=e["raw"],
+                             iterations=samples, mean=e["mean_ratio"]))
+        print(f"cycles lightmap {size}², {samples} spp: {wall:.1f} s wall, error {e['error']:.4f}", flush=True)
+        if (e["error"] < min(r["error"] for r in out_rows if r["engine"] == "raybundle")
+                or wall > a.max_cycles_seconds):
+            break
+        samples *= 4
+    lines = ["| raybundle Time Limit | seconds | iterations | error | mean |", "|---|---|---|---|---|"]
+    lines += [f"| {r['setting']:g} s | {r['seconds']:.1f} | {r['iterations']} | {100 * r['error']:.2f}% | "
+              f"×{r['mean']:.4f} |" for r in out_rows if r["engine"] == "raybundle"]
+    return (f"\n\nThe floor's {size}² lightmap against Cycles' bake of it (2 × {n} samples, its noise "
+            "subtracted), over the texels at least 2 from a seam, each timed from opening the file to the "
+            "lightmap written:\n\n" + "\n".join(lines) + "\n")
+
+
 def own_table(own):
     """raybundle's bakes, a row each: the Time Limit, the wall seconds, iterations, the gather's
     rays per point, the error and the mean against the reference's (Markdown)."""
@@ -146,6 +238,9 @@ def main(argv=None):
     p.add_argument("--max-cycles-seconds", type=float, default=400.0)
     p.add_argument("--lightmap-size", type=int, default=1024, help="0: no lightmap (a file without UV maps)")
     p.add_argument("--lightmap-seconds", type=float, default=5.0)
+    p.add_argument("--lightmap-error-size", type=int, default=None,
+                   help="the lightmap compared with Cycles' (default 256 on cornell_bake.blend, else 0: none)")
+    p.add_argument("--lightmap-reference-samples", type=int, default=4096)
     p.add_argument("--reference-only", action="store_true", help="make the cached reference and stop")
     add_page_argument(p, "bake")
     a = p.parse_args(argv)
@@ -206,18 +301,31 @@ def main(argv=None):
         _, _, wall, out = raybundle_bake(blend, a.lightmap_seconds, seed=3, lightmap_size=a.lightmap_size,
                                          directory=os.path.abspath(os.path.join(a.out, "lightmaps")))
         lightmap = dict(size=a.lightmap_size, solve_seconds=a.lightmap_seconds, wall_seconds=wall,
-                        lightmap_seconds=out.stats["bake_seconds"])
+                        lightmap_seconds=out.stats["lightmap_seconds"])
         lightmap_text = (f"\nA {a.lightmap_size}² lightmap of the floor after a {a.lightmap_seconds:g} s solve: "
-                         f"{wall:.1f} s from opening the file, of which {out.stats['bake_seconds']:.1f} s for the "
+                         f"{wall:.1f} s from opening the file, of which {out.stats['lightmap_seconds']:.1f} s for the "
                          "lightmap itself.")
         print(lightmap_text.strip())
+    lightmap_rows = []
+    if a.lightmap_error_size is None:
+        a.lightmap_error_size = 256 if _stem(blend) == "cornell_bake" else 0
+    if a.lightmap_error_size:
+        lightmap_text += lightmap_errors(blend, a, lightmap_rows)
+        lm_summary = side_by_side(lightmap_rows)
+        lm_targets = time_to_errors(lightmap_rows, goals=(0.05, 0.02, 0.01))
+        lightmap_text += "\n" + comparison_tables(lightmap_rows, lm_summary, lm_targets)
+        lm_png = os.path.join(a.out, f"lightmap-{_stem(blend)}.png")
+        chart(lm_png, lightmap_rows, f"{_stem(blend)}: the floor's {a.lightmap_error_size}² lightmap",
+              ylabel="relative RMSE over the texels against a long Cycles bake",
+              xlabel="seconds from loading the .blend to the lightmap written (2 cores)", all_pixels=False)
     with open(os.path.join(a.out, f"bake-{_stem(blend)}.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
     with open(os.path.join(a.out, f"summary-{_stem(blend)}.json"), "w") as f:
         json.dump(dict(blend=blend, reference_samples_per_half=a.reference_samples, rows=rows, summary=summary,
-                       time_to_error=targets, lightmap=lightmap, raybundle=own), f, indent=1)
+                       time_to_error=targets, lightmap=lightmap, raybundle=own, lightmap_rows=lightmap_rows), f,
+                  indent=1)
     png = os.path.join(a.out, f"bake-{_stem(blend)}.png")
     chart(png, rows, f"{_stem(blend)}, {len(reference):,} vertices: point-domain bake",
           ylabel="relative RMSE over the vertices against a long Cycles bake",
@@ -233,7 +341,7 @@ def main(argv=None):
                       "subtracted; the lamp's vertices left out. Error: relative RMSE over the vertices; "
                       "mean: raybundle's over the reference's.\n\n"
                       + own_table(own) + "\n" + comparison_tables(rows, summary, targets) + lightmap_text,
-                      [png], command=command_line("tools/bench_bake.py", argv))
+                      [png] + ([lm_png] if lightmap_rows else []), command=command_line("tools/bench_bake.py", argv))
         print(f"wrote its section of {a.page}")
     return 0
 

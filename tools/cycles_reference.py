@@ -198,6 +198,26 @@ def plane_under_white_world(material, cos_view, res, samples, path):
     return render_to(str(path)).reshape(-1, 3).astype(float)
 
 
+def bake_image(ob, size):
+    """Cycles' Combined bake (the scene's Cycles settings) of object ``ob``'s first material into a
+    ``size`` x ``size`` image through its active UV map: (size, size, 3), rows bottom-up (as
+    ``Image.pixels``).  The image node it bakes through is removed afterwards."""
+    bpy = _bpy()
+    nt = ob.data.materials[0].node_tree
+    target = bpy.data.images.new(f"cycles bake {ob.name}", size, size, float_buffer=True)
+    node = nt.nodes.new("ShaderNodeTexImage")
+    node.image = target
+    nt.nodes.active = node
+    for other in bpy.context.scene.objects:
+        other.select_set(other is ob)
+    bpy.context.view_layer.objects.active = ob
+    bpy.ops.object.bake(type="COMBINED", margin=0, use_clear=True, target="IMAGE_TEXTURES")
+    px = np.empty(size * size * 4, np.float32)
+    target.pixels.foreach_get(px)
+    nt.nodes.remove(node)
+    return px.reshape(size, size, 4)[..., :3]
+
+
 def unsupported(scene):
     """Why the scene cannot be built here (this script models triangles, Mix(Diffuse, Glossy)
     materials and one-sided emission, under a black world), or None."""

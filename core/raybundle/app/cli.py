@@ -27,7 +27,8 @@ from .plan import DEFAULT_TIME_LIMIT
 
 
 class ProgressBar:
-    """A one-line progress bar on a stream, redrawn at most 10 times a second."""
+    """A one-line progress bar on a stream, redrawn at most 10 times a second: the share done, then
+    ``info``'s ``phase`` (what the job does now) or its ``iterations``, and its ``seconds``."""
 
     def __init__(self, stream=sys.stderr, width=30):
         self.stream, self.width, self._last = stream, width, 0.0
@@ -41,7 +42,7 @@ class ProgressBar:
         self._last = now
         n = int(round(fraction * self.width))
         self.stream.write(f"\r[{'#' * n}{'.' * (self.width - n)}] {100 * fraction:5.1f}%  "
-                          f"{info['iterations']} iterations  {info['seconds']:.1f} s ")
+                          f"{info.get('phase') or str(info['iterations']) + ' iterations'}  {info['seconds']:.1f} s ")
         self.stream.flush()
         self._drawn = True
 

@@ -23,13 +23,13 @@ BLOCK = 256
 
 
 class BakeGather:
-    """The final gather of located bake ``points`` (:class:`~raybundle.imaging.baking.SurfacePoints`)
-    into ``solver``'s solution, with random streams from ``seed``; where a ray lands within a patch
-    of its point (a concave edge, a contact), one more cosine ray from the hit gathers the hit's
-    indirect light (:class:`~raybundle.imaging.gather.FinalGather` ``bounce``), where the patch
-    values cannot follow it.  :attr:`indirect` (N, 3)
-    [W/m^2] holds the interpolated values until :meth:`advance` replaces them, block by block,
-    with gathered ones; :attr:`gathered` counts the points done."""
+    """The final gather of located bake ``points`` (:class:`~raybundle.imaging.baking.SurfacePoints`),
+    or of those ``which`` indexes, into ``solver``'s solution, with random streams from ``seed`` (an
+    int or a sequence of ints); where a ray lands within a patch of its point (a concave edge, a
+    contact), one more cosine ray from the hit gathers the hit's indirect light
+    (:class:`~raybundle.imaging.gather.FinalGather` ``bounce``), where the patch values cannot follow
+    it.  :attr:`indirect` (N, 3) [W/m^2] holds the interpolated values until :meth:`advance` replaces
+    them, block by block, with gathered ones; :attr:`gathered` counts the points done."""
 
     #: the fewest rays per point worth gathering: a bake that buys fewer interpolates
     MIN_RAYS = EdgeGather.MIN_GATHER_RAYS
@@ -38,16 +38,21 @@ class BakeGather:
     #: the probe that measures a ray's cost: this many points, this many rays each
     PROBE_POINTS, PROBE_RAYS = EdgeGather.PROBE_POINTS, EdgeGather.PROBE_RAYS
 
-    def __init__(self, solver, points, seed=0):
+    def __init__(self, solver, points, seed=0, which=None):
         self.solver, self.points, self.seed = solver, points, seed
         self.indirect = interpolated_indirect(solver, points)
-        self.todo = np.nonzero(points.found)[0]
+        #: the points to gather (``which``; default: every point found), in order
+        self.todo = np.nonzero(points.found)[0] if which is None else np.asarray(which, np.int64)
         self.gathered = 0
         self.rays = self.fewest = 0
         self._deadline, self._spent, self._cast = None, 0.0, 0
         #: seconds :meth:`advance` took
         self.seconds = 0.0
         self._final = None
+
+    def _stream(self, k):
+        """The random stream ``k`` of the seed (an int or a sequence of ints)."""
+        return np.random.default_rng([*np.atleast_1d(self.seed), k])
 
     @property
     def final(self):
@@ -84,7 +89,7 @@ class BakeGather:
         if not len(self.todo) or seconds <= 0:
             return 0
         probe = self.todo[:: max(1, len(self.todo) // self.PROBE_POINTS)]
-        rng = np.random.default_rng([self.seed, 1 << 30])
+        rng = self._stream(1 << 30)
         r1, r2 = self.PROBE_RAYS // 4, self.PROBE_RAYS
         t0 = time.perf_counter()
         self._irradiance(probe, r1, rng)
@@ -132,7 +137,7 @@ class BakeGather:
                 self.rays = 0                                    # the rest stay interpolated
                 break
             t1 = time.perf_counter()
-            self.indirect[which] = self._irradiance(which, rays, np.random.default_rng([self.seed, block]))
+            self.indirect[which] = self._irradiance(which, rays, self._stream(block))
             self._spent += time.perf_counter() - t1
             self._cast += rays * len(which)
             self.fewest = min(self.fewest, rays)

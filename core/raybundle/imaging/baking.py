@@ -155,9 +155,12 @@ class BakedParts:
         return self.emitted + self.reflectance * (self.direct + indirect) + self.through
 
 
-def baked_parts(solver, points: SurfacePoints, light_samples=16, rng=None, penumbra_samples=None) -> BakedParts:
+def baked_parts(solver, points: SurfacePoints, light_samples=16, rng=None, penumbra_samples=None,
+                footprint=None) -> BakedParts:
     """:class:`BakedParts` of located ``points``: all but the indirect light.  ``solver``, ``rng``,
-    ``light_samples`` and ``penumbra_samples`` as in :func:`baked_radiance`."""
+    ``light_samples`` and ``penumbra_samples`` as in :func:`baked_radiance`; ``footprint``: a
+    :class:`~raybundle.tracing.footprint.Footprint` per point whose direct light is averaged over it
+    (lightmap texels), or None."""
     sc = solver.scene
     rng = np.random.default_rng(0) if rng is None else rng
     parts = BakedParts(*(np.zeros((len(points.triangle), 3)) for _ in range(4)))
@@ -176,7 +179,8 @@ def baked_parts(solver, points: SurfacePoints, light_samples=16, rng=None, penum
         if sc.texture is not None and sc.texture.has_normal_maps:     # and of a normal or bump map
             n_s = sc.texture.shading_normals(sc.triangle_source[tri], points.point[idx], n_s, n)
         parts.direct[idx] = direct.irradiance(points.point[idx], n_s, rng, light_samples, penumbra_samples,
-                                              receivers=sc.link_groups(tri))
+                                              receivers=sc.link_groups(tri),
+                                              footprint=None if footprint is None else footprint.subset(idx))
     kd = mats.diffuse_reflectance[m]
     if sc.texture is not None:                  # the texel's albedo: texture detail stays sharp
         kd = kd * sc.texture.at(sc.triangle_source[tri], points.point[idx])
@@ -232,101 +236,6 @@ def baked_radiance(solver, points: SurfacePoints, light_samples=16, rng=None, ga
         e[idx] = FinalGather(solver, bounce=True).irradiance(points.point[idx], solver.scene.tside_normal[ts],
                                                              int(gather_rays), rng, at=(ts, points.bary[idx]))
     return parts.radiance(e)
-
-
-# ------------------------------------------------------------------ lightmaps
-@dataclass
-class Texels:
-    """Lightmap texels covered by UV triangles: flat texel index ``y * width + x`` (N,)
-    (row y = 0 at v = 0, the bottom: Blender's image order), the triangle (N,) (an
-    index into the ``uv`` array given) and barycentrics on it (N, 3); ``overlap``: how
-    many texels more than one triangle claimed (overlapping UV islands: the last one
-    in triangle order wins)."""
-
-    texel: np.ndarray
-    triangle: np.ndarray
-    bary: np.ndarray
-    overlap: int = 0
-
-
-def texel_points(uv, width, height, chunk=1 << 22):
-    """The texels whose centres ``((x + 0.5) / W, (y + 0.5) / H)`` lie in UV triangles
-    ``uv`` (T, 3, 2) (u right, v up, the unit square is the image), with each centre's
-    barycentrics on its triangle: the points a lightmap bakes.  Texels on an edge shared
-    by two triangles of one island go to one of them (the same point either way).
-    Degenerate UV triangles (zero area) cover nothing.  Returns :class:`Texels`."""
-    uv = np.asarray(uv, float)
-    w, h = int(width), int(height)
-    if w < 1 or h < 1:
-        raise ValueError("the lightmap size must be at least 1 x 1")
-    p = uv * np.array([w, h]) - 0.5                          # texel-centre coordinates
-    lo = np.ceil(p.min(axis=1) - 1e-9).astype(np.int64)
-    hi = np.floor(p.max(axis=1) + 1e-9).astype(np.int64)
-    lo = np.maximum(lo, 0)
-    hi = np.minimum(hi, [w - 1, h - 1])
-    a = p[:, 1] - p[:, 0]
-    b = p[:, 2] - p[:, 0]
-    det = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    nx, ny = np.maximum(hi[:, 0] - lo[:, 0] + 1, 0), np.maximum(hi[:, 1] - lo[:, 1] + 1, 0)
-    count = np.where(np.abs(det) > 1e-12, nx * ny, 0)
-    bounds = np.concatenate([[0], np.cumsum(count)])
-    texels, tris, barys = [], [], []
-    t0 = 0
-    n_tri = len(uv)
-    while t0 < n_tri:
-        t1 = max(t0 + 1, int(np.searchsorted(bounds, bounds[t0] + chunk, "right")) - 1)
-        t1 = min(t1, n_tri)
-        c = count[t0:t1]
-        tri = np.repeat(np.arange(t0, t1), c)
-        k = np.arange(int(c.sum())) - np.repeat(bounds[t0:t1] - bounds[t0], c)     # index inside the box
-        x = lo[tri, 0] + k % np.maximum(nx[tri], 1)
-        y = lo[tri, 1] + k // np.maximum(nx[tri], 1)
-        d = np.stack([x, y], axis=1) - p[tri, 0]
-        b1 = (d[:, 0] * b[tri, 1] - d[:, 1] * b[tri, 0]) / det[tri]
-        b2 = (a[tri, 0] * d[:, 1] - a[tri, 1] * d[:, 0]) / det[tri]
-        b0 = 1.0 - b1 - b2
-        inside = (b0 >= -1e-9) & (b1 >= -1e-9) & (b2 >= -1e-9)
-        texels.append((y * w + x)[inside])
-        tris.append(tri[inside])
-        barys.append(np.clip(np.stack([b0, b1, b2], axis=1)[inside], 0.0, 1.0))
-        t0 = t1
-    texel = np.concatenate(texels) if texels else np.zeros(0, np.int64)
-    tri = np.concatenate(tris) if tris else np.zeros(0, np.int64)
-    bary = np.concatenate(barys) if barys else np.zeros((0, 3))
-    bary /= np.maximum(bary.sum(axis=1, keepdims=True), 1e-300)
-    # one triangle per texel: the last; a texel two triangles claim along a shared edge
-    # is not an overlap, one claimed by triangles that do not touch it on an edge is
-    last = len(texel) - 1 - np.unique(texel[::-1], return_index=True)[1]
-    on_edge = np.zeros(len(texel), bool) if len(texel) == 0 else bary.min(axis=1) < 1e-6
-    claims = np.bincount(texel[~on_edge], minlength=w * h) if len(texel) else np.zeros(w * h, np.int64)
-    overlap = int((claims > 1).sum())
-    return Texels(texel[last], tri[last], bary[last], overlap)
-
-
-def dilate(image, filled, margin):
-    """Fill ``margin`` texels around the filled ones (``image`` (H, W, C), ``filled``
-    (H, W) bool): each step, every empty texel next to filled ones (8-neighbourhood)
-    takes their mean, so bilinear lookups and mip-maps at UV seams read baked values,
-    as Cycles' bake margin does.  Returns the new image and mask."""
-    img = np.array(image, float)
-    ok = np.array(filled, bool)
-    hgt, wid = ok.shape
-    for _ in range(int(margin)):
-        if ok.all() or not ok.any():
-            break
-        pad_v = np.pad(img * ok[..., None], ((1, 1), (1, 1), (0, 0)))
-        pad_n = np.pad(ok.astype(float), 1)
-        total = np.zeros_like(img)
-        num = np.zeros(ok.shape)
-        for dy in (-1, 0, 1):
-            for dx in (-1, 0, 1):
-                if dx or dy:
-                    total += pad_v[1 + dy:1 + dy + hgt, 1 + dx:1 + dx + wid]
-                    num += pad_n[1 + dy:1 + dy + hgt, 1 + dx:1 + dx + wid]
-        grow = ~ok & (num > 0)
-        img[grow] = total[grow] / num[grow][:, None]
-        ok = ok | grow
-    return img, ok
 
 
 # ------------------------------------------------------------- refinement

@@ -15,6 +15,7 @@ is :class:`raybundle.lights.first_shot.PatchFirstShot`.
 from __future__ import annotations
 
 import threading
+from functools import partial
 
 import numpy as np
 
@@ -198,7 +199,8 @@ class DirectLighting:
                 light.pdf(points[i], y[i])
         return out
 
-    def light_samples_at(self, points, normals, light, u, unshadowed=False, crossed=None, receivers=None):
+    def light_samples_at(self, points, normals, light, u, unshadowed=False, crossed=None, receivers=None,
+                         origins=None):
         """One sample of every point's irradiance from one light.
 
         Returns ``(E (N,3) [W/m^2], travel (N,3), cos_x (N,))`` where E already
@@ -208,7 +210,8 @@ class DirectLighting:
         ``receivers``: the points' link groups (:meth:`~raybundle.scene.model.PatchScene.link_groups`)
         or None.  A light that casts no shadow (:attr:`casts_shadow`) is not blocked; a linked
         light lights only the groups it reaches and is blocked only by those that block it
-        (:mod:`raybundle.scene.linking`).
+        (:mod:`raybundle.scene.linking`).  ``origins`` (N, 3): where the shadow rays leave from, when not
+        ``points`` (where the light is sampled and its cosine taken).
         """
         if isinstance(light, TreeLights):
             y, e, em = self.tree_sample(points, normals, u)
@@ -216,9 +219,10 @@ class DirectLighting:
         else:
             y, e = light.sample(points, u)
             ids = self._index[id(light)]
-        return self.shadowed(points, normals, y, e, unshadowed, crossed, ids, receivers)
+        return self.shadowed(points, normals, y, e, unshadowed, crossed, ids, receivers, origins)
 
-    def shadowed(self, points, normals, y, e, unshadowed=False, crossed=None, lights=None, receivers=None):
+    def shadowed(self, points, normals, y, e, unshadowed=False, crossed=None, lights=None, receivers=None,
+                 origins=None):
         """:meth:`light_samples_at` for light samples ``y``, ``e`` (N, 3) drawn already from
         ``lights`` (an index into :meth:`light_list`, or (N,) of them, -1 for none; None: lights
         that cast shadows and are not linked)."""
@@ -244,6 +248,8 @@ class DirectLighting:
             free = e.copy() if unshadowed else None
             live = np.any(e > 0, axis=1)
             org_all = None
+        if origins is not None:                     # the shadow rays leave from elsewhere
+            org_all, points = None, origins
         if unblocked is not None:
             live &= ~np.broadcast_to(unblocked, live.shape)
         if live.any():
@@ -291,7 +297,8 @@ class DirectLighting:
             return samples_per_light + len(self.suns)
         return samples_per_light * len(self.area_lights) + len(self.point_lights)
 
-    def irradiance(self, points, normals, rng, samples_per_light=16, penumbra_samples=None, receivers=None):
+    def irradiance(self, points, normals, rng, samples_per_light=16, penumbra_samples=None, receivers=None,
+                   footprint=None):
         """Direct irradiance (N, 3) [W/m^2] of the first-shot lights at surface points
         with unit ``normals`` (N, 3), for bakes, where a point's value is final.
 
@@ -312,42 +319,31 @@ class DirectLighting:
         ``E = Le I(x) - mean_s e_s (1 - V_s)`` (a control variate: exact where no ray is blocked),
         where the first stage saw at least half of the light, and the mean ``mean_s e_s V_s``
         elsewhere (exactly 0 in an umbra); an estimate below 0 is 0.  Other lights: the mean.
-        One shadow ray per point light of radius 0 and per sun of angle 0 (exact with one), and
+        One shadow ray per point light of radius 0 and per sun of angle 0 (exact with one, but over a footprint), and
         ``penumbra_samples`` in all where it passed glass or a cut-out (whose outcome is random).
         A point's rays: a randomly shifted Kronecker (R_3) set per stage, stratified over the light's
-        triangles by area.  ``rng``: a Generator; ``receivers``: :meth:`light_samples_at`'s."""
+        triangles by area.  ``rng``: a Generator; ``receivers``: :meth:`light_samples_at`'s.
+        ``footprint``: a :class:`~raybundle.tracing.footprint.Footprint` per point (lightmap texels), or
+        None: each shadow ray then leaves from a point of the footprint (a randomly shifted Kronecker
+        (R_2) set a point) towards a sample drawn for the centre, so the estimate is the centre's
+        unoccluded light times its share visible from the footprint, averaged as Cycles' bake
+        averages a texel's."""
         out = np.zeros((len(points), 3))
-        alpha = kronecker_alpha(3)
         for light in self.sampled_lights():
-            sharp = (isinstance(light, PointLight) and float(light.lights.radius[light.k]) == 0.0) or \
-                (isinstance(light, SunLight) and light.angle == 0.0)
+            sharp = footprint is None and (
+                (isinstance(light, PointLight) and float(light.lights.radius[light.k]) == 0.0)
+                or (isinstance(light, SunLight) and light.angle == 0.0))
             n_s = 1 if sharp else max(1, int(samples_per_light))
             shift = rng.random((len(points), 3))
             analytic = None if sharp else light_polygon_irradiance(light, points, normals)
-
-            def shadow_sums(p, nrm, sh, first, last, rec=receivers):
-                """Sums of the shadowed and unshadowed estimates of samples first..last-1,
-                and whether some sample was seen and some blocked or passed a cut-out or glass (whose
-                outcome was random: a point whose few samples all passed by chance would keep them)."""
-                seen, total = np.zeros((len(p), 3)), np.zeros((len(p), 3))
-                lit, shade = np.zeros(len(p), bool), np.zeros(len(p), bool)
-                for s in range(first, last):
-                    e, _, _, free = self.light_samples_at(p, nrm, light, (sh + s * alpha) % 1.0, unshadowed=True,
-                                                          crossed=shade, receivers=rec)
-                    seen += e
-                    total += free
-                    reached, blocked = seen_blocked(e, free)
-                    lit |= reached
-                    shade |= blocked
-                return seen, total, lit & shade
-
-            seen, total, penumbra = shadow_sums(points, normals, shift, 0, n_s)
+            fp = None if footprint is None else (footprint, rng.random((len(points), 2)))
+            sums = partial(self._shadow_sums, light, points, normals, receivers=receivers)
+            seen, total, penumbra = sums(shift, 0, n_s, footprint=fp)
             n_penumbra = 16 * n_s if penumbra_samples is None else int(penumbra_samples)
             if sharp:                 # one ray finds the light exactly, but where it passed glass or a cut-out
                 more = np.nonzero(penumbra)[0] if n_penumbra > 1 else []
                 if len(more):
-                    s_more, _, _ = shadow_sums(points[more], normals[more], shift[more], 1, n_penumbra,
-                                               None if receivers is None else receivers[more])
+                    s_more, _, _ = sums(shift, 1, n_penumbra, which=more, footprint=fp)
                     seen[more] = (seen[more] + s_more) / n_penumbra
                 out += seen
                 continue
@@ -357,12 +353,12 @@ class DirectLighting:
             # the control variate is exact unless a ray is blocked, all of them where not
             n_pts = np.where(penumbra, max(n_penumbra, 1), np.where(ok, max(1, n_s // 4), n_s))
             shift = rng.random((len(points), 3))
+            fp = None if footprint is None else (footprint, rng.random((len(points), 2)))
             first = int(n_pts.min())
-            seen, total, _ = shadow_sums(points, normals, shift, 0, first)
+            seen, total, _ = sums(shift, 0, first, footprint=fp)
             for n_more in np.unique(n_pts[n_pts > first]):
                 more = np.nonzero(n_pts == n_more)[0]
-                s_more, t_more, _ = shadow_sums(points[more], normals[more], shift[more], first, int(n_more),
-                                                None if receivers is None else receivers[more])
+                s_more, t_more, _ = sums(shift, first, int(n_more), which=more, footprint=fp)
                 seen[more] += s_more
                 total[more] += t_more
             mean = seen / n_pts[:, None]
@@ -371,6 +367,31 @@ class DirectLighting:
                 mean[cv] = np.maximum(exact_i[cv, None] * np.asarray(light.radiance, float) - blocked, 0.0)
             out += mean
         return out
+
+    def _shadow_sums(self, light, points, normals, shift, first, last, which=None, receivers=None, footprint=None):
+        """Sums of the shadowed and unshadowed estimates of ``light``'s samples first..last-1 (a
+        Kronecker (R_3) set shifted by ``shift`` (N, 3) a point) at the points ``which`` (None: all),
+        and whether some sample was seen and some blocked or passed a cut-out or glass (whose outcome
+        was random: a point whose few samples all passed by chance would keep them).  ``footprint``:
+        ``(Footprint, shifts (N, 2))`` whose points (an R_2 set) the shadow rays leave from, or None: a
+        sample then weighs the light as the centre sees it by its visibility from the footprint."""
+        if which is not None:
+            points, normals, shift = points[which], normals[which], shift[which]
+            receivers = None if receivers is None else receivers[which]
+            footprint = None if footprint is None else (footprint[0].subset(which), footprint[1][which])
+        alpha, alpha_2 = kronecker_alpha(3), kronecker_alpha(2)
+        seen, total = np.zeros((len(points), 3)), np.zeros((len(points), 3))
+        lit, shade = np.zeros(len(points), bool), np.zeros(len(points), bool)
+        for s in range(first, last):
+            at = None if footprint is None else footprint[0].points(points, (footprint[1] + s * alpha_2) % 1.0)
+            e, _, _, free = self.light_samples_at(points, normals, light, (shift + s * alpha) % 1.0, unshadowed=True,
+                                                  crossed=shade, receivers=receivers, origins=at)
+            seen += e
+            total += free
+            reached, blocked = seen_blocked(e, free)
+            lit |= reached
+            shade |= blocked
+        return seen, total, lit & shade
 
     def far_side_irradiance(self, points, normals, rng, receivers=None):
         """(N, 3) [W/m^2] one sample per light of the first-shot lights' direct irradiance on the
