@@ -136,13 +136,12 @@ class LightmapBake:
             self._edges = EdgeGather(solver.scene, solver.tracer, seed)
             self._rng = np.random.default_rng([seed, 21])
         pts = locate_points(ex.scene, solver.scene, solver.tracer, info.first_triangle + tx.triangle, tx.bary)
-        # a million texels: a quarter of the shadow rays where they all agree (exact there: the
-        # light is integrated analytically) and 4 times as many in a penumbra, which neighbouring
-        # texels share (16 times as many everywhere took several times as long: docs/benchmarks.md, 'Measured
-        # choices behind the defaults')
+        # a million texels: a vertex's shadow rays find where a texel is lit, shadowed or in a penumbra,
+        # but a penumbra takes 4 times as many, where a vertex takes 16 (CHANGELOG: 16 times everywhere took
+        # 2 minutes on a 1024² floor; a quarter for the decision left penumbrae read as lit)
         n = job.bake.light_samples
         faces = info.first_triangle + np.arange(len(uv))
-        work = TexelGather(solver, tx, pts, size, self._edges, rays, (seed, 22 + k), max(1, n // 4), self._rng,
+        work = TexelGather(solver, tx, pts, size, self._edges, rays, (seed, 22 + k), n, self._rng,
                            penumbra_samples=4 * n,
                            footprint=texel_footprints(ex.scene, faces, uv, tx, size, size))
         return target, work

@@ -1,8 +1,9 @@
 """Lightmaps: the texels a UV map covers, their radiance, and the margin around the islands.
 
 A texel bakes the radiance at its centre's point (:func:`texel_points`), as a vertex does
-(:mod:`raybundle.imaging.baking`): the direct light estimated at the point, the indirect light
-interpolated from the patches, except next to concave edges and contacts, where the patch
+(:mod:`raybundle.imaging.baking`), but for its direct light, averaged over the texel's footprint
+(:func:`texel_footprints`) as Cycles' bake averages a texel; its indirect light is interpolated from
+the patches, except next to concave edges and contacts, where the patch
 values are not to be trusted (the sides that :meth:`~raybundle.imaging.gather.EdgeGather.near_edge`
 flags).  There :class:`TexelGather` gathers it from the solution as a vertex's is gathered
 (:class:`~raybundle.imaging.bake_gather.BakeGather`), with fewer rays a texel, and averages the
