@@ -129,9 +129,10 @@ bench-interiors: $(STAMP)
 bench-interiors-quick:
 	@$(MAKE) --no-print-directory bench-interiors INTERIORS=bathroom2
 
-# The point-domain bake against Cycles' bake of the same 4,624 vertices, and a 1024^2 lightmap
-# and the same of the box subdivided in Edit Mode (about 40 minutes on 2 cores the first time: the Cycles
-# references are cached in out/bench-bake)
+# The point-domain bake against Cycles' bake of the same 4,624 vertices, the time of a 1024^2 lightmap
+# and the floor's 256^2 lightmap against Cycles' bake of it, and the vertices of the box subdivided in
+# Edit Mode (about 80 minutes on 2 cores the first time, 35 after: the Cycles references are cached in
+# out/bench-bake)
 bench-bake: $(STAMP)
 	$(PY) tools/bench_bake.py --out out/bench-bake --page $(PAGE)
 	$(PY) tools/bench_bake.py --out out/bench-bake --blend demo_scenes/cornell_subdivided.blend --lightmap-size 0 \

@@ -1,8 +1,9 @@
 """Bake bench: raybundle's point-domain bake against Cycles' bake to a color attribute
-of the same vertices, side by side in one run; and the time of a 1024² lightmap.
+of the same vertices, side by side in one run; the time of a 1024² lightmap; and a 256²
+lightmap against Cycles' bake of it.
 
-Usage (the bpy module is in the project's venv; ~25 minutes on 2 cores the first
-time, the reference then comes from the cache)::
+Usage (the bpy module is in the project's venv; on ``cornell_bake.blend`` ~60 minutes on 2 cores
+the first time, ~25 once its references come from the cache)::
 
     python tools/bench_bake.py --out out/bench-bake [--times 5 10 20] [--reference-samples 4096]
 
