@@ -133,6 +133,7 @@ class BakeJob:
         self.export = self.solver = self.renderer = None
         self.targets = []
         self.lightmaps = LightmapBake(self)
+        self._final = None
         self.t_start = self.loop = None
         self.timings = {}
         #: the color attributes' points once the iteration ends: ``(rep, back, points, parts, gather)``
@@ -268,6 +269,9 @@ class BakeJob:
             self.fraction = timed * (1.0 - share + share * gather.fraction)
             if more:
                 return True
+        if not lm.targets:
+            self.fraction = 1.0
+            return False
         t0 = time.perf_counter()
         more = lm.step(budget)
         self.timings["lightmap_seconds"] = self.timings.get("lightmap_seconds", 0.0) + time.perf_counter() - t0
@@ -283,6 +287,16 @@ class BakeJob:
             return f"iteration {self.solver.stats.iterations}"
         g = self._points[4]
         return f"gathering {g.gathered:,} of {len(g.todo):,} points, {g.rays:,} rays each"
+
+    @property
+    def final_gather(self):
+        """The solution's :class:`raybundle.imaging.gather.FinalGather` (with the second bounce), made once
+        the iteration ends and shared by the color attributes' gather and the lightmaps'."""
+        if self._final is None:
+            from raybundle.imaging.gather import FinalGather
+
+            self._final = FinalGather(self.solver, bounce=True)
+        return self._final
 
     def _start_gather(self):
         """Locate the color attributes' points (cut where the lighting needs it first, with
@@ -302,7 +316,7 @@ class BakeJob:
         rep, back = _unique_points(ex.scene, face, bary)
         pts = locate_points(ex.scene, solver.scene, solver.tracer, face[rep], bary[rep])
         parts = baked_parts(solver, pts, self.bake.light_samples, rng)
-        gather = BakeGather(solver, pts, seed=self.plan.settings.seed)
+        gather = BakeGather(solver, pts, seed=self.plan.settings.seed, final=self.final_gather)
         rays, deadline = self.bake.gather_rays, None
         if self.loop.cancelled or self.stop.is_set():
             rays = 0
@@ -374,7 +388,8 @@ class BakeJob:
                     f"{info.original}.lightmap", img, directory, packed,
                     {"raybundle_object": info.original, "raybundle_uv_map": uv_name,
                      "raybundle_iterations": self.solver.stats.iterations})
-            self.timings["lightmap_seconds"] = self.timings.get("lightmap_seconds", 0.0) + time.perf_counter() - t1
+            if self.lightmaps.targets:
+                self.timings["lightmap_seconds"] = stepped + time.perf_counter() - t1
             if self.bake.camera:
                 camera_path = self._camera_image(directory, packed)
         finally:

@@ -143,5 +143,5 @@ class LightmapBake:
         faces = info.first_triangle + np.arange(len(uv))
         work = TexelGather(solver, tx, pts, size, self._edges, rays, (seed, 22 + k), n, self._rng,
                            penumbra_samples=4 * n,
-                           footprint=texel_footprints(ex.scene, faces, uv, tx, size, size))
+                           footprint=texel_footprints(ex.scene, faces, uv, tx, size, size), final=job.final_gather)
         return target, work

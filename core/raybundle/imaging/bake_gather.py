@@ -38,9 +38,12 @@ class BakeGather:
     #: the probe that measures a ray's cost: this many points, this many rays each
     PROBE_POINTS, PROBE_RAYS = EdgeGather.PROBE_POINTS, EdgeGather.PROBE_RAYS
 
-    def __init__(self, solver, points, seed=0, which=None):
+    def __init__(self, solver, points, seed=0, which=None, final=None):
         self.solver, self.points, self.seed = solver, points, seed
-        self.indirect = interpolated_indirect(solver, points)
+        #: the :class:`~raybundle.imaging.gather.FinalGather` (``bounce``) of the solution, shared by a
+        #: bake's gathers (``final``) or made when first needed
+        self._final = final
+        self.indirect = interpolated_indirect(solver, points, None if final is None else final.vert_indirect)
         #: the points to gather (``which``; default: every point found), in order
         self.todo = np.nonzero(points.found)[0] if which is None else np.asarray(which, np.int64)
         self.gathered = 0
@@ -48,7 +51,6 @@ class BakeGather:
         self._deadline, self._spent, self._cast = None, 0.0, 0
         #: seconds :meth:`advance` took
         self.seconds = 0.0
-        self._final = None
 
     def _stream(self, k):
         """The random stream ``k`` of the seed (an int or a sequence of ints)."""

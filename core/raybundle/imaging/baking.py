@@ -198,16 +198,22 @@ def baked_parts(solver, points: SurfacePoints, light_samples=16, rng=None, penum
     return parts
 
 
-def interpolated_indirect(solver, points: SurfacePoints):
+def interpolated_indirect(solver, points: SurfacePoints, vert=None):
     """E_ind (N, 3) [W/m^2] at located ``points`` interpolated linearly from the patch values (the
-    image's reconstruction, module docstring); zero at points not found."""
+    image's reconstruction, module docstring); zero at points not found.  ``vert``: the
+    reconstruction's vertex values of the indirect light if made already
+    (:attr:`~raybundle.imaging.gather.FinalGather.vert_indirect`), else made here."""
     out = np.zeros((len(points.triangle), 3))
     idx = np.nonzero(points.found)[0]
-    e_bar = solver.indirect_incoming()
-    if len(idx) and np.any(e_bar):
-        rec = solver.reconstruction
+    if not len(idx):
+        return out
+    rec = solver.reconstruction
+    if vert is None:
+        e_bar = solver.indirect_incoming()
+        if not np.any(e_bar):
+            return out
         vert = rec.smooth_and_sharp(e_bar, solver.caustic.E if solver.caustic is not None else None)
-        out[idx] = rec.at(vert, points.tside[idx], points.bary[idx])
+    out[idx] = rec.at(vert, points.tside[idx], points.bary[idx])
     return out
 
 

@@ -193,10 +193,11 @@ class TexelGather:
     whose :meth:`~raybundle.imaging.bake_gather.BakeGather.advance` runs it in blocks (a stop keeps
     what is gathered); :attr:`radius` the window's, :attr:`rays` a texel's (module docstring).
     ``footprint``: the texels' :func:`texel_footprints`, over which their direct light is averaged (None:
-    at their centres).  :meth:`image` is the lightmap."""
+    at their centres); ``final``: the bake's shared :class:`~raybundle.imaging.gather.FinalGather`, or
+    None.  :meth:`image` is the lightmap."""
 
     def __init__(self, solver, texels, points, size, edges, rays, seed, light_samples, rng, penumbra_samples=None,
-                 footprint=None):
+                 footprint=None, final=None):
         self.texels, self.points, self.size = texels, points, int(size)
         self.parts = baked_parts(solver, points, light_samples, rng, penumbra_samples, footprint)
         found = np.nonzero(points.found)[0]
@@ -209,7 +210,7 @@ class TexelGather:
             ratio = float(np.median(patch / np.maximum(self.spacing[near], 1e-300)))
             self.radius = int(np.clip(round((WINDOW_PER_PATCH * ratio - 1.0) / 2.0), 0, MAX_RADIUS))
         self.rays = max(MIN_TEXEL_RAYS, -(-int(rays) // (2 * self.radius + 1) ** 2)) if len(near) else 0
-        self.gather = BakeGather(solver, points, seed, which=near)
+        self.gather = BakeGather(solver, points, seed, which=near, final=final)
         self.base = self.gather.indirect.copy()                 # the interpolated indirect light
         self.gather.start(self.rays)
 
