@@ -148,6 +148,34 @@ def test_a_byte_images_values_decode_through_a_table_to_the_transfer_functions_n
     assert got.dtype == np.float32 and np.array_equal(got, srgb_to_linear(rgb).astype(np.float32))
 
 
+def test_a_byte_images_pixels_are_read_once_and_its_mean_is_its_decoded_texels(fresh, monkeypatch):
+    """A byte sRGB image on a Base Color is read from Blender once per export (its mean for the
+    material and its bytes for the texture alike; reading it twice cost a room of seven photos a
+    second), and its mean is that of its texels decoded one by one."""
+    from raybundle.scene.textures import srgb_to_linear
+    from raybundle_addon.translation import images
+    from raybundle_addon.translation.shaders import MaterialConverter
+
+    plane = plane_with_uvs(size=4.0)
+    img = bpy.data.images.new("photo", 40, 24)                   # bytes, sRGB
+    px = np.random.default_rng(2).random((24, 40, 4)).astype(np.float32)
+    img.pixels.foreach_set(px.ravel())
+    nt = plane.data.materials[0].node_tree
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    nt.links.new(tex.outputs["Color"], nt.nodes["Diffuse BSDF"].inputs["Color"])
+    add_light("SUN", rotation=(0.3, 0.2, 0), energy=3.0, angle=0.0)
+    add_camera((0, 0, 5), resolution=(16, 16), ortho_scale=4.0)
+    reads = []
+    real = images._pixels
+    monkeypatch.setattr(images, "_pixels", lambda image: reads.append(image.name) or real(image))
+    assert _export().scene.texture.images[0].dtype == np.uint8
+    assert reads == ["photo"]
+    held = np.asarray(img.pixels[:], np.float32).reshape(24, 40, 4)[..., :3]
+    want = srgb_to_linear(held).astype(float).reshape(-1, 3)          # each texel's value as Blender holds it
+    np.testing.assert_allclose(MaterialConverter(print).image_mean(img), want.mean(axis=0), rtol=1e-12)
+
+
 @pytest.mark.parametrize("extension", ["EXTEND", "REPEAT"])
 def test_an_image_extended_or_repeated_beyond_its_uv_square_is_as_cycles_renders_it(fresh, tmp_path, extension):
     """A checker whose UVs reach from -0.5 to 1.5 over the plane: with Extend its edge texels

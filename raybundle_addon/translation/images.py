@@ -28,6 +28,15 @@ def linear_pixels(image):
     return None if px is None else np.ascontiguousarray(px[..., :3])
 
 
+def byte_mean(k, values):
+    """(3,) the mean linear color of a byte sRGB image's texels ``k`` (H, W, 3) uint8 standing
+    for the encoded ``values`` (256,) (:func:`image_bytes`), each decoded as
+    :func:`decode_srgb_bytes` decodes it: from a count of each byte per channel."""
+    linear = srgb_to_linear(values).astype(np.float32).astype(float)
+    flat = k.reshape(-1, 3)
+    return np.array([np.bincount(flat[:, c], minlength=256) @ linear for c in range(3)]) / max(len(flat), 1)
+
+
 def decode_srgb_bytes(rgb):
     """:func:`~raybundle.scene.textures.srgb_to_linear` of a byte image's values (each one of 256,
     k / 255), through a table of the values it holds: the same numbers, without the power per texel."""

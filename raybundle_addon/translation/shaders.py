@@ -57,7 +57,7 @@ from raybundle.scene.materials import color_text
 from raybundle.scene.textures import modulation_map
 
 from .closures import Closures, clip_colors, flatten, luminance, principled_to_material
-from .images import image_bytes, linear_pixels, srgb_bytes
+from .images import byte_mean, image_bytes, linear_pixels, srgb_bytes
 from .node_links import follow_reroutes, uv_source, uv_through
 
 #: the diffuse color of faces without a material (Blender's default surface)
@@ -141,6 +141,7 @@ class MaterialConverter:
         self._cache = {}
         self._held = {}                 # material name -> the warnings of a conversion made ahead
         self._image_pixels = {}
+        self._image_bytes = {}          # byte sRGB images: image_bytes, read once
         #: material name -> its :class:`AlbedoTexture`
         self.textures = {}
         #: material name -> its :class:`Coverage` (cut-out materials only)
@@ -542,7 +543,7 @@ class MaterialConverter:
         its linear mean (the lookup decodes after interpolating, as Cycles does); any other its
         :meth:`modulation` and None, None."""
         if self._normalizer.get(image.name_full) is None and srgb_bytes(image):
-            got = image_bytes(image)
+            got = self._bytes(image)
             if got is not None:
                 mean = self.image_mean(image)
                 return got[0], np.where(mean > 0, 1.0 / np.where(mean > 0, mean, 1.0), 1.0), got[1]
@@ -558,9 +559,21 @@ class MaterialConverter:
         return self._image_pixels[key]
 
     def image_mean(self, image):
-        """(3,) mean linear color of ``image``, or None without pixel data."""
+        """(3,) mean linear color of ``image``, or None without pixel data (a byte sRGB image's
+        from its bytes, :func:`.images.byte_mean`, without decoding every texel)."""
+        if image is not None and image.name_full not in self._image_pixels and srgb_bytes(image):
+            got = self._bytes(image)
+            return None if got is None else byte_mean(*got)
         px = self.image_pixels(image)
         return None if px is None else px.reshape(-1, 3).mean(axis=0)
+
+    def _bytes(self, image):
+        """:func:`.images.image_bytes` of a byte sRGB ``image``, read from Blender once."""
+        key = image.name_full
+        if key not in self._image_bytes:
+            self._image_bytes[key] = image_bytes(image)
+        return self._image_bytes[key]
+
 
 def _transparent_input(mix):
     """1 or 2: the input of Mix Shader ``mix`` that a Transparent BSDF drives (the other not), or None."""
