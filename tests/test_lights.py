@@ -748,3 +748,28 @@ def test_first_shot_keeps_its_sums_for_the_tsides_a_light_faces_only():
     fs.set_sums(e_sum, d_sum, count)
     np.testing.assert_allclose(fs.E, E, rtol=1e-12, atol=1e-15)
     tr.close()
+
+
+def test_first_shot_keeps_direction_sums_for_the_directed_sides_only():
+    """The mean travel direction serves glossy sides alone: with ``directed`` the other sides
+    keep no direction sums (a clay room none: a third of the first shot's memory), while the
+    directed sides' ``direction`` and every side's E are the very numbers of a first shot that
+    keeps them all, after refinement and after ``set_sums``."""
+    sc = subdivide(lamp_scene(point=True), max_edge=0.1)
+    tr = RayTracer(sc)
+    floor = sc.patch_material[sc.side_patch] == 0
+    directed = floor & (sc.patch_centroid[sc.side_patch][:, 0] > 0)
+    shots = []
+    for which in (None, directed, np.zeros(sc.n_sides, bool)):
+        fs = PatchFirstShot(DirectLighting(sc, tr), np.random.default_rng(3), initial_samples=4, directed=which)
+        fs.refine(700)
+        shots.append(fs)
+    every, some, none = shots
+    for fs in (some, none):
+        np.testing.assert_array_equal(fs.E, every.E)
+    np.testing.assert_array_equal(some.direction[directed], every.direction[directed])
+    assert not some.direction[~directed].any() and len(none.sums()[1]) == 0
+    assert len(some.sums()[1]) == np.isin(sc.tside_side[some.receiving_tsides], np.nonzero(directed)[0]).sum() > 0
+    some.set_sums(*some.sums())
+    np.testing.assert_allclose(some.direction[directed], every.direction[directed], rtol=1e-12, atol=1e-15)
+    tr.close()

@@ -44,10 +44,13 @@ class PatchFirstShot:
     For glossy patches the reflected first shot uses one mean
     direction per light, ``E f(w_mean, w)``: an approximation (exact for point
     lights, close for lights small as seen from the patch), used only inside
-    the iteration; the image's direct light is per pixel and exact.
+    the iteration; the image's direct light is per pixel and exact.  ``directed`` (S,) bool
+    (default all): the sides whose ``direction`` is kept (the glossy ones); the others' rows of
+    it stay zero and their tsides keep no direction sums.
     """
 
-    def __init__(self, direct: DirectLighting, rng, initial_samples=16, receiving_area=None, pilot_samples=4):
+    def __init__(self, direct: DirectLighting, rng, initial_samples=16, receiving_area=None, pilot_samples=4,
+                 directed=None):
         self.direct = direct
         # average over the area that can receive light (see RayTracer.open_fraction)
         sc = direct.scene
@@ -70,7 +73,11 @@ class PatchFirstShot:
                                             axis=0))[0] if n_l else np.zeros(0, np.int64)
         n_r = len(self.receiving_tsides)
         self._e_sum = np.zeros((n_r, n_l, 3))          # per receiving tside (row), light, RGB
-        self._d_sum = np.zeros((n_r, n_l, 3))
+        # the direction sums of the receiving tsides of directed sides, by their row there (-1: none)
+        side_of = sc.tside_side[self.receiving_tsides]
+        kept = np.ones(n_r, bool) if directed is None else np.asarray(directed, bool)[side_of]
+        self._d_row = np.where(kept, np.cumsum(kept) - 1, -1)
+        self._d_sum = np.zeros((int(kept.sum()), n_l, 3))
         self._count = np.zeros(n_r)
         # each receiving tside's share of its side's receiving tsides' area (Neyman's draws, _targeted)
         ts_area = sc.triangle_area[sc.tside_triangle[self.receiving_tsides]]
@@ -99,9 +106,11 @@ class PatchFirstShot:
         u = self.rng.random((len(tri), 2))
         pts = points_on_triangles(sc.triangle_corners[sc.tside_triangle[tri]], u[:, 0], u[:, 1])
         nrm = sc.tside_normal[tri]
+        d_row = self._d_row[rows]
+        d = np.nonzero(d_row >= 0)[0]                  # the rows whose direction sums are kept
         if not pilot:
             old = self._e_sum[rows] / np.maximum(self._count[rows], 1)[:, None, None]
-            old_d = self._d_sum[rows] / np.maximum(self._count[rows], 1)[:, None, None]
+            old_d = self._d_sum[d_row[d]] / np.maximum(self._count[rows[d]], 1)[:, None, None]
         y = np.zeros(len(tri))
         for li, light in enumerate(self.lights):
             u_l = self.rng.random((len(tri), 3))
@@ -113,7 +122,8 @@ class PatchFirstShot:
             y[at] += e.mean(axis=1)
             if not pilot:
                 self._e_sum[rows[at], li] += e
-                self._d_sum[rows[at], li] += e.sum(axis=1, keepdims=True) * travel
+                kept = d_row[at] >= 0
+                self._d_sum[d_row[at][kept], li] += e[kept].sum(axis=1, keepdims=True) * travel[kept]
         side = sc.tside_side[tri]
         if pilot:
             self._side_n += np.bincount(side, minlength=sc.n_sides)
@@ -124,16 +134,19 @@ class PatchFirstShot:
         # side average = sum over its tsides of area * (tside mean) / side area
         w = (sc.triangle_area[sc.tside_triangle[tri]] / self.receiving_area[side])[:, None, None]
         new = self._e_sum[rows] / self._count[rows][:, None, None]
-        new_d = self._d_sum[rows] / self._count[rows][:, None, None]
         p, at = np.unique(side, return_inverse=True)
         self.E[p] += _summed(at, len(p), w * (new - old))
-        self._d_patch[p] += _summed(at, len(p), w * (new_d - old_d))
-        norm = np.linalg.norm(self._d_patch[p], axis=2, keepdims=True)
-        self.direction[p] = np.where(norm > 0, self._d_patch[p] / np.maximum(norm, 1e-300), 0.0)
+        if len(d):
+            new_d = self._d_sum[d_row[d]] / self._count[rows[d]][:, None, None]
+            p, at = np.unique(side[d], return_inverse=True)
+            self._d_patch[p] += _summed(at, len(p), w[d] * (new_d - old_d))
+            norm = np.linalg.norm(self._d_patch[p], axis=2, keepdims=True)
+            self.direction[p] = np.where(norm > 0, self._d_patch[p] / np.maximum(norm, 1e-300), 0.0)
 
     def sums(self):
-        """Copies of the sums and counts ``(e_sum, d_sum, count)`` per receiving tside that ``E``
-        and ``direction`` are formed from (what chains pool, :mod:`raybundle.app.chains`)."""
+        """Copies of the sums and counts ``(e_sum, d_sum, count)`` per receiving tside (``d_sum``
+        those of directed sides) that ``E`` and ``direction`` are formed from (what chains pool,
+        :mod:`raybundle.app.chains`)."""
         return self._e_sum.copy(), self._d_sum.copy(), self._count.copy()
 
     def set_sums(self, e_sum, d_sum, count):
@@ -148,7 +161,8 @@ class PatchFirstShot:
         self.E = np.zeros_like(self.E)
         self._d_patch = np.zeros_like(self._d_patch)
         np.add.at(self.E, side, w * self._e_sum / c)
-        np.add.at(self._d_patch, side, w * self._d_sum / c)
+        d = self._d_row >= 0
+        np.add.at(self._d_patch, side[d], w[d] * self._d_sum / c[d])
         norm = np.linalg.norm(self._d_patch, axis=2, keepdims=True)
         self.direction = np.where(norm > 0, self._d_patch / np.maximum(norm, 1e-300), 0.0)
 

@@ -149,7 +149,8 @@ class PatchSolution(Method, abc.ABC):
         """The first shot of the small lights and its caustic shot, and how many rays refine
         each per iteration."""
         # incoming first shot, refined by a few shadow rays every iteration
-        self.first_shot = PatchFirstShot(direct, stream(seed, Stream.FIRST_SHOT), receiving_area=open_area)
+        self.first_shot = PatchFirstShot(direct, stream(seed, Stream.FIRST_SHOT), receiving_area=open_area,
+                                         directed=self.glossy_mask)
         self.grid_rng = stream(seed, Stream.BUNDLE_GRID)
         # a sixteenth of the lit sides' worth of shadow rays per iteration (per side, not per
         # triangle: a cluster's many small triangles share one estimate)

@@ -135,8 +135,7 @@ class LinearReconstruction:
             x = np.zeros((self.n_vertices, side_values.shape[1]))
         x[self._p_vertices] = np.maximum(self._solve_mass(b), 0.0)
         if self._fit is not None:
-            fitted = self._fit.vertex_values(np.asarray(side_values, float))
-            x[self._fit.vertices] = np.maximum(fitted, 0.0, out=fitted)
+            self._fit.vertex_values(np.asarray(side_values, float), out=x)
         return x
 
     def smooth_and_sharp(self, side_values, sharp=None):
@@ -276,8 +275,10 @@ class ClusterFit:
         self._by_cluster = stable_order(r1)[0]
         self._cluster_start = np.searchsorted(r1[self._by_cluster], np.arange(len(self.sides)))
 
-    def vertex_values(self, side_values):
-        """Values (len(vertices), C) of :attr:`vertices` from side values (S, C)."""
+    def vertex_values(self, side_values, out):
+        """The values of :attr:`vertices` from side values (S, C), clamped at zero (the
+        projection's clamp, :meth:`LinearReconstruction.projected`), written into their rows of
+        ``out`` (V, C), which is returned: no (len(vertices), C) array beside it."""
         v = side_values
         dv = v[self.s2] - v[self.s1]                                                    # (K, C)
         r1 = self.row[self.s1]
@@ -291,9 +292,11 @@ class ClusterFit:
             reach[has] = most
         sc, nv, n_c = self._scene, len(self.vertices), v.shape[1]
         if compiled.use():
-            return _fit_corners(self._corner, self._corner_vertex, sc.tside_side, sc.tside_triangle,
-                                sc.triangle_corners, self.centroid, self.row, np.ascontiguousarray(g), reach,
-                                np.ascontiguousarray(v, float), self._weight, nv)
+            _fit_corners(self._corner, self._corner_vertex, sc.tside_side, sc.tside_triangle,
+                         np.asarray(sc.vertices, float), np.asarray(sc.triangles, np.int64), self.centroid, self.row,
+                         np.ascontiguousarray(g), reach, np.ascontiguousarray(v, float), self._weight,
+                         self.vertices, out)
+            return out
         num, den = np.zeros((nv, n_c)), np.zeros(nv)
         step = 1 << 18                          # corners per chunk: bounded temporaries on big scenes
         for lo in range(0, len(self._corner), step):
@@ -309,7 +312,9 @@ class ClusterFit:
                 pred = v[side, ch] + np.clip(np.einsum("nk,nk->n", x, g[row, :, ch]), -reach[row, ch], reach[row, ch])
                 num[:, ch] += np.bincount(vert, w * pred, minlength=nv)
             den += np.bincount(vert, w, minlength=nv)
-        return num / np.maximum(den, 1e-300)[:, None]
+        num /= np.maximum(den, 1e-300)[:, None]
+        out[self.vertices] = np.maximum(num, 0.0, out=num)
+        return out
 
 
 def _kernel_sample():
@@ -349,29 +354,36 @@ def _mass_product(ids, area, v, n_vertices):
 
 
 @compiled.kernel(lambda: (np.array([0, 1, 2], np.int32), np.array([0, 1, 2], np.int32), np.zeros(1, np.int64),
-                          np.zeros(1, np.int64), np.zeros((1, 3, 3)), np.zeros((1, 3)), np.zeros(1, np.int64),
-                          np.zeros((1, 3, 2)), np.zeros((1, 2)), np.ones((1, 2)), np.ones(1), 3))
-def _fit_corners(corner, corner_vertex, tside_side, tside_triangle, triangle_corners, centroid, row, g, reach,
-                 v, weight, n_vertices):
+                          np.zeros(1, np.int64), np.zeros((3, 3)), np.array([[0, 1, 2]], np.int64), np.zeros((1, 3)),
+                          np.zeros(1, np.int64), np.zeros((1, 3, 2)), np.zeros((1, 2)), np.ones((1, 2)), np.ones(1),
+                          np.arange(3), np.zeros((3, 2))))
+def _fit_corners(corner, corner_vertex, tside_side, tside_triangle, vertices, triangles, centroid, row, g, reach,
+                 v, weight, fitted, out):
     """:meth:`ClusterFit.vertex_values` at its corners: each flat tside corner ``corner`` (3 t + k)
     reads its side's fit ``v_s + clip(g_s . (x - c_s), -reach_s, reach_s)`` (``g`` (Sc, 3, C), ``reach``
-    (Sc, C) by cluster row ``row[s]``), weighted by ``weight[t]`` into its vertex ``corner_vertex``."""
+    (Sc, C) by cluster row ``row[s]``), weighted by ``weight[t]`` into its vertex ``corner_vertex``
+    (a row of ``fitted``, the rows of ``out`` its mean goes to, clamped at zero)."""
     n_c = v.shape[1]
-    num, den = np.zeros((n_vertices, n_c)), np.zeros(n_vertices)
+    den = np.zeros(fitted.shape[0])
+    for j in range(fitted.shape[0]):
+        for ch in range(n_c):
+            out[fitted[j], ch] = 0.0
     for i in range(corner.shape[0]):
         t = corner[i] // 3
         k = corner[i] - 3 * t
-        side, tri, w, vert = tside_side[t], tside_triangle[t], weight[t], corner_vertex[i]
+        side, w, vert = tside_side[t], weight[t], corner_vertex[i]
+        p = triangles[tside_triangle[t], k]
         r = row[side]
-        x0 = triangle_corners[tri, k, 0] - centroid[side, 0]
-        x1 = triangle_corners[tri, k, 1] - centroid[side, 1]
-        x2 = triangle_corners[tri, k, 2] - centroid[side, 2]
+        x0 = vertices[p, 0] - centroid[side, 0]
+        x1 = vertices[p, 1] - centroid[side, 1]
+        x2 = vertices[p, 2] - centroid[side, 2]
         for ch in range(n_c):
             d = x0 * g[r, 0, ch] + x1 * g[r, 1, ch] + x2 * g[r, 2, ch]
             d = min(max(d, -reach[r, ch]), reach[r, ch])
-            num[vert, ch] += w * (v[side, ch] + d)
+            out[fitted[vert], ch] += w * (v[side, ch] + d)
         den[vert] += w
-    for j in range(n_vertices):
+    for j in range(fitted.shape[0]):
         for ch in range(n_c):
-            num[j, ch] /= max(den[j], 1e-300)
-    return num
+            q = out[fitted[j], ch] / max(den[j], 1e-300)
+            out[fitted[j], ch] = 0.0 if q < 0.0 else q
+    return out
