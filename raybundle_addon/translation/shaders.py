@@ -140,8 +140,7 @@ class MaterialConverter:
         self._material = None
         self._cache = {}
         self._held = {}                 # material name -> the warnings of a conversion made ahead
-        self._image_pixels = {}
-        self._image_bytes = {}          # byte sRGB images: image_bytes, read once
+        self._image_pixels, self._image_bytes = {}, {}       # the latter: byte sRGB images' bytes
         #: material name -> its :class:`AlbedoTexture`
         self.textures = {}
         #: material name -> its :class:`Coverage` (cut-out materials only)
@@ -569,10 +568,9 @@ class MaterialConverter:
 
     def _bytes(self, image):
         """:func:`.images.image_bytes` of a byte sRGB ``image``, read from Blender once."""
-        key = image.name_full
-        if key not in self._image_bytes:
-            self._image_bytes[key] = image_bytes(image)
-        return self._image_bytes[key]
+        if image.name_full not in self._image_bytes:
+            self._image_bytes[image.name_full] = image_bytes(image)
+        return self._image_bytes[image.name_full]
 
 
 def _transparent_input(mix):

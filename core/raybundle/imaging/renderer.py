@@ -28,6 +28,7 @@ import numpy as np
 
 from ..lights.world_light import WorldLight
 from ..tracing.sampling import ShiftedKronecker, Stream, stream
+from ..util.memory import release_freed
 from .caustic_splats import CausticSplats
 from .components import ImageComponents
 from .emission_seen import EmissionSeen
@@ -216,6 +217,8 @@ class Renderer(ProgressiveImage):
         self.schedule.passed(time.perf_counter() - t0, self.image_rays - before_pass, self.passes == 0)
         self.passes += 1
         self._glossy_pixels = gl
+        if self.passes == 1:              # the first pass samples every pixel's penumbrae: its
+            release_freed()               # freed temporaries would sit under every later peak
 
     def _restart_solver_parts(self):
         """Drop what the passes and iterations read from the solver before its running

@@ -15,6 +15,7 @@ import time
 import numpy as np
 
 from ..tracing.sampling import Stream, stratified_2d, stream
+from ..util.memory import release_freed
 from .gather import FinalGather
 
 
@@ -174,6 +175,7 @@ class DiffuseIndirect:
         and its rays per sub-pixel sample for ``k`` sub-pixel samples (the automatic count
         is probed: :meth:`~raybundle.imaging.gather.EdgeGather.automatic_rays`)."""
         solver = self.solver
+        release_freed()                   # the vertex values below peak on what the run left
         caustic = solver.caustic is not None and not self.caustic_splatted
         # a caustic light-traced into the pixels (caustic_splats) is left out here
         e_bar = solver.image_incoming(caustic=caustic, world=not self.world_sampled)

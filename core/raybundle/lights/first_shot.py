@@ -68,9 +68,10 @@ class PatchFirstShot:
         self._d_patch = np.zeros((sc.n_sides, n_l, 3))
         self.direction = np.zeros((sc.n_sides, n_l, 3))
         # tsides that no light is in front of receive nothing: they cost no samples
-        origin = sc.triangle_corners[sc.tside_triangle, 0]
-        self.receiving_tsides = np.nonzero(np.any([light.in_front(origin, sc.tside_normal) for light in self.lights],
+        origin, normal = sc.triangle_corners[sc.tside_triangle, 0], np.asarray(sc.tside_normal)
+        self.receiving_tsides = np.nonzero(np.any([light.in_front(origin, normal) for light in self.lights],
                                             axis=0))[0] if n_l else np.zeros(0, np.int64)
+        del origin, normal
         n_r = len(self.receiving_tsides)
         self._e_sum = np.zeros((n_r, n_l, 3))          # per receiving tside (row), light, RGB
         # the direction sums of the receiving tsides of directed sides, by their row there (-1: none)

@@ -316,8 +316,8 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     slivers not cut off): a grid vertex that a lamp's outline passes through would otherwise
     weld the light trapped above the lamp to the ceiling beside it.  Returns ``(scene, n_cut)``: a new scene whose
     cut patches consist of the convex pieces' fan triangles, and the number of
-    patches cut.  The new scene carries ``triangle_corner_tag`` (T, 3) int64
-    (0 = no contact at that corner).
+    patches cut.  The new scene carries ``triangle_corner_tag`` (T, 3) int, in 32 bits where the
+    tags fit (0 = no contact at that corner).
     """
     groups = contact_segments(scene, np.asarray(faces, np.int64), tol, min_plane_area)
     if not groups:
@@ -326,7 +326,7 @@ def split_at_contacts(scene, faces, tol, min_fraction=0.005, min_plane_area=0.0)
     eps = 1e-9 * max(r, 1e-12)
     T = len(scene.triangles)
     replaced = np.zeros(T, bool)
-    corner_tag = (scene.triangle_corner_tag.copy() if scene.triangle_corner_tag is not None
+    corner_tag = (scene.triangle_corner_tag.astype(np.int64) if scene.triangle_corner_tag is not None
                   else np.zeros((T, 3), np.int64))
     out = _Pieces()
     tag_ids: dict = {}
@@ -436,6 +436,8 @@ def _with_pieces(scene, replaced, corner_tag, pieces):
     t = np.concatenate([scene.triangles[keep], new_t])
     src = np.concatenate([keep, np.asarray(pieces.source, np.int64)])
     tags = np.concatenate([corner_tag[keep], np.asarray(pieces.tags, np.int64).reshape(-1, 3)])
+    if tags.size and -2 ** 31 <= tags.min() and tags.max() < 2 ** 31:      # held in 32 bits where they fit
+        tags = tags.astype(np.int32)
     # patches: untouched triangles keep theirs (renumbered), pieces get new ids
     old_patch = scene.triangle_patch[keep]
     _, old_patch = np.unique(old_patch, return_inverse=True)

@@ -94,6 +94,7 @@ def pierced_parts(scene):
     tag = scene.triangle_corner_tag
     if tag is None or not (tag < 0).any():
         return None
+    tag = tag.astype(np.int64)                       # pierce tags reach past 32 bits
     vid = welded_vertices(scene).astype(np.int32)
     corners = vid[scene.triangles]
     lo, hi = shared_edges(corners)                            # edges of two triangles at one place

@@ -71,7 +71,7 @@ class LinearReconstruction:
         p = p[self.area[p] > 0]
         self._p_side, self._p_area = scene.tside_side[p], self.area[p]
         self._p_vertices, local = np.unique(self.ids[p], return_inverse=True)
-        self._p_ids = local.reshape(-1, 3)
+        self._p_ids = local.reshape(-1, 3).astype(self.ids.dtype)
         self._p_flat = self._p_ids.ravel()
         self._p_lumped = np.bincount(self._p_flat, np.repeat(self._p_area, 3) / 3, minlength=len(self._p_vertices))
         # vertices neither the projection nor a fit gives a value: the sides' mean around them
@@ -318,7 +318,7 @@ class ClusterFit:
 
 
 def _kernel_sample():
-    return np.array([[0, 1, 2]]), np.ones(1), np.zeros(1, np.int64), np.ones((1, 2)), 3, np.zeros(3, bool)
+    return np.array([[0, 1, 2]], np.int32), np.ones(1), np.zeros(1, np.int64), np.ones((1, 2)), 3, np.zeros(3, bool)
 
 
 @compiled.kernel(_kernel_sample)
@@ -338,7 +338,7 @@ def _scatter_sides(ids, weight, side, side_values, n_vertices, unit):
     return out
 
 
-@compiled.kernel(lambda: (np.array([[0, 1, 2]]), np.ones(1), np.ones((3, 2)), 3))
+@compiled.kernel(lambda: (np.array([[0, 1, 2]], np.int32), np.ones(1), np.ones((3, 2)), 3))
 def _mass_product(ids, area, v, n_vertices):
     """(V, C) ``M v`` over tsides ``ids`` (TS, 3) of ``area`` (TS,): each triangle adds
     ``A / 12 (2 v_a + v_b + v_c) = A / 12 (v_a + v_a + v_b + v_c)`` at its corner a."""

@@ -30,7 +30,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ..util.arrays import connected_components, stable_order, unique_ints, unique_rows
+from ..util.arrays import GatheredRows, connected_components, stable_order, unique_ints, unique_rows
 from .camera import Camera
 from .materials import MaterialTable
 from .transmission import pass_probability
@@ -317,8 +317,9 @@ class PatchScene:
     # ------------------------------------------------------------- geometry
     @cached_property
     def triangle_corners(self):
-        """(T, 3, 3) float: corner positions."""
-        return self.vertices[self.triangles]
+        """(T, 3, 3) float: corner positions, gathered from the vertices where indexed
+        (:class:`~raybundle.util.arrays.GatheredRows`), not held."""
+        return GatheredRows(self.vertices, self.triangles)
 
     # not cached: a (T, 3) array that nothing reads once the areas and normals are made
     def _cross(self):
@@ -453,9 +454,9 @@ class PatchScene:
 
     @cached_property
     def tside_normal(self):
-        """(TS, 3) float: unit normal of each tside."""
-        sign = np.where(np.arange(len(self.tside_triangle)) < len(self.triangles), 1.0, -1.0)
-        return self.triangle_normal[self.tside_triangle] * sign[:, None]
+        """(TS, 3) float: unit normal of each tside (a back tside's the negated front's),
+        gathered where indexed (:class:`~raybundle.util.arrays.GatheredRows`), not held."""
+        return GatheredRows(self.triangle_normal, self.tside_triangle, flip_from=len(self.triangles))
 
     @cached_property
     def tside_side(self):

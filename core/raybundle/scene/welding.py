@@ -13,7 +13,7 @@ SMOOTH_ANGLE = np.radians(30.0)
 
 
 def smooth_vertex_ids(scene):
-    """(TS, 3) int: ``scene``'s tside corners welded where the surface is smooth
+    """(TS, 3) int32 (int64 beyond 2^31 vertices): ``scene``'s tside corners welded where the surface is smooth
     (:attr:`~raybundle.scene.model.PatchScene.smooth_vertex_ids`).  Memory grows with the
     tsides, a few arrays of them at a time: positions, tags and corner classes in 32 bits."""
     _, r = scene.bounding_sphere
@@ -29,7 +29,8 @@ def smooth_vertex_ids(scene):
     cls = group_ids([pos, normal[:, None]] + ([] if tag is None else [tag])).astype(np.int32).reshape(-1, 3)
     links = _smooth_links(pos, normal, tag, cls, scene.tside_normal)
     del pos, normal, tag
-    return connected_components(int(cls.max(initial=-1)) + 1, links)[cls]
+    ids = connected_components(int(cls.max(initial=-1)) + 1, links)
+    return (ids.astype(np.int32) if len(ids) < 2 ** 31 else ids)[cls]
 
 
 def _smooth_links(pos, normal, tag, cls, tside_normal):

@@ -1,5 +1,5 @@
 """Array helpers shared by the layers: unique rows, group ids, index ranges, shared edges,
-connected components."""
+connected components, rows gathered on demand."""
 from __future__ import annotations
 
 import numpy as np
@@ -202,3 +202,77 @@ def _components(links, out):
             label += 1
         else:
             out[x] = out[r]
+
+
+class GatheredRows:
+    """``values[index]`` (an array of ``values``' rows, ``index`` of any shape) without holding it:
+    indexing gathers only the rows asked for, ``x[key] == values[index][key]`` (the key's first
+    ``index.ndim`` parts index ``index``, the rest the rows); a whole-array step (``np.asarray``,
+    a ufunc, :meth:`mean`, :meth:`min`, :meth:`max`, :meth:`reshape`) gathers it all for that
+    step only.  With ``flip_from`` (a 1-D ``index``), the rows at and past that position come
+    out negated (the normals of triangles' back sides).  A scene of millions of triangles
+    holding its corners and side normals gathered would hold several times its vertices."""
+
+    def __init__(self, values, index, flip_from=None):
+        self.values, self.index, self.flip_from = values, index, flip_from
+
+    @property
+    def shape(self):
+        return self.index.shape + self.values.shape[1:]
+
+    @property
+    def ndim(self):
+        return len(self.shape)
+
+    @property
+    def dtype(self):
+        return self.values.dtype
+
+    def __len__(self):
+        return len(self.index)
+
+    def __getitem__(self, key):
+        key = key if isinstance(key, tuple) else (key,)
+        if any(k is Ellipsis or k is None for k in key):
+            return np.asarray(self)[key]
+        at = key[:self.index.ndim]
+        where = self.index[at]
+        rows = self.values[(where,) + key[self.index.ndim:]]
+        return self._flipped(np.array(rows) if np.ndim(where) == 0 else rows, at)      # a row: a view
+
+    def _flipped(self, rows, at):
+        """``rows`` (fresh) gathered at ``at`` of ``index``, those at and past ``flip_from`` negated."""
+        if self.flip_from is None:
+            return rows
+        k = at[0]
+        k = np.arange(*k.indices(len(self.index))) if isinstance(k, slice) else np.asarray(k)
+        k = np.nonzero(k)[0] if k.dtype == bool else np.where(k < 0, k + len(self.index), k)
+        sign = np.where(k < self.flip_from, 1.0, -1.0)
+        return np.multiply(rows, sign.reshape(sign.shape + (1,) * (rows.ndim - sign.ndim)), out=rows)
+
+    def __array__(self, dtype=None, copy=None):
+        out = self._flipped(self.values[self.index], (slice(None),))
+        return out if dtype is None else out.astype(dtype)
+
+    def _whole(name):                   # an operator on the whole array gathers it for that step
+        def op(self, *args):
+            return getattr(np.asarray(self), name)(*args)
+        return op
+
+    for _name in ("add", "sub", "mul", "truediv", "matmul", "gt", "ge", "lt", "le", "neg"):
+        for _dunder in (f"__{_name}__", f"__r{_name}__"):
+            if hasattr(np.ndarray, _dunder):
+                locals()[_dunder] = _whole(_dunder)
+    del _whole, _name, _dunder
+
+    def mean(self, *args, **kw):
+        return np.asarray(self).mean(*args, **kw)
+
+    def min(self, *args, **kw):
+        return np.asarray(self).min(*args, **kw)
+
+    def max(self, *args, **kw):
+        return np.asarray(self).max(*args, **kw)
+
+    def reshape(self, *shape):
+        return np.asarray(self).reshape(*shape)

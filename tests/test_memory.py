@@ -1,0 +1,67 @@
+"""Memory that grows with the scene, not with a step's convenience: arrays gathered where read,
+freed memory given back between a run's steps."""
+import numpy as np
+
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene import builtin as scenes
+from raybundle.util.arrays import GatheredRows
+from raybundle.util.memory import release_freed
+
+
+def test_gathered_rows_read_as_the_array_they_stand_for():
+    """Any key, whole-array steps and operators give the numbers of ``values[index]``; with
+    ``flip_from`` the rows from there on come out negated."""
+    rng = np.random.default_rng(1)
+    v = rng.random((7, 3))
+    t = rng.integers(0, 7, (5, 3))
+    g, a = GatheredRows(v, t), v[t]
+    for key in (2, [4, 0], (slice(None), 1), ([1, 3], [2, 0]), (3, 2, 1), (a[:, 0, 0] > 0.5,), (Ellipsis, 0)):
+        np.testing.assert_array_equal(g[key], a[key])
+    assert g.shape == a.shape and len(g) == 5 and g.ndim == 3
+    for got, want in ((np.asarray(g), a), (g.mean(axis=1), a.mean(axis=1)), (g.min(axis=1), a.min(axis=1)),
+                      (g > 0.5, a > 0.5), (1 - g, 1 - a), (-g, -a), (np.roll(g, 1, axis=1), np.roll(a, 1, axis=1))):
+        np.testing.assert_array_equal(got, want)
+    n = GatheredRows(v, np.array([0, 3, 1, 1, 6]), flip_from=3)
+    b = v[[0, 3, 1, 1, 6]] * np.array([1, 1, 1, -1, -1.0])[:, None]
+    for key in ([4, 0], slice(1, None), (slice(None), 2), 3, (b[:, 0] > 0,)):
+        np.testing.assert_array_equal(n[key], b[key])
+    np.testing.assert_array_equal(np.asarray(n), b)
+
+
+def test_a_running_scene_holds_no_corners_or_side_normals_and_32_bit_welded_ids():
+    """Through set-up, iterations and an image pass, a laid-out scene keeps no (T, 3, 3)
+    corners and no (TS, 3) side normals (their numbers as the arrays gave them), and its
+    welded vertex ids and contact tags take 32 bits."""
+    sc = pipeline.prepare(scenes.cornell(resolution=(24, 24)), 600)
+    r = pipeline.make_renderer(sc, RenderSettings(seed=0))
+    r.step()
+    r.image_pass()
+    n_t, n_ts = len(sc.triangles), len(sc.tside_triangle)
+    held = [k for k, x in vars(sc).items() if isinstance(x, np.ndarray) and x.dtype == float
+            and x.shape in ((n_t, 3, 3), (n_ts, 3)) and k not in ("vertices", "triangle_normal")]
+    assert held == []
+    np.testing.assert_array_equal(np.asarray(sc.triangle_corners), sc.vertices[sc.triangles])
+    sign = np.where(np.arange(n_ts) < n_t, 1.0, -1.0)[:, None]
+    np.testing.assert_array_equal(np.asarray(sc.tside_normal), sc.triangle_normal[sc.tside_triangle] * sign)
+    assert sc.smooth_vertex_ids.dtype == np.int32
+    assert sc.triangle_corner_tag is None or sc.triangle_corner_tag.dtype == np.int32
+    r.tracer.close()
+
+
+def test_freed_memory_goes_back_to_the_system():
+    """Small arrays freed between others still held stay resident until :func:`release_freed`
+    returns their pages (glibc; elsewhere it says it could not)."""
+    def resident():
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * 4096
+
+    if not release_freed():
+        return
+    parts = [np.ones(4096) for _ in range(6000)]          # 32 KB each: in the heap, 192 MB
+    kept = parts[::10]                                   # the freed nine tenths lie between them
+    del parts
+    before = resident()
+    assert release_freed()
+    assert before - resident() > 100 * 2 ** 20
+    del kept
