@@ -90,3 +90,36 @@ def test_the_compiled_glossy_sampler_gives_the_numpy_paths_directions_and_weight
     for g, w in zip(got, want):
         assert np.any(w > 0)
         assert np.allclose(g, w, rtol=1e-10, atol=1e-13), np.abs(g - w).max()
+
+
+_SIGNATURES = """
+import json
+from raybundle.app import pipeline
+from raybundle.imaging.settings import RenderSettings
+from raybundle.scene.builtin import load_scene
+from raybundle.util import compiled
+pipeline._compile_kernels(None, None)
+sc = load_scene("cornell-glossy")
+sc.camera = sc.camera.with_resolution(32, 32)
+r = pipeline.make_renderer(pipeline.prepare(sc, 300), RenderSettings(seed=1))
+for _ in range(3):
+    r.step()
+    r.image_pass()
+r.image()
+r.tracer.close()
+print(json.dumps({k.__name__: len(k._compiled.signatures) for k in compiled._KERNELS if k._compiled is not None}))
+"""
+
+
+def test_a_render_calls_the_kernels_as_they_were_compiled_before_it():
+    """A glossy scene's render (lamps with MIS, glossy eye paths, bundles) calls every kernel with
+    the argument types its set-up phase compiled: none compiles again during the run, where a
+    cold first render would wait for it and the phase would not show it (read-only views, as
+    ``broadcast_to`` gives, made four kernels compile a second time)."""
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", _SIGNATURES], capture_output=True, text=True, check=True).stdout
+    counts = json.loads(out.strip().splitlines()[-1])
+    assert counts and all(n == 1 for n in counts.values()), counts

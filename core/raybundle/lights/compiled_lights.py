@@ -32,7 +32,11 @@ from ..scene import compiled_bsdf
 from ..scene.compiled_bsdf import dot3, glossy_pdf_at
 from ..util.compiled import helper, kernel
 
-_V = np.ascontiguousarray
+def _V(a, dtype=None):
+    """``a`` contiguous and writeable, the kernels' compiled signature (a read-only view, as
+    ``broadcast_to`` gives, would compile them again during the run)."""
+    a = np.ascontiguousarray(a, dtype)
+    return a if a.flags.writeable else a.copy()
 
 
 def _rows(a):

@@ -115,7 +115,11 @@ def glossy_pdf(mt, mat, normal, w_in, w_out):
 
 
 def _rows(a, n):
-    return np.ascontiguousarray(np.broadcast_to(np.asarray(a, float), (n, 3)))
+    """``a`` as (n, 3) contiguous writeable floats, the kernels' compiled signature (a read-only
+    view, as ``broadcast_to`` gives, would compile them again during the run)."""
+    a = np.asarray(a, float)
+    return np.ascontiguousarray(a) if a.shape == (n, 3) and a.flags.writeable else \
+        np.array(np.broadcast_to(a, (n, 3)), order="C")
 
 
 # ------------------------------------------------------------------------------------- kernels
