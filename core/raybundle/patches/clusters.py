@@ -118,7 +118,7 @@ class _Grouping:
         self.scene = scene
         if rows is None:
             self.rows = np.arange(len(scene.triangles))
-            corners, self.area, normal = scene.triangle_corners, scene.triangle_area, scene.triangle_normal
+            corners, self.area, normal = np.asarray(scene.triangle_corners), scene.triangle_area, scene.triangle_normal
         else:
             self.rows = np.asarray(rows, np.int64)
             corners = scene.vertices[scene.triangles[self.rows]]

@@ -119,7 +119,7 @@ def contact_segments(scene, faces, tol, min_plane_area=0.0):
     out = []
     if len(faces) == 0:
         return out
-    corners = scene.triangle_corners
+    corners = np.asarray(scene.triangle_corners)                # gathered once: read whole and in parts
     lo_all, hi_all = corners.min(axis=1), corners.max(axis=1)
     _, r = scene.bounding_sphere
     vid = welded_vertices(scene)

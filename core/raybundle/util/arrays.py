@@ -246,9 +246,14 @@ class GatheredRows:
             return rows
         k = at[0]
         k = np.arange(*k.indices(len(self.index))) if isinstance(k, slice) else np.asarray(k)
-        k = np.nonzero(k)[0] if k.dtype == bool else np.where(k < 0, k + len(self.index), k)
-        sign = np.where(k < self.flip_from, 1.0, -1.0)
-        return np.multiply(rows, sign.reshape(sign.shape + (1,) * (rows.ndim - sign.ndim)), out=rows)
+        if k.dtype == bool:
+            k = np.nonzero(k)[0]
+        elif k.size and k.min() < 0:
+            k = np.where(k < 0, k + len(self.index), k)
+        back = k >= self.flip_from
+        if back.any():
+            rows[back] *= -1.0
+        return rows
 
     def __array__(self, dtype=None, copy=None):
         out = self._flipped(self.values[self.index], (slice(None),))
