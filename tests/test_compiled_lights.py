@@ -189,7 +189,7 @@ def test_compiled_world_samples_match_numpy(monkeypatch):
     """The world light's samples (:mod:`raybundle.lights.compiled_world`) by brightness alone
     and by three sides' guides (one without sums): the same pixels, directions, densities and
     radiance on both paths."""
-    from raybundle.lights.world_light import GUIDE_CELLS, WorldLight
+    from raybundle.lights.world_light import GUIDE_CELLS, SideSums, WorldLight
     from raybundle.scene.world import World
     from raybundle.tracing.visibility import RayTracer
 
@@ -239,7 +239,7 @@ def test_compiled_world_guides_match_numpy(monkeypatch):
     """The sides' guides (:meth:`WorldLight.guide_at`) from the bundles' sums (one side without
     any) and the sums learned from samples (one side without any): the same shares,
     probabilities and cumulative probabilities on both paths, up to the order of their sums."""
-    from raybundle.lights.world_light import GUIDE_CELLS, WorldLight
+    from raybundle.lights.world_light import GUIDE_CELLS, SideSums, WorldLight
     from raybundle.scene.world import World
     from raybundle.tracing.visibility import RayTracer
 
@@ -251,8 +251,9 @@ def test_compiled_world_guides_match_numpy(monkeypatch):
     rng = np.random.default_rng(3)
     n_s = sc.n_sides
     assert n_s >= 2
-    bundle = (rng.random((n_s, GUIDE_CELLS)) ** 6).astype(np.float32)
-    bundle[0] = 0.0
+    bundle = SideSums(n_s)                        # no sums on side 0
+    for c in range(GUIDE_CELLS):
+        bundle.add(np.arange(1, n_s), c, rng.random(n_s - 1) ** 6)
     learned = np.arange(1, n_s)
     wl.learn(np.repeat(learned, 50), _unit(rng.normal(size=(50 * len(learned), 3))), rng.random(50 * len(learned)))
     sides = rng.integers(0, n_s, 500)
@@ -270,7 +271,7 @@ def test_world_samples_in_pieces_are_the_same_on_any_threads(blocker):
     part and the learned guide) split into pieces on two threads and on one: the same
     estimates, rays and learned sums, where shadow rays pass glass too; and without glass, the
     same as one call on all the points."""
-    from raybundle.lights.world_light import GUIDE_CELLS, WorldLight
+    from raybundle.lights.world_light import GUIDE_CELLS, SideSums, WorldLight
     from raybundle.scene.build import build_scene
     from raybundle.scene.materials import MaterialTable
     from raybundle.scene.world import World

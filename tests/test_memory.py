@@ -65,3 +65,24 @@ def test_freed_memory_goes_back_to_the_system():
     assert release_freed()
     assert before - resident() > 100 * 2 ** 20
     del kept
+
+
+def test_the_bundles_sky_guide_keeps_rows_for_the_sides_the_sky_reached():
+    """A room lit through a deep window: the bundles' sky sums by guide cell take a row for each
+    side a line from the sky reached (a room's inner sides mostly see none straight), not
+    (sides, cells)."""
+    from test_clusters import room_with_a_deep_window
+    from test_world import sky_and_ground
+
+    from raybundle.scene.build import attach_world
+    from raybundle.scene.world import World
+
+    sc = pipeline.prepare(attach_world(room_with_a_deep_window(), World(sky_and_ground())), 400)
+    r = pipeline.make_renderer(sc, RenderSettings(seed=0))
+    for _ in range(4):
+        r.step()
+    guide = r.solver.world_guide
+    reached = np.nonzero(guide.row >= 0)[0]
+    assert 0 < guide.used == len(reached) < sc.n_sides and len(guide.sums) <= 1.5 * guide.used
+    assert (guide.sums[guide.row[reached]].sum(axis=1) > 0).all()
+    r.tracer.close()

@@ -54,19 +54,20 @@ def cut_points(cdf):
 
 def world_guides(wl, bundle_sums, seen, share, equal, most, rows, cols):
     """``(share (U,), cdf (U cells,), prob (U cells,))``: :meth:`~raybundle.lights.world_light.WorldLight.guide_at`'s
-    guide of sides ``seen`` (U,) from the bundles' sums (S, cells) or None and ``wl's learned
+    guide of sides ``seen`` (U,) from the bundles' sums (a :class:`~raybundle.lights.world_light.SideSums`) or None and ``wl's learned
     sums (weighted ``min(hits, most) / equal``), blurred over the ``rows`` x ``cols`` cells;
     ``share`` for the sides with sums."""
     u, cells = len(seen), rows * cols
     out = np.empty(u), np.empty(u * cells), np.empty(u * cells)
-    bundle = np.zeros((0, cells), np.float32) if bundle_sums is None else np.ascontiguousarray(bundle_sums, np.float32)
+    bundle = (np.zeros(0, np.int64), np.zeros((0, cells), np.float32)) if bundle_sums is None else \
+        (bundle_sums.row, bundle_sums.sums)
     _guides(bundle, np.ascontiguousarray(seen, np.int64), wl.learned_rows(), float(share), float(equal), float(most),
             rows, cols, *out)
     return out
 
 
 def _sample_guides():
-    return (np.ones((2, 8), np.float32), np.array([0, 1], np.int64),
+    return ((np.array([0, -1], np.int64), np.ones((1, 8), np.float32)), np.array([0, 1], np.int64),
             (np.array([0, -1], np.int64), np.array([3], np.int64), np.ones((1, 8), np.float32)),
             0.8, 4.0, 64.0, 2, 4, np.empty(2), np.empty(16), np.empty(16))
 
@@ -74,17 +75,19 @@ def _sample_guides():
 @kernel(_sample_guides)
 def _guides(bundle, seen, learned, share, equal, most, rows, cols, share_out, cdf, prob):
     row_of, hits, sums = learned
+    bundle_row, bundle_sums = bundle
     cells = rows * cols
     g, a = np.empty(cells), np.empty(cells)
     for u in range(len(seen)):
         g[:] = 0.0
-        if bundle.shape[0] > 0:
+        b = bundle_row[seen[u]] if bundle_row.shape[0] > 0 else -1
+        if b >= 0:
             t = 0.0
             for c in range(cells):
-                t += float(bundle[seen[u], c])
+                t += float(bundle_sums[b, c])
             t = t if t > 0 else 1.0
             for c in range(cells):
-                g[c] = float(bundle[seen[u], c]) / t
+                g[c] = float(bundle_sums[b, c]) / t
         r = row_of[seen[u]]
         if r >= 0:
             w = min(hits[r], most) / equal

@@ -65,6 +65,40 @@ def _blurred(g):
     return out.reshape(len(g), GUIDE_CELLS)
 
 
+class SideSums:
+    """Per side a row of sums over the sky's guide cells, made when the side first gets a value
+    (``row`` (S,): its row, -1 none yet; ``sums`` (rows, cells) float32, grown by half when
+    full): what reaches some sides of a room costs their rows, not a (sides, cells) array."""
+
+    def __init__(self, n_sides):
+        self.row = np.full(n_sides, -1, np.int64)
+        self.sums = np.zeros((0, GUIDE_CELLS), np.float32)
+        self.used = 0
+
+    def rows(self, sides):
+        """The rows of ``sides`` (M,), made for those without one."""
+        new = np.unique(sides[self.row[sides] < 0])
+        if len(new):
+            self.row[new] = self.used + np.arange(len(new))
+            self.used += len(new)
+            if self.used > len(self.sums):
+                more = max(self.used, (3 * len(self.sums)) // 2) - len(self.sums)
+                self.sums = np.vstack([self.sums, np.zeros((more, GUIDE_CELLS), np.float32)])
+        return self.row[sides]
+
+    def add(self, sides, cell, values):
+        """Add ``values`` (M,) to distinct ``sides`` (M,) in guide ``cell``."""
+        rows = self.rows(sides)                  # first: it may grow the sums
+        self.sums[rows, cell] += values.astype(np.float32)
+
+    def of(self, sides):
+        """(M, cells) float64 the sums of ``sides`` (zero for sides without a row)."""
+        out = np.zeros((len(sides), GUIDE_CELLS))
+        r = self.row[sides]
+        out[r >= 0] = self.sums[r[r >= 0]]
+        return out
+
+
 def _normalized(g):
     """Rows of ``g`` (U, cells) divided by their sums (rows of zeros stay zero)."""
     total = g.sum(axis=1, keepdims=True)
@@ -107,10 +141,8 @@ class WorldLight:
         self.rays = 0
         # what the samples of :meth:`learn` found open, per side seen: the side's row
         # (-1: none yet), per row the sums by guide cell (rows, cells) and the unblocked samples
-        self._row = np.full(tracer.scene.n_sides, -1, np.int64)
-        self._learned = np.zeros((0, GUIDE_CELLS), np.float32)
-        self._hits = np.zeros(0, np.int64)
-        self._rows_used = 0                             # rows in use (the arrays have room for more)
+        self._learned = SideSums(tracer.scene.n_sides)
+        self._hits = np.zeros(0, np.int64)              # per row of the learned sums
 
     def sample(self, u, guide=None, sides=None):
         """``(directions (N, 3), pdf (N,) [1/sr], radiance (N, 3))`` for uniforms ``u`` (N, 3),
@@ -150,7 +182,7 @@ class WorldLight:
         """What :meth:`learn` has kept: each side's row (-1: none yet), each row's unblocked
         samples and its sums by guide cell (rows, cells) (:mod:`~raybundle.lights.compiled_world`;
         rows no side has yet are zero)."""
-        return self._row, self._hits, self._learned
+        return self._learned.row, self._hits, self._learned.sums
 
     def tables(self):
         """The sampling tables, integer ones first: the cumulative brightness's cut points
@@ -183,7 +215,7 @@ class WorldLight:
     def guide_at(self, bundle_sums, sides):
         """``(guide, at)`` for points on ``sides`` (N,): the :meth:`sample` guide of the sides
         they are on and each point's place among them (module docstring).  ``bundle_sums``
-        (S, cells) or None: what the solver's bundles brought each side from each cell; the
+        (:class:`SideSums`) or None: what the solver's bundles brought each side from each cell; the
         sides' learned sums (:meth:`learn`) are mixed in by their unblocked samples."""
         seen, at = np.unique(np.asarray(sides), return_inverse=True)
         if compiled.use():
@@ -191,12 +223,12 @@ class WorldLight:
                                                GUIDE_ROWS, GUIDE_COLS), at.reshape(-1)
         g = np.zeros((len(seen), GUIDE_CELLS))
         if bundle_sums is not None:
-            g += _normalized(bundle_sums[seen].astype(float))
-        rows = self._row[seen]
+            g += _normalized(bundle_sums.of(seen))
+        rows = self._learned.row[seen]
         has = np.nonzero(rows >= 0)[0]
         if len(has):
             weight = np.minimum(self._hits[rows[has]], LEARNED_MAX) / LEARNED_EQUAL
-            g[has] += _normalized(self._learned[rows[has]].astype(float)) * weight[:, None]
+            g[has] += _normalized(self._learned.sums[rows[has]].astype(float)) * weight[:, None]
         return self.guide_of(g), at.reshape(-1)
 
     @staticmethod
@@ -219,17 +251,10 @@ class WorldLight:
         ``directions`` (M, 3) towards the sky, each with ``value`` (M,) = max_c L_w cos / pdf."""
         if len(sides) == 0:
             return
-        new = np.unique(sides[self._row[sides] < 0])
-        if len(new):
-            self._row[new] = self._rows_used + np.arange(len(new))
-            self._rows_used += len(new)
-            if self._rows_used > len(self._hits):       # room for twice the rows: a pass adds a few
-                more = max(self._rows_used, 2 * len(self._hits)) - len(self._hits)
-                self._learned = np.vstack([self._learned, np.zeros((more, GUIDE_CELLS), np.float32)])
-                self._hits = np.concatenate([self._hits, np.zeros(more, np.int64)])
-        rows = self._row[sides]
+        rows = self._learned.rows(sides)
+        self._hits = np.concatenate([self._hits, np.zeros(len(self._learned.sums) - len(self._hits), np.int64)])
         cells = guide_cell(directions, self.h, self.w)
-        np.add.at(self._learned, (rows, cells), value.astype(np.float32))
+        np.add.at(self._learned.sums, (rows, cells), value.astype(np.float32))
         self._hits += np.bincount(rows, minlength=len(self._hits))
 
     def irradiance(self, points, normals, u, guide=None, lobe=None, learn=None):

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..lights.caustics import CausticShot
 from ..lights.first_shot import PatchFirstShot
-from ..lights.world_light import GUIDE_CELLS, guide_cell
+from ..lights.world_light import SideSums, guide_cell
 from ..patches.reconstruction import LinearReconstruction
 from ..patches.side_points import SidePoints
 from ..scene.transmission import solver_share
@@ -181,8 +181,8 @@ class PatchSolution(Method, abc.ABC):
         self.mean_incoming = np.zeros((n, 3))
         self.world_incoming = np.zeros((n, 3))      # the iterate's part straight from the world
         self.mean_world_incoming = np.zeros((n, 3))
-        #: (S, cells) or None: per side, the world light the bundles brought it from each guide cell
-        #: of the sky, summed over the iterations (:class:`~raybundle.lights.world_light.WorldLight`)
+        #: :class:`~raybundle.lights.world_light.SideSums` or None: per side, the world light the bundles
+        #: brought it from each guide cell of the sky, summed over the iterations (its rows: the sides it reached)
         self.world_guide = None
         self._tiny = None                           # sides smaller than a bundle cell (set at the first step)
         self.averaged = 0                           # iterations in mean_incoming
@@ -428,14 +428,14 @@ class PatchSolution(Method, abc.ABC):
         guide cell (-d for sender -1, +d for -2): ``max_c L_w * cell_area * w / A_i``, the
         brightest channel of its irradiance share, as the world light samples by."""
         if self.world_guide is None:
-            self.world_guide = np.zeros((len(self.area), GUIDE_CELLS), np.float32)
+            self.world_guide = SideSums(len(self.area))
         cells = guide_cell(np.stack([-d, d]), *self.world.image.shape[:2])
-        n = len(self.area)
         for sender_id, cell in ((-1, cells[0]), (-2, cells[1])):
             lum = S[sender_id].max()
             if lum > 0:
-                got = np.bincount(bundle.receiver[sender == sender_id], minlength=n)
-                self.world_guide[:, cell] += (got * (lum * w) / self.area).astype(np.float32)
+                got = np.bincount(bundle.receiver[sender == sender_id], minlength=len(self.area))
+                s = np.nonzero(got)[0]
+                self.world_guide.add(s, cell, got[s] * (lum * w) / self.area[s])
 
     # ------------------------------------------------------------- estimates
     def radiance(self, patch, w_out, diffuse_incoming=None, first_shot_emission=True, glossy_iterate=True,
