@@ -54,7 +54,8 @@ def cut_points(cdf):
 
 def world_guides(wl, bundle_sums, seen, share, equal, most, rows, cols):
     """``(share (U,), cdf (U cells,), prob (U cells,))``: :meth:`~raybundle.lights.world_light.WorldLight.guide_at`'s
-    guide of sides ``seen`` (U,) from the bundles' sums (a :class:`~raybundle.lights.world_light.SideSums`) or None and ``wl's learned
+    guide of sides ``seen`` (U,) from the bundles' sums
+    (:class:`~raybundle.lights.world_light.SideSums`) or None and ``wl's learned
     sums (weighted ``min(hits, most) / equal``), blurred over the ``rows`` x ``cols`` cells;
     ``share`` for the sides with sums."""
     u, cells = len(seen), rows * cols

@@ -252,7 +252,8 @@ class WorldLight:
         if len(sides) == 0:
             return
         rows = self._learned.rows(sides)
-        self._hits = np.concatenate([self._hits, np.zeros(len(self._learned.sums) - len(self._hits), np.int64)])
+        if len(self._hits) < len(self._learned.sums):          # the sums grew
+            self._hits = np.concatenate([self._hits, np.zeros(len(self._learned.sums) - len(self._hits), np.int64)])
         cells = guide_cell(directions, self.h, self.w)
         np.add.at(self._learned.sums, (rows, cells), value.astype(np.float32))
         self._hits += np.bincount(rows, minlength=len(self._hits))
