@@ -151,7 +151,8 @@ def test_a_byte_images_values_decode_through_a_table_to_the_transfer_functions_n
 def test_a_byte_images_pixels_are_read_once_and_its_mean_is_its_decoded_texels(fresh, monkeypatch):
     """A byte sRGB image on a Base Color is read from Blender once per export (its mean for the
     material and its bytes for the texture alike; reading it twice cost a room of seven photos a
-    second), and its mean is that of its texels decoded one by one."""
+    second), and its mean is that of its texels decoded one by one.  A texture without color
+    attributes keeps no corner colors (nine floats a face, all zero)."""
     from raybundle.scene.textures import srgb_to_linear
     from raybundle_addon.translation import images
     from raybundle_addon.translation.shaders import MaterialConverter
@@ -169,7 +170,8 @@ def test_a_byte_images_pixels_are_read_once_and_its_mean_is_its_decoded_texels(f
     reads = []
     real = images._pixels
     monkeypatch.setattr(images, "_pixels", lambda image: reads.append(image.name) or real(image))
-    assert _export().scene.texture.images[0].dtype == np.uint8
+    tex = _export().scene.texture
+    assert tex.images[0].dtype == np.uint8 and tex.face_color is None
     assert reads == ["photo"]
     held = np.asarray(img.pixels[:], np.float32).reshape(24, 40, 4)[..., :3]
     want = srgb_to_linear(held).astype(float).reshape(-1, 3)          # each texel's value as Blender holds it

@@ -87,8 +87,10 @@ class SceneBuilder:
         maps = [self.converter.albedo_map(im) if kind == "albedo"
                 else (np.asarray(self.converter.image_pixels(im), np.float32), None, None)
                 for _, im, kind, *_ in ordered]
-        return SurfaceTexture([m for m, *_ in maps], faces(1, -1), corners, faces(0, 0.0, (3, 2), float),
-                              faces(2, 0.0, (3, 3), float), faces(3, -1), faces(4, -1), faces(5, False, (), bool),
+        image = faces(1, -1)
+        return SurfaceTexture([m for m, *_ in maps], image, corners, faces(0, 0.0, (3, 2), float),
+                              faces(2, 0.0, (3, 3), float) if (image == -2).any() else None,     # color attributes
+                              faces(3, -1), faces(4, -1), faces(5, False, (), bool),
                               encoded=[e for _, e, _ in maps], byte_values=[b for *_, b in maps],
                               closest=[closest for *_, closest, _ in ordered],
                               extend=[extend for *_, extend in ordered])
