@@ -260,15 +260,14 @@ class GatheredRows:
         return out if dtype is None else out.astype(dtype)
 
     def _whole(name):                   # an operator on the whole array gathers it for that step
-        def op(self, *args):
-            return getattr(np.asarray(self), name)(*args)
-        return op
+        return lambda self, *args: getattr(np.asarray(self), name)(*args)
 
-    for _name in ("add", "sub", "mul", "truediv", "matmul", "gt", "ge", "lt", "le", "neg"):
-        for _dunder in (f"__{_name}__", f"__r{_name}__"):
-            if hasattr(np.ndarray, _dunder):
-                locals()[_dunder] = _whole(_dunder)
-    del _whole, _name, _dunder
+    __add__, __radd__, __sub__, __rsub__ = _whole("__add__"), _whole("__radd__"), _whole("__sub__"), _whole("__rsub__")
+    __mul__, __rmul__, __truediv__, __rtruediv__ = (_whole("__mul__"), _whole("__rmul__"), _whole("__truediv__"),
+                                                    _whole("__rtruediv__"))
+    __matmul__, __rmatmul__, __neg__ = _whole("__matmul__"), _whole("__rmatmul__"), _whole("__neg__")
+    __gt__, __ge__, __lt__, __le__ = _whole("__gt__"), _whole("__ge__"), _whole("__lt__"), _whole("__le__")
+    del _whole
 
     def mean(self, *args, **kw):
         return np.asarray(self).mean(*args, **kw)
