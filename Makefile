@@ -35,6 +35,11 @@ $(if $(PY_OLDEST),,$(error CI=true: no working Python 3.11 for the oldest Blende
 endif
 endif
 
+# every module byte-compiled once, in parallel (pip's own compile, one file at a time, was slow):
+# a process then never compiles what it imports, where Python writes no bytecode itself
+# (PYTHONDONTWRITEBYTECODE): bpy's start-up scripts, numpy and numba cost each process seconds
+BYTECODE = $(1) -m compileall -q -j 0 $$($(1) -c 'import sysconfig; print(sysconfig.get_path("purelib"))')
+
 # .venv is remade when the Python it should have changes (3.13 appeared, or went away)
 ifneq ($(shell cat $(VENV)/.python 2>/dev/null),$(PYTHON))
 $(STAMP): FORCE
@@ -43,6 +48,7 @@ $(STAMP): core/pyproject.toml pyproject.toml requirements-dev.txt
 	$(PYTHON) -m venv --clear $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet --no-compile -r requirements-dev.txt -e ./core -e .
+	$(call BYTECODE,$(PY)) core/raybundle raybundle_addon
 	echo "$(PYTHON)" > $(VENV)/.python
 	touch $(STAMP)
 
@@ -51,6 +57,7 @@ $(OLDEST)/.installed: requirements-oldest.txt
 	$(PY_OLDEST) -m venv --clear $(OLDEST)
 	$(OLDEST)/bin/python -m pip install --quiet --upgrade pip
 	$(OLDEST)/bin/python -m pip install --quiet --no-compile -r requirements-oldest.txt
+	$(call BYTECODE,$(OLDEST)/bin/python)
 	touch $@
 
 demo: $(STAMP)
