@@ -178,6 +178,41 @@ def test_a_byte_images_pixels_are_read_once_and_its_mean_is_its_decoded_texels(f
     np.testing.assert_allclose(MaterialConverter(print).image_mean(img), want.mean(axis=0), rtol=1e-12)
 
 
+def test_the_export_unloads_the_image_files_it_loaded_and_keeps_those_loaded_before(fresh, tmp_path):
+    """Two photos on two planes' Base Color, saved as files: the one Blender had not loaded is
+    unloaded again once the export has read its pixels (its copy in Blender stayed for the whole
+    render: a room's photographs, tens of megabytes), the one already loaded (shown in an image
+    editor, say) stays loaded; both textures are the files' pixels."""
+    from raybundle_addon.translation.images import image_bytes
+
+    rng = np.random.default_rng(4)
+    files = {}
+    for name in ("unloaded", "shown"):
+        im = bpy.data.images.new(name, 20, 12)
+        im.pixels.foreach_set(rng.random((12, 20, 4)).astype(np.float32).ravel())
+        im.filepath_raw, im.file_format = str(tmp_path / f"{name}.png"), "PNG"
+        im.save()
+        bpy.data.images.remove(im)
+        files[name] = bpy.data.images.load(str(tmp_path / f"{name}.png"))
+    for k, (name, im) in enumerate(files.items()):
+        plane = plane_with_uvs(size=1.0)
+        plane.location.x = 1.5 * k
+        plane.data.materials[0] = plane.data.materials[0].copy()
+        nt = plane.data.materials[0].node_tree
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = im
+        nt.links.new(tex.outputs["Color"], nt.nodes["Diffuse BSDF"].inputs["Color"])
+    assert files["shown"].pixels[0] >= 0.0                       # loaded, as an editor showing it would
+    assert not files["unloaded"].has_data and files["shown"].has_data
+    add_light("SUN", rotation=(0.3, 0.2, 0), energy=3.0, angle=0.0)
+    add_camera((0.75, 0, 5), resolution=(16, 16), ortho_scale=4.0)
+    tex = _export().scene.texture
+    assert not files["unloaded"].has_data and files["shown"].has_data
+    held = [image_bytes(files[name])[0] for name in files]          # read again from the files
+    got = sorted(tex.images, key=lambda a: a.ravel()[:8].tolist())
+    assert all(any(np.array_equal(g, h) for g in got) for h in held)
+
+
 @pytest.mark.parametrize("extension", ["EXTEND", "REPEAT"])
 def test_an_image_extended_or_repeated_beyond_its_uv_square_is_as_cycles_renders_it(fresh, tmp_path, extension):
     """A checker whose UVs reach from -0.5 to 1.5 over the plane: with Extend its edge texels

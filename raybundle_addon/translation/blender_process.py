@@ -28,9 +28,11 @@ def temporary_folder(prefix):
 
 class BlenderProcess:
     """``script`` (a file beside this module) run with ``args`` by Blender, its log in
-    ``folder``/log.txt, given up after ``timeout`` seconds."""
+    ``folder``/log.txt, given up after ``timeout`` seconds.  The script lowers its own priority
+    on POSIX (``os.nice``); on Windows the process starts below normal, or ``lowest`` at idle
+    priority (a render whose result is read last)."""
 
-    def __init__(self, script, args, folder, timeout):
+    def __init__(self, script, args, folder, timeout, lowest=False):
         import bpy
 
         self.folder, self.timeout = folder, float(timeout)
@@ -42,7 +44,8 @@ class BlenderProcess:
             cmd = [sys.executable, path, *args]
         # the log to a file: a pipe nobody reads while the caller works would fill and stall it.
         # The script lowers its own priority on POSIX (no preexec_fn in a process with threads)
-        lower = dict(creationflags=subprocess.BELOW_NORMAL_PRIORITY_CLASS) if os.name == "nt" else {}
+        lower = dict(creationflags=subprocess.IDLE_PRIORITY_CLASS if lowest else subprocess.BELOW_NORMAL_PRIORITY_CLASS) \
+            if os.name == "nt" else {}
         self._started = time.perf_counter()
         try:
             with open(os.path.join(folder.name, "log.txt"), "w") as log:
@@ -60,7 +63,7 @@ class BlenderProcess:
         """Wait for the end (at most :attr:`timeout` seconds from the start); raises
         :class:`BlenderProcessError` when it failed or any of ``outputs`` (paths) is missing."""
         try:
-            self._proc.wait(timeout=max(1.0, self.timeout - (time.perf_counter() - self._started)))
+            self._proc.wait(timeout=max(0.0, self.timeout - (time.perf_counter() - self._started)))
         except subprocess.TimeoutExpired:
             self._proc.kill()
             self._proc.wait()

@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .images import loaded_while_read
 from .light_linking import LinkSets
 from .lights import convert_light
 from .mesh_data import mesh_arrays, texture_uvs
@@ -398,16 +399,17 @@ def _export_geometry(depsgraph, scene, warn, cam_ob, camera, size, border, name,
     Blender bakes the node graphs on the materials' inputs meanwhile (:mod:`.node_graphs`)."""
     override = getattr(depsgraph.view_layer, "material_override", None)
     materials, users = _used_materials(depsgraph, override)
-    graphs = start_graph_bake(materials, users, camera=camera)
-    try:
-        converter = MaterialConverter(warn, graphs)
-        for m in materials:         # while Blender bakes: those that do not wait for it (their images decoded)
-            if not graphs.bakes(m):
-                converter.convert_ahead(m)
-        return _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, world, t0,
-                               converter, override)
-    finally:
-        graphs.cancel()
+    with loaded_while_read():             # the images' pixels are read into the scene's arrays
+        graphs = start_graph_bake(materials, users, camera=camera)
+        try:
+            converter = MaterialConverter(warn, graphs)
+            for m in materials:         # while Blender bakes: those that do not wait for it (their images decoded)
+                if not graphs.bakes(m):
+                    converter.convert_ahead(m)
+            return _export_objects(depsgraph, scene, warn, cam_ob, camera, size, border, name, world, t0,
+                                   converter, override)
+        finally:
+            graphs.cancel()
 
 
 def _used_materials(depsgraph, override):

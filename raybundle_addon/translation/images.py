@@ -2,9 +2,29 @@
 values of byte sRGB images, which Cycles keeps encoded and decodes after interpolating."""
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 
 from raybundle.scene.textures import srgb_to_linear
+
+
+@contextmanager
+def loaded_while_read():
+    """Within it, the images Blender had not loaded before (``Image.has_data`` False: a file's
+    pixels are decoded on first access) and that were read are unloaded again at its end
+    (``Image.buffers_free``; Blender reloads an image's pixels when it next needs them).  Their
+    pixels are read into arrays once, and Blender's own copy would otherwise stay in memory for
+    the whole render: a room's photographs, tens of megabytes each."""
+    import bpy
+
+    unloaded = [im for im in bpy.data.images if not im.has_data]
+    try:
+        yield
+    finally:
+        for im in unloaded:
+            if im.has_data:
+                im.buffers_free()
 
 
 def srgb_bytes(image):

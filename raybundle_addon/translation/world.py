@@ -231,7 +231,7 @@ def start_world_render(world, width=EQUIRECT_WIDTH, samples=EQUIRECT_SAMPLES, vi
     # leaves the layout its own (on one thread the living room's set-up waited 3.5-4 s for it at
     # the end; at the same priority the dining room's layout took 2 s longer)
     try:
-        proc = BlenderProcess("world_render.py", args, tmp, RENDER_TIMEOUT)
+        proc = BlenderProcess("world_render.py", args, tmp, RENDER_TIMEOUT, lowest=True)
     except BlenderProcessError as e:
         raise WorldRenderError(str(e)) from None
     return WorldRender(key, proc, out, seen, cache=cache)

@@ -9,8 +9,9 @@ Loads the world ``WORLD_NAME`` from ``LIBRARY.blend`` into an empty scene and re
 through a panoramic equirectangular camera at rotation (90, 0, -90) degrees (the layout of
 :mod:`raybundle.scene.world`: the image's centre looks along +X, its top row at the zenith),
 ``WIDTH`` x ``WIDTH / 2`` pixels, box filter one pixel wide (each pixel the mean radiance of
-its cell), no denoising, Standard view, on ``THREADS`` CPU threads (0: all) at a lower priority
-(nice 10), into a 32-bit
+its cell), no denoising, Standard view, on ``THREADS`` CPU threads (0: all) at the lowest
+priority (nice 19: below the node-graph bakes, :mod:`.material_bake`, which the export waits for,
+while the world is read only after the patch layout), into a 32-bit
 float EXR.  Only the world is in the
 scene, so every camera ray sees it directly: Blender evaluates whatever its node tree holds.
 
@@ -28,8 +29,8 @@ import sys
 
 
 def main(argv):
-    if hasattr(os, "nice"):         # below the caller, who lays out the patches meanwhile (on Windows: Popen's flag)
-        os.nice(10)
+    if hasattr(os, "nice"):         # below the caller and the graph bakes (on Windows: Popen's flag)
+        os.nice(19)
     import bpy
 
     library, name, out, width, samples, threads = argv[0], argv[1], argv[2], int(argv[3]), int(argv[4]), int(argv[5])
