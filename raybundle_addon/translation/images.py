@@ -15,10 +15,11 @@ def loaded_while_read():
     pixels are decoded on first access) and that were read are unloaded again at its end
     (``Image.buffers_free``; Blender reloads an image's pixels when it next needs them).  Their
     pixels are read into arrays once, and Blender's own copy would otherwise stay in memory for
-    the whole render: a room's photographs, tens of megabytes each."""
+    the whole render: a room's photographs, tens of megabytes each.  The Render Result and the
+    Viewer Node's image (source ``VIEWER``) are never touched."""
     import bpy
 
-    unloaded = [im for im in bpy.data.images if not im.has_data]
+    unloaded = [im for im in bpy.data.images if not im.has_data and im.source != "VIEWER"]
     try:
         yield
     finally:
