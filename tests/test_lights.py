@@ -6,12 +6,14 @@ from raybundle.lights.reflected_direct import reflected_radiance
 from raybundle.app import pipeline
 from raybundle.lights.direct import DirectLighting
 from raybundle.lights.first_shot import PatchFirstShot
+from raybundle.patches.clusters import make_patches
 from raybundle.patches.layout import subdivide
 from raybundle.scene import builtin as scenes
 from raybundle.scene.build import build_scene
 from raybundle.scene.materials import MaterialTable
 from raybundle.scene.model import PointLights
 from raybundle.tracing.visibility import RayTracer
+from test_lit_splits import lamp_close_over, tiled_floor
 
 LAMP = MaterialTable.from_list([dict(name="floor", diffuse=(0.5, 0.5, 0.5)), dict(name="lamp", emission=(1, 2, 3))])
 
@@ -683,6 +685,28 @@ def test_the_first_shot_refines_where_its_samples_spread():
     _, sd_round_robin = spread(True)
     assert sd < 0.5 * sd_round_robin, (sd / exact, sd_round_robin / exact)
     tr.close()
+
+
+def test_the_first_shots_pilot_draws_a_few_points_a_side_not_one_a_triangle():
+    """A floor of 48 x 48 tiles grouped into 64 patches under a lamp: E's initial samples take
+    one point on each of a cluster's triangles at least (each triangle's mean is kept), but the
+    pilot samples that measure a side's spread are ``pilot_samples`` points a side, uniform over
+    its area, so the set-up traces at most one shadow ray more a side per pilot sample (they
+    were one more a triangle: as many again as E's)."""
+    sc = make_patches(tiled_floor(area_lights=lamp_close_over()), patches=64)
+    tr = RayTracer(sc)
+    try:
+        dl = DirectLighting(sc, tr)
+        fs = PatchFirstShot(dl, np.random.default_rng(1), initial_samples=16, pilot_samples=4)
+        rows = fs.receiving_tsides
+        sides = np.unique(sc.tside_side[rows])
+        e_rays = sc.tside_samples(16)[rows].sum()
+        assert len(rows) > 20 * len(sides)                      # clusters of many triangles
+        assert e_rays <= dl.rays <= e_rays + 4 * len(sides), (dl.rays, e_rays, len(sides))
+        assert np.all(fs._side_n[sides] == 4)
+        assert np.all(fs.E[sides].sum(axis=(1, 2)) > 0)
+    finally:
+        tr.close()
 
 
 def test_the_first_shot_is_unbiased_where_lamps_light_slivers_of_sides():

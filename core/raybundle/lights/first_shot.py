@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..tracing.sampling import points_on_triangles
+from ..util.arrays import stable_order
 from .direct import DirectLighting, may_light
 
 
@@ -84,24 +85,42 @@ class PatchFirstShot:
         ts_area = sc.triangle_area[sc.tside_triangle[self.receiving_tsides]]
         ts_side = sc.tside_side[self.receiving_tsides]
         self._share_in_side = ts_area / np.maximum(np.bincount(ts_side, ts_area, minlength=sc.n_sides)[ts_side], 1e-300)
-        # initial_samples per side into E and pilot_samples per side into the spread, each shared
-        # out over a cluster's triangles by area
-        for samples, pilot in ((initial_samples, False), (pilot_samples, True)):
-            counts = sc.tside_samples(samples)[self.receiving_tsides]
-            for r in range(samples if n_r else 0):
-                todo = np.nonzero(counts > r)[0]
-                step = 1 << 18                            # bounded temporaries on big scenes
-                for lo in range(0, len(todo), step):
-                    self._add(todo[lo:lo + step], pilot)
+        # initial_samples per side into E, shared out over a cluster's triangles by area (each
+        # receiving tside's mean needs one at least); pilot_samples per side into the spread,
+        # shared out the same way where a side has at most as many receiving tsides, else each
+        # at a point uniform over the side's receiving area (on a tside drawn by area)
+        counts = sc.tside_samples(initial_samples)[self.receiving_tsides]
+        for r in range(initial_samples if n_r else 0):
+            self._add_in_steps(np.nonzero(counts > r)[0], form=False)
+        self._form()                             # E and direction from the sums, once
+        counts = sc.tside_samples(pilot_samples)[self.receiving_tsides]
+        few = np.bincount(ts_side, minlength=sc.n_sides)[ts_side] <= pilot_samples
+        order, side = stable_order(ts_side[~few])
+        order = np.flatnonzero(~few)[order]
+        first = np.flatnonzero(np.r_[True, side[1:] != side[:-1]]) if len(side) else np.zeros(0, np.int64)
+        last = np.r_[first[1:], len(side)] - 1          # each such side's rows in ``order``
+        cdf = np.cumsum(self._share_in_side[order])
+        before = cdf[first] - self._share_in_side[order[first]]
+        for r in range(pilot_samples if n_r else 0):
+            at = np.searchsorted(cdf, before + self.rng.random(len(first)) * (cdf[last] - before), side="right") \
+                if len(first) else np.zeros(0, np.int64)
+            self._add_in_steps(np.r_[np.nonzero(few & (counts > r))[0], order[np.clip(at, first, last)]], pilot=True)
+
+    def _add_in_steps(self, rows, pilot=False, form=True):
+        """:meth:`_add` of ``rows`` in steps: bounded temporaries on big scenes."""
+        step = 1 << 18
+        for lo in range(0, len(rows), step):
+            self._add(rows[lo:lo + step], pilot, form)
 
     @property
     def n_lights(self):
         return len(self.lights)
 
-    def _add(self, rows, pilot=False):
+    def _add(self, rows, pilot=False, form=True):
         """One new sample on each receiving tside of ``rows`` (distinct rows of
-        :attr:`receiving_tsides`): into E and direction, or with ``pilot`` into the sides'
-        spread only (class docstring)."""
+        :attr:`receiving_tsides`): into E and direction (with ``form`` False into their sums
+        only, :meth:`_form` to make them after), or with ``pilot`` into the sides' spread only
+        (class docstring)."""
         sc = self.scene
         tri = self.receiving_tsides[rows]
         u = self.rng.random((len(tri), 2))
@@ -109,7 +128,7 @@ class PatchFirstShot:
         nrm = sc.tside_normal[tri]
         d_row = self._d_row[rows]
         d = np.nonzero(d_row >= 0)[0]                  # the rows whose direction sums are kept
-        if not pilot:
+        if not pilot and form:
             old = self._e_sum[rows] / np.maximum(self._count[rows], 1)[:, None, None]
             old_d = self._d_sum[d_row[d]] / np.maximum(self._count[rows[d]], 1)[:, None, None]
         y = np.zeros(len(tri))
@@ -132,6 +151,8 @@ class PatchFirstShot:
             self._side_y2 += np.bincount(side, y * y, minlength=sc.n_sides)
             return
         self._count[rows] += 1
+        if not form:
+            return
         # side average = sum over its tsides of area * (tside mean) / side area
         w = (sc.triangle_area[sc.tside_triangle[tri]] / self.receiving_area[side])[:, None, None]
         new = self._e_sum[rows] / self._count[rows][:, None, None]
@@ -153,17 +174,23 @@ class PatchFirstShot:
     def set_sums(self, e_sum, d_sum, count):
         """Replace the sums and counts per receiving tside (e.g. those of several chains pooled,
         :mod:`raybundle.app.chains`) and recompute ``E`` and ``direction`` from them."""
-        sc = self.scene
         self._e_sum, self._d_sum, self._count = e_sum.copy(), d_sum.copy(), count.copy()
-        c = np.maximum(self._count, 1)[:, None, None]
+        self._form()
+
+    def _form(self):
+        """``E`` and ``direction`` made from the sums and counts per receiving tside: the
+        side's area-weighted mean of its tsides' means."""
+        sc = self.scene
         ts = self.receiving_tsides
         side = sc.tside_side[ts]
-        w = (sc.triangle_area[sc.tside_triangle[ts]] / np.maximum(self.receiving_area[side], 1e-300))[:, None, None]
-        self.E = np.zeros_like(self.E)
-        self._d_patch = np.zeros_like(self._d_patch)
-        np.add.at(self.E, side, w * self._e_sum / c)
+        n = sc.n_sides
+        # each tside's weight over its count: area / side's receiving area / samples
+        w = (sc.triangle_area[sc.tside_triangle[ts]] / np.maximum(self.receiving_area[side], 1e-300)
+             / np.maximum(self._count, 1))[:, None]
         d = self._d_row >= 0
-        np.add.at(self._d_patch, side[d], w[d] * self._d_sum / c[d])
+        for li in range(self.E.shape[1]):        # a light at a time: temporaries of (TS, 3)
+            self.E[:, li] = _summed(side, n, w * self._e_sum[:, li])
+            self._d_patch[:, li] = _summed(side[d], n, w[d] * self._d_sum[:, li])
         norm = np.linalg.norm(self._d_patch, axis=2, keepdims=True)
         self.direction = np.where(norm > 0, self._d_patch / np.maximum(norm, 1e-300), 0.0)
 
@@ -202,7 +229,7 @@ class PatchFirstShot:
 def _summed(group, n, values):
     """(n, ...) the sums of ``values`` (N, ...) by ``group`` (N,) in [0, n) (``np.add.at``'s
     result, by one bincount per column: many times faster)."""
-    flat = values.reshape(len(values), -1)
+    flat = values.reshape(len(values), int(np.prod(values.shape[1:])))
     out = np.empty((n, flat.shape[1]))
     for c in range(flat.shape[1]):
         out[:, c] = np.bincount(group, flat[:, c], minlength=n)
