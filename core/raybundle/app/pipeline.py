@@ -84,34 +84,20 @@ def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None, stage=None, stop=None
     if max_edge is not None:
         return subdivide(scene, max_edge=max_edge)
     if patches:
-        # one tracer over the input serves the layout's crowding probe and the lamps' splits
-        tracer = RayTracer(scene) if _has_lamps(scene) else None
-        try:
-            laid_out = make_patches(scene, patches=patches, stage=stage, probe=tracer)
-            _step(stage, stop, "splitting patches where the lamps' light changes within them")
-            return laid_out if tracer is None else split_lit_unevenly(scene, laid_out, tracer)
-        finally:
-            if tracer is not None:
-                tracer.close()
+        laid_out = make_patches(scene, patches=patches, stage=stage)
+        _step(stage, stop, "splitting patches where the lamps' light changes within them")
+        return split_lit_unevenly(scene, laid_out)
     return triangle_patches(scene)
 
 
-def _has_lamps(scene):
-    """Whether ``scene`` has a lamp the first shot takes (a light or a small emitter)."""
-    return bool(len(scene.point_lights) or len(scene.sun_lights) or len(scene.area_lights)
-                or len(small_emitters(scene)))
-
-
-def split_lit_unevenly(scene, laid_out, tracer=None):
+def split_lit_unevenly(scene, laid_out):
     """``laid_out`` (``scene``'s patch layout) with the patches over which the first shot's
     lamps' light changes strongly split (:func:`~raybundle.patches.lit_splits.split_where_lit_unevenly`),
-    their light probed with shadow rays over ``scene`` (the same surfaces; ``tracer`` a
-    :class:`~raybundle.tracing.visibility.RayTracer` over it, or one built here) from a fixed
-    seed, so a layout is the same on every run."""
-    if not _has_lamps(scene):
+    their light probed with shadow rays over ``scene`` (the same surfaces) from a fixed seed, so
+    a layout is the same on every run."""
+    if not (len(scene.point_lights) or len(scene.sun_lights) or len(scene.area_lights) or len(small_emitters(scene))):
         return laid_out                 # no lamp of the first shot: no tracer built
-    own = tracer is None
-    tracer = RayTracer(scene) if own else tracer
+    tracer = RayTracer(scene)
     try:
         direct = DirectLighting(scene, tracer)
         if not direct.n_lights:
@@ -123,8 +109,7 @@ def split_lit_unevenly(scene, laid_out, tracer=None):
 
         return split_where_lit_unevenly(laid_out, light)[0]
     finally:
-        if own:
-            tracer.close()
+        tracer.close()
 
 
 def _check_world(scene):

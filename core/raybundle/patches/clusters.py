@@ -299,15 +299,13 @@ def surface_size(scene: PatchScene, patches, grouping):
     return SURFACE_SHARE * np.sqrt(surfaces / patches) if surfaces > 0 else np.inf
 
 
-def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stage=None, probe=None) -> PatchScene:
+def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stage=None) -> PatchScene:
     """The patch layout of ``scene`` for about ``patches`` patches (or patch size ``size`` [m]):
     large triangles cut, small ones grouped (module docstring).  A scene without triangles
     smaller than a patch gets exactly :func:`~raybundle.patches.layout.subdivide`'s layout.  With
     ``contacts``, patches follow contact lines (:func:`~raybundle.patches.layout.cut_at_contacts`)
     and no cluster holds triangles both in and out of a gap narrower than a quarter of a patch
-    (:func:`~raybundle.patches.gaps.gap_sides`).  ``stage(text)`` is told each step as it starts.
-    ``probe``: a :class:`~raybundle.tracing.visibility.RayTracer` over ``scene`` to trace the
-    crowding of cut faces with (left open), or None to build one when a face is cut."""
+    (:func:`~raybundle.patches.gaps.gap_sides`).  ``stage(text)`` is told each step as it starts."""
     stage = stage or (lambda text: None)
     if (patches is None) == (size is None):
         raise ValueError("give exactly one of patches and size")
@@ -323,9 +321,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
     # crowding is traced over the input (its pieces have the same surfaces), if a triangle is cut
     stage(f"cutting faces larger than a patch ({h:.3g} m)")
     pieces = ~small & scene.materials.reflects[scene.triangle_material]
-    own = probe is None
-    if own:
-        probe = RayTracer(scene) if pieces.any() else None
+    probe = RayTracer(scene) if pieces.any() else None
     try:
         small, fine, row, split, crowded = _cut(scene, grouping, h, probe)
         coarser = min(h * np.sqrt((patches + 3 * crowded) / patches), surface_size(scene, patches, grouping)) \
@@ -338,7 +334,7 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
             h, detail_h = coarser, max(detail_h, coarser)
             small, fine, row, split, _ = _cut(scene, grouping, h, probe)
     finally:
-        if own and probe is not None:
+        if probe is not None:
             probe.close()
     lo, probe = grouping.lo, None
     del grouping                    # the cuts done, only its origin is needed: memory grows with the scene
