@@ -93,18 +93,26 @@ class PatchFirstShot:
         for r in range(initial_samples if n_r else 0):
             self._add_in_steps(np.nonzero(counts > r)[0], form=False)
         self._form()                             # E and direction from the sums, once
-        counts = sc.tside_samples(pilot_samples)[self.receiving_tsides]
-        few = np.bincount(ts_side, minlength=sc.n_sides)[ts_side] <= pilot_samples
+        for rows in self._pilot_rows(pilot_samples, ts_side):
+            self._add_in_steps(rows, pilot=True)
+
+    def _pilot_rows(self, k, ts_side):
+        """Each round's rows (of :attr:`receiving_tsides`, whose sides are ``ts_side``) for ``k``
+        pilot samples a side: a side with at most ``k`` receiving tsides shares them out by area
+        (:meth:`~raybundle.scene.model.PatchScene.tside_samples`), each other side takes one a
+        round on a tside drawn by area, so that its points are uniform over its receiving area."""
+        counts = self.scene.tside_samples(k)[self.receiving_tsides]
+        few = np.bincount(ts_side)[ts_side] <= k
         order, side = stable_order(ts_side[~few])
         order = np.flatnonzero(~few)[order]
         first = np.flatnonzero(np.r_[True, side[1:] != side[:-1]]) if len(side) else np.zeros(0, np.int64)
         last = np.r_[first[1:], len(side)] - 1          # each such side's rows in ``order``
         cdf = np.cumsum(self._share_in_side[order])
         before = cdf[first] - self._share_in_side[order[first]]
-        for r in range(pilot_samples if n_r else 0):
+        for r in range(k if len(ts_side) else 0):
             at = np.searchsorted(cdf, before + self.rng.random(len(first)) * (cdf[last] - before), side="right") \
                 if len(first) else np.zeros(0, np.int64)
-            self._add_in_steps(np.r_[np.nonzero(few & (counts > r))[0], order[np.clip(at, first, last)]], pilot=True)
+            yield np.r_[np.nonzero(few & (counts > r))[0], order[np.clip(at, first, last)]]
 
     def _add_in_steps(self, rows, pilot=False, form=True):
         """:meth:`_add` of ``rows`` in steps: bounded temporaries on big scenes."""
