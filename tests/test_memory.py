@@ -86,3 +86,24 @@ def test_the_bundles_sky_guide_keeps_rows_for_the_sides_the_sky_reached():
     assert 0 < guide.used == len(reached) < sc.n_sides and len(guide.sums) <= 1.5 * guide.used
     assert (guide.sums[guide.row[reached]].sum(axis=1) > 0).all()
     r.tracer.close()
+
+
+def test_the_final_images_vertex_values_take_single_precision():
+    """The vertex values an image reads at its hits (the final gather's, the image's own
+    reconstruction and the caustic shot's averages) are kept in 32 bits: 12 bytes a vertex
+    each, where they took 24 (a furnished room's final image held three or four arrays of
+    its ~1M welded vertices at once); they are the double projection's values, rounded."""
+    from raybundle.imaging.gather import FinalGather
+
+    sc = pipeline.prepare(scenes.load_scene("cornell-glossy"), 300)
+    r = pipeline.make_renderer(sc, RenderSettings(seed=0))
+    for _ in range(3):
+        r.step()
+    solver = r.solver
+    e = solver.image_incoming(caustic=True, world=True)
+    final = FinalGather(solver, image_values=(e, None))
+    exact = solver.reconstruction.smooth_and_sharp(e, None)
+    for vert in (final.vert, final.image_vert) + ((final.vert_caustic,) if final.vert_caustic is not None else ()):
+        assert vert.dtype == np.float32 and vert.nbytes == 12 * solver.reconstruction.n_vertices
+    np.testing.assert_allclose(final.image_vert, exact, rtol=1e-6, atol=1e-6 * exact.max())
+    r.tracer.close()

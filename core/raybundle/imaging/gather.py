@@ -59,7 +59,7 @@ class FinalGather:
         # image's own reconstruction (``image_vert``), in one projection
         pairs = [(indirect + solver.first_shot.E.sum(axis=1), sharp)] + \
             ([(indirect, sharp)] if self.near > 0 else []) + ([image_values] if image_values is not None else [])
-        verts = rec.smooth_and_sharp_many(pairs)
+        verts = rec.smooth_and_sharp_many(pairs, np.float32)      # read at hits: single precision
         self.vert = verts[0]
         self.vert_indirect = verts[1] if self.near > 0 else None
         self.image_vert = verts[-1] if image_values is not None else None
@@ -69,7 +69,7 @@ class FinalGather:
         # is (``caustic`` False: left out, for an image that light-traces it into its pixels,
         # :meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`)
         self.first_shot_glossy = sharp is None
-        self.vert_caustic = rec.averaged(sharp) if sharp is not None and caustic else None
+        self.vert_caustic = rec.averaged(sharp).astype(np.float32) if sharp is not None and caustic else None
 
     def irradiance(self, points, normals, rays, rng, shift=None, first=0, at=None, chunk_rays=1 << 18):
         """E_ind (N, 3) [W/m^2] at ``points`` (N, 3) with unit ``normals`` (N, 3), by

@@ -164,7 +164,8 @@ class DiffuseIndirect:
         if len(r) == 0:
             return e
         if "vert" not in cache:
-            cache["vert"] = self.solver.reconstruction.averaged(caustic.E) if self.settings.smooth else None
+            cache["vert"] = self.solver.reconstruction.averaged(caustic.E).astype(np.float32) \
+                if self.settings.smooth else None
         e[r] += surface_values(self.scene, self.solver, caustic.E, cache["vert"], g.tside[h[r]], g.bary[h[r]])
         return e
 
@@ -188,7 +189,7 @@ class DiffuseIndirect:
                                 image_values=(e_bar, sharp) if self.settings.smooth else None)
         vert = final.image_vert if final is not None else None
         if vert is None and self.settings.smooth and np.any(e_bar):
-            vert = solver.reconstruction.smooth_and_sharp(e_bar, sharp)
+            vert = solver.reconstruction.smooth_and_sharp(e_bar, sharp, np.float32)
         if final is not None:
             per_sample = (-(-int(rays) // k) if rays > 0 else
                           self.edge_gather.automatic_rays(final, self.probe(), k, final_time,

@@ -138,14 +138,15 @@ class LinearReconstruction:
             self._fit.vertex_values(np.asarray(side_values, float), out=x)
         return x
 
-    def smooth_and_sharp(self, side_values, sharp=None):
+    def smooth_and_sharp(self, side_values, sharp=None, dtype=float):
         """Side values (S, C) -> (V, C): :meth:`projected` of ``side_values - sharp`` plus
         :meth:`averaged` of ``sharp`` (S, C) (the caustic first shot: sharp-edged and
         noisy, which a projection would ring on; projected, it measured worse on ``cornell-glossy``:
-        docs/benchmarks.md, 'Measured choices behind the defaults')."""
-        return self.smooth_and_sharp_many([(side_values, sharp)])[0]
+        docs/benchmarks.md, 'Measured choices behind the defaults'), kept as ``dtype`` (float32
+        for values an image reads: half the memory of the vertices)."""
+        return self.smooth_and_sharp_many([(side_values, sharp)], dtype)[0]
 
-    def smooth_and_sharp_many(self, pairs):
+    def smooth_and_sharp_many(self, pairs, dtype=float):
         """:meth:`smooth_and_sharp` of each ``(side_values, sharp)`` in ``pairs``, as a list: one
         projection of all their columns side by side (the same values: the projection and its
         clamp act column by column), so the mesh's work is done once, not once per pair."""
@@ -158,7 +159,7 @@ class LinearReconstruction:
             part = x[:, c:c + v.shape[1]]
             if s is not None and id(s) not in averaged:
                 averaged[id(s)] = self.averaged(s)
-            out.append(part if s is None else part + averaged[id(s)])
+            out.append((part if s is None else part + averaged[id(s)]).astype(dtype, copy=False))
             c += v.shape[1]
         return out
 
