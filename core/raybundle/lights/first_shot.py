@@ -196,9 +196,10 @@ class PatchFirstShot:
         w = (sc.triangle_area[sc.tside_triangle[ts]] / np.maximum(self.receiving_area[side], 1e-300)
              / np.maximum(self._count, 1))[:, None]
         d = self._d_row >= 0
+        side_d, w_d = side[d], w[d]               # the directed rows, in the order of the direction sums
         for li in range(self.E.shape[1]):        # a light at a time: temporaries of (TS, 3)
             self.E[:, li] = _summed(side, n, w * self._e_sum[:, li])
-            self._d_patch[:, li] = _summed(side[d], n, w[d] * self._d_sum[:, li])
+            self._d_patch[:, li] = _summed(side_d, n, w_d * self._d_sum[:, li])
         norm = np.linalg.norm(self._d_patch, axis=2, keepdims=True)
         self.direction = np.where(norm > 0, self._d_patch / np.maximum(norm, 1e-300), 0.0)
 
