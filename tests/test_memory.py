@@ -107,3 +107,53 @@ def test_the_final_images_vertex_values_take_single_precision():
         assert vert.dtype == np.float32 and vert.nbytes == 12 * solver.reconstruction.n_vertices
     np.testing.assert_allclose(final.image_vert, exact, rtol=1e-6, atol=1e-6 * exact.max())
     r.tracer.close()
+
+
+def test_a_textures_coarser_levels_are_dropped_after_its_means_and_its_faces_take_32_bits():
+    """A map's pyramid (its levels of 2 x 2 means) serves the set-up's patch means alone: none
+    is held after them (a furnished room held 40 MB of them through its render), and the means
+    come out the same when the levels are made again.  The input faces' corners take 32 bits
+    (the add-on gives the textures and the shading normals one array of them)."""
+    from raybundle.scene.build import build_scene
+    from raybundle.scene.materials import MaterialTable
+    from raybundle.scene.model import PointLights
+    from raybundle.scene.textures import SurfaceTexture
+
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
+    t = np.array([[0, 1, 2], [0, 2, 3]])
+    checker = np.where((np.add.outer(np.arange(512), np.arange(512)) // 8 % 2)[..., None], 0.4, 1.6) * np.ones(3)
+    tex = SurfaceTexture([checker.astype(np.float32)], np.zeros(2, int), v[t], (v[t][..., :2] + 1) / 2)
+    scene = build_scene(v, t, np.zeros(2, int), MaterialTable.from_list([dict(name="floor", diffuse=(0.5,) * 3)]),
+                        texture=tex, point_lights=PointLights([[0.0, 0.0, 1.0]], [[1.0, 1.0, 1.0]]))
+    laid = pipeline.prepare(scene, patches=40)
+    means = laid.texture.side_means(laid, seed=0)
+    assert laid.texture._pyramids == {}
+    assert laid.texture.face_corners.dtype == np.float32
+    np.testing.assert_array_equal(laid.texture.side_means(laid, seed=0), means)
+    assert laid.texture._pyramids == {}
+
+
+def test_the_vertex_averages_take_no_per_corner_arrays_and_the_glossy_paths_keep_32_bits():
+    """A solution's vertex averages (what the glossy eye paths read at their hits) are made
+    without (TS, 3) arrays of weights or a 64-bit copy of the corners' ids (a furnished room's
+    first average took 60 MB beyond its result), and the glossy eye paths keep them in 32 bits."""
+    import tracemalloc
+
+    sc = pipeline.prepare(scenes.load_scene("cornell-glossy"), 4000)
+    r = pipeline.make_renderer(sc, RenderSettings(seed=0))
+    r.step()
+    rec, e = r.solver.reconstruction, r.solver.received()
+    tracemalloc.start()
+    try:
+        out = rec.averaged(e)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    per_corner = 3 * 8 * len(rec.ids)
+    # the result, the weights' sums and their guard (V,) each, a column of ones per side
+    assert peak < out.nbytes + 2 * 8 * rec.n_vertices + 8 * sc.n_sides + per_corner / 4, (peak, per_corner)
+    r.image_pass()
+    vert = r.glossy_paths._vert[1]
+    assert vert.dtype == np.float32
+    np.testing.assert_allclose(vert, rec.averaged(r.solver.received()), rtol=1e-6)
+    r.tracer.close()

@@ -106,12 +106,14 @@ class SceneBuilder:
 
         v, t, m = self.joined("vertices"), self.joined("triangles"), self.joined("materials")
         mats = MaterialTable.from_list(self._material_specs)
-        texture = self.texture(v[t])
         with _warnings.catch_warnings(record=True) as caught:
             _warnings.simplefilter("always")
-            shading = None
+            corners, shading = v[t], None
             if all(p.normals is not None for p in self.parts):
-                shading = ShadingNormals.of_faces(v[t], self.joined("normals"))
+                shading = ShadingNormals.of_faces(corners, self.joined("normals"))
+            # the input faces in 32 bits, one array for the shading normals and the textures
+            corners = corners.astype(np.float32) if shading is None else shading.face_corners
+            texture = self.texture(corners)
             sc = build_scene(v, t, m, mats, point_lights=_records(PointLights, self.lights["point"]),
                              sun_lights=_records(SunLights, self.lights["sun"]),
                              area_lights=_records(AreaLights, self.lights["area"]),

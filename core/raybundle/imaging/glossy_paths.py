@@ -77,10 +77,11 @@ class GlossyEyePaths:
         return tuple(np.concatenate([p[c] for p in parts]) for c in (0, 1))
 
     def _vertex_values(self, e):
-        """The solver's vertex values of the side values ``e``, kept while ``e`` stays the same
-        (a pass gathers its own samples and its extra ones from the same solution)."""
+        """The solver's vertex values of the side values ``e`` in 32 bits, kept while ``e`` stays
+        the same (a pass gathers its own samples and its extra ones from the same solution)."""
         if self._vert is None or not np.array_equal(self._vert[0], e):
-            self._vert = (e, self.solver.reconstruction.averaged(e))
+            self._vert = None
+            self._vert = (e, self.solver.reconstruction.averaged(e).astype(np.float32))
         return self._vert[1]
 
     def _gather(self, g, idx, u, e, vert, world_samples, guide):

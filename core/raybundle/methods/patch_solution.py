@@ -42,8 +42,9 @@ class PatchSolution(Method, abc.ABC):
     TINY_SIDE = 16.0
     #: rays a tiny side gathers by per iteration (0: none, the bundles' estimate stays)
     TINY_GATHER_RAYS = 4
-    #: the glossy sides' send rays traced in one batch, at most (several bundle directions at once)
-    GLOSSY_SEND_BATCH = 1 << 18
+    #: the glossy sides' send rays traced in one batch, at most (several bundle directions at once):
+    #: a batch's temporaries (its rays' hits and the radiance they read) are a few hundred bytes a ray
+    GLOSSY_SEND_BATCH = 1 << 16
 
     #: it takes the first shot's glossy reflection by lobe-sampled rays (``settings.caustics``)
     TAKES_CAUSTIC_SHOT = True

@@ -93,6 +93,9 @@ class LinearReconstruction:
     def _average_sums(self):
         """(V,) the sums of :meth:`averaged`'s weights over all tsides (the weights themselves,
         (TS, 3), are made per call and only on the NumPy path)."""
+        if compiled.use():
+            return _scatter_sides(self.ids, self.area, self.scene.tside_side, np.ones((self.scene.n_sides, 1)),
+                                  self.n_vertices, self.empty)[:, 0]
         return np.bincount(self._flat, self._corner_weights(self.ids, self.area).ravel(), minlength=self.n_vertices)
 
     def _corner_weights(self, ids, area):
@@ -104,7 +107,9 @@ class LinearReconstruction:
         """Side values (S, C) -> (V, C): the mean of the sides around each vertex,
         weighted by their receiving area (vertices without any: unweighted); with
         ``tsides`` (indices) over those alone (right at the vertices all of whose tsides they hold)."""
-        return self._numerator(side_values, tsides) / np.maximum(self._average_sums, 1e-300)[:, None]
+        out = self._numerator(side_values, tsides)
+        out /= np.maximum(self._average_sums, 1e-300)[:, None]        # in place: (V, C) is the largest array
+        return out
 
     def _numerator(self, side_values, tsides=None):
         """(V, C) :meth:`averaged`'s weighted sums at each vertex, before the division."""

@@ -79,7 +79,7 @@ class SurfaceTexture:
     ``face_image`` (F,) int: the map of each input face (-1: untextured; -2: the face's
     corner colors, interpolated linearly: a color attribute, whose color is the albedo
     factor itself), indexed by :attr:`~raybundle.scene.model.PatchScene.triangle_source`;
-    ``face_corners`` (F, 3, 3) [m] and ``face_uv`` (F, 3, 2): the input faces and their
+    ``face_corners`` (F, 3, 3) [m], float32, and ``face_uv`` (F, 3, 2): the input faces and their
     corner UVs; ``face_color`` (F, 3, 3) or None: their corner colors; ``face_alpha`` (F,) int
     or None: the map of each face's coverage (its first channel; -1: opaque); ``face_normal``
     (F,) int or None: the map of each face's normal, its texels the perturbed normal (x, y, z)
@@ -114,7 +114,7 @@ class SurfaceTexture:
                             else np.asarray(self.face_normal, np.int64))
         self.face_bump = (np.zeros(len(self.face_image), bool) if self.face_bump is None
                           else np.asarray(self.face_bump, bool))
-        self.face_corners = np.asarray(self.face_corners, float)
+        self.face_corners = np.asarray(self.face_corners, np.float32)
         self.face_uv = np.asarray(self.face_uv, float)
         if self.face_color is not None:
             self.face_color = np.asarray(self.face_color, float)
@@ -197,7 +197,8 @@ class SurfaceTexture:
         return out
 
     def level(self, image, level):
-        """Level ``level`` of map ``image``'s pyramid (kept once made): level 0 is the map as
+        """Level ``level`` of map ``image``'s pyramid (kept until :meth:`_triangle_means` ends,
+        the set-up's reads of it): level 0 is the map as
         stored (bytes for a map of :attr:`byte_values`), each next level the means of 2 x 2 texels
         of decoded values (an odd row or column is averaged with the first, as the map repeats, or
         with itself where its edges extend)."""
@@ -364,12 +365,15 @@ class SurfaceTexture:
         rng = stream(seed, Stream.TEXTURE_MEANS)
         groups, which = np.unique(np.stack([k, level, img[textured]], axis=1), axis=0, return_inverse=True)
         order = np.argsort(which.ravel(), kind="stable")
-        for (n, lev, m), sel in zip(groups, np.split(order, np.cumsum(np.bincount(which.ravel()))[:-1])):
-            st = stratified_2d_sets(len(sel), int(n), rng).reshape(-1, 2)
-            w = uniform_triangle(st[:, 0], st[:, 1]).reshape(len(sel), int(n), 3)
-            at = np.einsum("tnk,tkc->tnc", w, uv[sel]).reshape(-1, 2)
-            got = self.lookup(int(m), at, int(lev))
-            mean[textured[sel]] = got.reshape(len(sel), int(n), -1).mean(axis=1)
+        try:
+            for (n, lev, m), sel in zip(groups, np.split(order, np.cumsum(np.bincount(which.ravel()))[:-1])):
+                st = stratified_2d_sets(len(sel), int(n), rng).reshape(-1, 2)
+                w = uniform_triangle(st[:, 0], st[:, 1]).reshape(len(sel), int(n), 3)
+                at = np.einsum("tnk,tkc->tnc", w, uv[sel]).reshape(-1, 2)
+                got = self.lookup(int(m), at, int(lev))
+                mean[textured[sel]] = got.reshape(len(sel), int(n), -1).mean(axis=1)
+        finally:           # the coarser levels serve these means alone: not held through the render
+            self._pyramids.clear()
         return mean
 
 
