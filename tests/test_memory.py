@@ -157,3 +157,18 @@ def test_the_vertex_averages_take_no_per_corner_arrays_and_the_glossy_paths_keep
     assert vert.dtype == np.float32
     np.testing.assert_allclose(vert, rec.averaged(r.solver.received()), rtol=1e-6)
     r.tracer.close()
+
+
+def test_the_first_shots_sums_per_triangle_side_take_32_bits():
+    """The first shot's sums, counts, shares and rows per receiving triangle side, held through
+    the render (a furnished room's 70 MB in 64 bits), take 32 bits; its sides' E is summed in 64
+    (``test_lights``: E as the pooled sums form it, to 1e-12)."""
+    sc = pipeline.prepare(scenes.load_scene("cornell-glossy"), 600)
+    r = pipeline.make_renderer(sc, RenderSettings(seed=0))
+    r.step()
+    fs = r.solver.first_shot
+    assert len(fs.receiving_tsides) > 0 and len(fs._d_sum) > 0
+    assert {a.dtype for a in (fs._e_sum, fs._d_sum, fs._count, fs._share_in_side)} == {np.dtype(np.float32)}
+    assert {a.dtype for a in (fs.receiving_tsides, fs._d_row)} == {np.dtype(np.int32)}
+    assert fs.E.dtype == np.float64
+    r.tracer.close()

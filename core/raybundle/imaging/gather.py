@@ -189,14 +189,14 @@ class FinalGather:
 PROBES = 32
 
 
-def near_edge_tsides(scene, tracer, rng, tsides=None, probes=PROBES, reach=1.0, chunk=1 << 20):
+def near_edge_tsides(scene, tracer, rng, tsides=None, probes=PROBES, reach=1.0, chunk=1 << 16):
     """(N,) bool for triangle sides ``tsides`` (N,) (default: all): sides where the patch
     values are not to be trusted, because something else lies within ``reach`` patch sizes
     above them (a concave edge, a contact, an object close by): any of ``probes`` (one count,
     or (N,) per side) cosine-distributed rays from uniformly random points of the side meets
     a surface within that distance.  Sides that reflect no diffuse light are never flagged.
-    Traced about ``chunk`` rays at a time: an image asks
-    only for the sides its pixels see, whatever the scene's size."""
+    Traced about ``chunk`` rays at a time (a ray's temporaries are a few hundred bytes): an image
+    asks only for the sides its pixels see, whatever the scene's size."""
     tsides = np.arange(len(scene.tside_triangle)) if tsides is None else np.asarray(tsides, np.int64)
     counts = np.broadcast_to(np.asarray(probes, np.int64), len(tsides))
     kd = scene.materials.diffuse_reflectance[scene.triangle_material[scene.tside_triangle[tsides]]]

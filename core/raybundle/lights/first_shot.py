@@ -71,20 +71,23 @@ class PatchFirstShot:
         # tsides that no light is in front of receive nothing: they cost no samples
         origin, normal = sc.triangle_corners[sc.tside_triangle, 0], np.asarray(sc.tside_normal)
         self.receiving_tsides = np.nonzero(np.any([light.in_front(origin, normal) for light in self.lights],
-                                            axis=0))[0] if n_l else np.zeros(0, np.int64)
+                                            axis=0))[0].astype(np.int32) if n_l else np.zeros(0, np.int32)
         del origin, normal
         n_r = len(self.receiving_tsides)
-        self._e_sum = np.zeros((n_r, n_l, 3))          # per receiving tside (row), light, RGB
+        # the sums and counts per receiving tside (row), light, RGB, in 32 bits: one to a few
+        # (TS, 3) arrays held through the render, where the sides' E and direction take 64
+        self._e_sum = np.zeros((n_r, n_l, 3), np.float32)
         # the direction sums of the receiving tsides of directed sides, by their row there (-1: none)
         side_of = sc.tside_side[self.receiving_tsides]
         kept = np.ones(n_r, bool) if directed is None else np.asarray(directed, bool)[side_of]
-        self._d_row = np.where(kept, np.cumsum(kept) - 1, -1)
-        self._d_sum = np.zeros((int(kept.sum()), n_l, 3))
-        self._count = np.zeros(n_r)
+        self._d_row = np.where(kept, np.cumsum(kept) - 1, -1).astype(np.int32)
+        self._d_sum = np.zeros((int(kept.sum()), n_l, 3), np.float32)
+        self._count = np.zeros(n_r, np.float32)
         # each receiving tside's share of its side's receiving tsides' area (Neyman's draws, _targeted)
         ts_area = sc.triangle_area[sc.tside_triangle[self.receiving_tsides]]
         ts_side = sc.tside_side[self.receiving_tsides]
-        self._share_in_side = ts_area / np.maximum(np.bincount(ts_side, ts_area, minlength=sc.n_sides)[ts_side], 1e-300)
+        self._share_in_side = (ts_area / np.maximum(np.bincount(ts_side, ts_area, minlength=sc.n_sides)[ts_side],
+                                                    1e-300)).astype(np.float32)
         # initial_samples per side into E, shared out over a cluster's triangles by area (each
         # receiving tside's mean needs one at least); pilot_samples per side into the spread,
         # shared out the same way where a side has at most as many receiving tsides, else each
@@ -107,7 +110,7 @@ class PatchFirstShot:
         order = np.flatnonzero(~few)[order]
         first = np.flatnonzero(np.r_[True, side[1:] != side[:-1]]) if len(side) else np.zeros(0, np.int64)
         last = np.r_[first[1:], len(side)] - 1          # each such side's rows in ``order``
-        cdf = np.cumsum(self._share_in_side[order])
+        cdf = np.cumsum(self._share_in_side[order], dtype=float)
         before = cdf[first] - self._share_in_side[order[first]]
         for r in range(k if len(ts_side) else 0):
             at = np.searchsorted(cdf, before + self.rng.random(len(first)) * (cdf[last] - before), side="right") \
@@ -115,8 +118,9 @@ class PatchFirstShot:
             yield np.r_[np.nonzero(few & (counts > r))[0], order[np.clip(at, first, last)]]
 
     def _add_in_steps(self, rows, pilot=False, form=True):
-        """:meth:`_add` of ``rows`` in steps: bounded temporaries on big scenes."""
-        step = 1 << 18
+        """:meth:`_add` of ``rows`` in steps: bounded temporaries on big scenes (a row's are a few
+        hundred bytes)."""
+        step = 1 << 16
         for lo in range(0, len(rows), step):
             self._add(rows[lo:lo + step], pilot, form)
 
@@ -137,8 +141,9 @@ class PatchFirstShot:
         d_row = self._d_row[rows]
         d = np.nonzero(d_row >= 0)[0]                  # the rows whose direction sums are kept
         if not pilot and form:
-            old = self._e_sum[rows] / np.maximum(self._count[rows], 1)[:, None, None]
-            old_d = self._d_sum[d_row[d]] / np.maximum(self._count[rows[d]], 1)[:, None, None]
+            # the means in 64 bits: E's updates then add up to what _form makes of the sums
+            old = self._e_sum[rows] / np.maximum(self._count[rows], 1).astype(float)[:, None, None]
+            old_d = self._d_sum[d_row[d]] / np.maximum(self._count[rows[d]], 1).astype(float)[:, None, None]
         y = np.zeros(len(tri))
         for li, light in enumerate(self.lights):
             u_l = self.rng.random((len(tri), 3))
@@ -163,11 +168,11 @@ class PatchFirstShot:
             return
         # side average = sum over its tsides of area * (tside mean) / side area
         w = (sc.triangle_area[sc.tside_triangle[tri]] / self.receiving_area[side])[:, None, None]
-        new = self._e_sum[rows] / self._count[rows][:, None, None]
+        new = self._e_sum[rows] / self._count[rows].astype(float)[:, None, None]
         p, at = np.unique(side, return_inverse=True)
         self.E[p] += _summed(at, len(p), w * (new - old))
         if len(d):
-            new_d = self._d_sum[d_row[d]] / self._count[rows[d]][:, None, None]
+            new_d = self._d_sum[d_row[d]] / self._count[rows[d]].astype(float)[:, None, None]
             p, at = np.unique(side[d], return_inverse=True)
             self._d_patch[p] += _summed(at, len(p), w[d] * (new_d - old_d))
             norm = np.linalg.norm(self._d_patch[p], axis=2, keepdims=True)

@@ -162,9 +162,11 @@ class LinearReconstruction:
         out, c = [], 0
         for v, s in pairs:
             part = x[:, c:c + v.shape[1]]
-            if s is not None and id(s) not in averaged:
-                averaged[id(s)] = self.averaged(s)
-            out.append((part if s is None else part + averaged[id(s)]).astype(dtype, copy=False))
+            if s is not None:
+                if id(s) not in averaged:
+                    averaged[id(s)] = self.averaged(s)
+                part += averaged[id(s)]         # in x's own columns: no (V, C) beside it
+            out.append(part.astype(dtype, copy=False))
             c += v.shape[1]
         return out
 

@@ -66,6 +66,9 @@ import numpy as np
 MAX_SAMPLES = 256
 #: points a patch's mean albedo takes at the least (:meth:`SurfaceTexture.side_means`)
 PATCH_SAMPLES = 16
+#: points whose look-ups a mean takes at once (:meth:`SurfaceTexture._triangle_means`): a point's
+#: temporaries are a couple of hundred bytes
+MEAN_POINTS = 1 << 16
 #: fewest samples per triangle for its mean coverage: a patch's radiance is the light it
 #: receives over its covered area, so an error there is an error of the patch
 MIN_COVERAGE_SAMPLES = 64
@@ -367,11 +370,15 @@ class SurfaceTexture:
         order = np.argsort(which.ravel(), kind="stable")
         try:
             for (n, lev, m), sel in zip(groups, np.split(order, np.cumsum(np.bincount(which.ravel()))[:-1])):
-                st = stratified_2d_sets(len(sel), int(n), rng).reshape(-1, 2)
-                w = uniform_triangle(st[:, 0], st[:, 1]).reshape(len(sel), int(n), 3)
-                at = np.einsum("tnk,tkc->tnc", w, uv[sel]).reshape(-1, 2)
-                got = self.lookup(int(m), at, int(lev))
-                mean[textured[sel]] = got.reshape(len(sel), int(n), -1).mean(axis=1)
+                n = int(n)
+                st = stratified_2d_sets(len(sel), n, rng).reshape(len(sel), n, 2)
+                step = max(1, MEAN_POINTS // n)       # the points' look-ups a few triangles at a time
+                for lo in range(0, len(sel), step):
+                    t = sel[lo:lo + step]
+                    s = st[lo:lo + step].reshape(-1, 2)
+                    w = uniform_triangle(s[:, 0], s[:, 1]).reshape(len(t), n, 3)
+                    got = self.lookup(int(m), np.einsum("tnk,tkc->tnc", w, uv[t]).reshape(-1, 2), int(lev))
+                    mean[textured[t]] = got.reshape(len(t), n, -1).mean(axis=1)
         finally:           # the coarser levels serve these means alone: not held through the render
             self._pyramids.clear()
         return mean
