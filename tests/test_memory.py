@@ -172,3 +172,28 @@ def test_the_first_shots_sums_per_triangle_side_take_32_bits():
     assert {a.dtype for a in (fs.receiving_tsides, fs._d_row)} == {np.dtype(np.int32)}
     assert fs.E.dtype == np.float64
     r.tracer.close()
+
+
+def test_a_float_map_in_half_precision_reads_as_the_float_map_to_its_precision():
+    """A float map that half precision holds (finite, below float16's largest) is kept in half the
+    memory and reads as the float32 map to 2^-11 of its values, at level 0 (bilinear and closest)
+    and on the pyramid's levels (made in float32); one it does not hold stays float32."""
+    from raybundle.scene.textures import SurfaceTexture, half_precision
+
+    rng = np.random.default_rng(2)
+    im = (rng.random((64, 48, 3)) * 3).astype(np.float32)
+    corners = np.array([[[0, 0, 0], [1, 0, 0], [0, 1, 0]]], float)
+    uv = np.array([[[0, 0], [1, 0], [0, 1]]], float)
+    half = half_precision(im)
+    assert half.dtype == np.float16 and half.nbytes == im.nbytes // 2
+    at = rng.random((500, 2)) * 2 - 0.5
+    for closest in (False, True):
+        full = SurfaceTexture([im], [0], corners, uv, closest=[closest])
+        small = SurfaceTexture([half], [0], corners, uv, closest=[closest])
+        assert small.images[0].dtype == np.float16
+        for level in (0, 1, 3):
+            want, got = full.lookup(0, at, level), small.lookup(0, at, level)
+            assert got.dtype != np.float16
+            np.testing.assert_allclose(got, want, rtol=2 ** -11, atol=0)
+    assert half_precision(np.array([[[1.0, 7e4, 0.0]]], np.float32)).dtype == np.float32
+    assert half_precision(np.array([[[1.0, np.inf, 0.0]]], np.float32)).dtype == np.float32

@@ -74,7 +74,7 @@ class SceneBuilder:
         tex = [p.textured for p in self.parts]
         if not any(x is not None and (np.any(x[1] != -1) or np.any(x[3] != -1) or np.any(x[4] != -1)) for x in tex):
             return None
-        from raybundle.scene.textures import SurfaceTexture
+        from raybundle.scene.textures import SurfaceTexture, half_precision
 
         size = [len(p.triangles) for p in self.parts]
 
@@ -82,10 +82,11 @@ class SceneBuilder:
             return np.concatenate([np.full((n, *shape), fill, dtype) if x is None else x[k] for n, x in zip(size, tex)])
 
         # albedo maps are the image over its mean (the material holds the mean; a byte sRGB image's
-        # texels encoded, as Cycles keeps them), coverage and normal maps as they are
+        # texels encoded, as Cycles keeps them), coverage and normal maps as they are; float
+        # texels in half precision where that holds them
         ordered = sorted(self.images.values(), key=lambda x: x[0])
         maps = [self.converter.albedo_map(im) if kind == "albedo"
-                else (np.asarray(self.converter.image_pixels(im), np.float32), None, None)
+                else (half_precision(np.asarray(self.converter.image_pixels(im), np.float32)), None, None)
                 for _, im, kind, *_ in ordered]
         image = faces(1, -1)
         return SurfaceTexture([m for m, *_ in maps], image, corners, faces(0, 0.0, (3, 2), float),

@@ -54,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from raybundle.scene.materials import color_text
-from raybundle.scene.textures import modulation_map
+from raybundle.scene.textures import half_precision, modulation_map
 
 from .closures import Closures, clip_colors, flatten, luminance, principled_to_material
 from .images import byte_mean, image_bytes, linear_pixels, srgb_bytes
@@ -527,13 +527,13 @@ class MaterialConverter:
         return own if own is not None else self.textures.get(mat.name_full)
 
     def modulation(self, image):
-        """(H, W, 3) the albedo map of ``image``: its pixels over the material's mean albedo
-        (the image's own mean, or the objects' mean for a graph baked on each object)."""
+        """(H, W, 3) the albedo map of ``image``, its pixels over the material's mean albedo (the image's
+        own mean, or the objects' for a graph baked on each), in half precision where that holds it."""
         px = self.image_pixels(image)
         mean = self._normalizer.get(image.name_full)
         if mean is None:
-            return modulation_map(px)[0]
-        return np.where(mean > 0, px / np.where(mean > 0, mean, 1.0), 1.0).astype(np.float32)
+            return half_precision(modulation_map(px)[0])
+        return half_precision(np.where(mean > 0, px / np.where(mean > 0, mean, 1.0), 1.0).astype(np.float32))
 
     def albedo_map(self, image):
         """``(texels (H, W, 3), encoded, byte values)`` of ``image``'s albedo map

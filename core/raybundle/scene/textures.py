@@ -78,7 +78,8 @@ MIN_COVERAGE_SAMPLES = 64
 class SurfaceTexture:
     """Modulation maps of the textured input faces.
 
-    ``images``: list of (H, W, 3) float32 modulation maps (linear image / its mean);
+    ``images``: list of (H, W, 3) float32 modulation maps (linear image / its mean; float16 maps
+    are kept so, :func:`half_precision`);
     ``face_image`` (F,) int: the map of each input face (-1: untextured; -2: the face's
     corner colors, interpolated linearly: a color attribute, whose color is the albedo
     factor itself), indexed by :attr:`~raybundle.scene.model.PatchScene.triangle_source`;
@@ -125,7 +126,8 @@ class SurfaceTexture:
                             for b in (self.byte_values or [None] * len(self.images))]
         if len(self.byte_values) != len(self.images):
             raise ValueError("texture: 'byte_values' needs one entry per map")
-        self.images = [np.ascontiguousarray(im, np.float32 if b is None else np.uint8)
+        self.images = [np.ascontiguousarray(im, np.uint8 if b is not None else
+                                            np.float16 if np.asarray(im).dtype == np.float16 else np.float32)
                        for im, b in zip(self.images, self.byte_values)]
         self.encoded = [None if e is None or not np.all(np.isfinite(e)) else np.asarray(e, float).reshape(3)
                         for e in (self.encoded or [None] * len(self.images))]
@@ -172,7 +174,7 @@ class SurfaceTexture:
     def texels(self, image):
         """(H, W, 3) float32 map ``image``'s texels, read through :attr:`byte_values` for a map of bytes."""
         im, values = self.images[image], self.byte_values[image]
-        return im if values is None else values[im]
+        return im.astype(np.float32, copy=False) if values is None else values[im]
 
     def lookup(self, image, uv, level=0):
         """Lookup (N, 3) of map ``image`` at ``uv`` (N, 2), repeating or with its edges extended
@@ -188,6 +190,7 @@ class SurfaceTexture:
         wrap = (lambda i, n: np.clip(i, 0, n - 1)) if self.extend[image] else (lambda i, n: i % n)
         if self.closest[image] and level == 0:
             out = im[wrap(np.floor(y + 0.5).astype(np.int64), h), wrap(np.floor(x + 0.5).astype(np.int64), w)]
+            out = out.astype(np.float32, copy=False)
         else:
             x0, y0 = np.floor(x), np.floor(y)
             fx, fy = (x - x0)[:, None], (y - y0)[:, None]
@@ -402,6 +405,20 @@ def srgb_to_linear(c):
     one = c.dtype.type
     curve = ((np.maximum(c, one(0.04045)) + one(0.055)) * one(1 / 1.055)) ** one(2.4)
     return np.where(c <= one(0.04045), c * one(1 / 12.92), curve)
+
+
+#: the largest finite float16
+HALF_MAX = float(np.finfo(np.float16).max)
+
+
+def half_precision(texels):
+    """``texels`` (a float map) in float16 where that holds every texel (all finite and below
+    :data:`HALF_MAX`): 11 bits of precision, finer than a byte image's steps, in half the memory
+    of float32; else as they are."""
+    texels = np.asarray(texels)
+    if texels.size and np.isfinite(texels).all() and np.abs(texels).max() < HALF_MAX:
+        return texels.astype(np.float16)
+    return texels
 
 
 def modulation_map(image):
