@@ -80,7 +80,7 @@ class GlossyEyePaths:
         """The solver's vertex values of the side values ``e`` in 32 bits, kept while ``e`` stays
         the same (a pass gathers its own samples and its extra ones from the same solution)."""
         if self._vert is None or not np.array_equal(self._vert[0], e):
-            self._vert = None
+            self._vert = None                     # the old values go before the new are made
             self._vert = (e, self.solver.reconstruction.averaged(e).astype(np.float32))
         return self._vert[1]
 

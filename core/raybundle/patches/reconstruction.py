@@ -229,7 +229,11 @@ class ClusterFit:
         # sides that share a welded vertex: distinct (vertex, side) pairs, neighbours within a vertex
         # (pairs as one integer key each: one sort, no dense ids first)
         cv, cs = ids.ravel(), np.repeat(side, 3)
-        first = unique_ints(cv.astype(np.int64) * n_sides + cs)[1]
+        key = cv.astype(np.int64)
+        key *= n_sides
+        key += cs                                 # made in place, and sorted in place
+        first = unique_ints(key, own=True)[1]
+        del key
         order = first[stable_order(cv[first])[0]]
         v, s = cv[order], cs[order]
         del first, order
