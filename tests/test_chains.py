@@ -49,9 +49,10 @@ def test_merged_chains_pool_their_sums_and_counts():
                                                                                              counts)
     fs = [r.solver.first_shot for r in rs]
     # each receiving triangle side's mean weighted by the two chains' sample counts there (they
-    # differ: the refinement goes where each chain's samples spread), then the side's area-weighted sum
+    # differ: the refinement goes where each chain's samples spread), then the side's area-weighted
+    # sum, in 64 bits from the pooled 32-bit sums, as the first shot forms E
     (e0, _, c0), (e1, _, c1) = fs[0].sums(), fs[1].sums()
-    mean = (e0 + e1) / np.maximum(c0 + c1, 1)[:, None, None]
+    mean = (e0 + e1) / np.maximum(c0 + c1, 1).astype(float)[:, None, None]
     ts = fs[0].receiving_tsides
     w = sc.triangle_area[sc.tside_triangle[ts]] / fs[0].receiving_area[sc.tside_side[ts]]
     want = np.zeros_like(fs[0].E)
