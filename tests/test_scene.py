@@ -262,6 +262,29 @@ def test_connected_components_match_a_graph_search(monkeypatch):
             assert np.array_equal(connected_components(n, links), want), n
 
 
+def test_triangle_areas_and_normals_compiled_are_numpys_bits(monkeypatch):
+    """:mod:`raybundle.scene.triangle_geometry`: the kernel's areas and unit normals are the
+    NumPy path's bit for bit (random triangles far from the origin, slivers, and a triangle of
+    zero area, whose normal is NaN as NumPy's 0 / 0 is), and the unit normal is the cross
+    product of the edges over twice the area (a right triangle in the xy plane: +z, area 1/2)."""
+    from raybundle.scene import triangle_geometry as tg
+    from raybundle.util import compiled
+    rng = np.random.default_rng(3)
+    v = np.concatenate([rng.normal(size=(600, 3)) * 10.0 + 1e3, [[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0]]])
+    t = np.concatenate([rng.integers(0, 600, (500, 3)), [[600, 601, 602], [600, 601, 603]]])
+    t[:40, 2] = t[:40, 1]                                                # slivers of zero area too
+    assert compiled.ENABLED
+    area = tg.areas(v, t)
+    normal = tg.normals(v, t, area)
+    assert area[-2] == 0.5 and np.array_equal(normal[-2], [0.0, 0.0, 1.0]) and area[-1] == 0.0
+    assert np.isnan(normal[-1]).all() and np.isnan(normal[:40]).all()
+    with monkeypatch.context() as m, np.errstate(invalid="ignore", divide="ignore"):
+        m.setattr(compiled, "ENABLED", False)
+        m.setattr(compiled, "_warned", True)
+        assert np.array_equal(tg.areas(v, t), area)
+        assert np.array_equal(tg.normals(v, t, area), normal, equal_nan=True)
+
+
 def test_unique_rows_and_group_ids_match_numpy():
     """The welding's row ids (a mixed-radix key, or dense ranks first where the spans are too
     wide for one, or a lexsort) equal np.unique over rows: ids in lexicographic order, the first
@@ -299,19 +322,34 @@ def test_group_ids_of_wide_columns_make_no_copy_of_them_side_by_side():
     assert peak < 56 * n, peak / n
 
 
-def test_stable_order_and_unique_ints_match_numpy():
+def test_stable_order_and_unique_ints_match_numpy(monkeypatch):
     """The layout's 1-D sorts (one sort of ``(key - min) * N + index`` where that fits in 62
-    bits, an argsort beyond) give the stable argsort and ``np.unique``'s values, first indices
-    and inverse, for keys of any sign, dtype and span, empty and single ones too."""
-    from raybundle.util.arrays import stable_order, unique_ints
+    bits, a stable sort of the key and its index beyond; compiled radix sorts from
+    ``RADIX_MIN`` keys, NumPy's sorts below it and without Numba) give the stable argsort and
+    ``np.unique``'s values, first indices and inverse, for keys of any sign, dtype and span,
+    empty and single ones too."""
+    from raybundle.util import compiled
+    from raybundle.util.arrays import RADIX_MIN, stable_order, unique_ints
+    assert compiled.ENABLED and 5000 < RADIX_MIN < 40000
     rng = np.random.default_rng(11)
-    for span, dtype in ((4, np.int64), (1000, np.int32), (2 ** 40, np.int64), (2 ** 62, np.int64)):
-        for n in (0, 1, 7, 5000):
+    for numba in (True, False):
+        if not numba:
+            monkeypatch.setattr(compiled, "ENABLED", False)
+            monkeypatch.setattr(compiled, "_warned", True)
+        _check_stable_order(rng, stable_order, unique_ints)
+
+
+def _check_stable_order(rng, stable_order, unique_ints):
+    for span, dtype in ((4, np.int64), (1000, np.int32), (2 ** 40, np.int64), (2 ** 50, np.int64),
+                        (2 ** 62, np.int64)):
+        for n in (0, 1, 7, 5000, 40000):
             key = rng.integers(-span // 2, span // 2, n).astype(dtype)
             if n > 10:
                 key[: n // 3] = key[rng.integers(n // 3, n, n // 3)]          # repeated values
             order, value = stable_order(key)
             assert np.array_equal(order, np.argsort(key, kind="stable")) and value.dtype == key.dtype
+            assert all(np.array_equal(a, b) for a, b in zip(stable_order(key.astype(np.int64), own=True),
+                                                            (order, value)))
             assert np.array_equal(value, np.sort(key))
             want = np.unique(key, return_index=True, return_inverse=True)
             got = unique_ints(key)

@@ -31,6 +31,7 @@ from functools import cached_property
 import numpy as np
 
 from ..util.arrays import GatheredRows, connected_components, stable_order, unique_ints, unique_rows
+from . import triangle_geometry
 from .camera import Camera
 from .materials import MaterialTable
 from .transmission import pass_probability
@@ -323,18 +324,17 @@ class PatchScene:
 
     # not cached: a (T, 3) array that nothing reads once the areas and normals are made
     def _cross(self):
-        c = self.triangle_corners
-        return np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+        return triangle_geometry.cross(self.vertices, self.triangles)
 
     @cached_property
     def triangle_area(self):
         """(T,) float [m^2]."""
-        return 0.5 * np.linalg.norm(self._cross(), axis=1)
+        return triangle_geometry.areas(self.vertices, self.triangles)
 
     @cached_property
     def triangle_normal(self):
         """(T, 3) float unit front normals."""
-        return self._cross() / (2.0 * self.triangle_area[:, None])
+        return triangle_geometry.normals(self.vertices, self.triangles, self.triangle_area)
 
     @property
     def n_patches(self):

@@ -60,7 +60,8 @@ def stable_order(key, own=False):
     """``(order, sorted)`` of an integer array ``key`` (N,): ``np.argsort(key, kind="stable")``
     and ``key[order]``.  Where the key's span times N fits in 62 bits, one sort of the values
     ``(key - min) * N + index`` (the order and the values read back from them): a plain sort of
-    integers, several times faster than an argsort of them.  With ``own``, an int64 ``key`` is
+    integers, several times faster than an argsort of them, and compiled as a radix sort
+    (:func:`_radix_sort`) from :data:`RADIX_MIN` keys.  With ``own``, an int64 ``key`` is
     worked in place (the caller's to give up)."""
     key = np.asarray(key).reshape(-1)
     n = len(key)
@@ -68,18 +69,82 @@ def stable_order(key, own=False):
         return np.zeros(0, np.int64), key.copy()
     lo, hi = int(key.min()), int(key.max())
     if (hi - lo + 1) * float(n) >= 2.0 ** 62:
-        order = np.argsort(key, kind="stable")
-        return order, key[order]
+        if n < RADIX_MIN or not use() or hi - lo >= 2 ** 62:
+            order = np.argsort(key, kind="stable")
+            return order, key[order]
+        value = key.astype(np.int64, copy=not own)
+        value -= lo
+        order = np.arange(n)
+        _radix_sort(value, np.empty_like(value), (hi - lo).bit_length(), order, np.empty_like(order))
+        value += lo
+        return order, value.astype(key.dtype, copy=False)
     packed = key.astype(np.int64, copy=not own)      # worked in place: memory of two keys at most
     packed -= lo
     packed *= n
     for start in range(0, n, _CHUNK):
         packed[start:start + _CHUNK] += np.arange(start, min(start + _CHUNK, n))
-    packed.sort()
+    if n >= RADIX_MIN and use():
+        none = np.zeros(0, np.int64)
+        _radix_sort(packed, np.empty_like(packed), ((hi - lo + 1) * n - 1).bit_length(), none, none)
+    else:
+        packed.sort()
     order = packed % n
     packed //= n                       # the sorted values, in place
     packed += lo
     return order, packed.astype(key.dtype, copy=False)
+
+
+#: keys from which :func:`stable_order` sorts by :func:`_radix_sort` (below, NumPy's sort)
+RADIX_MIN = 1 << 14
+#: bits of the digit :func:`_radix_sort` sorts by in one pass
+RADIX_BITS = 8
+
+
+def _radix_sample():
+    return np.array([3, 1, 2], np.int64), np.empty(3, np.int64), 2, np.arange(3), np.empty(3, np.int64)
+
+
+@kernel(_radix_sample)
+def _radix_sort(a, buf, bits, idx, ibuf):
+    """Sort ``a`` (N,) int64, values in ``[0, 2^bits)``, in place, and ``idx`` (N,) int64 with
+    it (or nothing where ``idx`` is empty): least significant digit first,
+    :data:`RADIX_BITS` a pass, by counts of every digit from one pass over ``a``, a pass skipped
+    where all values share its digit; ``buf`` and ``ibuf`` are their scratch.  Each pass is a
+    stable scatter, so the passes together sort stably, in O(N bits / RADIX_BITS) time."""
+    n = len(a)
+    carry = len(idx) == n
+    width = RADIX_BITS
+    mask = (1 << width) - 1
+    passes = (bits + width - 1) // width
+    count = np.zeros((passes, mask + 1), np.int64)
+    for i in range(n):
+        v = a[i]
+        for p in range(passes):
+            count[p, (v >> (p * width)) & mask] += 1
+    src, dst, isrc, idst = a, buf, idx, ibuf
+    moved = False
+    for p in range(passes):
+        c = count[p]
+        if c.max() == n:
+            continue
+        total = 0
+        for d in range(mask + 1):
+            here = c[d]
+            c[d] = total
+            total += here
+        shift = p * width
+        for i in range(n):
+            d = (src[i] >> shift) & mask
+            dst[c[d]] = src[i]
+            if carry:
+                idst[c[d]] = isrc[i]
+            c[d] += 1
+        src, dst, isrc, idst = dst, src, idst, isrc
+        moved = not moved
+    if moved:
+        a[:] = src
+        if carry:
+            idx[:] = isrc
 
 
 def unique_ints(key, own=False):
