@@ -23,7 +23,8 @@ hits, ``weight = f cos / pdf`` (bounded: at most the lobe's albedo).  The light
 sample, not the side's mean travel direction, spreads a lamp's reflection as its
 extent does (with one mean direction a sharp lobe under a lamp threw a
 too-concentrated spot on the ceiling).  ``E_c`` is the running mean over all
-samples, refined a little every iteration as the first shot is.  The iteration
+samples: a refinement's worth at the solver's set-up (so the warm-up's transfers carry its
+light on), a few more every iteration, as the first shot's.  The iteration
 then leaves the first shot's glossy reflection out of what glossy sides send
 (:meth:`~raybundle.methods.patch_solution.PatchSolution.sent_radiance`) and adds
 ``E_c`` to the receivers' incoming radiance instead, in both the iterate and

@@ -164,9 +164,7 @@ class PatchSolution(Method, abc.ABC):
             self.caustic = None
         self.caustic_refine = (max(1024, len(np.unique(scene.tside_side[self.caustic.tsides])))
                                if self.caustic is not None else 0)
-        if self.caustic is not None:
-            # its light is in the iterate from the start, as the first shot's: from zero, the
-            # iterates would take it up like albedo^n after the warm-up, and a short average be dark
+        if self.caustic is not None:       # lit at set-up as the first shot is: the warm-up carries it on
             self.caustic.refine(self.caustic_refine)
 
     def _set_iterate(self):
