@@ -157,6 +157,7 @@ class BakeJob:
             self.options = run_options(self.scene)
         check(self.options, bake=True)
         b.validate()
+        pipeline.compile_kernels(None, self.stop)             # before the export's first use of one
         # the world's render (where Blender must render it) runs on while the patches are laid out
         self.export = export_scene(self.depsgraph, require_camera=b.camera, defer_world=True)
         try:

@@ -142,7 +142,7 @@ def make_solver(scene, settings: RenderSettings | None = None, solver=Stochastic
         warnings.warn(f"first shot is off: the small emitters {names} light the scene only through the bundle "
                       "lines that happen to hit them, so the image is far noisier (thesis 3.4); keep "
                       "first_shot='auto'", stacklevel=3)
-    _compile_kernels(stage, stop)
+    compile_kernels(stage, stop)
     _step(stage, stop, f"building the ray tracer over {len(scene.triangles):,} triangles")
     tracer = RayTracer(scene, threads=settings.threads)
     try:
@@ -181,7 +181,7 @@ def _make_image_method(scene, settings, camera, name, stage, stop):
     """An image-only method (:class:`~raybundle.methods.path_tracing.PathTracer`): tracer and lights, no patches."""
     settings.validate()
     check_resources(scene if camera is None else replace(scene, camera=camera))
-    _compile_kernels(stage, stop)
+    compile_kernels(stage, stop)
     _step(stage, stop, f"building the ray tracer over {len(scene.triangles):,} triangles")
     tracer = RayTracer(scene, threads=settings.threads)
     try:
@@ -192,9 +192,10 @@ def _make_image_method(scene, settings, camera, name, stage, stop):
         raise
 
 
-def _compile_kernels(stage, stop):
+def compile_kernels(stage, stop):
     """The set-up phase "compiling the kernels" (:func:`raybundle.util.compiled.compile_all`),
-    where any is still to compile or load in this process."""
+    where any is still to compile or load in this process (the add-on's before its export, whose
+    sorts use one)."""
     if compiled.pending():
         _step(stage, stop, "compiling the kernels")
         compiled.compile_all()
@@ -212,7 +213,7 @@ def lay_out(scene, plan, stage=None, stop=None):
             stage(line)
     if plan.image_only:
         return scene
-    _compile_kernels(stage, stop)               # the layout's and the welding's too
+    compile_kernels(stage, stop)               # the layout's and the welding's too
     scene = prepare(scene, patches=plan.patches, stage=stage, stop=stop)
     # every patch method's reconstruction reads them: made here, they are made while Blender
     # may still be rendering the world (the add-on attaches it after the layout)
