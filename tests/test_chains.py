@@ -66,7 +66,7 @@ def test_merged_chains_pool_their_sums_and_counts():
 def test_merged_solver_chains_bake_their_weighted_average():
     """Patch values (what bakes and color attributes read) pool by iterations averaged:
     chains of 30 and 60 iterations weigh 30 : 60 (their iterates warmed up by b transfers
-    before, 13 in this furnace, mean albedo 0.7: 0.7^13 < 1%, none of them averaged)."""
+    before, 20 in this furnace, mean albedo 0.7: 0.7^20 < 0.1%, none of them averaged)."""
     sc = pipeline.prepare(scenes.furnace(), patches=150)
     solvers = []
     for seed, its in ((1, 30), (2, 60)):
@@ -76,7 +76,7 @@ def test_merged_solver_chains_bake_their_weighted_average():
         solvers.append(s)
     merged = chains.merge([chains.state(s) for s in solvers])
     fresh = chains.apply(merged, pipeline.make_solver(sc, RenderSettings(seed=1)))
-    assert solvers[0].burn_in == solvers[0].stats.warm_up == 13
+    assert solvers[0].warm_up_steps == solvers[0].stats.warm_up == 20
     w = np.array([30, 60]) / 90
     assert [s.averaged for s in solvers] == [30, 60] and fresh.averaged == 90
     assert np.allclose(fresh.mean_incoming, w[0] * solvers[0].mean_incoming + w[1] * solvers[1].mean_incoming)

@@ -335,8 +335,36 @@ def test_eight_iterations_have_the_right_mean(seeds):
         got.append(float((s.area @ s.patch_radiance()[:, 0]) / s.area.sum() / exact))
         solvers.append(s)
     assert abs(np.mean(got) - 1.0) < 4 * 0.031 / np.sqrt(len(seeds)), got
-    assert all(s.averaged == 8 and s.stats.warm_up == s.warm_up_steps == s.burn_in and s.restart_at == 0
+    assert all(s.averaged == 8 and s.stats.warm_up == s.warm_up_steps > s.burn_in and s.restart_at == 0
                for s in solvers)
+
+
+def test_the_warm_up_leaves_its_share_of_the_start_up_transient():
+    """The warm-up ends with the start-up transient below ``WARM_UP_TRANSIENT`` of the solution.
+    Two solvers of one furnace (albedo 0.8, exact incoming ``E = pi L``) warm up with the same
+    random operators, one from zero and one from the exact iterate: what still tells them apart
+    is the transient the warm-up left, about 0.8^n of E (a product of n random operators: seeds
+    1, 3, 4 and 7 left 0.75 to 1.05 times 0.8^31).  Stopped at 1%, as it was, it left 0.9%."""
+    from raybundle.lights.direct import DirectLighting
+    from raybundle.methods.stochastic_iteration import StochasticIterationSolver
+    from raybundle.tracing.visibility import RayTracer
+
+    sc = pipeline.prepare(scenes.furnace(albedo=np.full(3, 0.8), resolution=(16, 16)), patches=600)
+    tracer = RayTracer(sc)
+    exact = np.pi * scenes.FURNACE_LE[0] / (1 - 0.8)
+    try:
+        warmed = []
+        for start in (0.0, exact):
+            s = StochasticIterationSolver(sc, tracer, DirectLighting(sc, tracer), RenderSettings(seed=3))
+            s.incoming[:] = start
+            s.warm_up()
+            warmed.append(s)
+    finally:
+        tracer.close()
+    a, b = warmed
+    assert a.warm_up_steps == b.stats.warm_up == 31 and a.restart_at == 0
+    left = float(a.area @ (b.incoming - a.incoming)[:, 0]) / a.area.sum() / exact
+    assert 0 < left < 2 * StochasticIterationSolver.WARM_UP_TRANSIENT, left
 
 
 def test_the_warm_up_stops_when_asked():

@@ -346,11 +346,14 @@ def test_the_bundles_guide_sky_samples_through_an_opening_without_bias(floor_sol
 
 def test_the_pixels_own_sky_samples_teach_the_guide_without_bias(floor_solver):
     """The same floor under a roof with an opening: the sky samples of a few passes (four per
-    point, eight passes) teach each floor side which cells of the sky are open from it
-    (:meth:`WorldLight.learn`).  Drawn by that learned guide, the mean irradiance is the same as by
-    brightness alone (within 4.5 SE), and the variance is under 0.35 of it (0.25 measured) and
-    under 0.6 of the bundles' guide of 60 iterations alone, the old guide (0.61 of brightness
-    alone on these points)."""
+    point, eight passes), drawn by the guide they teach, teach each floor side which cells of the
+    sky are open from it (:meth:`WorldLight.learn`), with no bundles' guide to start from.  Drawn
+    by that learned guide, the mean irradiance is the same as by brightness alone (within 4.5 SE)
+    and the variance under 0.35 of it (0.16 to 0.28 in nine draws); mixed with the bundles' guide
+    (what an image draws by), the mean is the same too.  (Against the bundles' guide alone the
+    gain depends on where their directions fell: where they left open cells unseen, that guide's
+    rare heavy weights gave it more variance than brightness alone; where they did not, about the
+    learned guide's.)"""
     from raybundle.lights.world_light import WorldLight
 
     s = floor_solver
@@ -359,14 +362,12 @@ def test_the_pixels_own_sky_samples_teach_the_guide_without_bias(floor_solver):
     rng = np.random.default_rng(5)
     pts, normals, sides = _floor_points(s, rng, 3000)
     for _ in range(8):                       # the passes: samples drawn by the guide they teach
-        wl.irradiance(pts, normals, rng.random((len(pts), 4, 3)), wl.guide_at(s.world_guide, sides), learn=sides)
+        wl.irradiance(pts, normals, rng.random((len(pts), 4, 3)), wl.guide_at(None, sides), learn=sides)
     plain = wl.irradiance(pts, normals, rng.random((len(pts), 1, 3))).sum(axis=1)
-    guided = wl.irradiance(pts, normals, rng.random((len(pts), 1, 3)), wl.guide_at(s.world_guide, sides)).sum(axis=1)
-    bundles_only = WorldLight(sc.world, s.tracer)
-    old = bundles_only.irradiance(pts, normals, rng.random((len(pts), 1, 3)),
-                                  bundles_only.guide_at(s.world_guide, sides)).sum(axis=1)
+    learned = wl.irradiance(pts, normals, rng.random((len(pts), 1, 3)), wl.guide_at(None, sides)).sum(axis=1)
+    mixed = wl.irradiance(pts, normals, rng.random((len(pts), 1, 3)), wl.guide_at(s.world_guide, sides)).sum(axis=1)
     n = len(pts)
-    se = np.sqrt(plain.var() / n + guided.var() / n)
-    assert abs(plain.mean() - guided.mean()) < 4.5 * se, (plain.mean(), guided.mean(), se)
-    assert guided.var() < 0.35 * plain.var(), (guided.var(), plain.var())
-    assert guided.var() < 0.6 * old.var(), (guided.var(), old.var())
+    for guided in (learned, mixed):
+        se = np.sqrt(plain.var() / n + guided.var() / n)
+        assert abs(plain.mean() - guided.mean()) < 4.5 * se, (plain.mean(), guided.mean(), se)
+    assert learned.var() < 0.35 * plain.var(), (learned.var(), plain.var())

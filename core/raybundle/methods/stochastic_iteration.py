@@ -56,6 +56,8 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from ..tracing.sampling import Stream, stream, uniform_sphere
 from .patch_solution import PatchSolution
 
@@ -73,6 +75,9 @@ class StochasticIterationSolver(PatchSolution):
     #: at most this many warm-up transfers; a scene whose transient needs more also restarts its
     #: running average once, after the rest (:attr:`restart_at`)
     MAX_WARM_UP = 128
+    #: the warm-up ends when the start-up transient, about ``mean_albedo^n``, is below this share
+    #: of the solution
+    WARM_UP_TRANSIENT = 1e-3
     #: the warm-up's bundles have this many times fewer rays a side than the iterations'
     WARM_UP_COARSER = 4
 
@@ -80,8 +85,9 @@ class StochasticIterationSolver(PatchSolution):
         super().__init__(scene, tracer, direct, settings)
         #: the transfers that bring the iterate near the solution before the running average
         #: starts (:meth:`warm_up`)
-        self.warm_up_steps = min(self.burn_in, self.MAX_WARM_UP)
-        self.restart_at = self.burn_in - self.warm_up_steps
+        steps = np.ceil(np.log(self.WARM_UP_TRANSIENT) / np.log(max(self.mean_albedo, 1e-3)))
+        self.warm_up_steps = int(min(max(steps, self.burn_in), self.MAX_WARM_UP))
+        self.restart_at = max(self.burn_in - self.warm_up_steps, 0)
         self.warmed_up = False
 
     def warm_up(self, stop=None):
@@ -90,7 +96,9 @@ class StochasticIterationSolver(PatchSolution):
         The iterates start from zero and approach the solution like ``mean_albedo^n``: averaged
         from the first, a run of n iterations is dark by about ``1 / (n (1 - albedo))``.  Here
         :attr:`warm_up_steps` transfers apply the same random operator to the iterate until the
-        transient is below 1%, and are not averaged.  Each takes the iterations' number of
+        transient is below :data:`WARM_UP_TRANSIENT`, and are not averaged: a transient ``t`` left
+        makes a run of n iterations dark by ``t albedo (1 - albedo^n) / (n (1 - albedo))`` of the
+        indirect light, and the scene's slower modes decay more slowly than its mean albedo.  Each takes the iterations' number of
         directions (from a stream of their own, ``Stream.WARM_UP``, so the averaged iterations
         keep the sequence's), whose mean keeps the iterate's total light steady (with one
         direction a transfer, it is a product of random factors), but bundles of
