@@ -355,3 +355,37 @@ def test_an_open_smooth_glass_bends_its_normals_as_cycles_does(fresh, tmp_path):
     rel, mean = _regions_against_cycles(tmp_path, 512, 240, floor=0.0)
     print(np.round(rel.reshape(6, 6, 3).mean(axis=2), 3))
     assert np.abs(rel).max() < 0.04 and mean == pytest.approx(1.0, abs=0.01), (rel, mean)
+
+
+def test_a_panes_share_is_the_brute_force_pairing_of_its_planes():
+    """:func:`_pane_share` (one sort of the planes by normal and offset, each plane's nearest
+    opposite one found by search) against its definition plane by plane: a plane pairs with any
+    plane of the opposite normal whose offset is within ``PANE_THICKNESS`` times its size.  300
+    random sets of triangles on a few planes, opposite ones among them, at gaps below and above
+    the threshold, degenerate normals too; every share the same."""
+    from raybundle_addon.translation.export import PANE_THICKNESS, _pane_share
+
+    def brute(n, a, corners):
+        key = np.round(n * 1e4).astype(np.int64)
+        off = np.round(np.einsum("ij,ij->i", n, corners[:, 0]) * 1e4).astype(np.int64)
+        planes, inv = np.unique(np.column_stack([key, off]), axis=0, return_inverse=True)
+        area = np.bincount(inv.reshape(-1), a)
+        paired = [np.any(np.abs(planes[(planes[:, :3] == -p[:3]).all(axis=1), 3] + p[3]) * 1e-4
+                         < PANE_THICKNESS * np.sqrt(area[i])) for i, p in enumerate(planes)]
+        return float(area[np.array(paired, bool)].sum() / max(area.sum(), 1e-300))
+
+    rng = np.random.default_rng(1)
+    shares = []
+    for _ in range(300):
+        m = int(rng.integers(1, 60))
+        base = rng.normal(size=(4, 3))
+        base /= np.linalg.norm(base, axis=1)[:, None]
+        n = base[rng.integers(0, 4, m)] * rng.choice([-1, 1], m)[:, None]
+        if rng.random() < 0.2:
+            n[rng.integers(0, m)] = 0.0
+        d = rng.integers(-3, 4, m) * rng.choice([0.001, 0.05, 1.0])
+        corners = np.repeat((n * d[:, None])[:, None, :], 3, axis=1)
+        a = rng.random(m) * rng.choice([1e-4, 1.0])
+        shares.append(_pane_share(n, a, corners))
+        assert shares[-1] == pytest.approx(brute(n, a, corners), abs=1e-12)
+    assert sum(0 < s < 1 for s in shares) > 100

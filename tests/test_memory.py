@@ -109,6 +109,40 @@ def test_the_final_images_vertex_values_take_single_precision():
     r.tracer.close()
 
 
+def test_the_final_images_projection_makes_its_32_bit_values_in_one_array():
+    """The final image's vertex values (three sets of 3 columns, two with a sharp part, in one
+    projection: :meth:`~raybundle.patches.reconstruction.LinearReconstruction.smooth_and_sharp_many`)
+    are made in one (V, 9) float32 array whose columns the sets are, the cluster fits summing into
+    it: on a tessellated sphere in a room (cluster fits on 18,657 vertices, a few projected ones),
+    the call peaks at 98 bytes a vertex (with the sharp part's 64-bit average), where a 64-bit
+    (V, 9) result and a 32-bit copy of each set took 158; the bound is what those two alone take,
+    108.  The values are the 64-bit projection's, rounded."""
+    import tracemalloc
+
+    from test_clusters import furnace_with_sphere
+
+    sc = pipeline.prepare(furnace_with_sphere(96, 192), patches=400)
+    s = pipeline.make_solver(sc, RenderSettings(seed=1))
+    s.tracer.close()
+    rec = s.reconstruction
+    assert rec._fit is not None and len(rec._p_vertices)
+    rng = np.random.default_rng(7)
+    a, b, c, sharp = rng.normal(1.0, 1.0, (4, sc.n_sides, 3))
+    pairs = [(a, np.abs(sharp)), (b, np.abs(sharp)), (c, None)]
+    rec.smooth_and_sharp_many(pairs, np.float32)                      # kernels compiled, caches made
+    tracemalloc.start()
+    try:
+        start = tracemalloc.get_traced_memory()[0]
+        got = rec.smooth_and_sharp_many(pairs, np.float32)
+        peak = tracemalloc.get_traced_memory()[1] - start
+    finally:
+        tracemalloc.stop()
+    assert peak < 108 * rec.n_vertices, peak / rec.n_vertices
+    assert all(x.dtype == np.float32 and x.base is got[0].base for x in got)
+    for x, y in zip(got, rec.smooth_and_sharp_many(pairs)):
+        np.testing.assert_allclose(x, y, rtol=1e-6, atol=1e-6 * y.max())
+
+
 def test_a_textures_coarser_levels_are_dropped_after_its_means_and_its_faces_take_32_bits():
     """A map's pyramid (its levels of 2 x 2 means) serves the set-up's patch means alone: none
     is held after them (a furnished room held 40 MB of them through its render), and the means

@@ -137,6 +137,7 @@ def test_the_compiled_kernels_give_the_numpy_paths_values(monkeypatch):
     values = rng.random((sc.n_sides, 4))
     assert compiled.ENABLED
     got = [rec.averaged(values), rec.projected(values), rec.smooth_and_sharp(values, 0.3 * values)]
+    got32 = rec.projected(values, np.float32)
     monkeypatch.setattr(compiled, "ENABLED", False)                  # as where Numba cannot be imported
     monkeypatch.setattr(compiled, "REASON", "ImportError: No module named 'numba'")
     monkeypatch.setattr(compiled, "_warned", False)
@@ -145,6 +146,11 @@ def test_the_compiled_kernels_give_the_numpy_paths_values(monkeypatch):
     want += [rec.projected(values), rec.smooth_and_sharp(values, 0.3 * values)]   # said once
     for g, w in zip(got, want):
         assert g.shape == w.shape and np.allclose(g, w, rtol=1e-12, atol=1e-13 * np.abs(w).max())
+    # into 32 bits (the final image's): the fits sum in single precision, both paths
+    want32 = rec.projected(values, np.float32)
+    assert got32.dtype == want32.dtype == np.float32
+    np.testing.assert_allclose(got32, want[1], rtol=1e-6, atol=1e-6 * np.abs(want[1]).max())
+    np.testing.assert_allclose(want32, want[1], rtol=1e-6, atol=1e-6 * np.abs(want[1]).max())
 
 
 def test_the_projection_writes_the_fitted_vertices_into_its_result():

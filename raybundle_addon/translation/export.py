@@ -265,13 +265,24 @@ def _pane_share(n, a, corners):
     offset = np.einsum("ij,ij->i", n, corners[:, 0])
     planes, inv = np.unique(np.column_stack([key_n, np.round(offset * 1e4).astype(np.int64)]), axis=0,
                             return_inverse=True)
-    inv = inv.reshape(-1)
-    area = np.bincount(inv, a)
-    paired = np.zeros(len(planes), bool)
-    for i, (nx, ny, nz, off) in enumerate(planes):
-        other = np.nonzero((planes[:, 0] == -nx) & (planes[:, 1] == -ny) & (planes[:, 2] == -nz))[0]
-        gap = np.abs(planes[other, 3] + off) * 1e-4
-        paired[i] = bool(np.any(gap < PANE_THICKNESS * np.sqrt(area[i])))
+    area = np.bincount(inv.reshape(-1), a)
+    # each plane's normal and its opposite as ids of one table; the planes sorted by (normal, offset)
+    nid = np.unique(np.vstack([planes[:, :3], -planes[:, :3]]), axis=0, return_inverse=True)[1].reshape(-1)
+    own, opposite = nid[:len(planes)], nid[len(planes):]
+    off = planes[:, 3]
+    lo_off, span = off.min(), int(off.max() - off.min()) + 1
+    order = np.lexsort((off, own))
+    key = own[order] * span + (off[order] - lo_off)
+    # the nearest of the opposite normal's planes to the offset -off (a pane's other face)
+    first = np.searchsorted(key, opposite * span, "left")
+    last = np.searchsorted(key, opposite * span + span - 1, "right")
+    at = np.searchsorted(key, opposite * span + np.clip(-off, lo_off, lo_off + span - 1) - lo_off)
+    gap = np.full(len(planes), np.inf)
+    for cand in (at - 1, at):
+        ok = (cand >= first) & (cand < last)
+        c = np.where(ok, cand, 0)
+        gap = np.where(ok, np.minimum(gap, np.abs(off[order[c]] + off) * 1e-4), gap)
+    paired = gap < PANE_THICKNESS * np.sqrt(area)
     return float(area[paired].sum() / max(area.sum(), 1e-300))
 
 
@@ -283,9 +294,10 @@ def _warn_curved_glass(sc, tobj, objects, warn):
     if len(glass) == 0:
         return
     owner = tobj[sc.triangle_source[glass]]
-    curved = [objects[o].original for o in np.unique(owner)
-              if _pane_share(sc.triangle_normal[glass[owner == o]], sc.triangle_area[glass[owner == o]],
-                             sc.triangle_corners[glass[owner == o]]) < FLAT_GLASS]
+    glass = glass[np.argsort(owner, kind="stable")]
+    owners, start = np.unique(np.sort(owner), return_index=True)
+    curved = [objects[o].original for o, g in zip(owners.tolist(), np.split(glass, start[1:]))
+              if _pane_share(sc.triangle_normal[g], sc.triangle_area[g], sc.triangle_corners[g]) < FLAT_GLASS]
     if curved:
         warn(f"glass that is not a pane of parallel faces ({', '.join(repr(c) for c in curved[:3])}"
              f"{' ...' if len(curved) > 3 else ''}) lets light through unbent: its caustics are spread as a soft "

@@ -59,8 +59,10 @@ class CollocationReconstruction(LinearReconstruction):
                             s.mean_vertex_incoming - super().projected(s.mean_incoming))
         return self._detail[1]
 
-    def projected(self, side_values):
-        return super().projected(side_values) + self.detail()
+    def projected(self, side_values, dtype=float):
+        x = super().projected(side_values, dtype)
+        x += self.detail()
+        return x
 
 
 class PointCollocationSolver(PatchSolution):

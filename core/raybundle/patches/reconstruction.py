@@ -122,10 +122,11 @@ class LinearReconstruction:
         tri = np.asarray(side_values, float)[side]                              # (TS, C)
         return self._gather(self._corner_weights(ids, area)[..., None] * tri[:, None, :], ids.ravel())
 
-    def projected(self, side_values):
-        """Side values (S, C) -> (V, C): the L2 projection onto the hat functions,
+    def projected(self, side_values, dtype=float):
+        """Side values (S, C) -> (V, C) of ``dtype``: the L2 projection onto the hat functions,
         clamped at zero (the fit may overshoot below zero next to a jump, and the
-        values are radiances).  Vertices without receiving area take :meth:`averaged`."""
+        values are radiances).  Vertices without receiving area take :meth:`averaged`.  The
+        mass system is solved in 64 bits; the cluster fits sum their corners in ``dtype``."""
         side_values = np.ascontiguousarray(side_values, float)
         nv = len(self._p_vertices)
         if compiled.use():
@@ -136,8 +137,9 @@ class LinearReconstruction:
         if len(self._fallback_tsides):     # the fallback's sums, divided where they are kept: one (V, C)
             x = self._numerator(side_values, self._fallback_tsides)
             x[self._fallback] /= np.maximum(self._average_sums[self._fallback], 1e-300)[:, None]
+            x = x.astype(dtype, copy=False)
         else:
-            x = np.zeros((self.n_vertices, side_values.shape[1]))
+            x = np.zeros((self.n_vertices, side_values.shape[1]), dtype)
         x[self._p_vertices] = np.maximum(self._solve_mass(b), 0.0)
         if self._fit is not None:
             self._fit.vertex_values(np.asarray(side_values, float), out=x)
@@ -154,10 +156,11 @@ class LinearReconstruction:
     def smooth_and_sharp_many(self, pairs, dtype=float):
         """:meth:`smooth_and_sharp` of each ``(side_values, sharp)`` in ``pairs``, as a list: one
         projection of all their columns side by side (the same values: the projection and its
-        clamp act column by column), so the mesh's work is done once, not once per pair."""
+        clamp act column by column), so the mesh's work is done once, not once per pair.  The
+        values are views of that one (V, C) array of ``dtype``."""
         pairs = [(np.asarray(v, float), s) for v, s in pairs]
         stacked = np.concatenate([v if s is None else v - s for v, s in pairs], axis=1)
-        x = self.projected(stacked)
+        x = self.projected(stacked, dtype)
         averaged = {}                 # one average per distinct sharp part (pairs often share it)
         out, c = [], 0
         for v, s in pairs:
@@ -166,7 +169,7 @@ class LinearReconstruction:
                 if id(s) not in averaged:
                     averaged[id(s)] = self.averaged(s)
                 part += averaged[id(s)]         # in x's own columns: no (V, C) beside it
-            out.append(part.astype(dtype, copy=False))
+            out.append(part)
             c += v.shape[1]
         return out
 
@@ -365,16 +368,21 @@ def _mass_product(ids, area, v, n_vertices):
     return out
 
 
-@compiled.kernel(lambda: (np.array([0, 1, 2], np.int32), np.array([0, 1, 2], np.int32), np.zeros(1, np.int64),
-                          np.zeros(1, np.int64), np.zeros((3, 3)), np.array([[0, 1, 2]], np.int64), np.zeros((1, 3)),
-                          np.zeros(1, np.int64), np.zeros((1, 3, 2)), np.zeros((1, 2)), np.ones((1, 2)), np.ones(1),
-                          np.arange(3), np.zeros((3, 2))))
+def _fit_sample(dtype):
+    return lambda: (np.array([0, 1, 2], np.int32), np.array([0, 1, 2], np.int32), np.zeros(1, np.int64),
+                    np.zeros(1, np.int64), np.zeros((3, 3)), np.array([[0, 1, 2]], np.int64), np.zeros((1, 3)),
+                    np.zeros(1, np.int64), np.zeros((1, 3, 2)), np.zeros((1, 2)), np.ones((1, 2)), np.ones(1),
+                    np.arange(3), np.zeros((3, 2), dtype))
+
+
+@compiled.kernel(_fit_sample(np.float64), _fit_sample(np.float32))
 def _fit_corners(corner, corner_vertex, tside_side, tside_triangle, vertices, triangles, centroid, row, g, reach,
                  v, weight, fitted, out):
     """:meth:`ClusterFit.vertex_values` at its corners: each flat tside corner ``corner`` (3 t + k)
     reads its side's fit ``v_s + clip(g_s . (x - c_s), -reach_s, reach_s)`` (``g`` (Sc, 3, C), ``reach``
     (Sc, C) by cluster row ``row[s]``), weighted by ``weight[t]`` into its vertex ``corner_vertex``
-    (a row of ``fitted``, the rows of ``out`` its mean goes to, clamped at zero)."""
+    (a row of ``fitted``, the rows of ``out`` its mean goes to, clamped at zero; summed in
+    ``out``'s precision, 64 or 32 bits)."""
     n_c = v.shape[1]
     den = np.zeros(fitted.shape[0])
     for j in range(fitted.shape[0]):

@@ -61,8 +61,8 @@ class Kernel:
     """A function compiled on its first call (or by :func:`compile_all`); where Numba is not
     enabled, never called (its callers take their NumPy path: :func:`use`)."""
 
-    def __init__(self, fn, sample):
-        self.fn, self.sample, self._compiled = fn, sample, None
+    def __init__(self, fn, samples):
+        self.fn, self.samples, self._compiled = fn, samples, None
         self.__doc__, self.__name__ = fn.__doc__, fn.__name__
 
     def compiled(self):
@@ -75,11 +75,11 @@ class Kernel:
         return self.compiled()(*args)
 
 
-def kernel(sample):
-    """Mark a function as a kernel; ``sample()`` gives arguments it compiles for (small arrays
-    of the types and dimensions its callers pass)."""
+def kernel(*samples):
+    """Mark a function as a kernel; each ``sample()`` gives arguments it compiles for (small
+    arrays of the types and dimensions its callers pass: one sample per set of types)."""
     def mark(fn):
-        k = Kernel(fn, sample)
+        k = Kernel(fn, samples)
         _KERNELS.append(k)
         return k
     return mark
@@ -110,7 +110,8 @@ def compile_all():
         return 0.0
     t0 = time.perf_counter()
     for k in _uncompiled():
-        k(*k.sample())
+        for sample in k.samples:
+            k(*sample())
     return time.perf_counter() - t0
 
 
@@ -120,4 +121,4 @@ def pending():
 
 
 def _uncompiled():
-    return [k for k in _KERNELS if k._compiled is None or not k._compiled.signatures]
+    return [k for k in _KERNELS if k._compiled is None or len(k._compiled.signatures) < len(k.samples)]
