@@ -143,6 +143,31 @@ def test_the_final_images_projection_makes_its_32_bit_values_in_one_array():
         np.testing.assert_allclose(x, y, rtol=1e-6, atol=1e-6 * y.max())
 
 
+def test_the_cluster_fits_set_up_peaks_under_72_bytes_a_triangle_side():
+    """The reconstruction's set-up on a finely tessellated sphere in a room (160k triangle sides,
+    read through cluster fits) peaks 67 bytes a triangle side above what it keeps: the (vertex,
+    side) keys of its corners and their sort's scratch, with the sides' ids in 32 bits and no
+    inverse made for the distinct keys (a first-of-each pass needs none), where it peaked at 79."""
+    import tracemalloc
+
+    from test_clusters import furnace_with_sphere
+
+    from raybundle.patches.clusters import make_patches
+    from raybundle.patches.reconstruction import LinearReconstruction
+
+    sc = make_patches(furnace_with_sphere(200, 400), patches=400)
+    area = sc.triangle_area[sc.tside_triangle]
+    LinearReconstruction(sc, area)                                   # kernels compiled
+    tracemalloc.start()
+    try:
+        rec = LinearReconstruction(sc, area)
+        kept, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert rec._fit is not None
+    assert peak - kept < 72 * len(sc.tside_side), (peak - kept) / len(sc.tside_side)
+
+
 def test_a_textures_coarser_levels_are_dropped_after_its_means_and_its_faces_take_32_bits():
     """A map's pyramid (its levels of 2 x 2 means) serves the set-up's patch means alone: none
     is held after them (a furnished room held 40 MB of them through its render), and the means

@@ -438,7 +438,7 @@ def test_a_map_of_bytes_reads_the_very_values_of_its_float_twin():
     """A byte image's map kept as its bytes (uint8, a quarter of the memory) with the value each
     byte stands for: every lookup (bilinear, Closest, extended, on pyramid levels), a face's
     modulation and the ``.npz`` arrays read the very float32 values of the same map kept as
-    floats."""
+    floats (its pyramid decodes the 256 values, not each texel: the same floats)."""
     from raybundle.scene.textures import SurfaceTexture
 
     rng = np.random.default_rng(3)

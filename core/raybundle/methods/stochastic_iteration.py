@@ -98,12 +98,13 @@ class StochasticIterationSolver(PatchSolution):
         :attr:`warm_up_steps` transfers apply the same random operator to the iterate until the
         transient is below :data:`WARM_UP_TRANSIENT`, and are not averaged: a transient ``t`` left
         makes a run of n iterations dark by ``t albedo (1 - albedo^n) / (n (1 - albedo))`` of the
-        indirect light, and the scene's slower modes decay more slowly than its mean albedo.  Each takes the iterations' number of
-        directions (from a stream of their own, ``Stream.WARM_UP``, so the averaged iterations
-        keep the sequence's), whose mean keeps the iterate's total light steady (with one
-        direction a transfer, it is a product of random factors), but bundles of
-        :data:`WARM_UP_COARSER` times fewer rays a side.  Meanwhile the solver's readers of the
-        running average (the glossy senders' and tiny sides' gathers) read the current iterate.
+        indirect light, and the scene's slower modes decay more slowly than its mean albedo.
+        Each takes the iterations' number of directions (from a stream of their own,
+        ``Stream.WARM_UP``, so the averaged iterations keep the sequence's), whose mean keeps the
+        iterate's total light steady (with one direction a transfer, it is a product of random
+        factors), but bundles of :data:`WARM_UP_COARSER` times fewer rays a side.  Meanwhile the
+        solver's readers of the running average (the glossy senders' and tiny sides' gathers) read
+        the current iterate.
         ``stop`` (a callable) ends it early; the iteration then goes on from where it got."""
         if self.warmed_up:
             return

@@ -231,11 +231,11 @@ class ClusterFit:
         del centre
         # sides that share a welded vertex: distinct (vertex, side) pairs, neighbours within a vertex
         # (pairs as one integer key each: one sort, no dense ids first)
-        cv, cs = ids.ravel(), np.repeat(side, 3)
+        cv, cs = ids.ravel(), np.repeat(side.astype(np.int32 if n_sides < 2 ** 31 else np.int64), 3)
         key = cv.astype(np.int64)
         key *= n_sides
         key += cs                                 # made in place, and sorted in place
-        first = unique_ints(key, own=True)[1]
+        first = unique_ints(key, own=True, inverse=False)[1]
         del key
         order = first[stable_order(cv[first])[0]]
         v, s = cv[order], cs[order]
@@ -253,7 +253,11 @@ class ClusterFit:
         s2 = np.concatenate(s2) if s2 else np.zeros(0, np.int64)
         at = cluster[s1]                                  # pairs from a cluster side, each once
         s1, s2 = s1[at], s2[at]
-        keep = unique_ints(s1 * n_sides + s2)[1]
+        pair = s1.astype(np.int64)
+        pair *= n_sides
+        pair += s2
+        keep = unique_ints(pair, own=True, inverse=False)[1]
+        del pair
         self.s1, self.s2 = s1[keep], s2[keep]
         del s1, s2, keep
         d = self.centroid[self.s2] - self.centroid[self.s1]
@@ -274,7 +278,8 @@ class ClusterFit:
         self.inverse = np.linalg.inv(m)
         # welded vertices all of whose corners lie on cluster sides, and those corners
         n_vertices = int(ids.max()) + 1
-        on_other = np.bincount(cv, ~cluster[cs], minlength=n_vertices) > 0
+        on_other = np.zeros(n_vertices, bool)
+        on_other[cv[~cluster[cs]]] = True
         used = np.zeros(n_vertices, bool)
         used[cv] = True
         self.vertices = np.nonzero(used & ~on_other)[0]
@@ -283,7 +288,7 @@ class ClusterFit:
         self._scene = scene
         # flat tside corners 3 t + k and their rows (int32: half the memory of what a pass reads
         # most; a scene of 700M tsides would not fit in memory anyway)
-        self._corner = np.nonzero(vrow[cv] >= 0)[0].astype(np.int32)
+        self._corner = np.nonzero((vrow >= 0)[cv])[0].astype(np.int32)
         self._corner_vertex = vrow[cv[self._corner]].astype(np.int32)
         self._weight = a                                          # per tside
         # the pairs grouped by cluster: the limiter's reach (vertex_values)

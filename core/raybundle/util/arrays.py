@@ -147,14 +147,17 @@ def _radix_sort(a, buf, bits, idx, ibuf):
             idx[:] = isrc
 
 
-def unique_ints(key, own=False):
+def unique_ints(key, own=False, inverse=True):
     """``(values, first, inverse)`` of an integer array ``key`` (N,), as ``np.unique(key,
     return_index=True, return_inverse=True)`` gives them (the distinct values in order, the
-    first index of each, each element's value id), by :func:`stable_order` (``own`` as there)."""
+    first index of each, each element's value id; None without ``inverse``), by
+    :func:`stable_order` (``own`` as there)."""
     order, s = stable_order(key, own)
     new = np.ones(len(s), bool)
     np.not_equal(s[1:], s[:-1], out=new[1:])
     values = s[new]
+    if not inverse:
+        return values, order[new], None
     ids = np.cumsum(new, out=s if s.dtype == np.int64 else None)      # the sorted values no longer needed
     ids -= 1
     inverse = np.empty(len(s), np.int64)
