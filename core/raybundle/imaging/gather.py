@@ -71,12 +71,13 @@ class FinalGather:
         self.first_shot_glossy = sharp is None
         self.vert_caustic = rec.averaged(sharp).astype(np.float32) if sharp is not None and caustic else None
 
-    def irradiance(self, points, normals, rays, rng, shift=None, first=0, at=None, chunk_rays=1 << 18):
+    def irradiance(self, points, normals, rays, rng, shift=None, first=0, at=None, chunk_rays=1 << 16):
         """E_ind (N, 3) [W/m^2] at ``points`` (N, 3) with unit ``normals`` (N, 3), by
         ``rays`` rays each: point i's ray k takes the Kronecker (R_2) point
         ``shift_i + (first + k) alpha`` (``shift`` (N, 2), default random from ``rng``),
         so calls with ``first`` = 0, rays, 2 rays, ... on one point continue one
-        stratified set (an image spreads a pixel's gather over its sub-pixel samples).
+        stratified set (an image spreads a pixel's gather over its sub-pixel samples).  The rays go
+        ``chunk_rays`` at a time (each holds a few hundred bytes of hits and radiance meanwhile).
 
         With a caustic first shot (:mod:`raybundle.lights.caustics`), the rays leave out the first
         shot's glossy reflection at the glossy sides they meet (``E1_l f_g(w_l, -w)`` for the
