@@ -212,15 +212,15 @@ class SurfaceTexture:
             return self.images[image]
         key = (image, level)
         if key not in self._pyramids:
-            im = self.level(image, level - 1) if level > 1 else None
-            if level == 1:
-                values = self.byte_values[image]
-                if self.encoded[image] is None:
-                    im = self.texels(image)
-                elif values is None:
-                    im = srgb_to_linear(self.texels(image)) * np.asarray(self.encoded[image], np.float32)
-                else:         # a map of bytes: its 256 values decoded, not each texel (the same floats)
-                    im = srgb_to_linear(values)[self.images[image]] * np.asarray(self.encoded[image], np.float32)
+            values = self.byte_values[image]
+            if level > 1:
+                im = self.level(image, level - 1)
+            elif self.encoded[image] is None:
+                im = self.texels(image)
+            else:             # a map of bytes decodes its 256 values, not each texel (the same floats)
+                im = srgb_to_linear(self.texels(image)) if values is None else \
+                    srgb_to_linear(values)[self.images[image]]
+                im = im * np.asarray(self.encoded[image], np.float32)
             for axis in (0, 1):
                 if im.shape[axis] > 1:
                     if im.shape[axis] % 2:
