@@ -114,9 +114,9 @@ def test_the_final_images_projection_makes_its_32_bit_values_in_one_array():
     projection: :meth:`~raybundle.patches.reconstruction.LinearReconstruction.smooth_and_sharp_many`)
     are made in one (V, 9) float32 array whose columns the sets are, the cluster fits summing into
     it: on a tessellated sphere in a room (cluster fits on 18,657 vertices, a few projected ones),
-    the call peaks at 98 bytes a vertex (with the sharp part's 64-bit average), where a 64-bit
-    (V, 9) result and a 32-bit copy of each set took 158; the bound is what those two alone take,
-    108.  The values are the 64-bit projection's, rounded."""
+    the call peaks at 53 bytes a vertex (the sharp part's average added a column at a time; 98
+    with its whole 64-bit (V, 3)), where a 64-bit (V, 9) result and a 32-bit copy of each set took
+    158.  The values are the 64-bit projection's, rounded."""
     import tracemalloc
 
     from test_clusters import furnace_with_sphere
@@ -137,7 +137,7 @@ def test_the_final_images_projection_makes_its_32_bit_values_in_one_array():
         peak = tracemalloc.get_traced_memory()[1] - start
     finally:
         tracemalloc.stop()
-    assert peak < 108 * rec.n_vertices, peak / rec.n_vertices
+    assert peak < 64 * rec.n_vertices, peak / rec.n_vertices
     assert all(x.dtype == np.float32 and x.base is got[0].base for x in got)
     for x, y in zip(got, rec.smooth_and_sharp_many(pairs)):
         np.testing.assert_allclose(x, y, rtol=1e-6, atol=1e-6 * y.max())
@@ -168,11 +168,35 @@ def test_the_cluster_fits_set_up_peaks_under_72_bytes_a_triangle_side():
     assert peak - kept < 72 * len(sc.tside_side), (peak - kept) / len(sc.tside_side)
 
 
-def test_the_final_gathers_rays_go_65536_at_a_time():
-    """The final gather traces its rays in pieces of 65,536 (``chunk_rays``): 400,000 rays from
-    100,000 points of a glossy Cornell box peak at 26 MB above the call's start, where pieces of
-    262,144 rays peaked at 85 MB (in the bathroom's own materials, its final image's highest
-    point: 59 MB a call)."""
+def test_the_contact_lines_boxes_are_held_once_for_every_axis():
+    """The contact lines' search keeps every triangle's box once, per axis and contiguous, and
+    its sweeps along the three axes read those (a room's walls, floor and ceiling take all
+    three): 197 bytes a triangle at its peak on a room holding a tessellated sphere, where a
+    copy of the boxes per axis took 341 (the bathroom's contact cuts peaked on them)."""
+    import tracemalloc
+
+    from raybundle.patches.contacts import contact_segments, welded_vertices
+    from test_clusters import furnace_with_sphere
+
+    sc = furnace_with_sphere(128, 256)
+    walls = np.nonzero(sc.triangle_material == 0)[0]
+    welded_vertices(sc)                                        # the scene's caches made
+    assert len(contact_segments(sc, walls, 0.01)) == 6
+    tracemalloc.start()
+    try:
+        start = tracemalloc.get_traced_memory()[0]
+        contact_segments(sc, walls, 0.01)
+        peak = tracemalloc.get_traced_memory()[1] - start
+    finally:
+        tracemalloc.stop()
+    assert peak < 240 * len(sc.triangles), peak / len(sc.triangles)
+
+
+def test_the_final_gathers_rays_go_32768_at_a_time():
+    """The final gather traces its rays in pieces of 32,768 (``chunk_rays``): 400,000 rays from
+    100,000 points of a glossy Cornell box peak at 16 MB above the call's start, where pieces of
+    65,536 rays peaked at 26 MB and of 262,144 at 85 MB (in the bathroom's own materials, its
+    final image's highest point), in the same time."""
     import tracemalloc
 
     from raybundle.imaging.gather import FinalGather
@@ -195,14 +219,15 @@ def test_the_final_gathers_rays_go_65536_at_a_time():
     finally:
         tracemalloc.stop()
         s.tracer.close()
-    assert peak < 40 * 2 ** 20, peak / 2 ** 20
+    assert peak < 20 * 2 ** 20, peak / 2 ** 20
 
 
 def test_a_textures_coarser_levels_are_dropped_after_its_means_and_its_faces_take_32_bits():
     """A map's pyramid (its levels of 2 x 2 means) serves the set-up's patch means alone: none
     is held after them (a furnished room held 40 MB of them through its render), and the means
-    come out the same when the levels are made again.  The input faces' corners take 32 bits
-    (the add-on gives the textures and the shading normals one array of them)."""
+    come out the same when the levels are made again.  The input faces' corners and UVs take 32
+    bits (the add-on gives the textures and the shading normals one array of corners; Blender
+    keeps UVs in 32 bits), and so do their maps' numbers."""
     from raybundle.scene.build import build_scene
     from raybundle.scene.materials import MaterialTable
     from raybundle.scene.model import PointLights
@@ -217,7 +242,8 @@ def test_a_textures_coarser_levels_are_dropped_after_its_means_and_its_faces_tak
     laid = pipeline.prepare(scene, patches=40)
     means = laid.texture.side_means(laid, seed=0)
     assert laid.texture._pyramids == {}
-    assert laid.texture.face_corners.dtype == np.float32
+    assert laid.texture.face_corners.dtype == laid.texture.face_uv.dtype == np.float32
+    assert laid.texture.face_image.dtype == laid.texture.face_alpha.dtype == np.int32
     np.testing.assert_array_equal(laid.texture.side_means(laid, seed=0), means)
     assert laid.texture._pyramids == {}
 
@@ -245,6 +271,32 @@ def test_the_vertex_averages_take_no_per_corner_arrays_and_the_glossy_paths_keep
     vert = r.glossy_paths._vert[1]
     assert vert.dtype == np.float32
     np.testing.assert_allclose(vert, rec.averaged(r.solver.received()), rtol=1e-6)
+    r.tracer.close()
+
+
+def test_a_32_bit_vertex_average_keeps_one_64_bit_column_beside_it():
+    """An average kept in 32 bits (the caustic shot's at the points the eye sees in a mirror, a
+    sharp part added into the final image's projection, the glossy paths') is summed in 64 bits a
+    column at a time: its peak is the result, one (V,) float64 and one column of the side values
+    (33 bytes a vertex on the glossy Cornell box, 3 columns), where a 64-bit (V, 3), its 32-bit
+    copy and the divisor's guard took 57; the same values as the 64-bit average, rounded."""
+    import tracemalloc
+
+    sc = pipeline.prepare(scenes.load_scene("cornell-glossy"), 4000)
+    r = pipeline.make_renderer(sc, RenderSettings(seed=0))
+    r.step()
+    rec, e = r.solver.reconstruction, r.solver.received()
+    exact = rec.averaged(e)                                   # kernels compiled, caches made
+    tracemalloc.start()
+    try:
+        start = tracemalloc.get_traced_memory()[0]
+        out = rec.averaged(e, dtype=np.float32)
+        peak = tracemalloc.get_traced_memory()[1] - start
+    finally:
+        tracemalloc.stop()
+    assert out.dtype == np.float32 and out.shape == exact.shape
+    assert peak < 20 * rec.n_vertices + 10 * sc.n_sides, peak / rec.n_vertices
+    np.testing.assert_array_equal(out, exact.astype(np.float32))
     r.tracer.close()
 
 

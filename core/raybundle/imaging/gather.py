@@ -69,9 +69,9 @@ class FinalGather:
         # is (``caustic`` False: left out, for an image that light-traces it into its pixels,
         # :meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`)
         self.first_shot_glossy = sharp is None
-        self.vert_caustic = rec.averaged(sharp).astype(np.float32) if sharp is not None and caustic else None
+        self.vert_caustic = rec.averaged(sharp, dtype=np.float32) if sharp is not None and caustic else None
 
-    def irradiance(self, points, normals, rays, rng, shift=None, first=0, at=None, chunk_rays=1 << 16):
+    def irradiance(self, points, normals, rays, rng, shift=None, first=0, at=None, chunk_rays=1 << 15):
         """E_ind (N, 3) [W/m^2] at ``points`` (N, 3) with unit ``normals`` (N, 3), by
         ``rays`` rays each: point i's ray k takes the Kronecker (R_2) point
         ``shift_i + (first + k) alpha`` (``shift`` (N, 2), default random from ``rng``),

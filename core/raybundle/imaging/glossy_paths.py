@@ -81,7 +81,7 @@ class GlossyEyePaths:
         the same (a pass gathers its own samples and its extra ones from the same solution)."""
         if self._vert is None or not np.array_equal(self._vert[0], e):
             self._vert = None                     # the old values go before the new are made
-            self._vert = (e, self.solver.reconstruction.averaged(e).astype(np.float32))
+            self._vert = (e, self.solver.reconstruction.averaged(e, dtype=np.float32))
         return self._vert[1]
 
     def _gather(self, g, idx, u, e, vert, world_samples, guide):

@@ -128,6 +128,7 @@ class DiffuseIndirect:
                                             self.rng, shift=shift[h[f]], first=j * per_sample,
                                             at=(g.tside[h[f]], g.bary[h[f]]))
                     self.edge_gather.points += len(f)
+                    release_freed()           # a sample's gather leaves its pieces' space scattered
                 self.gather_rays_used += rays_j
             if own:
                 e = self._reflected_caustic(e, g, h, cache)
@@ -164,7 +165,7 @@ class DiffuseIndirect:
         if len(r) == 0:
             return e
         if "vert" not in cache:
-            cache["vert"] = self.solver.reconstruction.averaged(caustic.E).astype(np.float32) \
+            cache["vert"] = self.solver.reconstruction.averaged(caustic.E, dtype=np.float32) \
                 if self.settings.smooth else None
         e[r] += surface_values(self.scene, self.solver, caustic.E, cache["vert"], g.tside[h[r]], g.bary[h[r]])
         return e

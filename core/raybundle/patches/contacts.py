@@ -71,7 +71,9 @@ class _BoxQuery:
     the window of low ends ``[a - longest, b]``; the longer ones (1%) are always tested."""
 
     def __init__(self, lo, hi, axis=None):
-        # per axis, contiguous: :meth:`pairs` tests one axis at a time, the sweep's first
+        # per axis, contiguous: :meth:`pairs` tests one axis at a time, the sweep's first (boxes
+        # given as the transpose of per-axis arrays are read in place: queries along several
+        # axes share them)
         self.lo, self.hi = np.ascontiguousarray(lo.T), np.ascontiguousarray(hi.T)
         if axis is None:
             axis = int(np.argmax(hi.max(axis=0) - lo.min(axis=0))) if len(lo) else 0
@@ -120,7 +122,9 @@ def contact_segments(scene, faces, tol, min_plane_area=0.0):
     if len(faces) == 0:
         return out
     corners = np.asarray(scene.triangle_corners)                # gathered once: read whole and in parts
-    lo_all, hi_all = corners.min(axis=1), corners.max(axis=1)
+    # the boxes per axis, contiguous, as every axis' query reads them (its own copy is then none)
+    lo_all = np.ascontiguousarray(corners.min(axis=1).T).T
+    hi_all = np.ascontiguousarray(corners.max(axis=1).T).T
     _, r = scene.bounding_sphere
     vid = welded_vertices(scene)
     # a plane's box is thin along its normal: sweep along the axis where it is thinnest

@@ -91,24 +91,37 @@ class LinearReconstruction:
 
     @cached_property
     def _average_sums(self):
-        """(V,) the sums of :meth:`averaged`'s weights over all tsides (the weights themselves,
-        (TS, 3), are made per call and only on the NumPy path)."""
+        """(V,) the sums of :meth:`averaged`'s weights over all tsides, at least 1e-300 (its
+        divisor; the weights themselves, (TS, 3), are made per call and only on the NumPy path)."""
         if compiled.use():
-            return _scatter_sides(self.ids, self.area, self.scene.tside_side, np.ones((self.scene.n_sides, 1)),
+            sums = _scatter_sides(self.ids, self.area, self.scene.tside_side, np.ones((self.scene.n_sides, 1)),
                                   self.n_vertices, self.empty)[:, 0]
-        return np.bincount(self._flat, self._corner_weights(self.ids, self.area).ravel(), minlength=self.n_vertices)
+        else:
+            sums = np.bincount(self._flat, self._corner_weights(self.ids, self.area).ravel(), minlength=self.n_vertices)
+        return np.maximum(sums, 1e-300, out=sums)
 
     def _corner_weights(self, ids, area):
         """(N, 3) :meth:`averaged`'s weight of each corner of tsides ``ids`` (N, 3) of receiving
         ``area`` (N,): the area, 1 at a vertex without receiving area."""
         return np.where(self.empty[ids], 1.0, area[:, None])
 
-    def averaged(self, side_values, tsides=None):
-        """Side values (S, C) -> (V, C): the mean of the sides around each vertex,
+    def averaged(self, side_values, tsides=None, dtype=float):
+        """Side values (S, C) -> (V, C) of ``dtype``: the mean of the sides around each vertex,
         weighted by their receiving area (vertices without any: unweighted); with
-        ``tsides`` (indices) over those alone (right at the vertices all of whose tsides they hold)."""
-        out = self._numerator(side_values, tsides)
-        out /= np.maximum(self._average_sums, 1e-300)[:, None]        # in place: (V, C) is the largest array
+        ``tsides`` (indices) over those alone (right at the vertices all of whose tsides they hold).
+        Summed in 64 bits; into a narrower ``dtype`` a column at a time (one (V,) float64 beside
+        the result, not a (V, C))."""
+        if np.dtype(dtype) == np.float64:
+            out = self._numerator(side_values, tsides)
+            out /= self._average_sums[:, None]        # in place: (V, C) is the largest array
+            return out
+        side_values = np.asarray(side_values, float)
+        out = np.empty((self.n_vertices, side_values.shape[1]), dtype)
+        for c in range(side_values.shape[1]):
+            column = self._numerator(side_values[:, c:c + 1], tsides)[:, 0]
+            column /= self._average_sums
+            out[:, c] = column
+            del column                                 # before the next one is made
         return out
 
     def _numerator(self, side_values, tsides=None):
@@ -134,12 +147,13 @@ class LinearReconstruction:
         else:
             tri = side_values[self._p_side]
             b = self._gather((self._p_area[:, None] * tri / 3)[:, None, :].repeat(3, axis=1), self._p_flat, nv)
-        if len(self._fallback_tsides):     # the fallback's sums, divided where they are kept: one (V, C)
-            x = self._numerator(side_values, self._fallback_tsides)
-            x[self._fallback] /= np.maximum(self._average_sums[self._fallback], 1e-300)[:, None]
-            x = x.astype(dtype, copy=False)
-        else:
-            x = np.zeros((self.n_vertices, side_values.shape[1]), dtype)
+        x = np.zeros((self.n_vertices, side_values.shape[1]), dtype)
+        if len(self._fallback_tsides):     # the fallback's sums, divided where they are kept, a column at a time
+            for c in range(side_values.shape[1]):
+                column = self._numerator(side_values[:, c:c + 1], self._fallback_tsides)[:, 0]
+                column[self._fallback] /= self._average_sums[self._fallback]
+                x[:, c] = column
+                del column                             # before the next one is made
         x[self._p_vertices] = np.maximum(self._solve_mass(b), 0.0)
         if self._fit is not None:
             self._fit.vertex_values(np.asarray(side_values, float), out=x)
@@ -161,14 +175,13 @@ class LinearReconstruction:
         pairs = [(np.asarray(v, float), s) for v, s in pairs]
         stacked = np.concatenate([v if s is None else v - s for v, s in pairs], axis=1)
         x = self.projected(stacked, dtype)
-        averaged = {}                 # one average per distinct sharp part (pairs often share it)
         out, c = [], 0
         for v, s in pairs:
             part = x[:, c:c + v.shape[1]]
             if s is not None:
-                if id(s) not in averaged:
-                    averaged[id(s)] = self.averaged(s)
-                part += averaged[id(s)]         # in x's own columns: no (V, C) beside it
+                s = np.asarray(s, float)
+                for j in range(s.shape[1]):    # in x's own columns, a (V,) float64 at a time beside it
+                    part[:, j] += self.averaged(s[:, j:j + 1])[:, 0]
             out.append(part)
             c += v.shape[1]
         return out

@@ -83,7 +83,7 @@ class SurfaceTexture:
     ``face_image`` (F,) int: the map of each input face (-1: untextured; -2: the face's
     corner colors, interpolated linearly: a color attribute, whose color is the albedo
     factor itself), indexed by :attr:`~raybundle.scene.model.PatchScene.triangle_source`;
-    ``face_corners`` (F, 3, 3) [m], float32, and ``face_uv`` (F, 3, 2): the input faces and their
+    ``face_corners`` (F, 3, 3) [m] and ``face_uv`` (F, 3, 2), float32: the input faces and their
     corner UVs; ``face_color`` (F, 3, 3) or None: their corner colors; ``face_alpha`` (F,) int
     or None: the map of each face's coverage (its first channel; -1: opaque); ``face_normal``
     (F,) int or None: the map of each face's normal, its texels the perturbed normal (x, y, z)
@@ -111,15 +111,15 @@ class SurfaceTexture:
     _pyramids: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
-        self.face_image = np.asarray(self.face_image, np.int64)
-        self.face_alpha = (np.full(len(self.face_image), -1, np.int64) if self.face_alpha is None
-                           else np.asarray(self.face_alpha, np.int64))
-        self.face_normal = (np.full(len(self.face_image), -1, np.int64) if self.face_normal is None
-                            else np.asarray(self.face_normal, np.int64))
+        self.face_image = np.asarray(self.face_image, np.int32)
+        self.face_alpha = (np.full(len(self.face_image), -1, np.int32) if self.face_alpha is None
+                           else np.asarray(self.face_alpha, np.int32))
+        self.face_normal = (np.full(len(self.face_image), -1, np.int32) if self.face_normal is None
+                            else np.asarray(self.face_normal, np.int32))
         self.face_bump = (np.zeros(len(self.face_image), bool) if self.face_bump is None
                           else np.asarray(self.face_bump, bool))
         self.face_corners = np.asarray(self.face_corners, np.float32)
-        self.face_uv = np.asarray(self.face_uv, float)
+        self.face_uv = np.asarray(self.face_uv, np.float32)          # as Blender keeps UVs
         if self.face_color is not None:
             self.face_color = np.asarray(self.face_color, float)
         self.byte_values = [None if b is None else np.asarray(b, np.float32).reshape(256)
