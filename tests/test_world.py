@@ -288,6 +288,32 @@ def test_sides_much_smaller_than_a_bundle_cell_gather_and_send_their_average():
         s.tracer.close()
 
 
+def test_the_warm_ups_coarser_bundles_take_fewer_gather_rays_for_the_tiny_sides():
+    """A transfer at the warm-up's resolution (:data:`WARM_UP_COARSER` times coarser: a sixteenth
+    of the rays a side) gathers for the tiny sides a sixteenth of their rays too, at least one
+    each (their gathers were most of a warm-up transfer's time in the bathrooms: 1.4 of its
+    2.3 s), the iterations all of them; the speck's upper side, which sees only the sky, still
+    holds pi L_up exactly."""
+    from raybundle.methods.stochastic_iteration import StochasticIterationSolver
+
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0], [0, 0, 0.5], [0.001, 0, 0.5], [0, 0.001, 0.5]],
+                 float)
+    sc = build_scene(v, [[0, 1, 2], [0, 2, 3], [4, 5, 6]], [0, 0, 0], PLATE, two_sided=True,
+                     world=World(sky_and_ground()), triangle_patch=[0, 0, 1])
+    s = pipeline.make_solver(pipeline.prepare(sc, patches=0), RenderSettings(seed=2))
+    try:
+        d = np.array([[0.0, 0.6, 0.8]])
+        for res, rays in ((s.bundle_resolution, s.TINY_GATHER_RAYS),
+                          (s.bundle_resolution // StochasticIterationSolver.WARM_UP_COARSER, 1)):
+            before = s.stats.rays
+            E, _, _, bundles = s.transfer(d, resolution=res)
+            assert s.stats.rays - before - sum(b.n_casts for b in bundles) == len(s._tiny) * rays, res
+            top = s._tiny[s.normal[s._tiny, 2] > 0]
+            np.testing.assert_allclose(E[top], np.pi * L_UP[None], rtol=1e-9)
+    finally:
+        s.tracer.close()
+
+
 def _floor_under_a_roof_with_an_opening():
     """A 4 m floor at z = 0 under a roof at z = 1 over [-30, 30]^2 less the opening
     [-0.5, 0.5] x [0.5, 1.5] (four quads), under a world bright above."""

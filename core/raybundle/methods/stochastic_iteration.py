@@ -102,7 +102,8 @@ class StochasticIterationSolver(PatchSolution):
         Each takes the iterations' number of directions (from a stream of their own,
         ``Stream.WARM_UP``, so the averaged iterations keep the sequence's), whose mean keeps the
         iterate's total light steady (with one direction a transfer, it is a product of random
-        factors), but bundles of :data:`WARM_UP_COARSER` times fewer rays a side.  Meanwhile the
+        factors), but bundles of :data:`WARM_UP_COARSER` squared times fewer rays a side, and the tiny
+        sides' gathers as many times fewer (at least one ray a side).  Meanwhile the
         solver's readers of the running average (the glossy senders' and tiny sides' gathers) read
         the current iterate.
         ``stop`` (a callable) ends it early; the iteration then goes on from where it got."""
