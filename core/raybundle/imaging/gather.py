@@ -36,6 +36,7 @@ import numpy as np
 
 from ..tracing.sampling import Stream, cosine_directions, frames_from_normals, kronecker_alpha, stream
 from ..tracing.visibility import near_surface
+from ..util.memory import release_freed
 
 
 class FinalGather:
@@ -128,6 +129,7 @@ class FinalGather:
             out[lo:hi] = np.pi * L.reshape(hi - lo, rays, 3).mean(axis=1)
         if caustic:
             out += rec.at(self.vert_caustic, at[0], at[1])
+        release_freed()              # its pieces' space, left scattered, would sit under the image's peak
         return out
 
     def _bounced(self, points, normals, rng):

@@ -128,7 +128,6 @@ class DiffuseIndirect:
                                             self.rng, shift=shift[h[f]], first=j * per_sample,
                                             at=(g.tside[h[f]], g.bary[h[f]]))
                     self.edge_gather.points += len(f)
-                    release_freed()           # a sample's gather leaves its pieces' space scattered
                 self.gather_rays_used += rays_j
             if own:
                 e = self._reflected_caustic(e, g, h, cache)

@@ -29,7 +29,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..scene import compiled_bsdf
-from ..scene.compiled_bsdf import dot3, glossy_pdf_at
+from ..scene.compiled_bsdf import glossy_pdf_at
+from ..scene.compiled_microfacet import dot3
 from ..util.compiled import helper, kernel
 
 def _V(a, dtype=None):

@@ -276,13 +276,13 @@ class PatchSolution(Method, abc.ABC):
         scene (N,) (:func:`~raybundle.methods.gather_rays.gather`)."""
         return gather_rays.gather(self, points, normals, w)
 
-    def _gather_tiny(self, E, e_glossy, t_glossy, rays=None):
+    def _gather_tiny(self, E, e_glossy, t_glossy, resolution):
         """Put a gathered estimate in place of the bundles' one for the sides much smaller than a
         bundle cell (``_tiny``), in ``E`` (S, 3), the glossy iterate ``e_glossy``, ``t_glossy``
-        (S, 3, or None) and the world's part: ``E_i = (pi / m) sum_k L(y_k, -w_k)``, m =
-        ``rays`` (default ``TINY_GATHER_RAYS``) cosine-distributed rays ``w_k`` from uniform points ``y_k`` of side i
-        (:meth:`_gather`); a glossy side keeps ``pi L`` of its first ray and that ray's travel
-        direction.
+        (S, 3, or None) and the world's part: ``E_i = (pi / m) sum_k L(y_k, -w_k)`` by m cosine-distributed
+        rays ``w_k`` from uniform points ``y_k`` of side i (:meth:`_gather`), m = ``TINY_GATHER_RAYS`` times
+        the share of a side's rays that bundles of ``resolution`` take (at least one); a glossy side
+        keeps ``pi L`` of its first ray and that ray's travel direction.
 
         A bundle line meets such a side rarely and then brings it cell / area times its mean
         share: over the iterations its average is heavy-tailed (the interior bench's hall, 4,388
@@ -292,7 +292,7 @@ class PatchSolution(Method, abc.ABC):
         as the side shrinks.  Both are unbiased estimates of the same transfer, so the iteration
         stays an unbiased random operator."""
         tiny = self._tiny
-        m = self.TINY_GATHER_RAYS if rays is None else int(rays)
+        m = max(1, round(self.TINY_GATHER_RAYS * (resolution / self.bundle_resolution) ** 2))
         side = np.repeat(tiny, m)
         u = self.grid_rng.random((len(side), 5))
         pts, n = self._tiny_points.draw(side, u[:, :3])
@@ -334,8 +334,7 @@ class PatchSolution(Method, abc.ABC):
         :meth:`sent_environment`).  Returns ``(E, e_glossy, t_glossy, bundles)``: the diffuse
         lobe's mean over the K transfers (S, 3), each glossy side's one drawn transfer and its
         travel direction t_i (S, 3; None for diffuse-only scenes).  Counts directions and rays,
-        sets ``direction``; the caller stores the iterate.  At a coarser ``resolution`` the tiny
-        sides gather by as many times fewer rays (at least one).  With ``control`` (S, 3), an estimate
+        sets ``direction``; the caller stores the iterate.  With ``control`` (S, 3), an estimate
         of E made before the directions were drawn, E is taken less its control variate
         (:mod:`~raybundle.methods.control_variate`)."""
         if d is None:
@@ -397,9 +396,7 @@ class PatchSolution(Method, abc.ABC):
         if self.separates_world:
             self.world_incoming = self.world_incoming / k_dirs
         if self._tiny is not None and len(self._tiny) and self.TINY_GATHER_RAYS:
-            # coarser bundles (the warm-up's): their share of the rays a side, at least one
-            self._gather_tiny(E, e_glossy, t_glossy,
-                              max(1, round(self.TINY_GATHER_RAYS * (res / self.bundle_resolution) ** 2)))
+            self._gather_tiny(E, e_glossy, t_glossy, res)
         self.direction = d[-1]
         st.directions += k_dirs
         return E, e_glossy, t_glossy, bundles

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..util.compiled import helper, kernel
+from .compiled_microfacet import dot3, fresnel_at, lambda_at, visible_normal_at
 from .principled import MU_TABLE
 
 
@@ -138,13 +139,6 @@ def _pack_sample():
 
 
 @helper
-def dot3(a0, a1, a2, b0, b1, b2):
-    """a.b summed as ``np.einsum("ij,ij->i", a, b)`` sums three terms (two SIMD lanes: the
-    first and third, then the second), so that both paths give the same bits."""
-    return (a0 * b0 + a2 * b2) + a1 * b1
-
-
-@helper
 def _interp_at(mu, k):
     """Where ``np.interp(mu, linspace(0, 1, k), table)`` reads a table, for ``mu`` in [0, 1]:
     ``(j, dx, dmu)``, its value ``table[j]`` where ``dx < 0``, else ``_lerp(table[j],
@@ -166,14 +160,6 @@ def _lerp(t0, t1, dx, dmu):
 
 
 @helper
-def _smith_lambda(alpha, c):
-    c = min(max(c, 1e-12), 1.0)
-    c2 = c * c
-    tan2 = (1.0 - c2) / c2
-    return 0.5 * (np.sqrt(1.0 + alpha * alpha * tan2) - 1.0)
-
-
-@helper
 def _ggx_distribution(a, n0, n1, n2, i0, i1, i2, o0, o1, o2):
     """The unit half vector of ``w_i`` and ``w_o`` and the GGX ``D(h)`` about normal ``n``
     (:func:`~raybundle.scene.microfacet.ggx_distribution`, per point)."""
@@ -187,25 +173,13 @@ def _ggx_distribution(a, n0, n1, n2, i0, i1, i2, o0, o1, o2):
 
 
 @helper
-def _fresnel_dielectric_cos(c, eta):
-    c = abs(c)
-    g2 = eta * eta - 1.0 + c * c
-    if not g2 > 0:
-        return 1.0
-    g = np.sqrt(g2)
-    a = (g - c) / (g + c)
-    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-    return 0.5 * a * a * (1.0 + b * b)
-
-
-@helper
 def _layer_fl(hc, eta, on):
     """The dielectric layer's Fresnel remapped from [F0(eta), 1] to [0, 1] at ``c = h.w_out``
     (``microfacet.dielectric_layer_fresnel``'s ``s``); 0 where ``on`` is False."""
     if not on:
         return 0.0
     f_real = ((eta - 1.0) / (eta + 1.0)) ** 2
-    return min(max((_fresnel_dielectric_cos(hc, eta) - f_real) / (1.0 - f_real), 0.0), 1.0)
+    return min(max((fresnel_at(hc, eta) - f_real) / (1.0 - f_real), 0.0), 1.0)
 
 
 @helper
@@ -261,7 +235,7 @@ def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, laye
         if glossy and (layered[m] or g[m] > 0):
             a = alpha[m]
             h0, h1, h2, d = _ggx_distribution(a, n0, n1, n2, i0, i1, i2, o0, o1, o2)
-            g2 = 1.0 / (1.0 + _smith_lambda(a, cos_i) + _smith_lambda(a, cos_o))
+            g2 = 1.0 / (1.0 + lambda_at(a, cos_i) + lambda_at(a, cos_o))
             lobe = d * g2 / (4.0 * cos_i * cos_o)
             if not layered[m]:
                 gl = g[m] * lobe
@@ -307,7 +281,7 @@ def glossy_pdf_at(a, n0, n1, n2, i0, i1, i2, o0, o1, o2):
     cos_o = dot3(n0, n1, n2, o0, o1, o2)
     cos_i = dot3(n0, n1, n2, i0, i1, i2)
     if cos_i > 0 and cos_o > 0 and h_o > 0:
-        g1 = 1.0 / (1.0 + _smith_lambda(a, cos_o))
+        g1 = 1.0 / (1.0 + lambda_at(a, cos_o))
         return g1 * d / (4.0 * cos_o)
     return 0.0
 
@@ -315,36 +289,6 @@ def glossy_pdf_at(a, n0, n1, n2, i0, i1, i2, o0, o1, o2):
 def _sample_sampler():
     v = np.tile([[0.0, 0.0, 1.0]], (2, 1))
     return (np.zeros(2, np.int64), v, v, np.full((2, 2), 0.5), *_pack_sample(), np.empty((2, 3)), np.empty((2, 3)))
-
-
-@helper
-def _visible_normal(a, n0, n1, n2, o0, o1, o2, u0, u1):
-    """A GGX normal about n drawn from those visible from w_out (Heitz 2018), as
-    ``microfacet.sample_ggx_visible_normal`` computes it."""
-    sign = 1.0 if n2 >= 0 else -1.0                          # sampling.frames_from_normals
-    fa = -1.0 / (sign + n2)
-    fb = n0 * n1 * fa
-    t0, t1, t2 = 1 + sign * (n0 * n0) * fa, sign * fb, -sign * n0
-    b0, b1, b2 = fb, sign + (n1 * n1) * fa, -n1
-    v0, v1, v2 = a * dot3(o0, o1, o2, t0, t1, t2), a * dot3(o0, o1, o2, b0, b1, b2), max(dot3(n0, n1, n2, o0, o1, o2), 1e-12)
-    nv = np.sqrt((v0 * v0 + v1 * v1) + v2 * v2)
-    v0, v1, v2 = v0 / nv, v1 / nv, v2 / nv
-    lens = np.hypot(v0, v1)
-    if lens < 1e-12:
-        e0, e1, e2 = 1.0, 0.0, 0.0
-    else:
-        e0, e1, e2 = -v1 / lens, v0 / lens, 0.0 / lens
-    f0, f1, f2 = v1 * e2 - v2 * e1, v2 * e0 - v0 * e2, v0 * e1 - v1 * e0
-    r, phi = np.sqrt(u0), 2 * np.pi * u1
-    p1, p2 = r * np.cos(phi), r * np.sin(phi)
-    s = 0.5 * (1.0 + v2)
-    p2 = (1.0 - s) * np.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
-    q = np.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
-    h0, h1, h2 = p1 * e0 + p2 * f0 + q * v0, p1 * e1 + p2 * f1 + q * v1, p1 * e2 + p2 * f2 + q * v2
-    m0, m1, m2 = a * h0, a * h1, max(h2, 1e-12)
-    nm = np.sqrt((m0 * m0 + m1 * m1) + m2 * m2)
-    m0, m1, m2 = m0 / nm, m1 / nm, m2 / nm
-    return m0 * t0 + m1 * b0 + m2 * n0, m0 * t1 + m1 * b1 + m2 * n1, m0 * t2 + m1 * b2 + m2 * n2
 
 
 @kernel(_sample_sampler)
@@ -356,7 +300,7 @@ def _sample_glossy(mat, normal, w_out, u, kdr, g, ks, alpha, layered, has_layer,
         a = alpha[m]
         n0, n1, n2 = normal[p, 0], normal[p, 1], normal[p, 2]
         o0, o1, o2 = w_out[p, 0], w_out[p, 1], w_out[p, 2]
-        h0, h1, h2 = _visible_normal(a, n0, n1, n2, o0, o1, o2, u[p, 0], u[p, 1])
+        h0, h1, h2 = visible_normal_at(a, n0, n1, n2, o0, o1, o2, u[p, 0], u[p, 1])
         cos_o = dot3(n0, n1, n2, o0, o1, o2)
         h_o = dot3(h0, h1, h2, o0, o1, o2)
         i0, i1, i2 = 2 * h_o * h0 - o0, 2 * h_o * h1 - o1, 2 * h_o * h2 - o2
@@ -364,8 +308,8 @@ def _sample_glossy(mat, normal, w_out, u, kdr, g, ks, alpha, layered, has_layer,
         cos_i = dot3(n0, n1, n2, i0, i1, i2)
         w = 0.0
         if cos_i > 0 and h_o > 0 and cos_o > 0:
-            lam_o = _smith_lambda(a, abs(cos_o))
-            w = (1.0 + lam_o) / (1.0 + lam_o + _smith_lambda(a, abs(cos_i)))
+            lam_o = lambda_at(a, abs(cos_o))
+            w = (1.0 + lam_o) / (1.0 + lam_o + lambda_at(a, abs(cos_i)))
         if not (layered[m] and w > 0):
             for c in range(3):
                 weight[p, c] = g[m] * ks[m, c] * w
@@ -383,3 +327,4 @@ def _sample_glossy(mat, normal, w_out, u, kdr, g, ks, alpha, layered, has_layer,
             weight[p, c] = w * _layer_factor(
                 gm, fresnel[m], f82_f0[m, c], f82_b[m, c], ks[m, c], has_layer[m], layer_f0[m, c], fl, s, s5,
                 glossy_scale[m, j, c], glossy_scale[m, j1, c], layer_scale[m, j, c], layer_scale[m, j1, c], dx, dmu)
+

@@ -204,10 +204,19 @@ def ggx_fresnel_moments(alpha, cos_out, eta=0.0, f82=None, n_theta=256, n_phi=32
 
 @functools.lru_cache(maxsize=256)
 def _moments(alpha, eta, cos_out, n_theta, n_phi):
-    """:func:`ggx_fresnel_moments`' ``E``, ``Ed``, ``Sd`` and ``F5`` = E[w (1 - c)^5], kept."""
+    """:func:`ggx_fresnel_moments`' ``E``, ``Ed``, ``Sd`` and ``F5`` = E[w (1 - c)^5], kept
+    (compiled where the kernels are on: :func:`~raybundle.scene.compiled_microfacet.lobe_moments`)."""
+    from ..util import compiled
+
     k = len(cos_out)
-    out = {"E": np.empty(k), "Ed": np.zeros(k), "Sd": np.zeros(k), "F5": np.empty(k)}
     f0_real = f0_from_ior(eta) if eta > 1 else 0.0
+    if compiled.use():
+        from .compiled_microfacet import lobe_moments
+
+        q = np.empty((k, 4))
+        lobe_moments(float(alpha), float(eta), float(f0_real), np.asarray(cos_out, float), int(n_theta), int(n_phi), q)
+        return {"E": q[:, 0], "F5": q[:, 1], "Ed": q[:, 2], "Sd": q[:, 3]}
+    out = {"E": np.empty(k), "Ed": np.zeros(k), "Sd": np.zeros(k), "F5": np.empty(k)}
     for j, (w, valid, c) in enumerate(_lobe_points(alpha, np.asarray(cos_out), n_theta, n_phi)):
         out["E"][j] = w.mean()
         out["F5"][j] = (w * (1.0 - c) ** 5).mean()
