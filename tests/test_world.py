@@ -262,6 +262,14 @@ def test_the_pixels_sample_the_world_where_it_is_the_only_light():
     assert RenderSettings().world_samples == -1
 
 
+def _speck_over_a_plate():
+    """A 2 m plate, two-sided, with a speck 1 mm across half a metre over it, under the sky."""
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0], [0, 0, 0.5], [0.001, 0, 0.5], [0, 0.001, 0.5]],
+                 float)
+    return build_scene(v, [[0, 1, 2], [0, 2, 3], [4, 5, 6]], [0, 0, 0], PLATE, two_sided=True,
+                       world=World(sky_and_ground()), triangle_patch=[0, 0, 1])
+
+
 def test_sides_much_smaller_than_a_bundle_cell_gather_and_send_their_average():
     """A side far smaller than a bundle line's cross-section gets cell / area times its share
     when a line meets it; it sends its running average, not that spike (the living room of the
@@ -269,11 +277,7 @@ def test_sides_much_smaller_than_a_bundle_cell_gather_and_send_their_average():
     gathers its light by rays of its own: the speck's upper side, which sees only the sky, holds
     pi L_up exactly (each gather ray meets the sky above).  By the bundles alone, a line met the
     speck (1e-5 of a cell) in none of the 320 directions or, rarely, brought 1e5 times too much."""
-    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0], [0, 0, 0.5], [0.001, 0, 0.5], [0, 0.001, 0.5]],
-                 float)
-    sc = build_scene(v, [[0, 1, 2], [0, 2, 3], [4, 5, 6]], [0, 0, 0], PLATE, two_sided=True,
-                     world=World(sky_and_ground()), triangle_patch=[0, 0, 1])
-    s = pipeline.make_solver(pipeline.prepare(sc, patches=0), RenderSettings(seed=2))
+    s = pipeline.make_solver(pipeline.prepare(_speck_over_a_plate(), patches=0), RenderSettings(seed=2))
     try:
         for _ in range(20):
             s.step()
@@ -296,11 +300,7 @@ def test_the_warm_ups_coarser_bundles_take_fewer_gather_rays_for_the_tiny_sides(
     holds pi L_up exactly."""
     from raybundle.methods.stochastic_iteration import StochasticIterationSolver
 
-    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0], [0, 0, 0.5], [0.001, 0, 0.5], [0, 0.001, 0.5]],
-                 float)
-    sc = build_scene(v, [[0, 1, 2], [0, 2, 3], [4, 5, 6]], [0, 0, 0], PLATE, two_sided=True,
-                     world=World(sky_and_ground()), triangle_patch=[0, 0, 1])
-    s = pipeline.make_solver(pipeline.prepare(sc, patches=0), RenderSettings(seed=2))
+    s = pipeline.make_solver(pipeline.prepare(_speck_over_a_plate(), patches=0), RenderSettings(seed=2))
     try:
         d = np.array([[0.0, 0.6, 0.8]])
         for res, rays in ((s.bundle_resolution, s.TINY_GATHER_RAYS),
