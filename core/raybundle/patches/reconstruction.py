@@ -147,13 +147,9 @@ class LinearReconstruction:
         else:
             tri = side_values[self._p_side]
             b = self._gather((self._p_area[:, None] * tri / 3)[:, None, :].repeat(3, axis=1), self._p_flat, nv)
-        x = np.zeros((self.n_vertices, side_values.shape[1]), dtype)
-        if len(self._fallback_tsides):     # the fallback's sums, divided where they are kept, a column at a time
-            for c in range(side_values.shape[1]):
-                column = self._numerator(side_values[:, c:c + 1], self._fallback_tsides)[:, 0]
-                column[self._fallback] /= self._average_sums[self._fallback]
-                x[:, c] = column
-                del column                             # before the next one is made
+        # the fallback's vertices read their tsides' average (the other rows are written below)
+        x = self.averaged(side_values, self._fallback_tsides, dtype) if len(self._fallback_tsides) else \
+            np.zeros((self.n_vertices, side_values.shape[1]), dtype)
         x[self._p_vertices] = np.maximum(self._solve_mass(b), 0.0)
         if self._fit is not None:
             self._fit.vertex_values(np.asarray(side_values, float), out=x)

@@ -13,6 +13,8 @@ import functools
 
 import numpy as np
 
+from ..util import compiled
+
 
 def smith_lambda(alpha, cos_theta):
     """GGX Smith Lambda(w) = (sqrt(1 + alpha^2 tan^2 theta) - 1) / 2."""
@@ -206,8 +208,6 @@ def ggx_fresnel_moments(alpha, cos_out, eta=0.0, f82=None, n_theta=256, n_phi=32
 def _moments(alpha, eta, cos_out, n_theta, n_phi):
     """:func:`ggx_fresnel_moments`' ``E``, ``Ed``, ``Sd`` and ``F5`` = E[w (1 - c)^5], kept
     (compiled where the kernels are on: :func:`~raybundle.scene.compiled_microfacet.lobe_moments`)."""
-    from ..util import compiled
-
     k = len(cos_out)
     f0_real = f0_from_ior(eta) if eta > 1 else 0.0
     if compiled.use():
