@@ -20,7 +20,7 @@ land in just such a place, where the first shot's patch values are wrong most (a
 wall's direct light falls to zero towards the ceiling): there the hit's direct
 irradiance is estimated at the hit point itself
 (:meth:`~raybundle.lights.direct.DirectLighting.irradiance`, ``near_light_samples`` shadow
-rays per light).  ``tests/test_baking.py`` pins the corner profile against a
+rays per light, unclamped: the rays' mean is then unbiased).  ``tests/test_baking.py`` pins the corner profile against a
 brute-force integral.
 
 Bakes gather at every vertex and corner (:func:`raybundle.imaging.baking.baked_radiance`);
@@ -120,7 +120,7 @@ class FinalGather:
                             rec.at(self.vert_indirect, ts[c], bary[c])
                         e_hit[c] = e_ind + sv.direct.irradiance(at_hit, sc.tside_normal[ts[c]], rng,
                                                                 self.near_light_samples,
-                                                                receivers=sc.link_groups(tri[h]))
+                                                                receivers=sc.link_groups(tri[h]), clamp=False)
                 L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False,
                                      glossy_iterate=False, first_shot_glossy=self.first_shot_glossy)
                 L[hit] += self.glossy_reflected(origin[hit] + w[hit] * dist[hit, None], ts, -w[hit], rng)

@@ -298,7 +298,7 @@ class DirectLighting:
         return samples_per_light * len(self.area_lights) + len(self.point_lights)
 
     def irradiance(self, points, normals, rng, samples_per_light=16, penumbra_samples=None, receivers=None,
-                   footprint=None):
+                   footprint=None, clamp=True):
         """Direct irradiance (N, 3) [W/m^2] of the first-shot lights at surface points
         with unit ``normals`` (N, 3), for bakes, where a point's value is final.
 
@@ -318,7 +318,10 @@ class DirectLighting:
         cosine-weighted solid angle, :func:`polygon_irradiance`) less the estimated blocked part,
         ``E = Le I(x) - mean_s e_s (1 - V_s)`` (a control variate: exact where no ray is blocked),
         where the first stage saw at least half of the light, and the mean ``mean_s e_s V_s``
-        elsewhere (exactly 0 in an umbra); an estimate below 0 is 0.  Other lights: the mean.
+        elsewhere (exactly 0 in an umbra).  With ``clamp`` an estimate below 0 is 0, for a point
+        whose value is final; that clamp is biased up where a blocked sample's ``e_s`` can exceed
+        ``Le I(x)`` (a point close to the lamp, few rays), so an estimator that averages many
+        points' estimates (the final gather's rays) takes them unclamped.  Other lights: the mean.
         One shadow ray per point light of radius 0 and per sun of angle 0 (exact with one, but over a footprint), and
         ``penumbra_samples`` in all where it passed glass or a cut-out (whose outcome is random).
         A point's rays: a randomly shifted Kronecker (R_3) set per stage, stratified over the light's
@@ -364,7 +367,9 @@ class DirectLighting:
             mean = seen / n_pts[:, None]
             if cv.any():
                 blocked = (total[cv] - seen[cv]) / n_pts[cv, None]
-                mean[cv] = np.maximum(exact_i[cv, None] * np.asarray(light.radiance, float) - blocked, 0.0)
+                mean[cv] = exact_i[cv, None] * np.asarray(light.radiance, float) - blocked
+                if clamp:
+                    mean[cv] = np.maximum(mean[cv], 0.0)
             out += mean
         return out
 
