@@ -91,3 +91,33 @@ def test_pixel_errors_are_the_image_error_pixel_by_pixel():
     want = image_error(img, ref, (a, b), exclude)["error"] ** 2
     assert want > 0.05 ** 2 and got == pytest.approx(want, rel=1e-12)
     assert np.allclose(pixel_errors(img, ref), ((img - ref) ** 2).mean(axis=-1))
+
+
+def test_the_overlap_mask_marks_the_pixels_that_see_two_objects_in_one_plane():
+    """An orthographic 16 x 16 camera 1 m above a 1 x 1 m floor (1/16 m a pixel) on which a
+    second object's strip x in [0, 0.25] lies in the floor's plane: the pixels wholly over the
+    strip are marked, those wholly off it are not (the strip's edge pixels: either); a third
+    object, a lamp 1 cm above the floor, overlaps nothing, and one object overlaps nothing."""
+    from raybundle.app.metrics import overlap_mask
+    from raybundle.scene.build import build_scene
+    from raybundle.scene.camera import Camera
+    from raybundle.scene.materials import MaterialTable
+
+    def quad(x0, x1, y0, y1, z):
+        return [[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]]
+
+    v = np.array(quad(-0.5, 0.5, -0.5, 0.5, 0) + quad(0, 0.25, -0.5, 0.5, 0) + quad(-0.4, -0.2, -0.4, -0.2, 0.01),
+                 float)
+    t = np.array([[k, k + 1, k + 2] for k in (0, 4, 8)] + [[k, k + 2, k + 3] for k in (0, 4, 8)])
+    mats = MaterialTable.from_list([dict(name="clay", diffuse=(0.8,) * 3), dict(name="lamp", emission=(1,) * 3)])
+    m = np.eye(4)
+    m[2, 3] = 1.0
+    cam = Camera(16, 16, 16.0, 16.0, 8.0, 8.0, m, orthographic=True)
+    sc = build_scene(v, t, [0, 0, 1, 0, 0, 1], mats, camera=cam)
+    groups = np.array([0, 1, 2, 0, 1, 2])[sc.triangle_source]
+    mask = overlap_mask(sc, groups, samples=8)
+    x = (np.arange(16) + 0.5) / 16 - 0.5                     # pixel centres, columns left to right
+    over = (x - 1 / 32 > 0) & (x + 1 / 32 < 0.25)
+    off = (x + 1 / 32 < 0) | (x - 1 / 32 > 0.25)
+    assert mask[:, over].all() and not mask[:, off].any()
+    assert not overlap_mask(sc, np.zeros(6, int)[sc.triangle_source], samples=8).any()

@@ -168,6 +168,34 @@ def test_coplanar_overlaps_are_found_between_objects_facing_the_same_way():
     assert coplanar_overlaps(corners, np.zeros(len(obj), int)) == []
 
 
+def test_covered_points_are_those_of_an_overlap_and_only_those():
+    """The points where Cycles z-fights (raybundle.scene.overlaps.covered_points) in the scene
+    of the test above: points of the floor under the strip and of the strip over the floor are
+    covered; the floor's points beside the strip, the box bottom's (facing the other way), the
+    touching tile's, a point off every triangle and points under a second triangle of their own
+    object are not."""
+    from raybundle.scene.overlaps import covered_points
+
+    parts = [grid_triangles(-2, 2, -2, 2), grid_triangles(1, 2, -2, 2, step=0.25),
+             grid_triangles(-1, 0, -1, 0, down=True), grid_triangles(2, 3, -2, 2),
+             grid_triangles(-2, -1, -2, -1)]                        # the floor's own second layer
+    corners = np.concatenate(parts)
+    obj = np.repeat([0, 1, 2, 3, 0], [len(x) for x in parts])
+    rng = np.random.default_rng(0)
+    tri = rng.integers(len(corners), size=4000)
+    u = rng.random((len(tri), 2))
+    u = np.where(u.sum(axis=1, keepdims=True) > 1, 1 - u, u)
+    c = corners[tri]
+    pts = c[:, 0] + u[:, :1] * (c[:, 1] - c[:, 0]) + u[:, 1:] * (c[:, 2] - c[:, 0])
+    got = covered_points(corners, obj, pts, tri)
+    part = obj[tri]
+    strip_x = (pts[:, 0] > 1) & (pts[:, 0] < 2)
+    want = ((part == 0) & strip_x) | (part == 1)
+    assert got.sum() > 300
+    assert np.array_equal(got, want)
+    assert not covered_points(corners, obj, np.zeros((1, 3)), np.array([-1])).any()
+
+
 def test_coplanar_overlaps_test_points_in_blocks_of_bounded_memory():
     """Memory grows with the scene, not with a pass's convenience: two finely meshed floors
     laid over each other (8,192 triangles each, 64M point-in-triangle tests) are found in

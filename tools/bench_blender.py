@@ -170,17 +170,22 @@ RUN_FIGURES = ("export_seconds", "prepare_seconds", "patches", "iterations", "im
 
 def light_mask(blend, info=None):
     """Pixels within 2 px of a directly seen light, from the exported (or built-in) scene;
-    ``info`` (a dict), if given, is told ``world_emits``."""
+    ``info`` (a dict), if given, is told ``world_emits`` and, for a ``.blend``, ``overlaps``: the
+    pixels that see two objects' faces overlapping in one plane
+    (:func:`raybundle.app.metrics.overlap_mask`)."""
     import bpy
 
-    from raybundle.app.metrics import light_source_mask
+    from raybundle.app.metrics import light_source_mask, overlap_mask
     from raybundle.scene.builtin import load_scene
     from raybundle_addon.translation.export import export_scene
 
     scene = load_scene(blend) if not is_blend(blend) else None
     if scene is None:
         _open(blend)
-        scene = export_scene(bpy.context.evaluated_depsgraph_get()).scene
+        exported = export_scene(bpy.context.evaluated_depsgraph_get())
+        scene = exported.scene
+        if info is not None:
+            info["overlaps"] = overlap_mask(scene, exported.triangle_object[scene.triangle_source])
     if info is not None:
         info["world_emits"] = bool(scene.world.emits)
     return light_source_mask(scene, scene.camera)
@@ -230,10 +235,16 @@ def side_by_side(rows):
                  cycles_seconds_same_error=c_time)
         if "error_all_pixels" in r:
             d["raybundle_error_all_pixels"] = r["error_all_pixels"]
+        off = ""
+        if r.get("error_off_overlaps") is not None:
+            c_off = loglog_at([c["seconds"] for c in cyc], [c["error_off_overlaps"] for c in cyc], r["seconds"])
+            d.update(raybundle_error_off_overlaps=r["error_off_overlaps"], cycles_error_off_overlaps_same_time=c_off)
+            off = (f"; off the overlaps raybundle {r['error_off_overlaps']:.4f}, Cycles "
+                   f"{'n/a' if c_off is None else f'{c_off:.4f}'}")
         summary.append(d)
         print(f"at {r['seconds']:.1f} s: raybundle {r['error']:.4f}, Cycles "
               f"{'n/a' if c_err is None else f'{c_err:.4f}'}; Cycles reaches {r['error']:.4f} in "
-              f"{'n/a' if c_time is None else f'{c_time:.1f} s'}")
+              f"{'n/a' if c_time is None else f'{c_time:.1f} s'}{off}")
     return summary
 
 
@@ -299,19 +310,24 @@ def main(argv=None):
     reference = 0.5 * (halves[0] + halves[1])
     info = {}
     mask = light_mask(a.blend, info)
+    overlaps = info.get("overlaps", np.zeros_like(mask)) & ~mask
+    if overlaps.any():
+        print(f"{overlaps.sum()} pixels see two objects' faces overlapping in one plane (z-fighting)", flush=True)
 
     def row(engine, setting, img, wall):
         e = image_error(img, reference, reference_halves=halves, exclude=mask)
         full = image_error(img, reference, reference_halves=halves)
+        off = image_error(img, reference, reference_halves=halves, exclude=mask | overlaps)["error"] \
+            if overlaps.any() else None
         setup = LAST_RUN_FIGURES.get("setup_seconds") if engine == "raybundle" else None
         print(f"{engine} {setting:g}{' s' if engine == 'raybundle' else ' spp'}: {wall:.1f} s wall"
               f"{'' if setup is None else f' (set-up {setup:.1f} s)'}, "
               f"error {e['error']:.4f} (all pixels {full['error']:.4f}), mean ratio {e['mean_ratio']:.4f}, "
-              f"p99.9 {e['p99_9']:.3f}", flush=True)
+              f"p99.9 {e['p99_9']:.3f}" + ("" if off is None else f", off the overlaps {off:.4f}"), flush=True)
         if engine == "raybundle" and LAST_RUN_FIGURES.get("run"):
             print(f"  run: {LAST_RUN_FIGURES['run']}", flush=True)
         return dict(engine=engine, setting=setting, seconds=wall, error=e["error"], error_all_pixels=full["error"],
-                    mean_ratio=e["mean_ratio"], p99_9=e["p99_9"], setup_seconds=setup,
+                    mean_ratio=e["mean_ratio"], p99_9=e["p99_9"], error_off_overlaps=off, setup_seconds=setup,
                     iterations=LAST_RUN_FIGURES.get("iterations") if engine == "raybundle" else None)
 
     noise = image_error(reference, reference, reference_halves=halves, exclude=mask)
@@ -370,7 +386,7 @@ def main(argv=None):
     if a.page:
         title = os.path.basename(a.blend) + (" in clay" if a.clay else "") + ": raybundle against Cycles"
         write_section(a.page, section, title, page_body(a, reference, reference_samples, noise, rows, summary,
-                                                          targets, warnings, split),
+                                                          targets, warnings, split, overlaps),
                       [os.path.join(a.out, "bench.png")], command=command_line("tools/bench_blender.py", argv))
         print(f"wrote its section {section!r} of {a.page}")
     return 0
@@ -494,15 +510,24 @@ def breakdown_table(split):
     return "\n".join(text)
 
 
-def page_body(a, reference, reference_samples, noise, rows, summary, targets, warnings, split=None):
+def page_body(a, reference, reference_samples, noise, rows, summary, targets, warnings, split=None,
+              overlaps=None):
     """The bench's section of the benchmark page: the set-up, then :func:`comparison_tables`,
-    the breakdown (:func:`breakdown_table`) and the run's warnings."""
+    the errors off the z-fighting ``overlaps`` (an (H, W) bool mask), the breakdown
+    (:func:`breakdown_table`) and the run's warnings."""
     h, w = reference.shape[:2]
     text = [f"`{a.blend}`{' in clay (a white diffuse Material Override)' if a.clay else ', its own materials'}, "
             f"{w} × {h} px. Every render is timed from opening the scene to the EXR written. Reference: Cycles "
             f"2 × {reference_samples} spp, its own noise ({percent(noise['reference_noise'])} per pixel) "
             "subtracted. Error: relative RMSE over pixels at least 2 px from a directly seen light "
             "(`raybundle.app.metrics.image_error`).", "", comparison_tables(rows, summary, targets)]
+    off = [d for d in summary if d.get("raybundle_error_off_overlaps") is not None]
+    if off:
+        text += ["", "Off the pixels that see two objects' faces overlapping in one plane "
+                 f"({int(overlaps.sum())} px; `raybundle.app.metrics.overlap_mask`), where Cycles z-fights and "
+                 "renders darker than either face alone and raybundle lights them as one surface: "
+                 + "; ".join(f"raybundle {percent(d['raybundle_error_off_overlaps'])} at {d['raybundle_seconds']:.0f} s, "
+                             f"Cycles {percent(d['cycles_error_off_overlaps_same_time'])}" for d in off) + "."]
     last = [r for r in rows if r.get("regions")][-1:]
     if last:
         g = last[0]["regions"]

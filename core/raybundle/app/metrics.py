@@ -71,6 +71,34 @@ def light_source_mask(scene, camera=None, samples=4, seed=0, radius=2, tracer=No
     return dilate(seen.reshape(cam.height, cam.width), radius)
 
 
+def overlap_mask(scene, groups, camera=None, samples=4, seed=0, tracer=None):
+    """(H, W) bool: pixels that see a coplanar overlap of two of ``groups`` (T,) (the objects of
+    ``scene``'s triangles), where Cycles z-fights and renders darker than either face alone
+    (:mod:`raybundle.scene.overlaps`): any of ``samples`` jittered primary rays meets a point
+    covered by another group's triangle in the same plane, facing the same way.  Not left out
+    of :func:`image_error`: a breakdown's region."""
+    from ..scene.overlaps import covered_points
+    from ..tracing.sampling import Stream, stream
+    from ..tracing.visibility import RayTracer
+
+    cam = camera if camera is not None else scene.camera
+    own = tracer is None
+    tracer = tracer or RayTracer(scene)
+    try:
+        rng = stream(seed, Stream.LIGHT_SOURCE_MASK)
+        py, px = np.divmod(np.arange(cam.width * cam.height), cam.width)
+        seen = np.zeros(len(px), bool)
+        for _ in range(samples):
+            j = rng.random((len(px), 2))
+            org, d = cam.rays(px + j[:, 0], py + j[:, 1])
+            tri, dist, _, _ = tracer.first_hit(org, d)
+            seen |= covered_points(scene.triangle_corners, groups, org + d * dist[:, None], tri)
+    finally:
+        if own:
+            tracer.close()
+    return seen.reshape(cam.height, cam.width)
+
+
 #: W m^-2 sr^-1 added to the reference in the per-pixel relative error's denominator
 TAIL_FLOOR = 0.02
 

@@ -38,21 +38,7 @@ def coplanar_overlaps(corners, groups, min_area=0.0):
     groups = np.asarray(groups, np.int64)
     if len(corners) == 0:
         return []
-    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    area = 0.5 * np.linalg.norm(cross, axis=1)
-    ok = area > 0
-    n = np.zeros_like(cross)
-    n[ok] = cross[ok] / (2.0 * area[ok, None])
-    radius = float(np.linalg.norm(corners.reshape(-1, 3) - corners.reshape(-1, 3).mean(axis=0), axis=1).max())
-    off = np.einsum("ij,ij->i", n, corners[:, 0])
-    q = np.round(n * 1e4).astype(np.int64)
-    plane = group_ids([q[:, 0], q[:, 1], q[:, 2], np.round(off / max(radius * 1e-6, 1e-12)).astype(np.int64)])
-    plane[~ok] = -1
-    # planes holding triangles of two groups or more
-    sel = np.nonzero(ok)[0]
-    first = np.unique(group_ids([plane[sel], groups[sel]]), return_index=True)[1]       # one per (plane, group)
-    count = np.bincount(plane[sel][first])
-    shared = np.nonzero(count > 1)[0]
+    plane, n, area, shared = _shared_planes(corners, groups)
     found: dict = {}
     rng = np.random.default_rng(0)
     members = np.argsort(plane, kind="stable")
@@ -77,6 +63,57 @@ def coplanar_overlaps(corners, groups, min_area=0.0):
             found[key] = max(found.get(key, 0.0), s_ab)
     out = [(a, b, s) for (a, b), s in found.items() if s > 0 and s >= min_area]
     return sorted(out, key=lambda x: -x[2])
+
+
+def _shared_planes(corners, groups):
+    """``(plane (T,), unit normals (T, 3), areas (T,), shared)``: each triangle's plane id (-1:
+    no area; module docstring), and the ids of the planes holding triangles of two groups or more."""
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    ok = area > 0
+    n = np.zeros_like(cross)
+    n[ok] = cross[ok] / (2.0 * area[ok, None])
+    radius = float(np.linalg.norm(corners.reshape(-1, 3) - corners.reshape(-1, 3).mean(axis=0), axis=1).max())
+    off = np.einsum("ij,ij->i", n, corners[:, 0])
+    q = np.round(n * 1e4).astype(np.int64)
+    plane = group_ids([q[:, 0], q[:, 1], q[:, 2], np.round(off / max(radius * 1e-6, 1e-12)).astype(np.int64)])
+    plane[~ok] = -1
+    sel = np.nonzero(ok)[0]
+    first = np.unique(group_ids([plane[sel], groups[sel]]), return_index=True)[1]       # one per (plane, group)
+    count = np.bincount(plane[sel][first])
+    return plane, n, area, np.nonzero(count > 1)[0]
+
+
+def covered_points(corners, groups, points, triangles):
+    """(N,) bool: which ``points`` (N, 3) on ``triangles`` (N,) of ``corners`` (T, 3, 3) lie
+    strictly inside a triangle of another of ``groups`` (T,) in the same plane, facing the same
+    way: the points where Cycles z-fights (module docstring).  A point off every triangle
+    (``triangles`` -1) is not covered."""
+    corners = np.asarray(corners, float)
+    groups = np.asarray(groups, np.int64)
+    points, triangles = np.asarray(points, float), np.asarray(triangles, np.int64)
+    out = np.zeros(len(points), bool)
+    if len(corners) == 0 or len(points) == 0:
+        return out
+    plane, n, _, shared = _shared_planes(corners, groups)
+    mine = np.where(triangles >= 0, plane[np.maximum(triangles, 0)], -1)
+    for p in shared:
+        at = np.nonzero(mine == p)[0]
+        if not len(at):
+            continue
+        tri = np.nonzero(plane == p)[0]
+        e1, e2 = orthonormal_basis(n[tri[0]])
+        c2 = np.stack([corners[tri] @ e1, corners[tri] @ e2], axis=-1)
+        near = _near_other_groups(c2, groups[tri])        # the others neither cover nor are covered
+        at = at[np.isin(triangles[at], tri[near])]
+        tri, c2 = tri[near], c2[near]
+        if not len(at):
+            continue
+        p2 = np.stack([points[at] @ e1, points[at] @ e2], axis=-1)
+        point_group = groups[triangles[at]]
+        ga, _, _ = _covered_area(p2, np.arange(len(at)), np.ones(len(at)), c2, groups[tri], point_group)
+        out[at[np.unique(ga)]] = True
+    return out
 
 
 def _near_other_groups(c2, g):
@@ -116,10 +153,13 @@ def _sampled(g, area, rng):
     return every, scale
 
 
-def _covered_area(points, point_group, weight, tris, tri_group):
+def _covered_area(points, point_group, weight, tris, tri_group, owner=None):
     """``(a, b, area)`` arrays: for each pair of groups, the summed ``weight`` of the points of
     group ``a`` that lie strictly inside some triangle of ``tris`` (M, 3, 2) of another group
-    ``b``; a point counts once per covering group.  In blocks of :data:`BLOCK` tests."""
+    ``b``; a point counts once per covering group.  ``owner`` (N,): the group a point's cover
+    must differ from, when ``point_group`` labels the points otherwise (default: their group).
+    In blocks of :data:`BLOCK` tests."""
+    owner = point_group if owner is None else owner
     a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
     det = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
     live = np.abs(det) > 0
@@ -132,7 +172,7 @@ def _covered_area(points, point_group, weight, tris, tri_group):
         v = ((b[:, 0] - a[:, 0]) * (p[..., 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (p[..., 0] - a[:, 0])) / det
         pi, ti = np.nonzero((u > 1e-9) & (v > 1e-9) & (u + v < 1 - 1e-9))                 # (n, M) inside
         pi = pi + lo
-        other = point_group[pi] != tri_group[ti]
+        other = owner[pi] != tri_group[ti]
         hit_point.append(pi[other])
         hit_group.append(tri_group[ti[other]])
     pi, gb = np.concatenate(hit_point), np.concatenate(hit_group)
