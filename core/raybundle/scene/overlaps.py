@@ -97,11 +97,14 @@ def covered_points(corners, groups, points, triangles):
         return out
     plane, n, _, shared = _shared_planes(corners, groups)
     mine = np.where(triangles >= 0, plane[np.maximum(triangles, 0)], -1)
-    for p in shared:
-        at = np.nonzero(mine == p)[0]
+    members, by_point = np.argsort(plane, kind="stable"), np.argsort(mine, kind="stable")
+    bounds = np.searchsorted(plane[members], np.stack([shared, shared + 1]))
+    points_at = np.searchsorted(mine[by_point], np.stack([shared, shared + 1]))
+    for (lo, hi), (p_lo, p_hi) in zip(bounds.T, points_at.T):
+        at = by_point[p_lo:p_hi]
         if not len(at):
             continue
-        tri = np.nonzero(plane == p)[0]
+        tri = members[lo:hi]
         e1, e2 = orthonormal_basis(n[tri[0]])
         c2 = np.stack([corners[tri] @ e1, corners[tri] @ e2], axis=-1)
         near = _near_other_groups(c2, groups[tri])        # the others neither cover nor are covered
