@@ -75,8 +75,9 @@ def overlap_mask(scene, groups, camera=None, samples=4, seed=0, tracer=None):
     """(H, W) bool: pixels that see a coplanar overlap of two of ``groups`` (T,) (the objects of
     ``scene``'s triangles), where Cycles z-fights and renders darker than either face alone
     (:mod:`raybundle.scene.overlaps`): any of ``samples`` jittered primary rays meets a point
-    covered by another group's triangle in the same plane, facing the same way.  Not left out
-    of :func:`image_error`: a breakdown's region."""
+    covered by another group's triangle in the same plane, facing the same way (the rays of
+    :func:`light_source_mask`: its stream).  Not left out of :func:`image_error`: a breakdown's
+    region."""
     from ..scene.overlaps import covered_points
     from ..tracing.sampling import Stream, stream
     from ..tracing.visibility import RayTracer
