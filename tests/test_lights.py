@@ -228,6 +228,16 @@ def test_control_variate_direct_light_is_exact_where_the_lamp_is_seen_and_unbias
     tr.close()
 
 
+def plain_light_samples(dl, p, up, k):
+    """``(mean, standard error)`` (N,) of ``k`` plain samples a point of the first light of ``dl``
+    at points ``p`` facing ``up`` (N, 3), red channel (fixed seed)."""
+    rng = np.random.default_rng(0)
+    plain = dl.light_samples_at(np.repeat(p, k, 0), np.repeat(up, k, 0), dl.sampled_lights()[0],
+                                rng.random((len(p) * k, 3)))[0]
+    plain = plain[:, 0].reshape(len(p), k)
+    return plain.mean(axis=1), plain.std(axis=1) / np.sqrt(k)
+
+
 def test_bake_direct_light_is_unbiased_where_a_shadow_begins():
     """DirectLighting.irradiance on the floor line where the plate's penumbra begins (V 0.9-1):
     the mean of 200 estimates (16 rays, 256 in a penumbra) per point is within 4.5 standard
@@ -238,12 +248,7 @@ def test_bake_direct_light_is_unbiased_where_a_shadow_begins():
     tr = RayTracer(sc)
     dl = DirectLighting(sc, tr)
     p, up = floor_line(np.linspace(-0.19, -0.13, 7))
-    light = dl.sampled_lights()[0]
-    rng = np.random.default_rng(0)
-    k = 400_000
-    plain = dl.light_samples_at(np.repeat(p, k, 0), np.repeat(up, k, 0), light, rng.random((len(p) * k, 3)))[0]
-    plain = plain[:, 0].reshape(len(p), k)
-    ref, se_ref = plain.mean(axis=1), plain.std(axis=1) / np.sqrt(k)
+    ref, se_ref = plain_light_samples(dl, p, up, 400_000)
     # 200 estimates a point, in one call (each row its own random shift: independent estimates)
     runs = dl.irradiance(np.repeat(p, 200, 0), np.repeat(up, 200, 0), np.random.default_rng(0), 16, 256)
     runs = runs[:, 0].reshape(len(p), 200).T
@@ -272,12 +277,7 @@ def test_unclamped_direct_light_is_unbiased_close_to_a_lamp_with_one_ray():
     dl = DirectLighting(sc, tr)
     p = np.stack([np.linspace(-0.12, 0.12, 9), np.zeros(9), np.full(9, 0.44)], axis=1)
     up = np.tile([0, 0, 1.0], (len(p), 1))
-    light = dl.sampled_lights()[0]
-    rng = np.random.default_rng(0)
-    k = 200_000
-    plain = dl.light_samples_at(np.repeat(p, k, 0), np.repeat(up, k, 0), light, rng.random((len(p) * k, 3)))[0]
-    plain = plain[:, 0].reshape(len(p), k)
-    ref, se_ref = plain.mean(axis=1), plain.std(axis=1) / np.sqrt(k)
+    ref, se_ref = plain_light_samples(dl, p, up, 200_000)
     n = 16000
     z = {}
     for clamp in (False, True):

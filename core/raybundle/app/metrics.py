@@ -38,6 +38,20 @@ def dilate(mask, radius=2):
     return out
 
 
+def _primary_hits(camera, tracer, samples, seed):
+    """``(origins, directions, triangles, distances)`` of ``samples`` jittered primary rays a
+    pixel of ``camera`` (sample-major: row ``k * pixels + i`` is pixel i's k-th ray), from the
+    stream of :func:`light_source_mask`."""
+    from ..tracing.sampling import Stream, stream
+
+    rng = stream(seed, Stream.LIGHT_SOURCE_MASK)
+    py, px = np.divmod(np.arange(camera.width * camera.height), camera.width)
+    j = rng.random((samples, len(px), 2)).reshape(-1, 2)        # the draws of one (N, 2) call a sample
+    org, d = camera.rays(np.tile(px, samples) + j[:, 0], np.tile(py, samples) + j[:, 1])
+    tri, dist, _, _ = tracer.first_hit(org, d)
+    return org, d, tri, dist
+
+
 def light_source_mask(scene, camera=None, samples=4, seed=0, radius=2, tracer=None):
     """(H, W) bool: pixels within ``radius`` px of a directly seen light source.
 
@@ -46,7 +60,6 @@ def light_source_mask(scene, camera=None, samples=4, seed=0, radius=2, tracer=No
     one when any of ``samples`` jittered primary rays hits its front.
     """
     from ..lights.direct import DirectLighting
-    from ..tracing.sampling import Stream, stream
     from ..tracing.visibility import RayTracer
 
     cam = camera if camera is not None else scene.camera
@@ -54,50 +67,36 @@ def light_source_mask(scene, camera=None, samples=4, seed=0, radius=2, tracer=No
     tracer = tracer or RayTracer(scene)
     try:
         lights = DirectLighting(scene, tracer).first_shot_material
-        rng = stream(seed, Stream.LIGHT_SOURCE_MASK)
-        py, px = np.divmod(np.arange(cam.width * cam.height), cam.width)
-        seen = np.zeros(len(px), bool)
-        for _ in range(samples):
-            j = rng.random((len(px), 2))
-            org, d = cam.rays(px + j[:, 0], py + j[:, 1])
-            tri, _, _, _ = tracer.first_hit(org, d)
-            hit = tri >= 0
-            ts = scene.seen_tside(np.where(hit, tri, 0), d)
-            facing = np.einsum("ij,ij->i", scene.tside_normal[ts], d) < 0
-            seen |= hit & facing & lights[scene.triangle_material[np.maximum(tri, 0)]]
+        _, d, tri, _ = _primary_hits(cam, tracer, samples, seed)
+        hit = tri >= 0
+        ts = scene.seen_tside(np.where(hit, tri, 0), d)
+        facing = np.einsum("ij,ij->i", scene.tside_normal[ts], d) < 0
+        seen = hit & facing & lights[scene.triangle_material[np.maximum(tri, 0)]]
     finally:
         if own:
             tracer.close()
-    return dilate(seen.reshape(cam.height, cam.width), radius)
+    return dilate(seen.reshape(samples, cam.height, cam.width).any(axis=0), radius)
 
 
 def overlap_mask(scene, groups, camera=None, samples=4, seed=0, tracer=None):
     """(H, W) bool: pixels that see a coplanar overlap of two of ``groups`` (T,) (the objects of
     ``scene``'s triangles), where Cycles z-fights and renders darker than either face alone
-    (:mod:`raybundle.scene.overlaps`): any of ``samples`` jittered primary rays meets a point
-    covered by another group's triangle in the same plane, facing the same way (the rays of
-    :func:`light_source_mask`: its stream).  Not left out of :func:`image_error`: a breakdown's
-    region."""
+    (:mod:`raybundle.scene.overlaps`): any of ``samples`` jittered primary rays (those of
+    :func:`light_source_mask`) meets a point covered by another group's triangle in the same
+    plane, facing the same way.  Not left out of :func:`image_error`: a breakdown's region."""
     from ..scene.overlaps import covered_points
-    from ..tracing.sampling import Stream, stream
     from ..tracing.visibility import RayTracer
 
     cam = camera if camera is not None else scene.camera
     own = tracer is None
     tracer = tracer or RayTracer(scene)
     try:
-        rng = stream(seed, Stream.LIGHT_SOURCE_MASK)
-        py, px = np.divmod(np.arange(cam.width * cam.height), cam.width)
-        seen = np.zeros(len(px), bool)
-        for _ in range(samples):
-            j = rng.random((len(px), 2))
-            org, d = cam.rays(px + j[:, 0], py + j[:, 1])
-            tri, dist, _, _ = tracer.first_hit(org, d)
-            seen |= covered_points(scene.triangle_corners, groups, org + d * dist[:, None], tri)
+        org, d, tri, dist = _primary_hits(cam, tracer, samples, seed)
+        seen = covered_points(scene.triangle_corners, groups, org + d * np.where(tri >= 0, dist, 0.0)[:, None], tri)
     finally:
         if own:
             tracer.close()
-    return seen.reshape(cam.height, cam.width)
+    return seen.reshape(samples, cam.height, cam.width).any(axis=0)
 
 
 #: W m^-2 sr^-1 added to the reference in the per-pixel relative error's denominator
