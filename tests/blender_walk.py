@@ -65,8 +65,9 @@ OBJECT = _id({
     **_many("visible_camera visible_diffuse visible_glossy visible_transmission visible_volume_scatter visible_shadow",
             ("W", "per-ray-type visibility is not supported")),
     **_many("is_holdout is_shadow_catcher", ("W", "holdout / shadow catcher is not supported")),
-    **_many("shadow_terminator_normal_offset shadow_terminator_geometry_offset shadow_terminator_shading_offset",
-            ("W", "shadow terminator offsets are not modeled")),
+    **_many("shadow_terminator_normal_offset shadow_terminator_shading_offset",
+            ("W", "shadow terminator normal and shading offsets are not modeled")),
+    "shadow_terminator_geometry_offset": ("M", T_EXPORT + "test_the_shadow_terminator_geometry_offset_is_exported_per_object"),
     **_many("mode bound_box hide_viewport hide_select hide_surface_pick show_instancer_for_viewport display_type "
             "show_bounds display_bounds_type show_name show_axis show_texture_space show_wire show_all_edges "
             "show_transparent show_in_front empty_display_type empty_display_size empty_image_offset image_user "
@@ -88,8 +89,8 @@ OBJECT_CYCLES = {
     "name": ("I", ID),
     **_many("use_motion_blur use_deform_motion motion_steps", ("W", "motion blur is not supported")),
     **_many("use_camera_cull use_distance_cull", ("W", "culling is not modeled")),
-    "shadow_terminator_offset": ("W", "shadow terminator offsets are not modeled"),
-    "shadow_terminator_geometry_offset": ("W", "shadow terminator offsets are not modeled"),
+    "shadow_terminator_offset": ("W", "shadow terminator normal and shading offsets are not modeled"),
+    "shadow_terminator_geometry_offset": ("M", T_EXPORT + "test_the_shadow_terminator_geometry_offset_is_exported_per_object"),
     "ao_distance": ("I", "Fast GI's ambient occlusion distance, used only with Fast GI (warned on the scene)"),
     **_many("is_caustics_caster is_caustics_receiver", ("I", SAMPLING + " (Cycles' manifold next event "
                                                                "estimation)")),

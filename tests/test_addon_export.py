@@ -555,3 +555,32 @@ def test_materials_converted_ahead_warn_only_where_an_exported_object_uses_them(
     add_object("b", v, f, [mats[1]], location=(0, 0, -2))
     warned = [w for w in export().warnings if w.startswith("material")]
     assert [w.split("'")[1] for w in warned] == ["first", "second"], warned
+
+
+def test_the_shadow_terminator_geometry_offset_is_exported_per_object(fresh):
+    """Each smooth-shaded object's Shadow Terminator Geometry Offset reaches its faces (the
+    object's property in Blender 5, its ``cycles`` group's in 4.2, as Cycles reads it); the normal
+    and shading offsets, not modeled, are warned."""
+    from raybundle.scene.shading import DEFAULT_GEOMETRY_OFFSET
+
+    minimal(fresh)
+    obs = []
+    for k, offset in enumerate((None, 0.0, 0.4)):
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=8, ring_count=4, location=(3 * k, 0, 0))
+        bpy.ops.object.shade_smooth()
+        ob = bpy.context.active_object
+        ob.name = f"ball{k}"
+        holder = ob if hasattr(ob, "shadow_terminator_geometry_offset") else ob.cycles
+        if offset is not None:
+            holder.shadow_terminator_geometry_offset = offset
+        obs.append((ob.name, DEFAULT_GEOMETRY_OFFSET if offset is None else offset))
+    ex = export()
+    sc = ex.scene
+    face_object = ex.triangle_object
+    for k, (name, want) in enumerate(obs):
+        got = sc.shading.geometry_offset[face_object == [o.name for o in ex.objects].index(name)]
+        assert len(got) and np.allclose(got, want), (name, np.unique(got))
+    assert not any("terminator" in w for w in ex.warnings)
+    holder = ob if hasattr(ob, "shadow_terminator_shading_offset") else ob.cycles
+    setattr(holder, "shadow_terminator_shading_offset" if holder is ob else "shadow_terminator_offset", 0.2)
+    assert any("shadow terminator normal and shading offsets are not modeled" in w for w in export().warnings)

@@ -45,18 +45,25 @@ def test_ggx_albedo_quadrature_is_converged():
         assert np.all(a1 <= 1.0) and np.all(a1 > 0.5)
 
 
-def test_reciprocity_and_one_sidedness(rng):
+def test_reciprocity_above_the_surface_and_no_light_from_below(rng):
+    """Above the surface the BRDF is reciprocal; light from below it reflects nothing; a viewer
+    below a lit point (a smooth normal that faces away from the eye) sees the diffuse lobe alone,
+    as Cycles' Diffuse BSDF and its glossy closures do."""
     n = 10_000
     a = uniform_sphere(rng.random(n), rng.random(n))
     b = uniform_sphere(rng.random(n), rng.random(n))
     normal = np.tile([0, 0, 1.0], (n, 1))
+    front = (a[:, 2] < 0) & (b[:, 2] > 0)
+    below = (a[:, 2] < 0) & (b[:, 2] <= 0)
     for m in range(4):
         mats = np.full(n, m)
         f_ab = MATS.brdf(mats, normal, a, b)           # light travels along a, leaves along b
         f_ba = MATS.brdf(mats, normal, -b, -a)         # the reversed path
-        assert np.allclose(f_ab, f_ba, rtol=1e-10, atol=1e-12)
-        front = (a[:, 2] < 0) & (b[:, 2] > 0)
-        assert np.all(f_ab[~front] == 0) and np.all(f_ab[front] >= 0)
+        assert np.allclose(f_ab[front], f_ba[front], rtol=1e-10, atol=1e-12)
+        assert np.all(f_ab[a[:, 2] >= 0] == 0) and np.all(f_ab[front] >= 0)
+        diffuse = MATS.brdf(mats[below], normal[below], a[below], b[below], glossy=False)
+        assert np.allclose(f_ab[below], diffuse, rtol=1e-12, atol=0)
+        assert np.all((diffuse > 0) == (MATS.diffuse_reflectance[m] > 0))
 
 
 def test_energy_conservation_everywhere():

@@ -255,6 +255,42 @@ def test_shading_normals_interpolate_the_corner_normals():
     assert ShadingNormals.of_faces(corners, np.tile([0, 0, 1.0], (1, 3, 1))) is None
 
 
+def test_the_shadow_terminator_lifts_shadow_rays_clear_of_the_smooth_surface():
+    """A facet of the unit sphere with the sphere's normals at its corners: Cycles' lift of a
+    shadow ray's origin (raybundle.scene.shading) at points inside it is along their
+    interpolated normal and clears the sphere (at least as high as the sphere lies above the
+    point along it, at most twice: the corners' envelopes bound the parabola), towards the side
+    the light is on; a flat face has none.  With the light ``L`` at cosines ``c_s``, ``c_g`` to
+    the shading and flat normals the share of it taken is Cycles': none far from grazing,
+    ``1 - c_g / g`` where only the facet grazes, ``2 - (c_g + c_s) / g`` where both do."""
+    from raybundle.scene.shading import ShadingNormals, terminator_amount
+
+    def unit(v):
+        return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+    s, c = np.sin(0.4), np.cos(0.4)
+    corners = unit(np.array([[s, 0, c], [-s / 2, 0.866 * s, c], [-s / 2, -0.866 * s, c]]))
+    facet = unit(np.cross(corners[1] - corners[0], corners[2] - corners[0]))
+    facet *= np.sign(facet[2])
+    shading = ShadingNormals(np.stack([corners, corners]), np.stack([corners, np.tile(facet, (3, 1))]))
+    b = np.random.default_rng(3).dirichlet([2, 2, 2], 500)
+    p = b @ corners
+    up = np.tile(facet, (len(p), 1))
+    lift = shading.terminator_lift(np.zeros(len(p), int), p, up)
+    n = unit(b @ corners)
+    along = np.einsum("ij,ij->i", lift, n)
+    assert np.allclose(lift, along[:, None] * n, atol=1e-12)
+    pn = np.einsum("ij,ij->i", p, n)
+    height = -pn + np.sqrt(pn ** 2 - (np.einsum("ij,ij->i", p, p) - 1))       # |p + height n| = 1
+    assert np.all(along >= height) and np.all(along <= 2 * height), (along / height).min()
+    inside = shading.terminator_lift(np.zeros(len(p), int), p, -up)
+    assert np.all(np.einsum("ij,ij->i", inside, -up) > 0)
+    assert np.allclose(shading.terminator_lift(np.ones(len(p), int), p, up), 0.0, atol=1e-7)
+    amount = terminator_amount(np.array([0.1, 0.1, 0.1, 0.1, 0.0]), np.array([0.5, 0.5, 0.05, 0.08, 0.05]),
+                               np.array([0.5, 0.05, 0.02, 0.08, 0.02]))
+    assert np.allclose(amount, [0.0, 0.5, 1.0, 0.4, 0.0])
+
+
 def test_connected_components_match_a_graph_search(monkeypatch):
     """The welding's connected components (the compiled union-find, and the NumPy path's hooking
     and pointer jumping) against a breadth-first search, on random graphs from sparse (many

@@ -190,15 +190,26 @@ def _unmodeled_settings(scene, view_layer, world, warn):
 
 
 def _object_settings(ob, warn):
-    """Warn about object ``ob``'s settings that change Cycles' image and are not modeled: shadow
-    terminator offsets other than Blender's defaults (normal 0, geometry 0.1, shading 0)."""
+    """Warn about object ``ob``'s settings that change Cycles' image and are not modeled: the
+    shadow terminator's normal and shading offsets other than Blender's defaults (0); its
+    geometry offset is modeled (:func:`geometry_offset`)."""
     cy = getattr(ob, "cycles", None)
-    found = [(getattr(holder, k, d), d) for holder, k, d in (
-        (ob, "shadow_terminator_normal_offset", 0.0), (ob, "shadow_terminator_geometry_offset", 0.1),
-        (ob, "shadow_terminator_shading_offset", 0.0), (cy, "shadow_terminator_offset", 0.0),
-        (cy, "shadow_terminator_geometry_offset", 0.1))]
-    if any(abs(v - d) > 1e-6 for v, d in found):
-        warn(f"object {ob.name!r}: shadow terminator offsets are not modeled")
+    found = [getattr(holder, k, 0.0) for holder, k in (
+        (ob, "shadow_terminator_normal_offset"), (ob, "shadow_terminator_shading_offset"),
+        (cy, "shadow_terminator_offset"))]
+    if any(abs(v) > 1e-6 for v in found):
+        warn(f"object {ob.name!r}: shadow terminator normal and shading offsets are not modeled")
+
+
+def geometry_offset(ob):
+    """Object ``ob``'s Shadow Terminator Geometry Offset, as Cycles reads it: the object's own
+    property where Blender has one (5.x; its ``cycles`` group keeps an unused copy), else its
+    ``cycles`` group's (4.2)."""
+    from raybundle.scene.shading import DEFAULT_GEOMETRY_OFFSET
+
+    if hasattr(ob, "shadow_terminator_geometry_offset"):
+        return float(ob.shadow_terminator_geometry_offset)
+    return float(getattr(getattr(ob, "cycles", None), "shadow_terminator_geometry_offset", DEFAULT_GEOMETRY_OFFSET))
 
 
 def _warn_large_linked_emitters(sc, tobj, objects, warn):
@@ -550,4 +561,5 @@ def _export_mesh(inst, ob, M, build, link_sets, meshes, override, warn):
         if temp:
             ob.to_mesh_clear()
     if len(tri):
-        build.add_object(info, (pos, tri, loops, tp, mi, cn), M, slots, textured, link_sets.set_of(ob.original))
+        build.add_object(info, (pos, tri, loops, tp, mi, cn), M, slots, textured, link_sets.set_of(ob.original),
+                         geometry_offset(ob.original))

@@ -21,6 +21,7 @@ class _Part:
     normals: np.ndarray | None      # (T, 3, 3) world-space corner normals, None where the API lacks them
     emitter_set: int                # an emitting mesh's own link set
     textured: tuple | None          # :func:`.mesh_data.texture_uvs`'s arrays, None when untextured
+    geometry_offset: float          # the object's shadow terminator geometry offset
 
 
 class SceneBuilder:
@@ -47,15 +48,17 @@ class SceneBuilder:
             self._material_specs.append(self.converter.convert(mat))
         return self._material_index[key]
 
-    def add_object(self, info, arrays, M, slots, textured, emitter_set):
+    def add_object(self, info, arrays, M, slots, textured, emitter_set, geometry_offset):
         """Object ``info`` (an ObjectInfo) with the mesh ``arrays`` (positions, triangles, loops,
         triangle polygons, polygon material indices, corner normals: :func:`.mesh_data.mesh_arrays`,
-        its left-out faces removed), world matrix ``M``, material ``slots``, textures and link set."""
+        its left-out faces removed), world matrix ``M``, material ``slots``, textures, link set
+        and shadow terminator geometry offset."""
         pos, tri, loops, tp, mi, cn = arrays
         ids = np.array([self.material_id(m) for m in slots] or [self.material_id(None)], np.int64)
         self.parts.append(_Part(pos @ M[:3, :3].T.astype(np.float64) + M[:3, 3], tri.astype(np.int64) + self.n_vertices,
                                 ids[np.clip(mi[tp], 0, len(ids) - 1)], tp, loops,
-                                None if cn is None else world_normals(cn[loops], M), emitter_set, textured))
+                                None if cn is None else world_normals(cn[loops], M), emitter_set, textured,
+                                geometry_offset))
         self.objects.append(info)
         self.n_vertices += len(pos)
         self.n_triangles += len(tri)
@@ -111,7 +114,8 @@ class SceneBuilder:
             _warnings.simplefilter("always")
             corners, shading = v[t], None
             if all(p.normals is not None for p in self.parts):
-                shading = ShadingNormals.of_faces(corners, self.joined("normals"))
+                offsets = np.concatenate([np.full(len(p.triangles), p.geometry_offset, np.float32) for p in self.parts])
+                shading = ShadingNormals.of_faces(corners, self.joined("normals"), geometry_offset=offsets)
             # the input faces in 32 bits, one array for the shading normals and the textures
             corners = corners.astype(np.float32) if shading is None else shading.face_corners
             texture = self.texture(corners)

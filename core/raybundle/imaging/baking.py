@@ -15,8 +15,9 @@ interpolated linearly from the patch values (the image's reconstruction:
 :meth:`~raybundle.patches.reconstruction.LinearReconstruction.projected`, the caustic
 first shot by :meth:`~raybundle.patches.reconstruction.LinearReconstruction.averaged`),
 ``E_dir`` the direct irradiance of the first-shot lights estimated *at the point*, about
-its shading normal on smooth-shaded faces (:mod:`raybundle.scene.shading`, as Cycles' bake and
-the image), with ``light_samples`` shadow rays per area light
+its shading normal on smooth-shaded faces, their shadow rays lifted off the facets as Cycles'
+shadow terminator lifts them (:mod:`raybundle.scene.shading`, as Cycles' bake and the image),
+with ``light_samples`` shadow rays per area light
 (:meth:`~raybundle.lights.direct.DirectLighting.irradiance`), so shadows and the fall-off
 under a lamp are as sharp as the bake's resolution, and ``W_d`` the diffuse weight
 of a Principled layer seen along the normal.  Glossy lobes are view-dependent and
@@ -28,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..scene.shading import seen_normals
+from ..scene.shading import ShadowTerminator, sided_normals
 from ..tracing.sampling import triangle_barycentrics
 from .gather import FinalGather
 
@@ -175,12 +176,15 @@ def baked_parts(solver, points: SurfacePoints, light_samples=16, rng=None, penum
     parts.emitted[idx] = mats.emitted_radiance(m, ones)
     direct = solver.direct
     if direct.n_lights:         # about the shading normal of a smooth-shaded face, as the image's
-        n_s = seen_normals(sc.shading, sc.triangle_source[tri], points.point[idx], n, n)
+        src = sc.triangle_source[tri]
+        n_s = n if sc.shading is None else sided_normals(sc.shading, src, points.point[idx], n)
+        terminator = None if sc.shading is None else ShadowTerminator(sc.shading, src, points.point[idx], n)
         if sc.texture is not None and sc.texture.has_normal_maps:     # and of a normal or bump map
-            n_s = sc.texture.shading_normals(sc.triangle_source[tri], points.point[idx], n_s, n)
+            n_s = sc.texture.shading_normals(src, points.point[idx], n_s, n)
         parts.direct[idx] = direct.irradiance(points.point[idx], n_s, rng, light_samples, penumbra_samples,
                                               receivers=sc.link_groups(tri),
-                                              footprint=None if footprint is None else footprint.subset(idx))
+                                              footprint=None if footprint is None else footprint.subset(idx),
+                                              terminator=terminator)
     kd = mats.diffuse_reflectance[m]
     if sc.texture is not None:                  # the texel's albedo: texture detail stays sharp
         kd = kd * sc.texture.at(sc.triangle_source[tri], points.point[idx])

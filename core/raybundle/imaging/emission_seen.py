@@ -54,7 +54,10 @@ class EmissionSeen:
             out[miss[fine]] = world.view_radiance(-g.w_eye[miss[fine]])
         self.hit_seen[g.pixel[g.hit]] = True
         h = np.nonzero(g.hit)[0]
-        cos_eye = np.einsum("ij,ij->i", g.normal[h], g.w_eye[h])
+        # the side seen is the flat normal's (a diffuse lobe's smooth normal may face away from
+        # the eye); a layered material's view angle is its shading normal's
+        front = np.einsum("ij,ij->i", self.scene.tside_normal[g.tside[h]], g.w_eye[h]) > 0
+        cos_eye = np.where(front, np.maximum(np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]), 1e-6), 0.0)
         out[h] = self.scene.materials.emitted_radiance(g.material[h], cos_eye)
         emitter = np.zeros(len(out), bool)
         emitter[h] = np.any(out[h] > 0, axis=1)

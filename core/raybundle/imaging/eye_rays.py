@@ -14,7 +14,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from ..lights.sources import ShapeLight
-from ..scene.shading import facing_eye, sided_normals, specular_normals, valid_specular_normals
+from ..scene.shading import sided_normals, specular_normals, valid_specular_normals
 from ..scene.transmission import scatter
 from ..tracing.sampling import Stream, kronecker_alpha, stream
 from ..util.arrays import ranges
@@ -25,7 +25,7 @@ class GBuffer:
     """Visible surface per pixel: triangle (-1 = nothing), the triangle side seen
     ``tside`` (:meth:`~raybundle.scene.model.PatchScene.seen_tside`), point, the normal it
     is shaded with (that side's, on smooth-shaded faces the shading normal:
-    :func:`~raybundle.scene.shading.seen_normals`), material, direction to the eye ``w_eye``, barycentrics (N, 3)."""
+    :meth:`EyeRays._shading_normals`), material, direction to the eye ``w_eye``, barycentrics (N, 3)."""
 
     triangle: np.ndarray
     tside: np.ndarray
@@ -51,6 +51,12 @@ class GBuffer:
     @property
     def hit(self):
         return self.triangle >= 0
+
+    def front(self, scene):
+        """(N,) the rays that see a side facing them (by its flat normal: a smooth-shaded
+        face's shading normal may face away from the eye) of ``scene``'s."""
+        h = np.nonzero(self.hit)[0]
+        return h[np.einsum("ij,ij->i", scene.tside_normal[self.tside[h]], self.w_eye[h]) > 0]
 
     def weighted(self, values, idx=None):
         """``values`` (N, 3) (of the rays ``idx``, default all) times what the eye path's way
@@ -127,8 +133,9 @@ class EyeRays:
 
     def _shading_normals(self, tri, point, flat, w_eye):
         """The normals (N, 3) the points ``point`` seen on triangles ``tri`` are shaded with, from
-        their ``flat`` normals (N, 3, facing the eye ``w_eye``): Blender's shading normal
-        (:func:`~raybundle.scene.shading.seen_normals`), then the faces' normal and bump maps;
+        their ``flat`` normals (N, 3, facing the eye ``w_eye``): Blender's shading normal on the
+        side seen (:func:`~raybundle.scene.shading.sided_normals`), as Cycles' Diffuse BSDF
+        takes it even where it faces away from the eye, then the faces' normal and bump maps;
         on materials with a glossy lobe, made valid for the eye as Cycles' Bump Map Correction
         makes the normal of a specular closure (:func:`~raybundle.scene.shading.valid_specular_normals`),
         so the mirror direction stays above the surface; the diffuse lobe of such a material is
@@ -139,7 +146,7 @@ class EyeRays:
         n = flat
         if sc.shading is not None:
             sided = sided_normals(sc.shading, src, point, flat)
-            n = facing_eye(sided, flat, w_eye)
+            n = sided
             n[glossy] = valid_specular_normals(flat[glossy], w_eye[glossy], sided[glossy])
         if sc.texture is not None and sc.texture.has_normal_maps:
             n = sc.texture.shading_normals(src, point, n, w_eye)

@@ -271,7 +271,7 @@ class EdgeGather:
     def flagged(self, g):
         """(F,) the pixels of G-buffer ``g`` whose front-facing point lies on a side
         :meth:`near_edge` flags: the points an automatic gather would serve."""
-        h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
+        h = g.front(self.scene)
         return h[self.near_edge(g.tside[h])]
 
     def affordable(self, g, final_time):

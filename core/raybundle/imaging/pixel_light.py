@@ -30,6 +30,7 @@ import numpy as np
 
 from ..lights.direct import ALL_LIGHTS
 from ..lights.reflected_direct import reflected_radiance
+from ..scene.shading import ShadowTerminator
 from ..tracing.sampling import Stream, stream
 
 
@@ -97,10 +98,21 @@ class PixelLight:
             mis=mis, diffuse_scale=scale, shadow_flags=f,
             analytic=np.full(len(hf), ALL_LIGHTS) if start else flags[:, 0],
             penumbra=(pen_lights, share) + sequence, select=self.rng.random(len(hf)),
-            receivers=self.scene.link_groups(g.triangle[hf]), glossy_part=glossy_part)
+            receivers=self.scene.link_groups(g.triangle[hf]), glossy_part=glossy_part,
+            terminator=self.terminator(g, hf))
         np.bitwise_or.at(self.shadow_flags, pixels[hf], f)
         self.rays += direct.rays - before
         return value
+
+    def terminator(self, g, points, far_side=False):
+        """The :class:`~raybundle.scene.shading.ShadowTerminator` at ``points`` (indices into
+        G-buffer ``g``) for light on the side they are seen from (``far_side``: on the other), or
+        None in a scene without smooth shading."""
+        sc = self.scene
+        if sc.shading is None or len(points) == 0:
+            return None
+        return ShadowTerminator(sc.shading, sc.triangle_source[g.triangle[points]], g.point[points],
+                                sc.tside_normal[g.tside[points]] * (-1.0 if far_side else 1.0))
 
     def far_side(self, g, points):
         """(len(points), 3) the first-shot lights on the far side of the translucent surfaces
@@ -111,7 +123,8 @@ class PixelLight:
         if len(far):
             t = points[far]
             out[far] = kt[far] / np.pi * self.direct.far_side_irradiance(g.point[t], g.normal[t], self.rng,
-                                                                        self.scene.link_groups(g.triangle[t]))
+                                                                        self.scene.link_groups(g.triangle[t]),
+                                                                        self.terminator(g, t, far_side=True))
         return out
 
     def world(self, g, hf, scale, lobe=None):
@@ -126,7 +139,7 @@ class PixelLight:
         guide = self.world_light.guide_at(self.solver.world_guide, sides)
         lobes = None if lobe is None else (self.scene.materials, lobe, g.material[hf[lobe]], g.w_eye[hf[lobe]])
         e = self.world_light.irradiance(g.point[hf], g.normal[hf], self.rng.random((len(hf), self.world_samples, 3)),
-                                        guide, lobe=lobes, learn=sides)
+                                        guide, lobe=lobes, learn=sides, terminator=self.terminator(g, hf))
         sky = lobe_guide = None
         if lobe is not None:
             e, sky = e

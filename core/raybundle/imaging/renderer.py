@@ -249,8 +249,7 @@ class Renderer(ProgressiveImage):
         out = np.zeros((len(g.triangle), 3))
         lamps, world = (None, None) if self.parts is None else (np.zeros_like(out), np.zeros_like(out))
         clock = time.perf_counter()
-        h = np.nonzero(g.hit)[0]
-        hf = h[np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]) > 0]
+        hf = g.front(self.scene)
         light = self.light
         before = light.rays
         # the diffuse texture at the points, for the lamps and the world

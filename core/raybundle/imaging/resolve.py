@@ -115,7 +115,7 @@ class DiffuseIndirect:
         t_loop = time.perf_counter()
         for j in range(k):
             g = self.trace(np.broadcast_to(offsets[j], (n, 2)))
-            h = np.nonzero(g.hit & (np.einsum("ij,ij->i", g.normal, g.w_eye) > 0))[0]
+            h = g.front(sc)
             e = surface_values(sc, self.solver, e_bar, vert, g.tside[h], g.bary[h])
             if final is not None:
                 rays_j = per_sample

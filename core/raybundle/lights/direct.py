@@ -200,7 +200,7 @@ class DirectLighting:
         return out
 
     def light_samples_at(self, points, normals, light, u, unshadowed=False, crossed=None, receivers=None,
-                         origins=None):
+                         origins=None, terminator=None):
         """One sample of every point's irradiance from one light.
 
         Returns ``(E (N,3) [W/m^2], travel (N,3), cos_x (N,))`` where E already
@@ -211,7 +211,8 @@ class DirectLighting:
         or None.  A light that casts no shadow (:attr:`casts_shadow`) is not blocked; a linked
         light lights only the groups it reaches and is blocked only by those that block it
         (:mod:`raybundle.scene.linking`).  ``origins`` (N, 3): where the shadow rays leave from, when not
-        ``points`` (where the light is sampled and its cosine taken).
+        ``points`` (where the light is sampled and its cosine taken); ``terminator`` as
+        :meth:`shadowed`'s.
         """
         if isinstance(light, TreeLights):
             y, e, em = self.tree_sample(points, normals, u)
@@ -219,13 +220,15 @@ class DirectLighting:
         else:
             y, e = light.sample(points, u)
             ids = self._index[id(light)]
-        return self.shadowed(points, normals, y, e, unshadowed, crossed, ids, receivers, origins)
+        return self.shadowed(points, normals, y, e, unshadowed, crossed, ids, receivers, origins, terminator)
 
     def shadowed(self, points, normals, y, e, unshadowed=False, crossed=None, lights=None, receivers=None,
-                 origins=None):
+                 origins=None, terminator=None):
         """:meth:`light_samples_at` for light samples ``y``, ``e`` (N, 3) drawn already from
         ``lights`` (an index into :meth:`light_list`, or (N,) of them, -1 for none; None: lights
-        that cast shadows and are not linked)."""
+        that cast shadows and are not linked).  ``terminator``: the points'
+        :class:`~raybundle.scene.shading.ShadowTerminator` or None: the shadow rays of lights
+        grazing the facet leave from Cycles' lifted origin."""
         unblocked = link = None
         if lights is not None:
             ids = np.maximum(lights, 0)
@@ -250,6 +253,10 @@ class DirectLighting:
             org_all = None
         if origins is not None:                     # the shadow rays leave from elsewhere
             org_all, points = None, origins
+        if terminator is not None:
+            lifted = terminator.origins(points, w, cos_x)
+            if lifted is not None:
+                org_all, points = None, lifted
         if unblocked is not None:
             live &= ~np.broadcast_to(unblocked, live.shape)
         if live.any():
@@ -298,7 +305,7 @@ class DirectLighting:
         return samples_per_light * len(self.area_lights) + len(self.point_lights)
 
     def irradiance(self, points, normals, rng, samples_per_light=16, penumbra_samples=None, receivers=None,
-                   footprint=None, clamp=True):
+                   footprint=None, clamp=True, terminator=None):
         """Direct irradiance (N, 3) [W/m^2] of the first-shot lights at surface points
         with unit ``normals`` (N, 3), for bakes, where a point's value is final.
 
@@ -330,7 +337,8 @@ class DirectLighting:
         None: each shadow ray then leaves from a point of the footprint (a randomly shifted Kronecker
         (R_2) set a point) towards a sample drawn for the centre, so the estimate is the centre's
         unoccluded light times its share visible from the footprint, averaged as Cycles' bake
-        averages a texel's."""
+        averages a texel's.  ``terminator``: the points' shadow terminator, as :meth:`shadowed`'s
+        (with a footprint, each of its points lifted as its centre)."""
         out = np.zeros((len(points), 3))
         for light in self.sampled_lights():
             sharp = footprint is None and (
@@ -340,7 +348,7 @@ class DirectLighting:
             shift = rng.random((len(points), 3))
             analytic = None if sharp else light_polygon_irradiance(light, points, normals)
             fp = None if footprint is None else (footprint, rng.random((len(points), 2)))
-            sums = partial(self._shadow_sums, light, points, normals, receivers=receivers)
+            sums = partial(self._shadow_sums, light, points, normals, receivers=receivers, terminator=terminator)
             seen, total, penumbra = sums(shift, 0, n_s, footprint=fp)
             n_penumbra = 16 * n_s if penumbra_samples is None else int(penumbra_samples)
             if sharp:                 # one ray finds the light exactly, but where it passed glass or a cut-out
@@ -373,16 +381,19 @@ class DirectLighting:
             out += mean
         return out
 
-    def _shadow_sums(self, light, points, normals, shift, first, last, which=None, receivers=None, footprint=None):
+    def _shadow_sums(self, light, points, normals, shift, first, last, which=None, receivers=None, footprint=None,
+                     terminator=None):
         """Sums of the shadowed and unshadowed estimates of ``light``'s samples first..last-1 (a
         Kronecker (R_3) set shifted by ``shift`` (N, 3) a point) at the points ``which`` (None: all),
         and whether some sample was seen and some blocked or passed a cut-out or glass (whose outcome
         was random: a point whose few samples all passed by chance would keep them).  ``footprint``:
         ``(Footprint, shifts (N, 2))`` whose points (an R_2 set) the shadow rays leave from, or None: a
-        sample then weighs the light as the centre sees it by its visibility from the footprint."""
+        sample then weighs the light as the centre sees it by its visibility from the footprint.
+        ``terminator`` as :meth:`shadowed`'s."""
         if which is not None:
             points, normals, shift = points[which], normals[which], shift[which]
             receivers = None if receivers is None else receivers[which]
+            terminator = None if terminator is None else terminator.take(which)
             footprint = None if footprint is None else (footprint[0].subset(which), footprint[1][which])
         alpha, alpha_2 = kronecker_alpha(3), kronecker_alpha(2)
         seen, total = np.zeros((len(points), 3)), np.zeros((len(points), 3))
@@ -390,7 +401,8 @@ class DirectLighting:
         for s in range(first, last):
             at = None if footprint is None else footprint[0].points(points, (footprint[1] + s * alpha_2) % 1.0)
             e, _, _, free = self.light_samples_at(points, normals, light, (shift + s * alpha) % 1.0, unshadowed=True,
-                                                  crossed=shade, receivers=receivers, origins=at)
+                                                  crossed=shade, receivers=receivers, origins=at,
+                                                  terminator=terminator)
             seen += e
             total += free
             reached, blocked = seen_blocked(e, free)
@@ -398,14 +410,15 @@ class DirectLighting:
             shade |= blocked
         return seen, total, lit & shade
 
-    def far_side_irradiance(self, points, normals, rng, receivers=None):
+    def far_side_irradiance(self, points, normals, rng, receivers=None, terminator=None):
         """(N, 3) [W/m^2] one sample per light of the first-shot lights' direct irradiance on the
         far side of surfaces at ``points`` seen along ``normals`` (N, 3): what a translucent
         surface lets through (shadow rays from just behind it); ``receivers`` as
-        :meth:`light_samples_at`'s."""
+        :meth:`light_samples_at`'s, ``terminator`` as :meth:`shadowed`'s (for the far side)."""
         out = np.zeros((len(points), 3))
         for light in self.sampled_lights():
-            out += self.light_samples_at(points, -normals, light, rng.random((len(points), 3)), receivers=receivers)[0]
+            out += self.light_samples_at(points, -normals, light, rng.random((len(points), 3)), receivers=receivers,
+                                         terminator=terminator)[0]
         return out
 
     @staticmethod

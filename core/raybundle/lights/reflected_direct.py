@@ -77,6 +77,8 @@ class _Points:
     receivers: np.ndarray | None
     #: (N, 3) or None: where the glossy lobe's part of the light is added (``glossy_part``)
     glossy: np.ndarray | None = None
+    #: the points' :class:`~raybundle.scene.shading.ShadowTerminator`, or None (``terminator``)
+    terminator: object = None
 
 
 @dataclass
@@ -101,7 +103,7 @@ class _Samples:
 
 def reflected_radiance(direct, points, normals, mats, w_out, u, samples_per_light=1, mis=None, diffuse_scale=None,
                        shadow_flags=None, analytic=False, penumbra=None, select=None, receivers=None,
-                       glossy_part=None):
+                       glossy_part=None, terminator=None):
     """Direct radiance reflected towards ``w_out`` (N, 3) at surface points, RGB.
 
     Unbiased estimate with ``samples_per_light`` shadow rays per area light (one per point light
@@ -139,7 +141,8 @@ def reflected_radiance(direct, points, normals, mats, w_out, u, samples_per_ligh
     reaches (:mod:`raybundle.scene.linking`).  ``analytic`` (bool, (N,) bool, or (N,) uint64
     mask of lights): where the control variate applies (module docstring).  ``glossy_part``
     (N, 3) or None: the glossy lobe's share of the result is added to it (the rest is the
-    diffuse lobe's, the control variate's whole part included).
+    diffuse lobe's, the control variate's whole part included).  ``terminator``: the points'
+    :class:`~raybundle.scene.shading.ShadowTerminator` or None.
 
     The points are split into pieces run in parallel
     (:meth:`~raybundle.tracing.visibility.RayTracer.map_pieces`); a point's value does not
@@ -158,20 +161,21 @@ def reflected_radiance(direct, points, normals, mats, w_out, u, samples_per_ligh
         pen = None if penumbra is None else tuple(cut(x) for x in penumbra)
         return _reflected(direct, *(cut(x) for x in (points, normals, mats, w_out, u)), samples_per_light,
                           *(cut(x) for x in (mis, diffuse_scale, shadow_flags, an)), pen,
-                          *(cut(x) for x in (select, receivers, glossy_part)))
+                          *(cut(x) for x in (select, receivers, glossy_part)),
+                          None if terminator is None else terminator.take(slice(a, b)))
 
     return np.concatenate(direct.tracer.map_pieces(piece, n))
 
 
 def _reflected(direct, points, normals, mats, w_out, u, samples_per_light, mis, diffuse_scale, shadow_flags, an,
-               penumbra, select, receivers, glossy_part):
+               penumbra, select, receivers, glossy_part, terminator):
     """:func:`reflected_radiance` at one piece of its points, ``u`` an array or None and ``an``
     (N,) uint64 masks."""
     n = len(points)
     out = np.zeros((n, 3))
     lights = direct.light_list()
     at = _Points(lights, light_bits(len(lights)), points, normals, mats, w_out, diffuse_scale, mis, shadow_flags,
-                 receivers, glossy_part)
+                 receivers, glossy_part, terminator)
     f_d_all = _diffuse_part(direct, at, an)
     # with a light tree, the tree's samples (TREE) and the suns on their own
     own = range(len(lights)) if direct.tree is None else direct.suns
@@ -315,11 +319,13 @@ def _one_sample(direct, at, s, shading, uk, f_d, n_s, polygonal, acc):
         y, e = s.light.sample(p, uk)
         ids = s.li
     rec = None if at.receivers is None else at.receivers[s.pt]
+    lift = None if at.terminator is None else at.terminator.take(s.pt)
     free = None
     if at.shadow_flags is None and f_d is None:
-        e, travel, cos_x = direct.shadowed(p, nrm, y, e, lights=ids, receivers=rec)
+        e, travel, cos_x = direct.shadowed(p, nrm, y, e, lights=ids, receivers=rec, terminator=lift)
     else:
-        e, travel, cos_x, free = direct.shadowed(p, nrm, y, e, unshadowed=True, lights=ids, receivers=rec)
+        e, travel, cos_x, free = direct.shadowed(p, nrm, y, e, unshadowed=True, lights=ids, receivers=rec,
+                                                 terminator=lift)
     if compiled.use():
         mis, le = None, np.zeros(3)          # the MIS weight's light radiance, where it applies
         if at.mis is not None and polygonal:

@@ -258,12 +258,13 @@ class WorldLight:
         np.add.at(self._learned.sums, (rows, cells), value.astype(np.float32))
         self._hits += np.bincount(rows, minlength=len(self._hits))
 
-    def irradiance(self, points, normals, u, guide=None, lobe=None, learn=None):
+    def irradiance(self, points, normals, u, guide=None, lobe=None, learn=None, terminator=None):
         """(N, 3) [W/m^2] estimate of the direct irradiance from the world at ``points``
         (N, 3) with unit ``normals`` (N, 3), with ``u`` (N, K, 3) uniforms: K samples each;
         ``guide`` = ``(guide, at)`` of :meth:`guide_at` for the points, or None (by brightness
         alone).  ``learn`` (N,): the points' sides, whose learned guide the unblocked samples
-        join (:meth:`learn`; the ``guide`` given is the one they were drawn by).
+        join (:meth:`learn`; the ``guide`` given is the one they were drawn by).  ``terminator``:
+        the points' :class:`~raybundle.scene.shading.ShadowTerminator` or None.
 
         With ``lobe = (materials, idx, mats, w_out)``, also the radiance [W m^-2 sr^-1] the glossy
         lobes of materials ``mats`` at the points ``idx`` reflect towards ``w_out`` from the same
@@ -289,7 +290,8 @@ class WorldLight:
             if lobe is not None:                  # the piece's glossy points, in order
                 i, j = np.searchsorted(idx, [a, b])
                 lb = (lobe[0], idx[i:j] - a, lobe[2][i:j], lobe[3][i:j])
-            return self._irradiance(points[a:b], normals[a:b], u[a:b], at, lb, learn is not None)
+            lift = None if terminator is None else terminator.take(slice(a, b))
+            return self._irradiance(points[a:b], normals[a:b], u[a:b], at, lb, learn is not None, lift)
 
         parts = self.tracer.map_pieces(piece, n)
         self.rays += sum(p[3] for p in parts)
@@ -300,7 +302,7 @@ class WorldLight:
         out = np.concatenate([p[0] for p in parts]) / k
         return out if lobe is None else (out, np.concatenate([p[1] for p in parts]) / k)
 
-    def _irradiance(self, points, normals, u, guide, lobe, learn):
+    def _irradiance(self, points, normals, u, guide, lobe, learn, terminator=None):
         """:meth:`irradiance` at one piece of its points, not divided by the samples per point:
         ``(E, glossy or None, learned, rays)``, ``learned`` the unblocked samples' points,
         directions and values for :meth:`learn` (None without ``learn``)."""
@@ -315,6 +317,9 @@ class WorldLight:
         live = np.nonzero((cos > 0) & (pdf > 0))[0]
         if len(live):
             origin = points[rep[live]] + normals[rep[live]] * self.tracer.eps
+            if terminator is not None:
+                lifted = terminator.take(rep[live]).origins(origin, d[live], cos[live])
+                origin = origin if lifted is None else lifted
             blocked = self.tracer.occluded(origin, d[live], np.full(len(live), self.far))
             ok = live[~blocked]
             contrib = L[ok] * (cos[ok] / pdf[ok])[:, None]

@@ -215,12 +215,12 @@ def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, laye
         o0, o1, o2 = w_o[p, 0], w_o[p, 1], w_o[p, 2]
         cos_i = dot3(n0, n1, n2, i0, i1, i2)
         cos_o = dot3(n0, n1, n2, o0, o1, o2)
-        if not (cos_i > 0 and cos_o > 0):
+        if not cos_i > 0:
             out[p, 0] = out[p, 1] = out[p, 2] = 0.0
             continue
         mu = min(max(cos_o, 0.0), 1.0)
         r[0] = r[1] = r[2] = 0.0
-        if diffuse:
+        if diffuse:         # whatever side the viewer is on, the glossy lobes above it only
             wd = 1.0
             if layered[m] and has_layer[m]:
                 j, dx, dmu = _interp_at(mu, diffuse_weight.shape[1])
@@ -232,7 +232,7 @@ def _brdf(mat, normal, w_i, w_o, diffuse, glossy, scale, kdr, g, ks, alpha, laye
                 if layered[m]:
                     v = v * wd
                 r[c] = v
-        if glossy and (layered[m] or g[m] > 0):
+        if glossy and (layered[m] or g[m] > 0) and cos_i > 0 and cos_o > 0:
             a = alpha[m]
             h0, h1, h2, d = _ggx_distribution(a, n0, n1, n2, i0, i1, i2, o0, o1, o2)
             g2 = 1.0 / (1.0 + lambda_at(a, cos_i) + lambda_at(a, cos_o))

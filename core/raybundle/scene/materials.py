@@ -264,7 +264,9 @@ class MaterialTable:
 
     # --------------------------------------------------------------- evaluation
     def brdf(self, mat, normal, w_in, w_out, diffuse=True, glossy=True, diffuse_scale=None) -> np.ndarray:
-        """BRDF value f(w_in, w_out) [1/sr], RGB.
+        """BRDF value f(w_in, w_out) [1/sr], RGB: 0 where the light comes from below ``normal``,
+        the glossy lobes also where ``w_out`` lies below it (Cycles' Diffuse BSDF takes a smooth
+        normal that faces away from the eye as it is: :mod:`raybundle.scene.shading`).
 
         Parameters
         ----------
@@ -312,7 +314,7 @@ class MaterialTable:
                 h /= np.linalg.norm(h, axis=1, keepdims=True) + 1e-300
                 c = np.einsum("ij,ij->i", h, w_o[sel])
                 out[sel] += lobe[:, None] * self._glossy_factor(mat[sel], c, cos_o[sel])
-        out[~front] = 0.0
+        out[cos_i <= 0] = 0.0        # a diffuse lobe whatever side the viewer is on (Cycles')
         return out
 
     def albedo(self, mat, cos_out, diffuse=True, glossy=True) -> np.ndarray:
