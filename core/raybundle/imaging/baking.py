@@ -180,7 +180,7 @@ def baked_parts(solver, points: SurfacePoints, light_samples=16, rng=None, penum
         n_s = n if sc.shading is None else sided_normals(sc.shading, src, points.point[idx], n)
         terminator = None if sc.shading is None else ShadowTerminator(sc.shading, src, points.point[idx], n)
         if sc.texture is not None and sc.texture.has_normal_maps:     # and of a normal or bump map
-            n_s = sc.texture.shading_normals(src, points.point[idx], n_s, n)
+            n_s = sc.texture.shading_normals(src, points.point[idx], n_s)
         parts.direct[idx] = direct.irradiance(points.point[idx], n_s, rng, light_samples, penumbra_samples,
                                               receivers=sc.link_groups(tri),
                                               footprint=None if footprint is None else footprint.subset(idx),

@@ -143,14 +143,10 @@ class EyeRays:
         sc = self.scene
         src = sc.triangle_source[tri]
         glossy = np.nonzero(sc.materials.is_glossy[sc.triangle_material[tri]])[0]
-        n = flat
-        if sc.shading is not None:
-            sided = sided_normals(sc.shading, src, point, flat)
-            n = sided
-            n[glossy] = valid_specular_normals(flat[glossy], w_eye[glossy], sided[glossy])
+        n = flat if sc.shading is None else sided_normals(sc.shading, src, point, flat)
         if sc.texture is not None and sc.texture.has_normal_maps:
-            n = sc.texture.shading_normals(src, point, n, w_eye)
-            n[glossy] = valid_specular_normals(flat[glossy], w_eye[glossy], n[glossy])
+            n = sc.texture.shading_normals(src, point, n)
+        n[glossy] = valid_specular_normals(flat[glossy], w_eye[glossy], n[glossy])
         return n
 
     def through_interfaces(self, org, dirs, tri, t, u, v, choice=None):

@@ -282,11 +282,13 @@ class SurfaceTexture:
         """Whether any face has a normal or bump map."""
         return bool(np.any(self.face_normal >= 0))
 
-    def shading_normals(self, face, points, normals, w_eye):
+    def shading_normals(self, face, points, normals):
         """The normals (N, 3) to shade ``points`` (N, 3) on input faces ``face`` (N,) with:
         ``normals`` (N, 3) (unit, on the side seen) perturbed by the faces' normal or bump maps
-        (module docstring), kept where a face has none or the perturbed normal would not face
-        the eye ``w_eye`` (N, 3)."""
+        (module docstring), kept where a face has none.  A perturbed normal that faces away from
+        the eye is kept as it is, as Cycles' Normal Map and Bump nodes give it: a diffuse lobe
+        takes it so, a specular one made valid for the eye
+        (:func:`~raybundle.scene.shading.valid_specular_normals`)."""
         face = np.asarray(face, np.int64)
         out = np.array(normals, float)
         k_of = self.face_normal[face]
@@ -320,7 +322,7 @@ class SurfaceTexture:
         dual = n + (x * (bb * a - ab * b) + y * (aa * b - ab * a)) / (g * z)
         m = np.where(bump[:, None], dual, tangent)
         m /= np.maximum(np.linalg.norm(m, axis=1, keepdims=True), 1e-300)
-        ok = (np.einsum("ij,ij->i", m, w_eye[mapped]) > 1e-3) & np.all(np.isfinite(m), axis=1) & (np.abs(det) > 0)
+        ok = np.all(np.isfinite(m), axis=1) & (np.abs(det) > 0)
         out[mapped[ok]] = m[ok]
         return out
 
