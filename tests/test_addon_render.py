@@ -697,6 +697,18 @@ def test_resolution_percentage_border_and_view_layers(fresh, tmp_path):
     assert two.shape == (15, 20, 3) and np.isfinite(two).all() and two.mean() > 0
 
 
+def error_against_cycles(tmp_path, samples, iterations):
+    """The current scene's relative RMSE (:func:`raybundle.app.metrics.image_error`, Cycles'
+    noise subtracted, nothing excluded) with ``iterations`` against two Cycles halves of
+    ``samples`` spp each."""
+    from raybundle.app.metrics import image_error
+
+    a = render_cycles(tmp_path / "c1.exr", samples=samples, seed=1)
+    b = render_cycles(tmp_path / "c2.exr", samples=samples, seed=2)
+    ours = render_raybundle(tmp_path / "rb.exr", iterations=iterations, seed=3)
+    return image_error(ours, 0.5 * (a + b), reference_halves=[a, b], exclude=None)
+
+
 def test_a_smooth_shaded_sphere_is_shaded_as_cycles_shades_it(fresh, tmp_path):
     """A UV sphere of 12 x 6 faces, Shade Smooth, in a sun from the front left: Cycles shades
     it about the normals it interpolates over each face (a smooth gradient), not about the
@@ -735,18 +747,13 @@ def test_a_smooth_prism_is_shaded_about_normals_that_turn_away_from_the_eye(fres
     4.9% (all of it in the silhouette's pixels); with the terminator's lift and such normals
     replaced by the facet's (the code before): 74%; with the geometry offset at 0 in both
     engines, 7.3% against the code before's 26%."""
-    from raybundle.app.metrics import image_error
-
     bpy.ops.mesh.primitive_cylinder_add(vertices=6, radius=1.0, depth=2.0, rotation=(0, 0, math.radians(40)))
     bpy.ops.object.shade_smooth()
     bpy.context.active_object.data.materials.append(node_material("white", color=(0.8, 0.8, 0.8)))
     add_light("SUN", rotation=(math.radians(90), 0, math.radians(110)), energy=3.0)
     set_world((0, 0, 0), 0.0)
     add_camera((0, -5, 0), rotation=(math.radians(90), 0, 0), resolution=(48, 48), ortho_scale=2.6)
-    a = render_cycles(tmp_path / "c1.exr", samples=64, seed=1)
-    b = render_cycles(tmp_path / "c2.exr", samples=64, seed=2)
-    ours = render_raybundle(tmp_path / "rb.exr", iterations=16, seed=3)
-    e = image_error(ours, 0.5 * (a + b), reference_halves=[a, b], exclude=None)
+    e = error_against_cycles(tmp_path, samples=64, iterations=16)
     print(f"\nsmooth prism: {100 * e['error']:.2f}%")
     assert e["error"] < 0.08, e
 
@@ -760,8 +767,6 @@ def test_a_smooth_shaded_chrome_ball_mirrors_the_room_as_cycles_to_its_rim(fresh
     0.34% at 64 iterations (the ball a mirror the eye is reflected by: 0.47% read from its glossy lobe);
     the normal not turned, as before: 1.96% (the rim mirrors the sphere's own
     inside)."""
-    from raybundle.app.metrics import image_error
-
     s = 3.0
     walls = [[(-s, -s, -s), (s, -s, -s), (s, s, -s), (-s, s, -s)], [(-s, -s, s), (-s, s, s), (s, s, s), (s, -s, s)],
              [(-s, -s, -s), (-s, s, -s), (-s, s, s), (-s, -s, s)], [(s, -s, -s), (s, -s, s), (s, s, s), (s, s, -s)],
@@ -774,10 +779,7 @@ def test_a_smooth_shaded_chrome_ball_mirrors_the_room_as_cycles_to_its_rim(fresh
     bpy.context.active_object.data.materials.append(node_material("chrome", "glossy", color=(0.9, 0.9, 0.9),
                                                                   roughness=0.0))
     add_camera((0, -2.9, 0), rotation=(math.radians(90), 0, 0), resolution=(48, 36), lens=30)
-    a = render_cycles(tmp_path / "c1.exr", samples=128, seed=1)
-    b = render_cycles(tmp_path / "c2.exr", samples=128, seed=2)
-    ours = render_raybundle(tmp_path / "rb.exr", iterations=64, seed=3)
-    e = image_error(ours, 0.5 * (a + b), reference_halves=[a, b], exclude=None)
+    e = error_against_cycles(tmp_path, samples=128, iterations=64)
     print(f"\nchrome ball: {100 * e['error']:.2f}%")
     assert e["error"] < 0.01, e
 

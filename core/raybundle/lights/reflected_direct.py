@@ -193,11 +193,12 @@ def _reflected(direct, points, normals, mats, w_out, u, samples_per_light, mis, 
         acc = np.zeros((len(s.pt), 3 if glossy_part is None else 6))      # the glossy part beside
         f_d = _control_variate(exact[li], light, f_d_all, s.pt, out) if li != TREE else None
         shading = s.at(at)
+        lift = None if at.terminator is None else at.terminator.take(s.pt)      # the samples' terminator
         for j in range(n_s):
             uk = u[s.pt, k] if u is not None else np.empty((len(s.pt), 3))
             if s.kron is not None and len(s.kron):
                 uk[s.kron] = (s.shift + (s.start + j)[:, None] * _ALPHA) % 1.0
-            _one_sample(direct, at, s, shading, uk, f_d, n_s, polygonal, acc)
+            _one_sample(direct, at, s, shading, lift, uk, f_d, n_s, polygonal, acc)
             k += 1
         for c in range(acc.shape[1]):
             (out if c < 3 else glossy_part)[:, c % 3] += np.bincount(s.pt, acc[:, c], minlength=n)
@@ -306,10 +307,11 @@ def _light_samples(direct, at, li, base, picked, n_s, penumbra, by_chance):
     return _Samples(li, light, bit, pt, np.repeat(picked / (n_s * reps), reps)[:, None], kron, start, light_shift)
 
 
-def _one_sample(direct, at, s, shading, uk, f_d, n_s, polygonal, acc):
+def _one_sample(direct, at, s, shading, lift, uk, f_d, n_s, polygonal, acc):
     """One shadow-ray sample of :class:`_Samples` ``s`` at uniforms ``uk``, added to ``acc``
     (its rows; with ``at.glossy``, the glossy lobe's part also in its columns 3-5), the control
-    variate's correction with it; the shadow flags updated."""
+    variate's correction with it; the shadow flags updated.  ``lift``: the samples'
+    :class:`~raybundle.scene.shading.ShadowTerminator` or None."""
     p, nrm, m, wo, scale = shading
     em = None
     if s.li == TREE:
@@ -319,7 +321,6 @@ def _one_sample(direct, at, s, shading, uk, f_d, n_s, polygonal, acc):
         y, e = s.light.sample(p, uk)
         ids = s.li
     rec = None if at.receivers is None else at.receivers[s.pt]
-    lift = None if at.terminator is None else at.terminator.take(s.pt)
     free = None
     if at.shadow_flags is None and f_d is None:
         e, travel, cos_x = direct.shadowed(p, nrm, y, e, lights=ids, receivers=rec, terminator=lift)
