@@ -23,7 +23,7 @@ from ..methods.stochastic_iteration import StochasticIterationSolver
 from ..patches.clusters import DEFAULT_PATCHES, make_patches, triangle_patches
 from ..patches.layout import subdivide
 from ..patches.lit_splits import split_where_lit_unevenly
-from ..tracing.sampling import NOT_CUD
+from ..tracing.sampling import NOT_CUD, PointUniforms
 from ..tracing.visibility import RayTracer
 from ..util import compiled
 
@@ -93,8 +93,9 @@ def prepare(scene, patches=DEFAULT_PATCHES, max_edge=None, stage=None, stop=None
 def split_lit_unevenly(scene, laid_out):
     """``laid_out`` (``scene``'s patch layout) with the patches over which the first shot's
     lamps' light changes strongly split (:func:`~raybundle.patches.lit_splits.split_where_lit_unevenly`),
-    their light probed with shadow rays over ``scene`` (the same surfaces) from a fixed seed, so
-    a layout is the same on every run."""
+    their light probed with shadow rays over ``scene`` (the same surfaces) by numbers tied to the
+    probed points (:class:`~raybundle.tracing.sampling.PointUniforms`), so a layout is the same on
+    every run and however the scene's triangles and patches are numbered."""
     if not (len(scene.point_lights) or len(scene.sun_lights) or len(scene.area_lights) or len(small_emitters(scene))):
         return laid_out                 # no lamp of the first shot: no tracer built
     tracer = RayTracer(scene)
@@ -102,10 +103,9 @@ def split_lit_unevenly(scene, laid_out):
         direct = DirectLighting(scene, tracer)
         if not direct.n_lights:
             return laid_out
-        rng = np.random.default_rng(0)
-
-        def light(points, normals):
-            return direct.irradiance(points, normals, rng, samples_per_light=2, penumbra_samples=8).mean(axis=1)
+        def light(points, normals):         # each point's numbers its own: the same layout however numbered
+            return direct.irradiance(points, normals, PointUniforms(points), samples_per_light=2,
+                                     penumbra_samples=8).mean(axis=1)
 
         return split_where_lit_unevenly(laid_out, light)[0]
     finally:

@@ -61,6 +61,42 @@ def stream(seed, which, *more):
     return np.random.default_rng([int(seed), int(which), *more])
 
 
+
+def _mix64(x):
+    """SplitMix64's finaliser on uint64 arrays: a bijection whose output bits each depend on
+    every input bit (wrapping arithmetic)."""
+    x = x ^ (x >> np.uint64(30))
+    x = x * np.uint64(0xBF58476D1CE4E5B9)
+    x = x ^ (x >> np.uint64(27))
+    x = x * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+class PointUniforms:
+    """Uniform numbers tied to points, for estimates that decide a layout: ``random((N, k))``
+    (the only call of a Generator it stands in for) gives row i as a hash of the bits of
+    ``points[i]`` (N, 3), ``seed``, the call's count and the column, so each point's numbers
+    are the same whatever the order or company the points are asked in (the same scene
+    numbered otherwise is laid out the same)."""
+
+    def __init__(self, points, seed=0):
+        bits = np.ascontiguousarray(points, np.float64).view(np.uint64).reshape(len(points), -1)
+        with np.errstate(over="ignore"):
+            key = np.full(len(bits), _mix64(np.uint64(seed) + np.uint64(0x9E3779B97F4A7C15)), np.uint64)
+            for c in range(bits.shape[1]):
+                key = _mix64(key ^ bits[:, c])
+        self.key, self.calls = key, 0
+
+    def random(self, size):
+        n, k = (size, 1) if np.isscalar(size) else (size[0], int(np.prod(size[1:])))
+        if n != len(self.key):
+            raise ValueError(f"PointUniforms: {n} rows asked of {len(self.key)} points")
+        self.calls += 1
+        with np.errstate(over="ignore"):
+            salt = _mix64(np.uint64(self.calls) * np.uint64(0x9E3779B97F4A7C15) + np.arange(k, dtype=np.uint64))
+            z = _mix64(self.key[:, None] ^ salt[None, :])
+        return ((z >> np.uint64(11)).astype(np.float64) * 2.0 ** -53).reshape(size)
+
 # ------------------------------------------------------------ direction maps
 def uniform_sphere(u1, u2):
     """Map (u1, u2) in [0,1)^2 to a unit vector uniform on the sphere (pdf 1/(4 pi)).
