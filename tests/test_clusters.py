@@ -550,3 +550,30 @@ def test_welding_peaks_under_130_bytes_a_tside():
         tracemalloc.stop()
     assert sc.triangle_corner_tag is not None and ids.shape == (len(sc.tside_triangle), 3)
     assert peak < 130 * len(sc.tside_triangle), peak / len(sc.tside_triangle)
+
+
+@pytest.mark.parametrize("d, patches", [(0.03, 200), (0.05, 100)])
+def test_a_side_inside_a_solid_is_not_one_patch_with_a_side_facing_the_room(d, patches):
+    """A two-sided slab ``d`` thick whose bottom is turned in (its front faces up, into the slab,
+    like its top's): the bottom's and the top's small triangles lie in one plane's slab of the
+    grid, facing the same way, further apart than a gap (a quarter of a patch) and closer than
+    half a patch.  A cluster holding both gives the bottom's inner side, enclosed, the
+    irradiance of the top's side in the room, and the light it sends into the slab is lost to
+    the room (a window frame's box held 1.4% of a room's reflected power so).  No patch holds
+    triangles of both (:func:`enclosure_classes`; the layout before it mixed 144 and 64)."""
+    from raybundle.patches.clusters import patch_sizes
+
+    quads = [quad(0, 1, 0, 1, 0.0), quad(0, 1, 0, 1, d)]                 # both facing up: the bottom turned in
+    for x0, x1, y0, y1, n in ((0, 0, 0, 1, 0), (1, 1, 0, 1, 1), (0, 1, 0, 0, 2), (0, 1, 1, 1, 3)):
+        v = [[x0, y0, 0], [x1, y1, 0], [x1, y1, d], [x0, y0, d]]
+        quads.append((v, [[0, 1, 2], [0, 2, 3]] if n in (1, 2) else [[0, 2, 1], [0, 3, 2]]))
+    base = scene_of(quads)
+    sc = tessellate(replace(base, triangle_two_sided=np.ones(len(base.triangles), bool)), 6000)
+    h = patch_sizes(sc, patches)[0]
+    assert h / 4 < d < h / 2
+    p = make_patches(sc, patches=patches)
+    z = p.triangle_corners[:, :, 2].mean(axis=1)
+    flat = np.abs(p.triangle_normal[:, 2]) > 0.99
+    bottom, top = flat & (z < 0.5 * d), flat & (z > 0.5 * d)
+    mixed = np.intersect1d(p.triangle_patch[bottom], p.triangle_patch[top])
+    assert len(mixed) == 0, (len(mixed), h)

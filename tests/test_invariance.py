@@ -109,4 +109,7 @@ def test_the_blend_subdivided_in_blender_is_the_blend():
     # image's ceiling reads within 2% of the file's (two seeds, 150 iterations): the ceiling's
     # patches over and beside the lamp hanging just under it are laid out otherwise.  Seen since
     # the transfer's control variate took the noise that hid it; an allowance until explained.
+    # The other regions read brighter too: the back +1.2% to +2.3% (its bound here 1.85%) over six
+    # draws of the numbers of the lamps' split probe (`PointUniforms`' seed), with the enclosure
+    # classes or without; the layout's own seed reads +1.2%.  Not explained yet.
     check(a, region_batches(fine, 4000, batches=BATCHES), b, allow={"ceiling": 0.07})

@@ -35,7 +35,9 @@ triangles that straddle such a gap are cut along the contact, and in a cell a ga
 pieces that share no corner and cover a square a quarter of h wide or more (the wall on either
 side of a window's frame standing just in front of it: :func:`_pieces_apart`), and, under a world that lights
 the scene, by how much of the world each side sees (:func:`world_view_classes`: the facets of a
-window's frame and reveal outside, in the sky, and inside, in the room's shade), and by whether
+window's frame and reveal outside, in the sky, and inside, in the room's shade), by whether
+each side is enclosed within a patch size (:func:`enclosure_classes`: the inner sides of a window
+frame's box or a cabinet's carcass), and by whether
 a piece lies behind a surface its triangle pierces (:func:`~raybundle.patches.piercing.cut_where_pierced`);
 the rest stay patches of their own.
 Clusters smaller than h^2 / :data:`DETAIL` (the facets of a plant or a chair's legs in a cell:
@@ -87,6 +89,12 @@ SLIVER = 0.1
 WORLD_VIEW_CLASSES = (0.02, 0.2)
 #: cosine-distributed rays per triangle side that find its class
 WORLD_VIEW_RAYS = 16
+#: cosine-distributed rays per triangle side that find how enclosed it is (:func:`enclosure_classes`)
+ENCLOSURE_RAYS = 4
+#: ... and the share of them that leave within reach, at and above which a side is open
+ENCLOSURE_CLASSES = (0.2,)
+#: ... and how far they look, in patch sizes (:func:`enclosure_classes`)
+ENCLOSURE_REACH = 1.5
 
 
 def tessellate(scene: PatchScene, triangles) -> PatchScene:
@@ -149,8 +157,9 @@ class _Grouping:
         (default ``h``; both: :func:`patch_sizes`);
         ``gap`` (S, 2) bool: the triangle lies in a gap on its front / back
         (:func:`~raybundle.patches.gaps.gap_sides`), which a cluster does not straddle;
-        ``world_view`` (S, 2) int: the classes of how much of the world its front / back
-        sees (:func:`world_view_classes`), which a cluster does not mix either; nor the two
+        ``world_view`` (S, K) int: classes of its sides that a cluster does not mix either (how much
+        of the world its front / back sees, :func:`world_view_classes`, how enclosed they are,
+        :func:`enclosure_classes`); nor the two
         sides of a plane that a surface pierces, ``part`` = (part (S,), tagged corners (K, 3)) of
         :func:`~raybundle.patches.piercing.pierced_parts` over the scene's triangles, of which
         ``small_rows`` (T,) bool are the grouping's (not with ``spread``).
@@ -172,7 +181,7 @@ class _Grouping:
         keys = [cell[:, 0], cell[:, 1], cell[:, 2], self.cell[idx], slab,
                 sc.triangle_material[rows], sc.triangle_two_sided[rows]]
         if world_view is not None:
-            keys += [world_view[:, 0], world_view[:, 1]]
+            keys += list(np.asarray(world_view).T)
         carved = None
         if gap is not None:
             code = gap[:, 0] * 2 + gap[:, 1]
@@ -354,7 +363,9 @@ def make_patches(scene: PatchScene, patches=None, size=None, contacts=True, stag
         stage(f"grouping {int(fine_small.sum()):,} small triangles into patches")
         grouped = _Grouping(fine, lo=lo, rows=np.nonzero(fine_small)[0])
         gap = gap_sides(tracer, grouped.centroid, grouped.normal, CONTACT_SHARE * h) if contacts else None
-        view = world_view_classes(tracer, grouped.centroid, grouped.normal) if lit_by_world else None
+        views = ([world_view_classes(tracer, grouped.centroid, grouped.normal)] if lit_by_world else []) + \
+            ([enclosure_classes(tracer, grouped.centroid, grouped.normal, ENCLOSURE_REACH * h)] if contacts else [])
+        view = np.concatenate(views, axis=1) if views else None
     finally:
         if tracer is not None:
             tracer.close()
@@ -462,10 +473,12 @@ def _sides_apart(ids, part, row, plane, behind):
     return out
 
 
-def world_view_classes(tracer, points, normals, rays=WORLD_VIEW_RAYS, seed=0):
+def world_view_classes(tracer, points, normals, rays=WORLD_VIEW_RAYS, seed=0, reach=np.inf,
+                       classes=WORLD_VIEW_CLASSES):
     """(N, 2) int: how much of the world ``points`` (N, 3) see on the side their unit
     ``normals`` (N, 3) face (column 0) and on the other (column 1): the fraction of
-    ``rays`` cosine-distributed rays that leave the scene, cut at :data:`WORLD_VIEW_CLASSES`.
+    ``rays`` cosine-distributed rays that meet nothing within ``reach`` (default: leave the
+    scene), cut at ``classes``.
 
     A cluster is one unknown: the facets of a window's reveal out in the sky and those
     inside the room share its mean irradiance, so the inner ones send the sky's light on
@@ -495,8 +508,32 @@ def world_view_classes(tracer, points, normals, rays=WORLD_VIEW_RAYS, seed=0):
             d = (local @ frame).reshape(-1, 3)
             # a ray leaves the scene when nothing at all lies along it (Embree's any-hit query)
             blocked = tracer.occluded(np.repeat(p + tracer.eps * sign * nrm, rays, axis=0), d,
-                                      np.full(len(d), np.inf))
-            out[lo:lo + len(p), col] = np.digitize((~blocked).reshape(len(p), rays).mean(axis=1), WORLD_VIEW_CLASSES)
+                                      np.full(len(d), float(reach)))
+            out[lo:lo + len(p), col] = np.digitize((~blocked).reshape(len(p), rays).mean(axis=1), classes)
+    return out
+
+
+def enclosure_classes(tracer, points, normals, reach):
+    """(N, 2) int: whether the sides of ``points`` (N, 3) facing along their unit ``normals`` (N, 3)
+    (column 0) and against them (column 1) are enclosed (0) or open (1): enclosed when the ray
+    along the side's normal meets a surface within ``reach`` (:func:`~raybundle.patches.gaps.gap_sides`),
+    and so do all but a share under :data:`ENCLOSURE_CLASSES` of :data:`ENCLOSURE_RAYS`
+    cosine-distributed rays (:func:`world_view_classes`, asked only of those sides).
+
+    A side inside a solid (a window frame's box, a cabinet's carcass, a closed mesh's inner
+    faces) is enclosed, its neighbours on the room's side are not; a cluster holding both gave
+    the inner sides the room's irradiance, and the light they sent into the solid was lost to
+    the room.  The layout looks :data:`ENCLOSURE_REACH` patch sizes far: the two sides of a
+    solid thinner than half a patch may share a grid slab of :meth:`_Grouping.clusters`, and
+    within that reach its inner sides read enclosed."""
+    points, normals = np.asarray(points, float), np.asarray(normals, float)
+    out = np.ones((len(points), 2), np.int64)
+    near = gap_sides(tracer, points, normals, reach)
+    some = np.nonzero(near.any(axis=1))[0]
+    if len(some):
+        classes = world_view_classes(tracer, points[some], normals[some], rays=ENCLOSURE_RAYS, seed=1, reach=reach,
+                                     classes=ENCLOSURE_CLASSES)
+        out[some] = np.where(near[some], classes, 1)
     return out
 
 
