@@ -20,7 +20,8 @@ land in just such a place, where the first shot's patch values are wrong most (a
 wall's direct light falls to zero towards the ceiling): there the hit's direct
 irradiance is estimated at the hit point itself
 (:meth:`~raybundle.lights.direct.DirectLighting.irradiance`, ``near_light_samples`` shadow
-rays per light, unclamped: the rays' mean is then unbiased).  ``tests/test_baking.py`` pins the corner profile against a
+rays per light and ``near_penumbra_samples`` in a penumbra, unclamped: the rays' mean is then
+unbiased).  ``tests/test_baking.py`` pins the corner profile against a
 brute-force integral.
 
 Bakes gather at every vertex and corner (:func:`raybundle.imaging.baking.baked_radiance`);
@@ -43,10 +44,12 @@ class FinalGather:
     """The gather of one solution state (its vertex values computed once)."""
 
     def __init__(self, solver, near=1.0, near_light_samples=1, caustic=True, world=True, image_values=None,
-                 bounce=False):
+                 bounce=False, near_penumbra_samples=None):
         """``bounce``: a ray landing within ``near`` patch sizes gathers its hit's indirect light by one
         more ray (:meth:`_bounced`) rather than read it from the patches (bakes); its direct light is
-        sampled there either way."""
+        sampled there either way, with ``near_penumbra_samples`` shadow rays a light in a penumbra
+        (None: :meth:`~raybundle.lights.direct.DirectLighting.irradiance`'s default; an image's
+        pixels average so many hits that one is enough)."""
         sc, rec = solver.scene, solver.reconstruction
         self.bounce = bool(bounce)
         self.solver, self.scene, self.rec = solver, sc, rec
@@ -65,6 +68,7 @@ class FinalGather:
         self.vert_indirect = verts[1] if self.near > 0 else None
         self.image_vert = verts[-1] if image_values is not None else None
         self.near_light_samples = int(near_light_samples)
+        self.near_penumbra_samples = near_penumbra_samples
         self.hit_size = np.sqrt(sc.patch_area[sc.triangle_patch])      # per triangle [m]
         # the first shot's glossy reflections arrive by the caustic shot, read where the gather
         # is (``caustic`` False: left out, for an image that light-traces it into its pixels,
@@ -120,6 +124,7 @@ class FinalGather:
                             rec.at(self.vert_indirect, ts[c], bary[c])
                         e_hit[c] = e_ind + sv.direct.irradiance(at_hit, sc.tside_normal[ts[c]], rng,
                                                                 self.near_light_samples,
+                                                                penumbra_samples=self.near_penumbra_samples,
                                                                 receivers=sc.link_groups(tri[h]), clamp=False)
                 L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False,
                                      glossy_iterate=False, first_shot_glossy=self.first_shot_glossy)

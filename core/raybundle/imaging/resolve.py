@@ -185,7 +185,9 @@ class DiffuseIndirect:
         if gather and self.scene.n_patches and (rays > 0 or (rays < 0 and final_time and
                                                              self.edge_gather.affordable(self.probe(),
                                                                                          final_time))):
-            final = FinalGather(solver, near=self.GATHER_NEAR, caustic=caustic, world=not self.world_sampled,
+            # at hits within a patch size the lamps' light is sampled where they land, one
+            # shadow ray a light even in a penumbra: a pixel averages many such hits
+            final = FinalGather(solver, near_penumbra_samples=1, caustic=caustic, world=not self.world_sampled,
                                 image_values=(e_bar, sharp) if self.settings.smooth else None)
         vert = final.image_vert if final is not None else None
         if vert is None and self.settings.smooth and np.any(e_bar):
@@ -197,12 +199,6 @@ class DiffuseIndirect:
             if per_sample == 0:
                 final = None
         return e_bar, vert, final, per_sample
-
-    #: the image's final gather reads the patch values at every hit, however near
-    #: (:class:`~raybundle.imaging.gather.FinalGather`'s ``near`` 0): the direct light estimated
-    #: at hits within a patch size of the gathering point (bakes do, where a vertex's value is
-    #: final) costs many times as much per ray where lamps are many and takes no noise away
-    GATHER_NEAR = 0.0
 
     def automatic_gather_pays(self, final_time):
         """Whether the automatic final gather (``gather_rays`` -1) would spend ``final_time``
