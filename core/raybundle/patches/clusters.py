@@ -36,8 +36,8 @@ pieces that share no corner and cover a square a quarter of h wide or more (the 
 side of a window's frame standing just in front of it: :func:`_pieces_apart`), and, under a world that lights
 the scene, by how much of the world each side sees (:func:`world_view_classes`: the facets of a
 window's frame and reveal outside, in the sky, and inside, in the room's shade), by whether
-each side is enclosed within a patch size (:func:`enclosure_classes`: the inner sides of a window
-frame's box or a cabinet's carcass), and by whether
+each side is enclosed (:func:`enclosure_classes`: the inner sides of a window frame's box or a
+cabinet's carcass), and by whether
 a piece lies behind a surface its triangle pierces (:func:`~raybundle.patches.piercing.cut_where_pierced`);
 the rest stay patches of their own.
 Clusters smaller than h^2 / :data:`DETAIL` (the facets of a plant or a chair's legs in a cell:

@@ -61,7 +61,6 @@ def stream(seed, which, *more):
     return np.random.default_rng([int(seed), int(which), *more])
 
 
-
 def _mix64(x):
     """SplitMix64's finaliser on uint64 arrays: a bijection whose output bits each depend on
     every input bit (wrapping arithmetic)."""
