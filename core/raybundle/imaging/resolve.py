@@ -1,8 +1,10 @@
 """The diffuse indirect light of the image, resolved from the solution, and the final gather.
 
 ``W_d kd / pi * E_bar`` is linear in the running average ``E_bar`` of the patches' incoming
-radiance, so it is resolved once from the final average at ``resolve_samples`` stratified
-sub-pixel positions, with ``E_bar`` interpolated linearly over each smooth surface from vertex
+radiance, so it is resolved once from the final average at ``resolve_samples`` sub-pixel
+positions in each pixel (the first points of the Sobol (0, 2)-sequence, with a random digital
+shift of the pixel's own: a thin bar covering a share of every pixel along it is seen in each to
+within two of the positions, neither lost nor doubled along its whole length), with ``E_bar`` interpolated linearly over each smooth surface from vertex
 values that are the L2 projection of the patch values onto hat functions
 (:meth:`~raybundle.patches.reconstruction.LinearReconstruction.projected`), or flat per patch.
 Next to concave edges and contacts, where patch values cannot follow the light, a final gather
@@ -14,7 +16,7 @@ import time
 
 import numpy as np
 
-from ..tracing.sampling import Stream, stratified_2d, stream
+from ..tracing.sampling import Stream, sobol_points, stream
 from ..util.memory import release_freed
 from .gather import FinalGather
 
@@ -62,7 +64,7 @@ class DiffuseIndirect:
     def image(self, e_bar=None, samples=None, gather=True, final_time=None):
         """(N, 3) W_d kd/pi * E_bar at the pixels (W_d: the diffuse weight under a
         Principled layer, 1 without), box-filtered with ``samples`` (default
-        ``resolve_samples``) stratified sub-pixel samples.
+        ``resolve_samples``) sub-pixel samples a pixel (module docstring).
 
         ``e_bar`` (S, 3) defaults to the solver's
         :meth:`~raybundle.methods.patch_solution.PatchSolution.indirect_incoming`.
@@ -109,12 +111,13 @@ class DiffuseIndirect:
         if len(getattr(self.solver, "translucent_sides", ())):      # the first shot's part: _shade's
             through = self.solver.translucent_radiance(self.solver.indirect_incoming())
             through_vert = self.solver.reconstruction.averaged(through) if self.settings.smooth else None
-        offsets = stratified_2d(k, self.rng)     # new positions at every resolve
+        # new positions at every resolve, from each pixel's own shift of one (0, 2)-sequence
+        digits = self.rng.integers(0, 1 << 32, size=(n, 2), dtype=np.uint64)
         if final is not None:
             shift = self.rng.random((n, 2))
         t_loop = time.perf_counter()
         for j in range(k):
-            g = self.trace(np.broadcast_to(offsets[j], (n, 2)))
+            g = self.trace(sobol_points(np.full(n, j), digits))
             h = g.front(sc)
             e = surface_values(sc, self.solver, e_bar, vert, g.tside[h], g.bary[h])
             if final is not None:

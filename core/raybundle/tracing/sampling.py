@@ -482,6 +482,23 @@ def sobol_direction_numbers(bits=32):
     return v
 
 
+def sobol_points(index, shift, v=None):
+    """Points ``index`` (N,) of the two-dimensional Sobol (0, 2)-sequence, each with its own
+    digital shift ``shift`` (N, 2) of 32-bit words (:func:`sobol_direction_numbers`' bits),
+    (N, 2) in [0, 1): the XOR of the shift and of the direction numbers ``v`` of the index's set
+    bits.  With a uniformly random shift every point is uniform, and the first 2^m points of one
+    shift still put exactly one point into every dyadic box of area 2^-m."""
+    v = sobol_direction_numbers(32) if v is None else v
+    index = np.asarray(index, np.uint64)
+    x = np.array(shift, np.uint64, copy=True)
+    for k in range(v.shape[1]):
+        rest = index >> np.uint64(k)
+        if not rest.any():
+            break
+        x ^= (rest & np.uint64(1))[:, None] * v[:, k]
+    return x.astype(float) / float(1 << v.shape[1])
+
+
 class SobolSequence:
     """The two-dimensional Sobol (0, 2)-sequence with a random digital shift (each
     coordinate's bits XORed with a seeded random word; the net property is kept).
@@ -502,15 +519,8 @@ class SobolSequence:
         self.index = int(start)
 
     def point(self, index):
-        """Point ``index`` (2,) in [0, 1)^2: the XOR of the direction numbers of its set bits."""
-        x = self.shift.copy()
-        k = 0
-        while index:
-            if index & 1:
-                x ^= self.v[:, k]
-            index >>= 1
-            k += 1
-        return x.astype(float) / float(1 << self.BITS)
+        """Point ``index`` (2,) in [0, 1)^2 (:func:`sobol_points`)."""
+        return sobol_points(np.array([index]), self.shift[None], self.v)[0]
 
     def next(self, dim):
         if dim != 2:
