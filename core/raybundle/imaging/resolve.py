@@ -111,8 +111,7 @@ class DiffuseIndirect:
         if len(getattr(self.solver, "translucent_sides", ())):      # the first shot's part: _shade's
             through = self.solver.translucent_radiance(self.solver.indirect_incoming())
             through_vert = self.solver.reconstruction.averaged(through) if self.settings.smooth else None
-        # new positions at every resolve, from each pixel's own shift of one (0, 2)-sequence
-        digits = self.rng.integers(0, 1 << 32, size=(n, 2), dtype=np.uint64)
+        digits = self.rng.integers(0, 1 << 32, size=(n, 2), dtype=np.uint64)   # new at every resolve
         if final is not None:
             shift = self.rng.random((n, 2))
         t_loop = time.perf_counter()
