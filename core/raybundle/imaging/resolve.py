@@ -4,8 +4,9 @@
 radiance, so it is resolved once from the final average at ``resolve_samples`` sub-pixel
 positions in each pixel (the first points of the Sobol (0, 2)-sequence, with a random digital
 shift of the pixel's own: a thin bar covering a share of every pixel along it is seen in each to
-within two of the positions, neither lost nor doubled along its whole length), with ``E_bar`` interpolated linearly over each smooth surface from vertex
-values that are the L2 projection of the patch values onto hat functions
+within two of the positions, neither lost nor doubled along its whole length), with ``E_bar``
+interpolated linearly over each smooth surface from vertex values that are the L2 projection of
+the patch values onto hat functions
 (:meth:`~raybundle.patches.reconstruction.LinearReconstruction.projected`), or flat per patch.
 Next to concave edges and contacts, where patch values cannot follow the light, a final gather
 reads the solution where its rays land instead (:mod:`raybundle.imaging.gather`).
