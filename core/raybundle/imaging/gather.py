@@ -70,19 +70,25 @@ class FinalGather:
         self.near_light_samples = int(near_light_samples)
         self.near_penumbra_samples = near_penumbra_samples
         self.hit_size = np.sqrt(sc.patch_area[sc.triangle_patch])      # per triangle [m]
+        # what the rays so far cost: their count and seconds, and those of the near hits' light
+        self.rays, self.seconds, self.near_hits, self.near_seconds = 0, 0.0, 0, 0.0
         # the first shot's glossy reflections arrive by the caustic shot, read where the gather
         # is (``caustic`` False: left out, for an image that light-traces it into its pixels,
         # :meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`)
         self.first_shot_glossy = sharp is None
         self.vert_caustic = rec.averaged(sharp, dtype=np.float32) if sharp is not None and caustic else None
 
-    def irradiance(self, points, normals, rays, rng, shift=None, first=0, at=None, chunk_rays=1 << 15):
+    def irradiance(self, points, normals, rays, rng, shift=None, first=0, at=None, chunk_rays=1 << 15,
+                   variance=False):
         """E_ind (N, 3) [W/m^2] at ``points`` (N, 3) with unit ``normals`` (N, 3), by
-        ``rays`` rays each: point i's ray k takes the Kronecker (R_2) point
-        ``shift_i + (first + k) alpha`` (``shift`` (N, 2), default random from ``rng``),
-        so calls with ``first`` = 0, rays, 2 rays, ... on one point continue one
-        stratified set (an image spreads a pixel's gather over its sub-pixel samples).  The rays go
-        ``chunk_rays`` at a time (each holds a few hundred bytes of hits and radiance meanwhile).
+        ``rays`` rays each (one count, or (N,) per point, at least 1): point i's ray k takes the
+        Kronecker (R_2) point ``shift_i + (first_i + k) alpha`` (``shift`` (N, 2), default random
+        from ``rng``; ``first`` one index or (N,)), so calls with ``first`` = 0, rays, 2 rays, ...
+        on one point continue one stratified set (an image spreads a pixel's gather over its
+        sub-pixel samples).  The rays go about ``chunk_rays`` at a time (each holds a few hundred
+        bytes of hits and radiance meanwhile).  With ``variance``, ``(E_ind, var, near)``: also the
+        variance (N, 3) of one ray's estimate ``pi L`` about the mean, per point of at least two
+        rays (0 at the others), and the share (N,) of its rays that landed near.
 
         With a caustic first shot (:mod:`raybundle.lights.caustics`), the rays leave out the first
         shot's glossy reflection at the glossy sides they meet (``E1_l f_g(w_l, -w)`` for the
@@ -91,51 +97,98 @@ class FinalGather:
         as the iteration does, and the caustic shot's ``E_c`` read at ``at`` = (tside (N,),
         barycentrics (N, 3)) of the points takes its place (unless the gather was made
         without it)."""
-        sv, sc, rec = self.solver, self.scene, self.rec
         caustic = self.vert_caustic is not None
         if caustic and at is None:
             raise ValueError("a gather with a caustic first shot needs the points' sides: at=(tside, bary)")
         points = np.asarray(points, float)
         normals = np.asarray(normals, float)
         shift = rng.random((len(points), 2)) if shift is None else np.asarray(shift, float)
-        k = (first + np.arange(rays))[None, :, None] * kronecker_alpha(2)
+        counts = np.broadcast_to(np.asarray(rays, np.int64), len(points))
+        if len(counts) and counts.min() < 1:
+            raise ValueError("a final gather takes at least one ray a point")
+        first = np.broadcast_to(np.asarray(first, np.int64), len(points))
+        ends = np.cumsum(counts)
         out = np.zeros((len(points), 3))
-        step = max(1, chunk_rays // max(rays, 1))
-        for lo in range(0, len(points), step):
-            hi = min(lo + step, len(points))
-            n = normals[lo:hi]
-            t, b = frames_from_normals(n)
-            u = (shift[lo:hi, None, :] + k) % 1                                # (P, R, 2)
-            w = cosine_directions(u, t[:, None], b[:, None], n[:, None]).reshape(-1, 3)
-            origin = np.repeat(points[lo:hi] + n * sv.tracer.eps, rays, axis=0)
-            tri, dist, bu, bv = sv.tracer.first_hit(origin, w)
-            L = np.zeros((len(w), 3))
-            hit = np.nonzero(tri >= 0)[0]
-            if len(hit):
-                ts = sc.seen_tside(tri[hit], w[hit])
-                bary = np.stack([1 - bu[hit] - bv[hit], bu[hit], bv[hit]], axis=1)
-                e_hit = rec.at(self.vert, ts, bary)
-                if self.vert_indirect is not None:
-                    c = np.nonzero(dist[hit] < self.near * self.hit_size[tri[hit]])[0]
-                    if len(c):
-                        h = hit[c]
-                        at_hit = origin[h] + w[h] * dist[h, None]
-                        e_ind = self._bounced(at_hit, sc.tside_normal[ts[c]], rng) if self.bounce else \
-                            rec.at(self.vert_indirect, ts[c], bary[c])
-                        e_hit[c] = e_ind + sv.direct.irradiance(at_hit, sc.tside_normal[ts[c]], rng,
-                                                                self.near_light_samples,
-                                                                penumbra_samples=self.near_penumbra_samples,
-                                                                receivers=sc.link_groups(tri[h]), clamp=False)
-                L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False,
-                                     glossy_iterate=False, first_shot_glossy=self.first_shot_glossy)
-                L[hit] += self.glossy_reflected(origin[hit] + w[hit] * dist[hit, None], ts, -w[hit], rng)
-            if self.world and sc.world.emits:
-                L[tri < 0] = sc.world.radiance(w[tri < 0])
-            out[lo:hi] = np.pi * L.reshape(hi - lo, rays, 3).mean(axis=1)
+        var, near = (np.zeros((len(points), 3)), np.zeros(len(points))) if variance else (None, None)
+        lo = 0
+        while lo < len(points):
+            start = ends[lo - 1] if lo else 0
+            hi = max(lo + 1, int(np.searchsorted(ends, start + chunk_rays, side="right")))
+            c = counts[lo:hi]
+            origin, w = self._rays(points[lo:hi], normals[lo:hi], c, shift[lo:hi], first[lo:hi])
+            L, landed = self._ray_radiance(origin, w, rng)
+            begin = ends[lo:hi] - c - start                                  # each point's first ray in L
+            total = np.add.reduceat(L, begin, axis=0)
+            out[lo:hi] = np.pi * total / c[:, None]
+            if variance:
+                spread = np.pi ** 2 * (np.add.reduceat(L * L, begin, axis=0) - total ** 2 / c[:, None])
+                var[lo:hi] = np.where(c[:, None] > 1, np.maximum(spread, 0) / np.maximum(c - 1, 1)[:, None], 0.0)
+                near[lo:hi] = np.add.reduceat(landed.astype(float), begin) / c
+            lo = hi
         if caustic:
-            out += rec.at(self.vert_caustic, at[0], at[1])
+            out += self.rec.at(self.vert_caustic, at[0], at[1])
         release_freed()              # its pieces' space, left scattered, would sit under the image's peak
-        return out
+        return (out, var, near) if variance else out
+
+    def _rays(self, points, normals, counts, shift, first):
+        """The origins and directions (M, 3) of :meth:`irradiance`'s rays for ``points`` (P, 3)
+        with unit ``normals``, ``counts`` (P,) rays each (M in all, point by point): ray k of
+        point i along the cosine direction of the R_2 point ``shift_i + (first_i + k) alpha``."""
+        t, b = frames_from_normals(normals)
+        alpha = kronecker_alpha(2)
+        lift = points + normals * self.solver.tracer.eps
+        if np.all(counts == counts[0]):                    # one count: the frames broadcast
+            k = first[:, None, None] + np.arange(counts[0])[None, :, None]
+            u = (shift[:, None, :] + k * alpha) % 1                          # (P, R, 2)
+            w = cosine_directions(u, t[:, None], b[:, None], normals[:, None]).reshape(-1, 3)
+            return np.repeat(lift, counts[0], axis=0), w
+        own = np.repeat(np.arange(len(points)), counts)
+        index = first[own] + np.arange(len(own)) - np.repeat(np.cumsum(counts) - counts, counts)
+        u = (shift[own] + index[:, None] * alpha) % 1
+        return lift[own], cosine_directions(u, t[own], b[own], normals[own])
+
+    def _ray_radiance(self, origin, w, rng):
+        """``(L, near)``: L (M, 3) [W m^-2 sr^-1] that :meth:`irradiance`'s rays from ``origin``
+        (M, 3) along ``w`` (M, 3) read, and (M,) bool, those that landed within ``near`` patch
+        sizes (their hit's light sampled there); counted in :meth:`near_cost`'s figures."""
+        t0 = time.perf_counter()
+        sv, sc, rec = self.solver, self.scene, self.rec
+        tri, dist, bu, bv = sv.tracer.first_hit(origin, w)
+        L = np.zeros((len(w), 3))
+        near = np.zeros(len(w), bool)
+        hit = np.nonzero(tri >= 0)[0]
+        if len(hit):
+            ts = sc.seen_tside(tri[hit], w[hit])
+            bary = np.stack([1 - bu[hit] - bv[hit], bu[hit], bv[hit]], axis=1)
+            e_hit = rec.at(self.vert, ts, bary)
+            if self.vert_indirect is not None:
+                c = np.nonzero(dist[hit] < self.near * self.hit_size[tri[hit]])[0]
+                if len(c):
+                    t_near, h = time.perf_counter(), hit[c]
+                    near[h] = True
+                    at_hit = origin[h] + w[h] * dist[h, None]
+                    e_ind = self._bounced(at_hit, sc.tside_normal[ts[c]], rng) if self.bounce else \
+                        rec.at(self.vert_indirect, ts[c], bary[c])
+                    e_hit[c] = e_ind + sv.direct.irradiance(at_hit, sc.tside_normal[ts[c]], rng,
+                                                            self.near_light_samples,
+                                                            penumbra_samples=self.near_penumbra_samples,
+                                                            receivers=sc.link_groups(tri[h]), clamp=False)
+                    self.near_hits, self.near_seconds = self.near_hits + len(h), \
+                        self.near_seconds + time.perf_counter() - t_near
+            L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False,
+                                 glossy_iterate=False, first_shot_glossy=self.first_shot_glossy)
+            L[hit] += self.glossy_reflected(origin[hit] + w[hit] * dist[hit, None], ts, -w[hit], rng)
+        if self.world and sc.world.emits:
+            L[tri < 0] = sc.world.radiance(w[tri < 0])
+        self.rays, self.seconds = self.rays + len(w), self.seconds + time.perf_counter() - t0
+        return L, near
+
+    def near_cost(self):
+        """What a ray that lands near costs beyond a plain one, in plain rays: the seconds of
+        its hit's light samples over a ray's seconds without them, as measured so far (0 before
+        any near hit)."""
+        plain = (self.seconds - self.near_seconds) / max(self.rays, 1)
+        return (self.near_seconds / self.near_hits) / plain if self.near_hits and plain > 0 else 0.0
 
     def _bounced(self, points, normals, rng):
         """E_ind (N, 3) [W/m^2] at ``points`` (N, 3) with unit ``normals`` by one cosine-distributed

@@ -107,8 +107,8 @@ class Renderer(ProgressiveImage):
                                                 self.eye.pixel, lambda: self.trace_gbuffer(np.full((n, 2), 0.5)))
         #: seconds the last trace of every pixel took (None before the first)
         self.full_trace_seconds = None
-        self.indirect = DiffuseIndirect(scene, solver, settings, self.trace_gbuffer, n, self.edge_gather,
-                                        self._probe_gbuffer, self.world_light is not None,
+        self.indirect = DiffuseIndirect(scene, solver, settings, self.trace_gbuffer, (camera.height, camera.width),
+                                        self.edge_gather, self._probe_gbuffer, self.world_light is not None,
                                         self.caustic_splats is not None, lambda: self.full_trace_seconds)
 
     #: world samples per visible point and pass where the world alone lights the scene

@@ -20,6 +20,7 @@ import numpy as np
 from ..tracing.sampling import Stream, sobol_points, stream
 from ..util.memory import release_freed
 from .gather import FinalGather
+from .gather_allocation import GatherAllocation
 
 
 def surface_values(scene, solver, side_values, vert, tside, bary):
@@ -41,16 +42,18 @@ def sample_gather_rays(per_sample, seconds_left, seconds_per_sample):
 
 class DiffuseIndirect:
     """The image's diffuse indirect light from ``solver``'s solution, through the eye's rays
-    ``trace`` (:meth:`~raybundle.imaging.eye_rays.EyeRays.trace`, counted) at ``pixels``
-    pixels.  ``edge_gather`` (:class:`~raybundle.imaging.gather.EdgeGather`) flags the sides
-    that gather; ``probe()`` gives the G-buffer the automatic gather measures its cost on.
+    ``trace`` (:meth:`~raybundle.imaging.eye_rays.EyeRays.trace`, counted) at the pixels of an
+    image of ``shape`` (height, width).  ``edge_gather``
+    (:class:`~raybundle.imaging.gather.EdgeGather`) flags the sides that gather; ``probe()``
+    gives the G-buffer the automatic gather measures its cost on.
     ``world_sampled``: the world's direct light is sampled per pixel (not read from the
     patches); ``caustic_splatted``: the caustic shot is light-traced into the pixels;
     ``trace_seconds()``: what a trace of every pixel took last (None: not known)."""
 
-    def __init__(self, scene, solver, settings, trace, pixels, edge_gather, probe, world_sampled, caustic_splatted,
+    def __init__(self, scene, solver, settings, trace, shape, edge_gather, probe, world_sampled, caustic_splatted,
                  trace_seconds=lambda: None):
-        self.scene, self.solver, self.settings, self.trace, self.pixels = scene, solver, settings, trace, pixels
+        self.scene, self.solver, self.settings, self.trace = scene, solver, settings, trace
+        self.shape, self.pixels = tuple(shape), int(shape[0]) * int(shape[1])
         self.trace_seconds = trace_seconds
         self.edge_gather, self.probe = edge_gather, probe
         self.world_sampled, self.caustic_splatted = world_sampled, caustic_splatted
@@ -73,8 +76,10 @@ class DiffuseIndirect:
         interpolated by :meth:`~raybundle.patches.reconstruction.LinearReconstruction.smooth_and_sharp`.
         With ``gather`` (and ``e_bar`` the solver's own), points on the sides
         :meth:`~raybundle.imaging.gather.EdgeGather.near_edge` flags gather their indirect light
-        instead (:class:`~raybundle.imaging.gather.FinalGather`): ``gather_rays`` rays per pixel,
-        spread over its sub-pixel samples as one stratified set.  With ``gather_rays`` = -1
+        instead (:class:`~raybundle.imaging.gather.FinalGather`): ``gather_rays`` rays per pixel on
+        average, spread over its sub-pixel samples as one stratified set, the first sample's
+        alike in every pixel and the rest shared by their noise
+        (:mod:`~raybundle.imaging.gather_allocation`).  With ``gather_rays`` = -1
         the count is what ``final_time`` buy (the run loop gives ``gather_share`` of a timed
         run's iteration seconds, :meth:`~raybundle.imaging.renderer.Renderer.resolve`; none: no automatic
         gather), from the gather's
@@ -115,33 +120,54 @@ class DiffuseIndirect:
         digits = self.rng.integers(0, 1 << 32, size=(n, 2), dtype=np.uint64)   # new at every resolve
         if final is not None:
             shift = self.rng.random((n, 2))
+            share = GatherAllocation(*self.shape, per_sample, self.rng)
         t_loop = time.perf_counter()
         for j in range(k):
             g = self.trace(sobol_points(np.full(n, j), digits))
             h = g.front(sc)
             e = surface_values(sc, self.solver, e_bar, vert, g.tside[h], g.bary[h])
+            m = g.material[h]
+            w_d = sc.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]))
+            scale = sc.albedo_at(g.triangle[h], g.point[h])
+            factor = g.weighted(w_d * kd[m] / np.pi * (1.0 if scale is None else scale), h)
             if final is not None:
                 rays_j = per_sample
                 if rays < 0 and j > 0:     # the automatic gather keeps to its budget: none once it is spent
                     now = time.perf_counter()
                     rays_j = sample_gather_rays(per_sample, final_time - (now - t_start), (now - t_loop) / j)
-                f = np.nonzero(self.edge_gather.near_edge(g.tside[h]))[0] if rays_j else []
-                if len(f):
-                    e[f] = final.irradiance(g.point[h[f]], sc.tside_normal[g.tside[h[f]]], rays_j,
-                                            self.rng, shift=shift[h[f]], first=j * per_sample,
-                                            at=(g.tside[h[f]], g.bary[h[f]]))
-                    self.edge_gather.points += len(f)
+                if rays_j:
+                    self._gather(final, share, g, h, e, factor, shift)
                 self.gather_rays_used += rays_j
             if own:
                 e = self._reflected_caustic(e, g, h, cache)
-            m = g.material[h]
-            w_d = sc.materials.diffuse_weight(m, np.einsum("ij,ij->i", g.normal[h], g.w_eye[h]))
-            scale = sc.albedo_at(g.triangle[h], g.point[h])
-            value = w_d * kd[m] / np.pi * e * (1.0 if scale is None else scale)
+            value = factor * e
             if through is not None:
-                value += surface_values(sc, self.solver, through, through_vert, g.tside[h], g.bary[h])
-            out[h] += g.weighted(value, h)
+                value += g.weighted(surface_values(sc, self.solver, through, through_vert, g.tside[h], g.bary[h]), h)
+            out[h] += value
         return out / k
+
+    def _gather(self, final, share, g, h, e, factor, shift):
+        """Gather ``e`` (N, 3) at the points ``h`` of G-buffer ``g`` on flagged sides, in place,
+        with the rays ``share`` (:class:`~raybundle.imaging.gather_allocation.GatherAllocation`)
+        gives each pixel; the first gather measures one ray's variance in the pixels' values
+        (``factor`` (N, 3) times the irradiance) and its cost (a ray that lands near costs
+        :meth:`~raybundle.imaging.gather.FinalGather.near_cost` more) for ``share`` to divide the
+        rest by."""
+        sc = self.scene
+        f = np.nonzero(self.edge_gather.near_edge(g.tside[h]))[0]
+        if len(f) == 0:
+            return
+        px = h[f]
+        r = share.rays(px)
+        ts = g.tside[px]
+        got = final.irradiance(g.point[px], sc.tside_normal[ts], r, self.rng, shift=shift[px], first=share.used[px],
+                               at=(ts, g.bary[px]), variance=share.measuring)
+        share.used[px] += r
+        if share.measuring:
+            got, var, near = got
+            share.measure(px, np.sum(factor[f] ** 2 * var, axis=1), 1.0 + final.near_cost() * near)
+        e[f] = got
+        self.edge_gather.points += len(f)
 
     def samples(self, samples, final_time):
         """The sub-pixel samples of an :meth:`image`: ``samples`` (default ``resolve_samples``),
