@@ -70,8 +70,8 @@ class FinalGather:
         self.near_light_samples = int(near_light_samples)
         self.near_penumbra_samples = near_penumbra_samples
         self.hit_size = np.sqrt(sc.patch_area[sc.triangle_patch])      # per triangle [m]
-        # what the rays so far cost: their count and seconds, and those of the near hits' light
-        self.rays, self.seconds, self.near_hits, self.near_seconds = 0, 0.0, 0, 0.0
+        # the rays that landed near so far, and the shadow rays their light samples traced
+        self.near_hits, self.near_shadow_rays = 0, 0
         # the first shot's glossy reflections arrive by the caustic shot, read where the gather
         # is (``caustic`` False: left out, for an image that light-traces it into its pixels,
         # :meth:`~raybundle.imaging.caustic_splats.CausticSplats.splat`)
@@ -151,7 +151,6 @@ class FinalGather:
         """``(L, near)``: L (M, 3) [W m^-2 sr^-1] that :meth:`irradiance`'s rays from ``origin``
         (M, 3) along ``w`` (M, 3) read, and (M,) bool, those that landed within ``near`` patch
         sizes (their hit's light sampled there); counted in :meth:`near_cost`'s figures."""
-        t0 = time.perf_counter()
         sv, sc, rec = self.solver, self.scene, self.rec
         tri, dist, bu, bv = sv.tracer.first_hit(origin, w)
         L = np.zeros((len(w), 3))
@@ -164,7 +163,7 @@ class FinalGather:
             if self.vert_indirect is not None:
                 c = np.nonzero(dist[hit] < self.near * self.hit_size[tri[hit]])[0]
                 if len(c):
-                    t_near, h = time.perf_counter(), hit[c]
+                    h, shadow_rays = hit[c], sv.direct.rays
                     near[h] = True
                     at_hit = origin[h] + w[h] * dist[h, None]
                     e_ind = self._bounced(at_hit, sc.tside_normal[ts[c]], rng) if self.bounce else \
@@ -173,22 +172,20 @@ class FinalGather:
                                                             self.near_light_samples,
                                                             penumbra_samples=self.near_penumbra_samples,
                                                             receivers=sc.link_groups(tri[h]), clamp=False)
-                    self.near_hits, self.near_seconds = self.near_hits + len(h), \
-                        self.near_seconds + time.perf_counter() - t_near
+                    self.near_hits += len(h)
+                    self.near_shadow_rays += sv.direct.rays - shadow_rays
             L[hit] = sv.radiance(sc.tside_side[ts], -w[hit], diffuse_incoming=e_hit, first_shot_emission=False,
                                  glossy_iterate=False, first_shot_glossy=self.first_shot_glossy)
             L[hit] += self.glossy_reflected(origin[hit] + w[hit] * dist[hit, None], ts, -w[hit], rng)
         if self.world and sc.world.emits:
             L[tri < 0] = sc.world.radiance(w[tri < 0])
-        self.rays, self.seconds = self.rays + len(w), self.seconds + time.perf_counter() - t0
         return L, near
 
     def near_cost(self):
-        """What a ray that lands near costs beyond a plain one, in plain rays: the seconds of
-        its hit's light samples over a ray's seconds without them, as measured so far (0 before
-        any near hit)."""
-        plain = (self.seconds - self.near_seconds) / max(self.rays, 1)
-        return (self.near_seconds / self.near_hits) / plain if self.near_hits and plain > 0 else 0.0
+        """What a ray that lands near costs beyond a plain one, in rays: the shadow rays its hit's
+        light samples traced, on average so far (0 before any near hit).  Counted, not timed: a
+        run of given iterations stays reproducible."""
+        return self.near_shadow_rays / self.near_hits if self.near_hits else 0.0
 
     def _bounced(self, points, normals, rng):
         """E_ind (N, 3) [W/m^2] at ``points`` (N, 3) with unit ``normals`` by one cosine-distributed
