@@ -46,8 +46,8 @@ class GatherAllocation:
         return np.maximum(1, whole + (self.rng.random(len(pixels)) < r - whole)).astype(np.int64)
 
     def measure(self, pixels, variance, cost=None):
-        """Share the later samples' rays by one ray's ``variance`` (N,) and ``cost`` (N,, in any
-        unit; default equal) in ``pixels`` (N,, each once) (module docstring)."""
+        """Share the later samples' rays by one ray's ``variance`` (N,) and ``cost`` (N,) (in any
+        unit; default equal) in ``pixels`` (N,), each pixel once (module docstring)."""
         self.measuring = False
         if len(pixels) == 0:
             return
