@@ -421,9 +421,9 @@ class PatchSolution(Method, abc.ABC):
         return used, start, sent
 
     def _find_tiny(self, cell_area):
-        """The sides smaller than a cell (``cell_area``) of the iterations' bundles over
+        """The sides smaller than a cell (``cell_area``, kept) of the iterations' bundles over
         :data:`TINY_SIDE` (:meth:`_gather_tiny`), and their points."""
-        self._tiny = np.nonzero(self.area < cell_area / self.TINY_SIDE)[0]
+        self.cell_area, self._tiny = cell_area, np.nonzero(self.area < cell_area / self.TINY_SIDE)[0]
         self._tiny_points = SidePoints(self.scene, np.isin(np.arange(len(self.area)), self._tiny))
 
     def _guide(self, bundle, sender, S, d, w):

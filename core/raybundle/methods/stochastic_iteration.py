@@ -59,6 +59,7 @@ import time
 import numpy as np
 
 from ..tracing.sampling import Stream, stream, uniform_sphere
+from .energy_balance import RAYS_PER_SIDE, balanced_level, side_capture
 from .patch_solution import PatchSolution
 
 
@@ -89,6 +90,8 @@ class StochasticIterationSolver(PatchSolution):
         self.warm_up_steps = int(min(max(steps, self.burn_in), self.MAX_WARM_UP))
         self.restart_at = max(self.burn_in - self.warm_up_steps, 0)
         self.warmed_up = False
+        #: (3,) the factor :meth:`balance_level` scaled the warm-up's iterate by (1: not scaled)
+        self.level_scale = np.ones(3)
 
     def warm_up(self, stop=None):
         """Bring the iterate near the solution before the running average starts.
@@ -106,6 +109,10 @@ class StochasticIterationSolver(PatchSolution):
         sides' gathers as many times fewer (at least one ray a side).  Meanwhile the
         solver's readers of the running average (the glossy senders' and tiny sides' gathers) read
         the current iterate.
+        The last iterate's shape is near the solution's, but its level carries the noise of those
+        coarse transfers, many times one fine transfer's: a diffuse solution's is then set by the energy balance
+        (:meth:`balance_level`).  The first iteration's transfer takes the control variate of
+        this start, on the sides of at least a bundle cell (:meth:`step`).
         ``stop`` (a callable) ends it early; the iteration then goes on from where it got."""
         if self.warmed_up:
             return
@@ -122,9 +129,24 @@ class StochasticIterationSolver(PatchSolution):
             if self.separates_world:
                 self.mean_world_incoming = self.world_incoming.copy()
             self.stats.warm_up += 1
+        if self.diffuse_only and self.stats.warm_up and not (stop is not None and stop()):
+            self.balance_level()
         self.warmed_up = True
         self.stats.rays += self.direct.rays - before
         self.stats.seconds += time.perf_counter() - t0
+
+    def balance_level(self):
+        """Scale the iterate (and the running average it starts) to the level the energy balance
+        of its shape gives (:mod:`~raybundle.methods.energy_balance`), per colour channel; the
+        factor is kept as :attr:`level_scale` (3,)."""
+        capture, sky = side_capture(self.scene, self.tracer, stream(self.seed, Stream.ENERGY_BALANCE))
+        self.stats.rays += RAYS_PER_SIDE * self.scene.n_sides
+        sent = self.sent_radiance(self.normal)
+        iterate, self.incoming = self.incoming, np.zeros_like(self.incoming)
+        fixed = self.sent_radiance(self.normal)
+        self.level_scale = balanced_level(self.area, iterate, fixed, sent - fixed, capture, sky)
+        self.incoming = iterate * self.level_scale
+        self.mean_incoming = self.incoming.copy()
 
     def _store(self, E, e_glossy, t_glossy):
         """Make the transfer's result the iterate."""
@@ -145,7 +167,14 @@ class StochasticIterationSolver(PatchSolution):
         t0 = time.perf_counter()
         before = self.direct.rays
         self.refine_first_shot()
-        E, e_glossy, t_glossy, bundles = self.transfer(control=self.mean_incoming if self.averaged else None)
+        control = self.mean_incoming
+        if not self.averaged and self.stats.warm_up:
+            # the warm-up's iterate, a side's whole history being its last coarse transfer: on a side
+            # smaller than a bundle cell, which a line's hit gives cell / area times its share, it
+            # can be many times the side's mean, and there its control variate would add that error
+            # rather than take out noise
+            control = np.where((self.area >= self.cell_area)[:, None], control, 0.0)
+        E, e_glossy, t_glossy, bundles = self.transfer(control=control)
         self._store(E, e_glossy, t_glossy)
         st = self.stats
         st.iterations += 1

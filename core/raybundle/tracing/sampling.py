@@ -53,6 +53,7 @@ class Stream(enum.IntEnum):
     SOBOL_SHIFT = 23            # :class:`SobolSequence`'s digital shift
     RANDOM_ROOM = 29            # the built-in random rooms
     TEXTURE_MEANS = 31          # texture means over patches, by sampled points
+    ENERGY_BALANCE = 32         # the sides' capture rays of the warm-up's energy balance
 
 
 def stream(seed, which, *more):
